@@ -1,0 +1,53 @@
+//! The [`SensorStream`] trait: timestamped samples of named channels.
+
+use async_trait::async_trait;
+
+use crate::DriverError;
+
+/// Static description of one channel a stream delivers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelInfo {
+    /// The quantity measured, as a free-form name (the caller maps it).
+    pub quantity: String,
+    /// SI unit of the values.
+    pub unit: String,
+    /// Driver id of the device that measures it.
+    pub source: String,
+    /// Nominal sampling rate in hertz.
+    pub rate_hz: f64,
+}
+
+/// One reading of one channel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    /// Index of the channel in [`SensorStream::channels`].
+    pub channel: usize,
+    /// Value in the channel's unit.
+    pub value: f64,
+}
+
+/// Readings taken at one instant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SampleBatch {
+    /// Nanoseconds since the stream started.
+    pub t_ns: u64,
+    /// The readings taken at `t_ns`.
+    pub samples: Vec<Sample>,
+}
+
+/// A source of timestamped samples.
+///
+/// `next_batch` waits for the next instant at which readings are available.
+/// A simulated backend advances its virtual clock there; a hardware backend
+/// waits for the device.
+#[async_trait]
+pub trait SensorStream: Send {
+    /// Driver id of the stream.
+    fn id(&self) -> &str;
+
+    /// The channels this stream delivers, indexed by [`Sample::channel`].
+    fn channels(&self) -> &[ChannelInfo];
+
+    /// Wait for and return the next batch of readings.
+    async fn next_batch(&mut self) -> Result<SampleBatch, DriverError>;
+}

@@ -1,0 +1,22 @@
+//! The bench: test plans, settle detection, limits and the safe state, the
+//! simulated rig, and the sequencing that ties them to the recorder.
+
+mod commission;
+mod encoder;
+mod limits;
+mod plan;
+mod progress;
+mod runner;
+mod settle;
+mod sim_rig;
+
+pub use commission::{commission, CommissionError, CommissionOptions, Commissioned};
+pub use encoder::SpeedFromEncoder;
+pub use limits::{check_limits, Trip};
+pub use plan::{plan_steps, PlanStep};
+pub use progress::{NoProgress, Progress};
+pub use runner::{
+    record_channels, run_test, BenchError, Outcome, RecordSink, SUPPLY_LIMIT_FRACTION,
+};
+pub use settle::SettleDetector;
+pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};

@@ -1,0 +1,441 @@
+//! Test sequencing: drive the plan's steps through a power stage, read
+//! the sensors, check limits, detect settling, and feed every reading to
+//! the record.
+//!
+//! On any fault (a limit crossed, a driver error, a stale sensor, an
+//! operator stop) the power stage is commanded to its safe state *first*;
+//! only then is the cause recorded and the test ended as aborted.
+
+use std::time::Duration;
+
+use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
+use thiserror::Error;
+use tokio::sync::watch;
+
+use super::{check_limits, PlanStep, Progress, SettleDetector, SpeedFromEncoder};
+use crate::config::Config;
+use crate::record::{
+    ChannelSpec, Entry, Event, EventLevel, Record, RecordBuilder, RecordError, Recorder,
+    SegmentMarker, SegmentPhase, TestMeta,
+};
+
+/// Fraction of `limits.max_current_A` the supply's own current limit is
+/// set to at the start of a test.
+pub const SUPPLY_LIMIT_FRACTION: f64 = 0.9;
+
+/// How a test ended.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    /// Every step of the plan ran.
+    Completed,
+    /// The test was stopped and the rig put in its safe state.
+    Aborted {
+        /// Why, for a person.
+        reason: String,
+    },
+}
+
+/// Errors that stop the bench before or outside a test's own faults.
+#[derive(Debug, Error)]
+pub enum BenchError {
+    /// Recording failed: the test cannot go on without losing data.
+    #[error(transparent)]
+    Record(#[from] RecordError),
+    /// The sensors do not provide a channel the plan needs.
+    #[error("the sensors provide no `{0}` channel")]
+    MissingChannel(&'static str),
+}
+
+/// Where readings go: the MCAP recorder (when recording) and the
+/// in-memory record that identification reads. Both receive exactly the
+/// same entries, so a replay of the file sees the same data.
+pub struct RecordSink {
+    recorder: Option<Recorder>,
+    builder: RecordBuilder,
+    last_t_ns: u64,
+}
+
+impl RecordSink {
+    /// A sink over `channels`; `recorder` is `None` for a dry run.
+    pub fn new(
+        recorder: Option<Recorder>,
+        meta: Option<TestMeta>,
+        channels: Vec<ChannelSpec>,
+    ) -> RecordSink {
+        RecordSink {
+            recorder,
+            builder: RecordBuilder::new(meta, channels),
+            last_t_ns: 0,
+        }
+    }
+
+    /// The latest time of any entry pushed so far, ns.
+    pub fn last_t_ns(&self) -> u64 {
+        self.last_t_ns
+    }
+
+    /// Record one entry (waits when the recorder's queue is full).
+    pub async fn push(&mut self, entry: Entry) -> Result<(), RecordError> {
+        let t_ns = match &entry {
+            Entry::Samples { t_ns, .. }
+            | Entry::Segment { t_ns, .. }
+            | Entry::Event { t_ns, .. }
+            | Entry::Result { t_ns, .. } => *t_ns,
+        };
+        self.last_t_ns = self.last_t_ns.max(t_ns);
+        self.builder.push(&entry);
+        if let Some(r) = &self.recorder {
+            r.send(entry).await?;
+        }
+        Ok(())
+    }
+
+    /// The recorder (still open) and the record built so far.
+    pub fn into_parts(self) -> (Option<Recorder>, Record) {
+        (self.recorder, self.builder.finish())
+    }
+}
+
+/// Channels recorded for a DC test: every sensor channel in order, then
+/// the derived speed, then the armature-voltage command.
+pub fn record_channels(sensors: &[ChannelInfo], stage_id: &str) -> Vec<ChannelSpec> {
+    let mut out: Vec<ChannelSpec> = sensors
+        .iter()
+        .map(|c| ChannelSpec::sensor(&c.quantity, &c.unit, &c.source))
+        .collect();
+    let encoder = sensors
+        .iter()
+        .find(|c| c.quantity == "encoder_count")
+        .map_or("encoder", |c| c.source.as_str());
+    out.push(ChannelSpec::sensor(
+        "speed",
+        "rad/s",
+        &format!("{encoder}/derived"),
+    ));
+    out.push(ChannelSpec::command("armature_voltage", "V", stage_id));
+    out
+}
+
+struct Channels {
+    voltage: usize,
+    current: usize,
+    encoder: usize,
+    speed_rec: usize,
+    command_rec: usize,
+}
+
+impl Channels {
+    fn find(sensors: &[ChannelInfo]) -> Result<Channels, BenchError> {
+        let find = |q: &'static str| {
+            sensors
+                .iter()
+                .position(|c| c.quantity == q)
+                .ok_or(BenchError::MissingChannel(q))
+        };
+        Ok(Channels {
+            voltage: find("armature_voltage")?,
+            current: find("armature_current")?,
+            encoder: find("encoder_count")?,
+            speed_rec: sensors.len(),
+            command_rec: sensors.len() + 1,
+        })
+    }
+}
+
+/// Why a step stopped early.
+enum Stop {
+    Fault(String),
+}
+
+struct Bench<'a> {
+    cfg: &'a Config,
+    stage: &'a mut dyn PowerStage,
+    sensors: &'a mut dyn SensorStream,
+    sink: &'a mut RecordSink,
+    progress: &'a dyn Progress,
+    shutdown: &'a watch::Receiver<bool>,
+    ch: Channels,
+    encoder: SpeedFromEncoder,
+    t_ns: u64,
+    stale: Duration,
+}
+
+/// One reading of the quantities the plan watches.
+struct Reading {
+    current: f64,
+    speed: Option<f64>,
+}
+
+impl Bench<'_> {
+    async fn event(&mut self, level: EventLevel, message: String) -> Result<(), RecordError> {
+        self.sink
+            .push(Entry::Event {
+                t_ns: self.t_ns,
+                event: Event { level, message },
+            })
+            .await
+    }
+
+    async fn marker(
+        &mut self,
+        index: usize,
+        step: &PlanStep,
+        phase: SegmentPhase,
+    ) -> Result<(), RecordError> {
+        let marker = SegmentMarker {
+            index: index as u32,
+            kind: step.kind(),
+            phase,
+            label: step.label().to_string(),
+        };
+        self.sink
+            .push(Entry::Segment {
+                t_ns: self.t_ns,
+                marker,
+            })
+            .await
+    }
+
+    /// Next batch of readings, recorded and checked against the limits.
+    async fn read(&mut self) -> Result<Result<Reading, Stop>, RecordError> {
+        if *self.shutdown.borrow() {
+            return Ok(Err(Stop::Fault("operator stop".into())));
+        }
+        let batch = match tokio::time::timeout(self.stale, self.sensors.next_batch()).await {
+            Err(_) => {
+                return Ok(Err(Stop::Fault(format!(
+                    "sensor stream {} delivered nothing for {} ms",
+                    self.sensors.id(),
+                    self.stale.as_millis()
+                ))))
+            }
+            Ok(Err(e)) => return Ok(Err(Stop::Fault(format!("sensor fault: {e}")))),
+            Ok(Ok(b)) => b,
+        };
+        self.t_ns = batch.t_ns;
+        let mut values: Vec<(usize, f64)> =
+            batch.samples.iter().map(|s| (s.channel, s.value)).collect();
+        let get = |c: usize| {
+            batch
+                .samples
+                .iter()
+                .find(|s| s.channel == c)
+                .map(|s| s.value)
+        };
+        let (Some(voltage), Some(current), Some(count)) = (
+            get(self.ch.voltage),
+            get(self.ch.current),
+            get(self.ch.encoder),
+        ) else {
+            return Ok(Err(Stop::Fault(
+                "a sensor batch lacked voltage, current or encoder".into(),
+            )));
+        };
+        let speed = self.encoder.update(batch.t_ns, count);
+        if let Some(w) = speed {
+            values.push((self.ch.speed_rec, w));
+        }
+        self.sink
+            .push(Entry::Samples {
+                t_ns: batch.t_ns,
+                values,
+            })
+            .await?;
+        self.progress.tick(batch.t_ns as f64 * 1e-9);
+        if let Some(trip) = check_limits(&self.cfg.limits, voltage, current, speed) {
+            return Ok(Err(Stop::Fault(format!("limit tripped: {trip}"))));
+        }
+        Ok(Ok(Reading { current, speed }))
+    }
+
+    async fn command(&mut self, volts: f64) -> Result<Result<(), Stop>, RecordError> {
+        if let Err(e) = self.stage.set_setpoint(volts).await {
+            return Ok(Err(Stop::Fault(format!("power stage fault: {e}"))));
+        }
+        let entry = Entry::Samples {
+            t_ns: self.t_ns,
+            values: vec![(self.ch.command_rec, volts)],
+        };
+        self.sink.push(entry).await?;
+        Ok(Ok(()))
+    }
+
+    /// Hold a level until settled (plus the averaging hold) or timeout.
+    async fn level(&mut self, volts: f64) -> Result<Result<(), Stop>, RecordError> {
+        if let Err(stop) = self.command(volts).await? {
+            return Ok(Err(stop));
+        }
+        let st = self.cfg.settle;
+        let window = (st.window_s * self.cfg.sample_rate_hz).round() as usize;
+        let floors = vec![
+            st.tolerance * self.cfg.limits.max_current,
+            st.tolerance * self.cfg.limits.max_speed,
+        ];
+        let mut settle = SettleDetector::new(window, st.tolerance, floors);
+        let start = self.t_ns;
+        let mut settled_at = None;
+        loop {
+            let r = match self.read().await? {
+                Ok(r) => r,
+                Err(stop) => return Ok(Err(stop)),
+            };
+            let elapsed = (self.t_ns - start) as f64 * 1e-9;
+            if let Some(w) = r.speed {
+                if settle.push(&[r.current, w]) && elapsed >= st.min_hold_s && settled_at.is_none()
+                {
+                    settled_at = Some(self.t_ns);
+                }
+            }
+            if let Some(ts) = settled_at {
+                if (self.t_ns - ts) as f64 * 1e-9 >= st.hold_s {
+                    return Ok(Ok(()));
+                }
+            }
+            if elapsed >= st.timeout_s {
+                let msg = format!(
+                    "level {volts} V did not settle within {} s; moving on",
+                    st.timeout_s
+                );
+                self.event(EventLevel::Warn, msg).await?;
+                return Ok(Ok(()));
+            }
+        }
+    }
+
+    /// Open the armature and record until the rotor rests (no encoder
+    /// count for one settle window) or the coast-down timeout.
+    async fn coastdown(&mut self) -> Result<Result<(), Stop>, RecordError> {
+        if let Err(e) = self.stage.set_output_enabled(false).await {
+            return Ok(Err(Stop::Fault(format!("power stage fault: {e}"))));
+        }
+        self.event(
+            EventLevel::Info,
+            "armature opened for the coast-down".into(),
+        )
+        .await?;
+        let window = (self.cfg.settle.window_s * self.cfg.sample_rate_hz).round() as usize;
+        let start = self.t_ns;
+        let mut still = 0usize;
+        loop {
+            let r = match self.read().await? {
+                Ok(r) => r,
+                Err(stop) => return Ok(Err(stop)),
+            };
+            still = if r.speed == Some(0.0) { still + 1 } else { 0 };
+            if still >= window {
+                return Ok(Ok(()));
+            }
+            if (self.t_ns - start) as f64 * 1e-9 >= self.cfg.settle.coastdown_timeout_s {
+                let msg = format!(
+                    "rotor still turning after {} s of coast-down",
+                    self.cfg.settle.coastdown_timeout_s
+                );
+                self.event(EventLevel::Warn, msg).await?;
+                return Ok(Ok(()));
+            }
+        }
+    }
+
+    async fn run(&mut self, steps: &[PlanStep]) -> Result<Outcome, RecordError> {
+        // The supply limits its current a little below the trip limit, so a
+        // transient peak is held by the supply rather than ending the test.
+        let supply_limit = SUPPLY_LIMIT_FRACTION * self.cfg.limits.max_current;
+        if let Err(e) = self.stage.set_current_limit(supply_limit).await {
+            if !matches!(e, DriverError::Unsupported { .. }) {
+                return self.abort(None, format!("power stage fault: {e}")).await;
+            }
+        }
+        let start = async {
+            self.stage.set_setpoint(0.0).await?;
+            self.stage.set_output_enabled(true).await
+        };
+        if let Err(e) = start.await {
+            return self.abort(None, format!("power stage fault: {e}")).await;
+        }
+        for (index, step) in steps.iter().enumerate() {
+            self.progress.segment(index, steps.len(), step.label());
+            self.marker(index, step, SegmentPhase::Start).await?;
+            let result = match step {
+                PlanStep::Level { volts, .. } => self.level(*volts).await?,
+                PlanStep::Coastdown { .. } => self.coastdown().await?,
+            };
+            match result {
+                Ok(()) => self.marker(index, step, SegmentPhase::End).await?,
+                Err(Stop::Fault(reason)) => return self.abort(Some((index, step)), reason).await,
+            }
+        }
+        let safe = self.stage.safe_state().await;
+        let message = match &safe {
+            Ok(()) => "test complete; power stage in its safe state".to_string(),
+            Err(e) => format!("test complete, but the safe-state command failed: {e}"),
+        };
+        let level = if safe.is_ok() {
+            EventLevel::Info
+        } else {
+            EventLevel::Warn
+        };
+        self.event(level, message).await?;
+        Ok(Outcome::Completed)
+    }
+
+    /// Safe state first, then the record of why.
+    async fn abort(
+        &mut self,
+        open: Option<(usize, &PlanStep)>,
+        reason: String,
+    ) -> Result<Outcome, RecordError> {
+        let safe = self.stage.safe_state().await;
+        let message = match &safe {
+            Ok(()) => format!("{reason}; power stage commanded to its safe state"),
+            Err(e) => format!("{reason}; SAFE-STATE COMMAND FAILED: {e}"),
+        };
+        self.event(EventLevel::Abort, message.clone()).await?;
+        if let Some((index, step)) = open {
+            self.marker(index, step, SegmentPhase::End).await?;
+        }
+        Ok(Outcome::Aborted { reason: message })
+    }
+}
+
+/// Run the plan's `steps` on a rig. Returns how the test ended; an `Err`
+/// only when recording failed (the stage is then in its safe state too).
+#[allow(clippy::too_many_arguments)]
+pub async fn run_test(
+    cfg: &Config,
+    steps: &[PlanStep],
+    stage: &mut dyn PowerStage,
+    sensors: &mut dyn SensorStream,
+    counts_per_rev: f64,
+    sink: &mut RecordSink,
+    progress: &dyn Progress,
+    shutdown: &watch::Receiver<bool>,
+) -> Result<Outcome, BenchError> {
+    let ch = match Channels::find(sensors.channels()) {
+        Ok(ch) => ch,
+        Err(e) => {
+            let _ = stage.safe_state().await;
+            return Err(e);
+        }
+    };
+    let stale = Duration::from_secs_f64((50.0 / cfg.sample_rate_hz).max(0.5));
+    let mut bench = Bench {
+        cfg,
+        stage,
+        sensors,
+        sink,
+        progress,
+        shutdown,
+        ch,
+        encoder: SpeedFromEncoder::new(counts_per_rev),
+        t_ns: 0,
+        stale,
+    };
+    match bench.run(steps).await {
+        Ok(outcome) => Ok(outcome),
+        Err(e) => {
+            // Recording failed mid-test: never run a rig blind.
+            let _ = bench.stage.safe_state().await;
+            Err(e.into())
+        }
+    }
+}

@@ -1,0 +1,344 @@
+//! The simulated rig: a DC motor behind a simulated armature supply and
+//! simulated sensors, implementing the driver traits.
+//!
+//! The supply ([`SimPowerStage`]) and the sensors ([`SimSensors`]) share one
+//! plant. Each [`SensorStream::next_batch`] advances the plant by one
+//! sample period on a virtual clock, so a test runs as fast as the CPU
+//! allows; with `realtime` it also waits for the wall clock to catch up.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Duration;
+
+use async_trait::async_trait;
+use motorbench_drivers::{
+    ChannelInfo, DriverError, PowerStage, Sample, SampleBatch, SensorStream, StageCapabilities,
+};
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+
+use crate::config::SimulatedRig;
+use crate::model::{DcMotor, DcState, ParamError, Terminal};
+
+const STAGE_ID: &str = "sim-supply";
+const SENSORS_ID: &str = "sim-daq";
+
+/// Channel indices of [`SimSensors`].
+pub mod channel {
+    /// Armature voltage at the motor terminals, V.
+    pub const VOLTAGE: usize = 0;
+    /// Armature current, A.
+    pub const CURRENT: usize = 1;
+    /// Encoder count (quadrature, 4 per line).
+    pub const ENCODER: usize = 2;
+}
+
+#[derive(Debug)]
+struct Plant {
+    motor: DcMotor,
+    state: DcState,
+    setpoint: f64,
+    output: f64,
+    enabled: bool,
+    current_limit: f64,
+    current_rating: f64,
+    max_voltage: f64,
+    slew_per_step: f64,
+    step: u64,
+}
+
+impl Plant {
+    /// Advance one sample period; the terminal voltage over the period.
+    fn advance(&mut self) -> f64 {
+        let target = if self.enabled { self.setpoint } else { 0.0 };
+        self.output += (target - self.output).clamp(-self.slew_per_step, self.slew_per_step);
+        self.state = if self.enabled {
+            let mut next = self.motor.step(&self.state, Terminal::Driven(self.output));
+            if next.current.abs() > self.current_limit {
+                // Constant-current mode: the supply lowers its voltage to
+                // hold the limit (quasi-static: the limit current's
+                // resistive drop plus the back-EMF).
+                let p = self.motor.params();
+                let u = p.ra * self.current_limit.copysign(next.current) + p.k * self.state.speed;
+                next = self.motor.step(&self.state, Terminal::Driven(u));
+            }
+            next
+        } else {
+            self.motor.step(&self.state, Terminal::Open)
+        };
+        self.step += 1;
+        if self.enabled {
+            self.output
+        } else {
+            self.motor.params().k * self.state.speed
+        }
+    }
+}
+
+fn lock(plant: &Mutex<Plant>) -> MutexGuard<'_, Plant> {
+    // A panic while holding the lock cannot leave the plant half-updated in
+    // a way that matters more than stopping: keep going with its state.
+    plant.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The simulated armature supply.
+#[derive(Debug, Clone)]
+pub struct SimPowerStage {
+    plant: Arc<Mutex<Plant>>,
+}
+
+/// The simulated sensors: voltage and current ADCs and an encoder.
+#[derive(Debug)]
+pub struct SimSensors {
+    plant: Arc<Mutex<Plant>>,
+    channels: Vec<ChannelInfo>,
+    period_ns: f64,
+    rng: StdRng,
+    voltage: Adc,
+    current: Adc,
+    counts_per_rad: f64,
+    realtime_start: Option<tokio::time::Instant>,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Adc {
+    noise: Option<Normal<f64>>,
+    lsb: f64,
+    full_scale: f64,
+}
+
+impl Adc {
+    fn new(noise: f64, full_scale: f64, bits: u32) -> Adc {
+        let noise =
+            (noise > 0.0).then(|| Normal::new(0.0, noise).expect("noise checked ≥ 0 by config"));
+        Adc {
+            noise,
+            lsb: 2.0 * full_scale / f64::from(1u32 << bits),
+            full_scale,
+        }
+    }
+
+    fn read(&self, value: f64, rng: &mut StdRng) -> f64 {
+        let noisy = value + self.noise.map_or(0.0, |n| n.sample(rng));
+        (noisy.clamp(-self.full_scale, self.full_scale) / self.lsb).round() * self.lsb
+    }
+}
+
+/// Build the simulated rig from its configuration; both halves share one
+/// plant, at rest with the output disabled.
+pub fn sim_rig(
+    cfg: &SimulatedRig,
+    sample_rate_hz: f64,
+    realtime: bool,
+) -> Result<(SimPowerStage, SimSensors), ParamError> {
+    let dt = 1.0 / sample_rate_hz;
+    let plant = Arc::new(Mutex::new(Plant {
+        motor: DcMotor::new(cfg.motor, dt)?,
+        state: DcState::default(),
+        setpoint: 0.0,
+        output: 0.0,
+        enabled: false,
+        current_limit: cfg.power_stage.current_limit,
+        current_rating: cfg.power_stage.current_limit,
+        max_voltage: cfg.power_stage.max_voltage,
+        slew_per_step: cfg.power_stage.slew * dt,
+        step: 0,
+    }));
+    let s = &cfg.sensors;
+    let info = |quantity: &str, unit: &str| ChannelInfo {
+        quantity: quantity.into(),
+        unit: unit.into(),
+        source: SENSORS_ID.into(),
+        rate_hz: sample_rate_hz,
+    };
+    let sensors = SimSensors {
+        plant: plant.clone(),
+        channels: vec![
+            info("armature_voltage", "V"),
+            info("armature_current", "A"),
+            info("encoder_count", "count"),
+        ],
+        period_ns: 1e9 / sample_rate_hz,
+        rng: StdRng::seed_from_u64(s.seed),
+        voltage: Adc::new(s.voltage_noise, s.voltage_full_scale, s.voltage_bits),
+        current: Adc::new(s.current_noise, s.current_full_scale, s.current_bits),
+        counts_per_rad: f64::from(s.encoder_lines) * 4.0 / std::f64::consts::TAU,
+        realtime_start: realtime.then(tokio::time::Instant::now),
+    };
+    Ok((SimPowerStage { plant }, sensors))
+}
+
+impl SimPowerStage {
+    /// True when the output is enabled (for tests and diagnostics).
+    pub fn output_enabled(&self) -> bool {
+        lock(&self.plant).enabled
+    }
+
+    /// The voltage set point (for tests and diagnostics).
+    pub fn setpoint(&self) -> f64 {
+        lock(&self.plant).setpoint
+    }
+}
+
+#[async_trait]
+impl PowerStage for SimPowerStage {
+    fn id(&self) -> &str {
+        STAGE_ID
+    }
+
+    fn capabilities(&self) -> StageCapabilities {
+        StageCapabilities {
+            current_limit: true,
+            max_setpoint: lock(&self.plant).max_voltage,
+        }
+    }
+
+    async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
+        let mut p = lock(&self.plant);
+        if !value.is_finite() || value.abs() > p.max_voltage {
+            return Err(DriverError::Device {
+                device: STAGE_ID.into(),
+                reason: format!("set point {value} V is outside ±{} V", p.max_voltage),
+            });
+        }
+        p.setpoint = value;
+        Ok(())
+    }
+
+    async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
+        let mut p = lock(&self.plant);
+        if !enabled {
+            p.output = 0.0;
+        }
+        p.enabled = enabled;
+        Ok(())
+    }
+
+    async fn safe_state(&mut self) -> Result<(), DriverError> {
+        let mut p = lock(&self.plant);
+        p.setpoint = 0.0;
+        p.output = 0.0;
+        p.enabled = false;
+        Ok(())
+    }
+
+    async fn set_current_limit(&mut self, amperes: f64) -> Result<(), DriverError> {
+        if !(amperes.is_finite() && amperes > 0.0) {
+            return Err(DriverError::Device {
+                device: STAGE_ID.into(),
+                reason: format!("current limit {amperes} A"),
+            });
+        }
+        let mut p = lock(&self.plant);
+        // The supply cannot limit above its own rating.
+        p.current_limit = amperes.min(p.current_rating);
+        Ok(())
+    }
+}
+
+#[async_trait]
+impl SensorStream for SimSensors {
+    fn id(&self) -> &str {
+        SENSORS_ID
+    }
+
+    fn channels(&self) -> &[ChannelInfo] {
+        &self.channels
+    }
+
+    async fn next_batch(&mut self) -> Result<SampleBatch, DriverError> {
+        let (step, terminal_voltage, state) = {
+            let mut p = lock(&self.plant);
+            let u = p.advance();
+            (p.step, u, p.state)
+        };
+        let t_ns = (step as f64 * self.period_ns).round() as u64;
+        if let Some(start) = self.realtime_start {
+            tokio::time::sleep_until(start + Duration::from_nanos(t_ns)).await;
+        } else if step % 1024 == 0 {
+            // Let other tasks (signal handlers, the recorder's queue) run.
+            tokio::task::yield_now().await;
+        }
+        let samples = vec![
+            Sample {
+                channel: channel::VOLTAGE,
+                value: self.voltage.read(terminal_voltage, &mut self.rng),
+            },
+            Sample {
+                channel: channel::CURRENT,
+                value: self.current.read(state.current, &mut self.rng),
+            },
+            Sample {
+                channel: channel::ENCODER,
+                value: (state.angle * self.counts_per_rad).floor(),
+            },
+        ];
+        Ok(SampleBatch { t_ns, samples })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{Backend, Config};
+
+    fn rig() -> (SimPowerStage, SimSensors) {
+        let Backend::Simulated(sim) = Config::embedded_default().backend;
+        sim_rig(&sim, 2000.0, false).unwrap()
+    }
+
+    #[tokio::test]
+    async fn disabled_output_leaves_the_motor_at_rest() {
+        let (_, mut sensors) = rig();
+        for _ in 0..100 {
+            let b = sensors.next_batch().await.unwrap();
+            assert_eq!(b.samples[channel::ENCODER].value, 0.0);
+            assert!(b.samples[channel::CURRENT].value.abs() < 0.02);
+        }
+    }
+
+    #[tokio::test]
+    async fn driven_motor_reaches_the_seed_steady_state_and_clock_is_exact() {
+        let (mut stage, mut sensors) = rig();
+        stage.set_setpoint(60.0).await.unwrap();
+        stage.set_output_enabled(true).await.unwrap();
+        let mut last = None;
+        let mut current = 0.0;
+        for k in 1..=4000u64 {
+            let b = sensors.next_batch().await.unwrap();
+            assert_eq!(b.t_ns, k * 500_000);
+            if k > 2000 {
+                current += b.samples[channel::CURRENT].value / 2000.0;
+            }
+            last = Some(b);
+        }
+        let b = last.unwrap();
+        assert!((b.samples[channel::VOLTAGE].value - 60.0).abs() < 0.5);
+        assert!((current - 0.113).abs() < 1e-3, "mean current {current}");
+    }
+
+    #[tokio::test]
+    async fn setpoint_beyond_the_supply_is_refused_and_safe_state_disables() {
+        let (mut stage, _) = rig();
+        let err = stage.set_setpoint(1000.0).await.unwrap_err();
+        assert!(matches!(err, DriverError::Device { .. }));
+        stage.set_setpoint(100.0).await.unwrap();
+        stage.set_output_enabled(true).await.unwrap();
+        stage.safe_state().await.unwrap();
+        assert!(!stage.output_enabled());
+        assert_eq!(stage.setpoint(), 0.0);
+    }
+
+    #[tokio::test]
+    async fn current_limit_holds_the_inrush() {
+        let (mut stage, mut sensors) = rig();
+        stage.set_current_limit(0.5).await.unwrap();
+        stage.set_setpoint(248.0).await.unwrap();
+        stage.set_output_enabled(true).await.unwrap();
+        for _ in 0..2000 {
+            let b = sensors.next_batch().await.unwrap();
+            // Limit plus ADC noise and one step of overshoot.
+            assert!(b.samples[channel::CURRENT].value < 0.56, "{:?}", b.samples);
+        }
+    }
+}

@@ -1,0 +1,555 @@
+//! Rig and test configuration: raw TOML structures (unknown keys refused)
+//! and their validation into a [`Config`].
+//!
+//! Every error names the file and, for syntax or type errors, the line and
+//! the key; validation errors name the key path (`limits.max_current_A`).
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+use thiserror::Error;
+
+use crate::model::DcParams;
+
+/// The embedded default configuration: the simulated rig with the seed
+/// paper's Table 4 motor.
+pub const DEFAULT_CONFIG: &str = include_str!("../config/sim-dc.toml");
+
+/// Name shown for the embedded default in messages.
+pub const DEFAULT_CONFIG_NAME: &str = "<embedded default: config/sim-dc.toml>";
+
+/// A configuration that cannot be used.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    /// The file could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Read {
+        /// The file.
+        path: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// TOML syntax error, wrong type or unknown key.
+    #[error("{path}:{line}: {message} (in `{text}`)")]
+    Parse {
+        /// The file.
+        path: String,
+        /// 1-based line of the offending text.
+        line: usize,
+        /// The offending line, trimmed.
+        text: String,
+        /// What the parser said, on one line.
+        message: String,
+    },
+    /// A value parsed but is not usable.
+    #[error("{path}: {key}: {reason}")]
+    Invalid {
+        /// The file.
+        path: String,
+        /// Dotted key path.
+        key: String,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// Raw file layout; see `config/sim-dc.toml` for a documented example.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawConfig {
+    motor: RawMotor,
+    rig: RawRig,
+    limits: Limits,
+    test: RawTest,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMotor {
+    id: String,
+    #[serde(default)]
+    nameplate: toml::Table,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawRig {
+    backend: String,
+    #[serde(rename = "sample_rate_Hz")]
+    sample_rate_hz: f64,
+    simulated: Option<SimulatedRig>,
+}
+
+/// The simulated rig: the motor it simulates and its imperfections.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SimulatedRig {
+    /// The true parameters of the simulated motor.
+    pub motor: DcParams,
+    /// The simulated armature supply.
+    pub power_stage: SimPowerStageConfig,
+    /// The simulated sensors.
+    pub sensors: SimSensorConfig,
+}
+
+/// The simulated armature supply.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SimPowerStageConfig {
+    /// Largest voltage it can produce, V.
+    #[serde(rename = "max_voltage_V")]
+    pub max_voltage: f64,
+    /// Output slew rate, V/s.
+    #[serde(rename = "slew_V_per_s")]
+    pub slew: f64,
+    /// Largest current the supply can deliver (its constant-current
+    /// rating), A. The bench sets a lower limit at the start of a test.
+    #[serde(rename = "current_limit_A")]
+    pub current_limit: f64,
+}
+
+/// The simulated sensors: noise, ADC resolution, encoder.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SimSensorConfig {
+    /// Noise generator seed.
+    pub seed: u64,
+    /// Voltage ADC full scale (±), V.
+    #[serde(rename = "voltage_full_scale_V")]
+    pub voltage_full_scale: f64,
+    /// Voltage ADC bits.
+    pub voltage_bits: u32,
+    /// Voltage noise standard deviation, V.
+    #[serde(rename = "voltage_noise_V")]
+    pub voltage_noise: f64,
+    /// Current ADC full scale (±), A.
+    #[serde(rename = "current_full_scale_A")]
+    pub current_full_scale: f64,
+    /// Current ADC bits.
+    pub current_bits: u32,
+    /// Current noise standard deviation, A.
+    #[serde(rename = "current_noise_A")]
+    pub current_noise: f64,
+    /// Encoder lines per revolution (4 counts per line).
+    pub encoder_lines: u32,
+}
+
+/// Test limits: crossing one aborts the test and makes the rig safe.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Limits {
+    /// Largest armature voltage magnitude, V.
+    #[serde(rename = "max_voltage_V")]
+    pub max_voltage: f64,
+    /// Largest armature current magnitude, A.
+    #[serde(rename = "max_current_A")]
+    pub max_current: f64,
+    /// Largest speed magnitude, rad/s.
+    #[serde(rename = "max_speed_rad_s")]
+    pub max_speed: f64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawTest {
+    plan: String,
+    #[serde(rename = "levels_V", default)]
+    levels: Vec<f64>,
+    #[serde(rename = "coastdown_from_V")]
+    coastdown_from: Option<f64>,
+    #[serde(default)]
+    coastdown: bool,
+    settle: Settle,
+}
+
+/// How settling is detected at each level.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Settle {
+    /// Length of each of the two compared windows, s.
+    pub window_s: f64,
+    /// Relative change of the window means allowed, beyond noise.
+    pub tolerance: f64,
+    /// Shortest time at a level before it may be called settled, s.
+    pub min_hold_s: f64,
+    /// Settled data kept at each level for averaging, s.
+    pub hold_s: f64,
+    /// Longest wait for a level to settle, s.
+    pub timeout_s: f64,
+    /// Longest coast-down before the test moves on, s.
+    #[serde(default = "default_coastdown_timeout")]
+    pub coastdown_timeout_s: f64,
+}
+
+fn default_coastdown_timeout() -> f64 {
+    60.0
+}
+
+/// Which rig backend drives the test.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Backend {
+    /// The simulated rig, in process.
+    Simulated(SimulatedRig),
+}
+
+/// The test plan to run.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Plan {
+    /// Armature-voltage staircase, each level held until settled, then an
+    /// optional coast-down from the last level.
+    DcStep {
+        /// Voltage levels in order, V; the first is reached from rest.
+        levels: Vec<f64>,
+        /// End with a coast-down.
+        coastdown: bool,
+    },
+    /// Run up to a voltage, settle, open the armature and let it coast.
+    DcCoastdown {
+        /// Voltage to settle at before opening the armature, V.
+        from: f64,
+    },
+}
+
+/// A validated configuration.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Config {
+    /// Where it came from (a path, or the embedded default's name).
+    pub source: String,
+    /// The text as given (recorded in the MCAP metadata).
+    pub text: String,
+    /// Motor id.
+    pub motor_id: String,
+    /// Nameplate as a JSON object.
+    pub nameplate: serde_json::Value,
+    /// Rig backend.
+    pub backend: Backend,
+    /// Samples per second.
+    pub sample_rate_hz: f64,
+    /// Test limits.
+    pub limits: Limits,
+    /// The plan.
+    pub plan: Plan,
+    /// Settle detection.
+    pub settle: Settle,
+}
+
+impl Config {
+    /// Load and validate a file.
+    pub fn load(path: &Path) -> Result<Config, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Config::parse(&path.display().to_string(), &text)
+    }
+
+    /// The embedded default.
+    pub fn embedded_default() -> Config {
+        Config::parse(DEFAULT_CONFIG_NAME, DEFAULT_CONFIG)
+            .expect("the embedded default configuration is valid")
+    }
+
+    /// Parse and validate `text`; `source` names it in errors.
+    pub fn parse(source: &str, text: &str) -> Result<Config, ConfigError> {
+        let raw: RawConfig = toml::from_str(text).map_err(|e| {
+            let start = e.span().map(|s| s.start).unwrap_or(0).min(text.len());
+            let line = text[..start].matches('\n').count() + 1;
+            ConfigError::Parse {
+                path: source.to_string(),
+                line,
+                text: text.lines().nth(line - 1).unwrap_or("").trim().to_string(),
+                message: e.message().replace('\n', " ").trim().to_string(),
+            }
+        })?;
+        let invalid = |key: &str, reason: String| ConfigError::Invalid {
+            path: source.to_string(),
+            key: key.to_string(),
+            reason,
+        };
+        let positive = |key: &str, v: f64| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(invalid(key, format!("{v} must be a finite number > 0")))
+            }
+        };
+
+        if raw.motor.id.trim().is_empty() {
+            return Err(invalid("motor.id", "must not be empty".into()));
+        }
+        let nameplate = serde_json::to_value(&raw.motor.nameplate)
+            .map_err(|e| invalid("motor.nameplate", e.to_string()))?;
+
+        positive("rig.sample_rate_Hz", raw.rig.sample_rate_hz)?;
+        let backend = match raw.rig.backend.as_str() {
+            "simulated" => {
+                let sim = raw.rig.simulated.ok_or_else(|| {
+                    invalid(
+                        "rig.simulated",
+                        "missing: backend \"simulated\" needs it".into(),
+                    )
+                })?;
+                sim.motor.validate().map_err(|e| {
+                    invalid(&format!("rig.simulated.motor.{}", e.name), e.to_string())
+                })?;
+                let ps = &sim.power_stage;
+                positive("rig.simulated.power_stage.max_voltage_V", ps.max_voltage)?;
+                positive("rig.simulated.power_stage.slew_V_per_s", ps.slew)?;
+                positive(
+                    "rig.simulated.power_stage.current_limit_A",
+                    ps.current_limit,
+                )?;
+                let s = &sim.sensors;
+                positive(
+                    "rig.simulated.sensors.voltage_full_scale_V",
+                    s.voltage_full_scale,
+                )?;
+                positive(
+                    "rig.simulated.sensors.current_full_scale_A",
+                    s.current_full_scale,
+                )?;
+                for (key, bits) in [
+                    ("voltage_bits", s.voltage_bits),
+                    ("current_bits", s.current_bits),
+                ] {
+                    if !(2..=24).contains(&bits) {
+                        return Err(invalid(
+                            &format!("rig.simulated.sensors.{key}"),
+                            format!("{bits} must be 2 to 24"),
+                        ));
+                    }
+                }
+                for (key, v) in [
+                    ("voltage_noise_V", s.voltage_noise),
+                    ("current_noise_A", s.current_noise),
+                ] {
+                    if !(v.is_finite() && v >= 0.0) {
+                        return Err(invalid(
+                            &format!("rig.simulated.sensors.{key}"),
+                            format!("{v} must be ≥ 0"),
+                        ));
+                    }
+                }
+                if s.encoder_lines == 0 {
+                    return Err(invalid(
+                        "rig.simulated.sensors.encoder_lines",
+                        "must be > 0".into(),
+                    ));
+                }
+                Backend::Simulated(sim)
+            }
+            other => {
+                return Err(invalid(
+                    "rig.backend",
+                    format!("unknown backend \"{other}\" (this version has: \"simulated\")"),
+                ))
+            }
+        };
+
+        positive("limits.max_voltage_V", raw.limits.max_voltage)?;
+        positive("limits.max_current_A", raw.limits.max_current)?;
+        positive("limits.max_speed_rad_s", raw.limits.max_speed)?;
+
+        let level_ok = |key: &str, v: f64| {
+            if !v.is_finite() || v.abs() > raw.limits.max_voltage {
+                Err(invalid(
+                    key,
+                    format!(
+                        "{v} V is beyond limits.max_voltage_V = {}",
+                        raw.limits.max_voltage
+                    ),
+                ))
+            } else {
+                Ok(())
+            }
+        };
+        let plan = match raw.test.plan.as_str() {
+            "dc_step" => {
+                if raw.test.coastdown_from.is_some() {
+                    return Err(invalid(
+                        "test.coastdown_from_V",
+                        "belongs to plan \"dc_coastdown\"".into(),
+                    ));
+                }
+                if raw.test.levels.len() < 2 {
+                    return Err(invalid(
+                        "test.levels_V",
+                        "a staircase needs at least 2 levels".into(),
+                    ));
+                }
+                for (n, v) in raw.test.levels.iter().enumerate() {
+                    level_ok(&format!("test.levels_V[{n}]"), *v)?;
+                }
+                if let Some(n) = raw.test.levels.windows(2).position(|w| w[0] == w[1]) {
+                    return Err(invalid(
+                        &format!("test.levels_V[{}]", n + 1),
+                        "repeats the level before it: that is no step".into(),
+                    ));
+                }
+                Plan::DcStep {
+                    levels: raw.test.levels,
+                    coastdown: raw.test.coastdown,
+                }
+            }
+            "dc_coastdown" => {
+                if !raw.test.levels.is_empty() || raw.test.coastdown {
+                    return Err(invalid(
+                        "test",
+                        "plan \"dc_coastdown\" takes coastdown_from_V only".into(),
+                    ));
+                }
+                let from = raw.test.coastdown_from.ok_or_else(|| {
+                    invalid(
+                        "test.coastdown_from_V",
+                        "missing: plan \"dc_coastdown\" needs it".into(),
+                    )
+                })?;
+                level_ok("test.coastdown_from_V", from)?;
+                Plan::DcCoastdown { from }
+            }
+            other => {
+                return Err(invalid(
+                    "test.plan",
+                    format!(
+                    "unknown plan \"{other}\" (this version has: \"dc_step\", \"dc_coastdown\")"
+                ),
+                ))
+            }
+        };
+
+        let st = raw.test.settle;
+        positive("test.settle.window_s", st.window_s)?;
+        positive("test.settle.tolerance", st.tolerance)?;
+        positive("test.settle.hold_s", st.hold_s)?;
+        positive("test.settle.timeout_s", st.timeout_s)?;
+        positive("test.settle.coastdown_timeout_s", st.coastdown_timeout_s)?;
+        if !(st.min_hold_s.is_finite() && st.min_hold_s >= 0.0) {
+            return Err(invalid(
+                "test.settle.min_hold_s",
+                format!("{} must be ≥ 0", st.min_hold_s),
+            ));
+        }
+        if st.window_s * raw.rig.sample_rate_hz < 10.0 {
+            return Err(invalid(
+                "test.settle.window_s",
+                "must span at least 10 samples".into(),
+            ));
+        }
+
+        Ok(Config {
+            source: source.to_string(),
+            text: text.to_string(),
+            motor_id: raw.motor.id,
+            nameplate,
+            backend,
+            sample_rate_hz: raw.rig.sample_rate_hz,
+            limits: raw.limits,
+            plan,
+            settle: st,
+        })
+    }
+}
+
+/// The path a user gave, or the embedded default when none.
+pub fn load_or_default(path: Option<&PathBuf>) -> Result<Config, ConfigError> {
+    match path {
+        Some(p) => Config::load(p),
+        None => Ok(Config::embedded_default()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with(replace: &str, by: &str) -> Result<Config, ConfigError> {
+        assert!(
+            DEFAULT_CONFIG.contains(replace),
+            "fixture text not found: {replace}"
+        );
+        Config::parse("rig.toml", &DEFAULT_CONFIG.replacen(replace, by, 1))
+    }
+
+    #[test]
+    fn embedded_default_is_the_seed_motor() {
+        let c = Config::embedded_default();
+        let Backend::Simulated(sim) = &c.backend;
+        assert_eq!(sim.motor, DcParams::SEED_TABLE4_MOMENTS);
+        assert_eq!(c.nameplate["power_W"], 180);
+        assert!(
+            matches!(&c.plan, Plan::DcStep { levels, coastdown: true } if levels[0] == 60.0 && levels[1] == 248.0)
+        );
+    }
+
+    #[test]
+    fn every_shipped_config_is_valid() {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+        let mut n = 0;
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
+                n += 1;
+            }
+        }
+        assert!(n >= 2, "expected the shipped example configs, found {n}");
+    }
+
+    #[test]
+    fn unknown_key_is_refused_by_name_and_line() {
+        let err = with("[limits]", "[limits]\nmax_torque_Nm = 3")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("rig.toml:"), "{err}");
+        assert!(err.contains("max_torque_Nm"), "{err}");
+        let line = err.split(':').nth(1).unwrap().parse::<usize>().unwrap();
+        let expected = DEFAULT_CONFIG
+            .lines()
+            .position(|l| l.starts_with("[limits]"))
+            .unwrap()
+            + 2;
+        assert_eq!(line, expected, "{err}");
+        assert!(!err.contains('\n'), "one line: {err}");
+    }
+
+    #[test]
+    fn wrong_type_names_the_line() {
+        let err = with("max_current_A = 6", "max_current_A = \"six\"")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("max_current_A"), "{err}");
+    }
+
+    #[test]
+    fn invalid_values_name_the_key() {
+        let err = with("max_current_A = 6", "max_current_A = -6")
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("rig.toml: limits.max_current_A:"), "{err}");
+        let err = with("La = 0.803", "La = 0").unwrap_err().to_string();
+        assert!(err.contains("rig.simulated.motor.La"), "{err}");
+        let err = with("levels_V = [60,", "levels_V = [600,")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("test.levels_V[0]"), "{err}");
+        let err = with("plan = \"dc_step\"", "plan = \"im_slip_sweep\"")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("test.plan") && err.contains("unknown plan"),
+            "{err}"
+        );
+        let err = with("backend = \"simulated\"", "backend = \"modbus\"")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("rig.backend"), "{err}");
+    }
+
+    #[test]
+    fn missing_file_is_named() {
+        let err = Config::load(Path::new("no/such/rig.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(err.starts_with("no/such/rig.toml: cannot read"), "{err}");
+    }
+}

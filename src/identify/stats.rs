@@ -1,0 +1,84 @@
+//! Small statistics helpers: linear least squares with covariance, and
+//! Student-t quantiles for confidence intervals.
+
+use nalgebra::{DMatrix, DVector};
+
+/// Two-sided 97.5 % quantiles of Student's t for 1–30 degrees of freedom
+/// (standard table values); beyond 30 the normal 1.96 is used.
+const T975: [f64; 30] = [
+    12.706, 4.303, 3.182, 2.776, 2.571, 2.447, 2.365, 2.306, 2.262, 2.228, 2.201, 2.179, 2.160,
+    2.145, 2.131, 2.120, 2.110, 2.101, 2.093, 2.086, 2.080, 2.074, 2.069, 2.064, 2.060, 2.056,
+    2.052, 2.048, 2.045, 2.042,
+];
+
+/// The 97.5 % quantile of Student's t with `dof` degrees of freedom.
+pub fn t975(dof: usize) -> f64 {
+    match dof {
+        0 => f64::INFINITY,
+        1..=30 => T975[dof - 1],
+        _ => 1.96,
+    }
+}
+
+/// A least-squares solution of `A·x ≈ b`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LeastSquares {
+    /// The solution.
+    pub x: DVector<f64>,
+    /// Half-widths of the 95 % intervals (`None` without spare rows).
+    pub half_width: Option<DVector<f64>>,
+}
+
+/// Solve `A·x ≈ b` (rows ≥ columns, full column rank) by SVD; intervals
+/// from the residual variance when there are more rows than columns.
+pub fn least_squares(a: &DMatrix<f64>, b: &DVector<f64>) -> Option<LeastSquares> {
+    let (rows, cols) = a.shape();
+    if rows < cols {
+        return None;
+    }
+    let svd = a.clone().svd(true, true);
+    let smax = svd.singular_values.max();
+    if svd.singular_values.min() <= smax * 1e-12 {
+        return None;
+    }
+    let x = svd.solve(b, 0.0).ok()?;
+    let dof = rows - cols;
+    let half_width = (dof > 0).then(|| {
+        let r = a * &x - b;
+        let s2 = r.norm_squared() / dof as f64;
+        let ata_inv = (a.transpose() * a)
+            .try_inverse()
+            .unwrap_or_else(|| DMatrix::from_element(cols, cols, f64::NAN));
+        DVector::from_fn(cols, |i, _| t975(dof) * (s2 * ata_inv[(i, i)]).sqrt())
+    });
+    Some(LeastSquares { x, half_width })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn exact_system_has_no_interval_and_noisy_one_covers_truth() {
+        let a = DMatrix::from_row_slice(2, 2, &[1.0, 2.0, 3.0, 4.0]);
+        let b = DVector::from_vec(vec![5.0, 11.0]);
+        let ls = least_squares(&a, &b).unwrap();
+        assert!((ls.x[0] - 1.0).abs() < 1e-12 && (ls.x[1] - 2.0).abs() < 1e-12);
+        assert!(ls.half_width.is_none());
+        // y = 2 + 0.5·x with small alternating errors.
+        let xs: Vec<f64> = (0..10).map(f64::from).collect();
+        let a = DMatrix::from_fn(10, 2, |r, c| if c == 0 { 1.0 } else { xs[r] });
+        let b = DVector::from_fn(10, |r, _| {
+            2.0 + 0.5 * xs[r] + if r % 2 == 0 { 0.01 } else { -0.01 }
+        });
+        let ls = least_squares(&a, &b).unwrap();
+        let hw = ls.half_width.unwrap();
+        assert!((ls.x[1] - 0.5).abs() < hw[1] && hw[1] < 0.01);
+    }
+
+    #[test]
+    fn rank_deficient_is_refused() {
+        let a = DMatrix::from_row_slice(3, 2, &[1.0, 2.0, 2.0, 4.0, 3.0, 6.0]);
+        assert!(least_squares(&a, &DVector::from_vec(vec![1.0, 2.0, 3.0])).is_none());
+    }
+}

@@ -1,0 +1,20 @@
+//! motorbench: commissions electric motors on a test rig.
+//!
+//! Map of the crate (data flows top to bottom):
+//!
+//! - [`config`]: rig and test configuration (TOML), validated.
+//! - [`model`]: DC machine equations, effects, exact simulation.
+//! - [`bench`]: test plans, settle detection, limits and safe state, the
+//!   simulated rig behind the `motorbench-drivers` traits.
+//! - [`record`]: MCAP recorder and reader per the data contract, CSV import.
+//! - [`identify`]: parameter identification from a [`record::Record`].
+//! - [`report`]: JSON, text and SVG output.
+//!
+//! The binary (`src/main.rs`) is a thin CLI over these modules.
+
+pub mod bench;
+pub mod config;
+pub mod identify;
+pub mod model;
+pub mod record;
+pub mod report;

@@ -1,0 +1,411 @@
+//! The `motorbench` command line: a thin layer over the library.
+//!
+//! Exit codes: 0 success; 1 runtime failure (I/O, recording); 2 bad input
+//! (usage, configuration, CSV or MCAP); 3 the test was aborted (the rig
+//! was put in its safe state; the record is still written); 4 no
+//! identification method applied to the data; 5 `replay --check` found a
+//! result that differs from the recorded one.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+use motorbench::bench::{commission, CommissionOptions, Outcome, Progress};
+use motorbench::config::{load_or_default, Backend};
+use motorbench::identify::{identify_dc, Identification};
+use motorbench::record::{read_dc_csv, read_mcap, Record, SegmentKind};
+use motorbench::report::{render_text, segment_plots, write_segments_svg};
+
+#[derive(Parser)]
+#[command(
+    name = "motorbench",
+    version,
+    about = "Commission electric motors on a test rig: run a test, record it to MCAP, identify the motor."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Run a test plan on a rig, record every sample to MCAP, identify the
+    /// motor. Without --config: the simulated rig with the seed paper's motor.
+    Run {
+        /// Rig and test configuration (TOML); default: the embedded config/sim-dc.toml.
+        #[arg(long)]
+        config: Option<PathBuf>,
+        /// Directory for the record, report and plot.
+        #[arg(long, default_value = "records")]
+        out: PathBuf,
+        /// Pace the simulated rig at wall-clock time instead of as fast as possible.
+        #[arg(long)]
+        realtime: bool,
+        /// Print the identification as JSON (the data contract) instead of text.
+        #[arg(long)]
+        json: bool,
+        /// No progress bar.
+        #[arg(long, short)]
+        quiet: bool,
+    },
+    /// Read a recorded MCAP (also a truncated one) and identify the motor again.
+    Replay {
+        /// The record.
+        log: PathBuf,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Also write the measured-vs-model plot here (SVG).
+        #[arg(long)]
+        svg: Option<PathBuf>,
+        /// Exit with code 5 when the result differs from the recorded one.
+        #[arg(long)]
+        check: bool,
+    },
+    /// Identify a motor from CSV files (one segment each) or one MCAP record.
+    Identify {
+        /// Test kind of the data.
+        #[arg(long, value_enum)]
+        kind: KindArg,
+        /// CSV files, or one MCAP file.
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+        /// Nameplate (JSON object with the contract's keys).
+        #[arg(long)]
+        nameplate: Option<PathBuf>,
+        /// Print JSON instead of text.
+        #[arg(long)]
+        json: bool,
+        /// Also write the measured-vs-model plot here (SVG).
+        #[arg(long)]
+        svg: Option<PathBuf>,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum KindArg {
+    DcStep,
+    DcCoastdown,
+    ImSlipSweep,
+}
+
+impl From<KindArg> for SegmentKind {
+    fn from(k: KindArg) -> SegmentKind {
+        match k {
+            KindArg::DcStep => SegmentKind::DcStep,
+            KindArg::DcCoastdown => SegmentKind::DcCoastdown,
+            KindArg::ImSlipSweep => SegmentKind::ImSlipSweep,
+        }
+    }
+}
+
+/// A failure with its exit code.
+struct Failure {
+    code: u8,
+    message: String,
+}
+
+fn bad_input(e: impl std::fmt::Display) -> Failure {
+    Failure {
+        code: 2,
+        message: e.to_string(),
+    }
+}
+
+fn runtime(e: impl std::fmt::Display) -> Failure {
+    Failure {
+        code: 1,
+        message: e.to_string(),
+    }
+}
+
+/// A progress bar on stderr (hidden when stderr is not a terminal).
+struct Bar {
+    bar: ProgressBar,
+    last_tick_ms: AtomicU64,
+}
+
+impl Bar {
+    fn new(quiet: bool) -> Bar {
+        let bar = if quiet {
+            ProgressBar::hidden()
+        } else {
+            ProgressBar::new(0)
+        };
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{spinner} [{elapsed_precise}] {bar:24} segment {pos}/{len} {msg}",
+            )
+            .expect("valid template"),
+        );
+        bar.enable_steady_tick(Duration::from_millis(120));
+        Bar {
+            bar,
+            last_tick_ms: AtomicU64::new(0),
+        }
+    }
+}
+
+impl Progress for Bar {
+    fn segment(&self, index: usize, total: usize, label: &str) {
+        self.bar.set_length(total as u64);
+        self.bar.set_position(index as u64 + 1);
+        self.bar.set_message(label.to_string());
+    }
+
+    fn tick(&self, t_s: f64) {
+        let ms = (t_s * 1e3) as u64;
+        if ms >= self.last_tick_ms.load(Ordering::Relaxed) + 100 {
+            self.last_tick_ms.store(ms, Ordering::Relaxed);
+            self.bar.set_prefix(format!("{t_s:.1} s"));
+        }
+    }
+
+    fn done(&self, message: &str) {
+        self.bar.finish_and_clear();
+        if !self.bar.is_hidden() {
+            eprintln!("{message}");
+        }
+    }
+}
+
+fn print_identification(
+    id: &Identification,
+    json: bool,
+    truth: Option<&motorbench::model::DcParams>,
+) {
+    if json {
+        println!("{}", id.report.to_json_pretty());
+    } else {
+        print!("{}", render_text(id, truth));
+    }
+}
+
+fn identified_or_code(id: &Identification) -> Result<(), Failure> {
+    if id.report.best.is_some() {
+        Ok(())
+    } else {
+        Err(Failure {
+            code: 4,
+            message: "no identification method applies to this data (see the warnings)".into(),
+        })
+    }
+}
+
+async fn run(
+    config: Option<PathBuf>,
+    out: PathBuf,
+    realtime: bool,
+    json: bool,
+    quiet: bool,
+) -> Result<(), Failure> {
+    let cfg = load_or_default(config.as_ref()).map_err(bad_input)?;
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    tokio::spawn(async move {
+        wait_for_stop_signal().await;
+        let _ = stop_tx.send(true);
+    });
+    let progress = Bar::new(quiet || json);
+    let opts = CommissionOptions {
+        out_dir: out,
+        realtime,
+    };
+    if !json && !quiet {
+        let Backend::Simulated(_) = &cfg.backend;
+        eprintln!(
+            "motorbench: {} on the simulated rig ({})",
+            cfg.motor_id, cfg.source
+        );
+    }
+    let done = commission(&cfg, &opts, &progress, &stop_rx)
+        .await
+        .map_err(runtime)?;
+    print_identification(&done.identification, json, done.truth.as_ref());
+    if !json {
+        println!(
+            "\nrecord: {} ({} messages)",
+            done.mcap_path.display(),
+            done.stats.messages
+        );
+        println!("report: {}", done.report_path.display());
+        println!("plot:   {}", done.svg_path.display());
+    }
+    if let Outcome::Aborted { reason } = &done.outcome {
+        return Err(Failure {
+            code: 3,
+            message: format!("test aborted: {reason}"),
+        });
+    }
+    identified_or_code(&done.identification)
+}
+
+async fn wait_for_stop_signal() {
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{signal, SignalKind};
+        match signal(SignalKind::terminate()) {
+            Ok(mut term) => {
+                tokio::select! {
+                    _ = tokio::signal::ctrl_c() => {},
+                    _ = term.recv() => {},
+                }
+            }
+            Err(_) => {
+                let _ = tokio::signal::ctrl_c().await;
+            }
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = tokio::signal::ctrl_c().await;
+    }
+}
+
+fn write_svg(path: Option<&Path>, record: &Record, id: &Identification) -> Result<(), Failure> {
+    if let Some(path) = path {
+        write_segments_svg(path, &segment_plots(record, id)).map_err(runtime)?;
+    }
+    Ok(())
+}
+
+fn replay(log: &Path, json: bool, svg: Option<&Path>, check: bool) -> Result<(), Failure> {
+    let record = read_mcap(log).map_err(bad_input)?;
+    if let Some(r) = &record.recovery {
+        eprintln!(
+            "motorbench: {} is damaged (truncated or unfinished): recovered {} messages before: {}",
+            log.display(),
+            r.messages,
+            r.reason
+        );
+    }
+    let id = identify_dc(&record);
+    print_identification(&id, json, None);
+    write_svg(svg, &record, &id)?;
+    let now = serde_json::to_value(&id.report).expect("a report always serialises");
+    match &record.recorded_result {
+        Some(recorded) if *recorded == now => {
+            eprintln!("replay: identical to the recorded /bench/result")
+        }
+        Some(_) => {
+            eprintln!("replay: DIFFERS from the recorded /bench/result");
+            if check {
+                return Err(Failure {
+                    code: 5,
+                    message: "replayed identification differs from the recorded one".into(),
+                });
+            }
+        }
+        None => eprintln!("replay: the record holds no /bench/result to compare with"),
+    }
+    identified_or_code(&id)
+}
+
+fn load_record(
+    kind: SegmentKind,
+    files: &[PathBuf],
+    nameplate: Option<&Path>,
+) -> Result<Record, Failure> {
+    if kind == SegmentKind::ImSlipSweep {
+        return Err(bad_input("identify --kind im_slip_sweep: induction-machine identification is not in this version yet"));
+    }
+    if let Some(path) = nameplate {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| bad_input(format!("{}: {e}", path.display())))?;
+        let v: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| bad_input(format!("{}:{}: {e}", path.display(), e.line())))?;
+        if !v.is_object() {
+            return Err(bad_input(format!(
+                "{}: a nameplate must be a JSON object",
+                path.display()
+            )));
+        }
+    }
+    let is_mcap = |p: &PathBuf| {
+        p.extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
+    };
+    match files.iter().filter(|p| is_mcap(p)).count() {
+        0 => {}
+        1 if files.len() == 1 => return read_mcap(&files[0]).map_err(bad_input),
+        _ => {
+            return Err(bad_input(
+                "give either one MCAP file or any number of CSV files",
+            ))
+        }
+    }
+    let mut record = Record::default();
+    for (n, path) in files.iter().enumerate() {
+        let seg = read_dc_csv(path, kind, n as u32).map_err(bad_input)?;
+        if let Some(other) = record.segments.iter().position(|s| s.index == seg.index) {
+            return Err(bad_input(format!(
+                "{}: segment index {} is already used by {}",
+                path.display(),
+                seg.index,
+                files[other].display()
+            )));
+        }
+        record.segments.push(seg);
+    }
+    record.segments.sort_by_key(|s| s.index);
+    Ok(record)
+}
+
+fn identify(
+    kind: SegmentKind,
+    files: &[PathBuf],
+    nameplate: Option<&Path>,
+    json: bool,
+    svg: Option<&Path>,
+) -> Result<(), Failure> {
+    let record = load_record(kind, files, nameplate)?;
+    let id = identify_dc(&record);
+    print_identification(&id, json, None);
+    write_svg(svg, &record, &id)?;
+    identified_or_code(&id)
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run {
+            config,
+            out,
+            realtime,
+            json,
+            quiet,
+        } => tokio::runtime::Builder::new_multi_thread()
+            .enable_all()
+            .build()
+            .map_err(runtime)
+            .and_then(|rt| rt.block_on(run(config, out, realtime, json, quiet))),
+        Command::Replay {
+            log,
+            json,
+            svg,
+            check,
+        } => replay(&log, json, svg.as_deref(), check),
+        Command::Identify {
+            kind,
+            files,
+            nameplate,
+            json,
+            svg,
+        } => identify(
+            kind.into(),
+            &files,
+            nameplate.as_deref(),
+            json,
+            svg.as_deref(),
+        ),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(f) => {
+            eprintln!("motorbench: {}", f.message);
+            ExitCode::from(f.code)
+        }
+    }
+}

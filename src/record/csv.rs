@@ -1,0 +1,464 @@
+//! CSV import per the contract's "CSV import" section: one file is one
+//! segment, for data taken elsewhere (a scope, a spreadsheet).
+//!
+//! DC kinds (`dc_step`, `dc_coastdown`) need the columns `time_s`,
+//! `armature_voltage_V`, `armature_current_A` and `speed_rad_s` (or
+//! `speed_rpm`, converted with ×2π/60; if both are present `speed_rad_s` is
+//! used). The header row names the columns, in any order, optionally in
+//! quotes; unknown columns are ignored (and not parsed). Fields are plain
+//! comma-separated numbers with optional surrounding whitespace (and
+//! optional quotes). Blank lines and lines starting with `#` are skipped.
+//!
+//! The file may open with a declaration comment,
+//! `# motorbench segment <index> kind=<kind> label=<free text>`
+//! (`kind=` and `label=` optional); without it the segment takes the
+//! caller's kind and index, and the file name as its label.
+//!
+//! Refused with the file, the line and (where there is one) the column: a
+//! missing column, a field that is not a number, NaN or infinity, time not
+//! strictly increasing, a row whose number of fields differs from the
+//! header's, a malformed declaration, a file without a header or data rows.
+//! `im_slip_sweep` files are not supported yet.
+
+use std::path::Path;
+
+use super::error::RecordError;
+use super::types::{DcSegment, SegmentKind};
+
+/// Time column.
+pub const COL_TIME: &str = "time_s";
+/// Armature-voltage column.
+pub const COL_VOLTAGE: &str = "armature_voltage_V";
+/// Armature-current column.
+pub const COL_CURRENT: &str = "armature_current_A";
+/// Speed column in rad/s.
+pub const COL_SPEED: &str = "speed_rad_s";
+/// Speed column in rpm, accepted instead of [`COL_SPEED`].
+pub const COL_SPEED_RPM: &str = "speed_rpm";
+
+/// Prefix of the declaration comment, after `#` and blanks.
+const DECLARATION: &str = "motorbench segment";
+
+/// rpm → rad/s.
+const RPM_TO_RAD_S: f64 = 2.0 * std::f64::consts::PI / 60.0;
+
+/// What the declaration comment says.
+#[derive(Debug, Default)]
+struct Declaration {
+    index: Option<u32>,
+    kind: Option<SegmentKind>,
+    label: Option<String>,
+}
+
+/// Reads one DC segment from a CSV file. `default_kind` and
+/// `default_index` apply unless the file declares its own.
+pub fn read_dc_csv(
+    path: &Path,
+    default_kind: SegmentKind,
+    default_index: u32,
+) -> Result<DcSegment, RecordError> {
+    let text = std::fs::read_to_string(path).map_err(|e| RecordError::io(path, e))?;
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    let err = |line: usize, column: Option<&str>, reason: String| {
+        RecordError::csv(path, line, column, reason)
+    };
+
+    let mut lines = text
+        .split('\n')
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
+        .filter(|(_, l)| !l.trim().is_empty())
+        .peekable();
+
+    // The declaration, if the first non-blank line is one.
+    let mut decl = Declaration::default();
+    if let Some(&(no, line)) = lines.peek() {
+        if let Some(rest) = declaration_text(line) {
+            decl = parse_declaration(rest).map_err(|r| err(no, None, r))?;
+            lines.next();
+        }
+    }
+    let mut lines = lines.filter(|(_, l)| !l.trim_start().starts_with('#'));
+
+    let kind = decl.kind.unwrap_or(default_kind);
+    if kind == SegmentKind::ImSlipSweep {
+        return Err(RecordError::Unsupported {
+            path: path.to_path_buf(),
+            reason: "CSV import of im_slip_sweep segments is not supported yet".to_string(),
+        });
+    }
+
+    let Some((header_no, header_line)) = lines.next() else {
+        let last = text.lines().count().max(1);
+        return Err(err(last, None, "no header row (the file is empty)".into()));
+    };
+    let header: Vec<&str> = header_line.split(',').map(unquote).collect();
+    let find = |name: &str| -> Result<Option<usize>, RecordError> {
+        let mut hits = header.iter().enumerate().filter(|(_, h)| **h == name);
+        let first = hits.next().map(|(i, _)| i);
+        if hits.next().is_some() {
+            return Err(err(header_no, Some(name), "column appears twice".into()));
+        }
+        Ok(first)
+    };
+    let missing = |name: &str, extra: &str| {
+        err(
+            header_no,
+            Some(name),
+            format!(
+                "missing column{extra} (the header names: {})",
+                header.join(", ")
+            ),
+        )
+    };
+    let time_col = find(COL_TIME)?.ok_or_else(|| missing(COL_TIME, ""))?;
+    let voltage_col = find(COL_VOLTAGE)?.ok_or_else(|| missing(COL_VOLTAGE, ""))?;
+    let current_col = find(COL_CURRENT)?.ok_or_else(|| missing(COL_CURRENT, ""))?;
+    let (speed_col, speed_scale) = match (find(COL_SPEED)?, find(COL_SPEED_RPM)?) {
+        (Some(c), _) => (c, None),
+        (None, Some(c)) => (c, Some(RPM_TO_RAD_S)),
+        (None, None) => return Err(missing(COL_SPEED, " (or speed_rpm)")),
+    };
+
+    let mut seg = DcSegment {
+        index: decl.index.unwrap_or(default_index),
+        kind: Some(kind),
+        label: decl.label.unwrap_or_else(|| {
+            path.file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        }),
+        ..DcSegment::default()
+    };
+    let mut previous_time: Option<(f64, usize)> = None;
+    for (no, line) in lines {
+        let fields: Vec<&str> = line.split(',').collect();
+        if fields.len() != header.len() {
+            let column = header.get(fields.len()).copied();
+            return Err(err(
+                no,
+                column,
+                format!(
+                    "the row has {} fields, the header has {}",
+                    fields.len(),
+                    header.len()
+                ),
+            ));
+        }
+        let number = |col: usize| -> Result<f64, RecordError> {
+            let name = header[col];
+            let raw = unquote(fields[col]);
+            let v: f64 = raw
+                .parse()
+                .map_err(|_| err(no, Some(name), format!("{raw:?} is not a number")))?;
+            if !v.is_finite() {
+                return Err(err(
+                    no,
+                    Some(name),
+                    format!("{raw:?} is not a finite number"),
+                ));
+            }
+            Ok(v)
+        };
+        let t = number(time_col)?;
+        if let Some((prev, prev_no)) = previous_time {
+            if t <= prev {
+                return Err(err(
+                    no,
+                    Some(COL_TIME),
+                    format!(
+                        "time {t} is not after the previous row's {prev} (line {prev_no}); time must increase strictly"
+                    ),
+                ));
+            }
+        }
+        previous_time = Some((t, no));
+        let voltage = number(voltage_col)?;
+        let current = number(current_col)?;
+        let speed = number(speed_col)?;
+        seg.time.push(t);
+        seg.voltage.push(voltage);
+        seg.current.push(current);
+        seg.speed.push(match speed_scale {
+            Some(k) => speed * k,
+            None => speed,
+        });
+    }
+    if seg.time.is_empty() {
+        return Err(err(header_no, None, "no data rows after the header".into()));
+    }
+    Ok(seg)
+}
+
+/// The text after `# motorbench segment`, if `line` is a declaration.
+fn declaration_text(line: &str) -> Option<&str> {
+    let rest = line.trim().strip_prefix('#')?.trim_start();
+    let rest = rest.strip_prefix(DECLARATION)?;
+    if rest.is_empty() || rest.starts_with(char::is_whitespace) {
+        Some(rest.trim())
+    } else {
+        None
+    }
+}
+
+/// Parses `<index> kind=<kind> label=<free text>`.
+fn parse_declaration(text: &str) -> Result<Declaration, String> {
+    let mut decl = Declaration::default();
+    let (index, mut rest) = split_word(text);
+    if index.is_empty() {
+        return Err("segment declaration without a segment index".into());
+    }
+    decl.index = Some(index.parse().map_err(|_| {
+        format!("segment declaration: {index:?} is not a segment index (0, 1, 2, …)")
+    })?);
+    if let Some(after) = rest.strip_prefix("kind=") {
+        let (kind, tail) = split_word(after);
+        decl.kind = Some(SegmentKind::parse(kind).ok_or_else(|| {
+            format!(
+                "segment declaration: kind {kind:?} is not dc_step, dc_coastdown or im_slip_sweep"
+            )
+        })?);
+        rest = tail;
+    }
+    if let Some(label) = rest.strip_prefix("label=") {
+        decl.label = Some(label.trim().to_string());
+    } else if !rest.is_empty() {
+        return Err(format!(
+            "segment declaration: unexpected {rest:?} (want `<index> kind=<kind> label=<text>`)"
+        ));
+    }
+    Ok(decl)
+}
+
+/// The first whitespace-separated word and the trimmed rest.
+fn split_word(s: &str) -> (&str, &str) {
+    let s = s.trim_start();
+    match s.find(char::is_whitespace) {
+        Some(i) => (&s[..i], s[i..].trim()),
+        None => (s, ""),
+    }
+}
+
+/// Trims blanks and one pair of surrounding quotes.
+fn unquote(s: &str) -> &str {
+    let s = s.trim();
+    for q in ['"', '\''] {
+        if let Some(inner) = s.strip_prefix(q).and_then(|r| r.strip_suffix(q)) {
+            return inner.trim();
+        }
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(dir: &tempfile::TempDir, name: &str, text: &str) -> std::path::PathBuf {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    }
+
+    fn read(text: &str) -> Result<DcSegment, RecordError> {
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(&dir, "data.csv", text);
+        read_dc_csv(&p, SegmentKind::DcStep, 3)
+    }
+
+    /// The error text, checked to name the file, the line and the column.
+    fn error(text: &str, line: usize, column: Option<&str>) -> String {
+        let e = read(text).unwrap_err();
+        let s = e.to_string();
+        assert!(matches!(e, RecordError::Csv { .. }), "{s}");
+        assert!(s.contains("data.csv"), "{s}");
+        assert!(s.contains(&format!("data.csv:{line}: ")), "{s}");
+        if let Some(c) = column {
+            assert!(s.contains(&format!("column {c}: ")), "{s}");
+        }
+        assert!(!s.contains('\n'), "{s}");
+        s
+    }
+
+    #[test]
+    fn happy_path_any_order_unknown_columns_comments() {
+        let seg = read(
+            "# scope export\n\
+             \"speed_rad_s\", time_s ,armature_current_A,note,armature_voltage_V\r\n\
+             10.5, 0.0, 1.25, x, 24\r\n\
+             \n\
+             # a comment between rows\n\
+             11.0,0.001,1.5,y,24.0\n",
+        )
+        .unwrap();
+        assert_eq!(seg.index, 3);
+        assert_eq!(seg.kind, Some(SegmentKind::DcStep));
+        assert_eq!(seg.label, "data.csv");
+        assert_eq!(seg.time, vec![0.0, 0.001]);
+        assert_eq!(seg.voltage, vec![24.0, 24.0]);
+        assert_eq!(seg.current, vec![1.25, 1.5]);
+        assert_eq!(seg.speed, vec![10.5, 11.0]);
+    }
+
+    #[test]
+    fn rpm_is_converted() {
+        let seg =
+            read("time_s,armature_voltage_V,armature_current_A,speed_rpm\n0,1,2,60\n1,1,2,3000\n")
+                .unwrap();
+        assert_eq!(seg.speed[0], 2.0 * std::f64::consts::PI / 60.0 * 60.0);
+        assert!((seg.speed[0] - 2.0 * std::f64::consts::PI).abs() < 1e-12);
+        assert!((seg.speed[1] - 314.159_265_358_979_3).abs() < 1e-9);
+    }
+
+    #[test]
+    fn rad_s_wins_over_rpm() {
+        let seg = read(
+            "time_s,armature_voltage_V,armature_current_A,speed_rpm,speed_rad_s\n0,1,2,60,7\n",
+        )
+        .unwrap();
+        assert_eq!(seg.speed, vec![7.0]);
+    }
+
+    #[test]
+    fn declaration_comment() {
+        let seg = read(
+            "# motorbench segment 4 kind=dc_coastdown label=coast from 1500 rpm, hot\n\
+             time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,0,0,150\n0.5,0,0,100\n",
+        )
+        .unwrap();
+        assert_eq!(seg.index, 4);
+        assert_eq!(seg.kind, Some(SegmentKind::DcCoastdown));
+        assert_eq!(seg.label, "coast from 1500 rpm, hot");
+        let seg = read(
+            "  # motorbench segment 7\n\
+             time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,0,0,150\n",
+        )
+        .unwrap();
+        assert_eq!((seg.index, seg.kind), (7, Some(SegmentKind::DcStep)));
+        assert_eq!(seg.label, "data.csv");
+    }
+
+    #[test]
+    fn bad_declaration() {
+        let s = error(
+            "# motorbench segment x kind=dc_step label=a\ntime_s\n",
+            1,
+            None,
+        );
+        assert!(s.contains("segment index"), "{s}");
+        let s = error("# motorbench segment 1 kind=ac\n", 1, None);
+        assert!(s.contains("\"ac\""), "{s}");
+    }
+
+    #[test]
+    fn im_slip_sweep_is_not_supported_yet() {
+        let e = read("# motorbench segment 0 kind=im_slip_sweep label=sweep\nslip\n").unwrap_err();
+        assert!(matches!(e, RecordError::Unsupported { .. }), "{e}");
+        assert!(e.to_string().contains("not supported yet"), "{e}");
+        let dir = tempfile::tempdir().unwrap();
+        let p = write(&dir, "s.csv", "slip\n0.1\n");
+        let e = read_dc_csv(&p, SegmentKind::ImSlipSweep, 0).unwrap_err();
+        assert!(e.to_string().contains("s.csv"), "{e}");
+    }
+
+    #[test]
+    fn missing_column() {
+        let s = error(
+            "# c\ntime_s,armature_voltage_V,speed_rad_s\n0,1,2\n",
+            2,
+            Some(COL_CURRENT),
+        );
+        assert!(s.contains("missing column"), "{s}");
+        let s = error(
+            "time_s,armature_voltage_V,armature_current_A\n0,1,2\n",
+            1,
+            Some(COL_SPEED),
+        );
+        assert!(s.contains("speed_rpm"), "{s}");
+    }
+
+    #[test]
+    fn duplicate_column() {
+        error(
+            "time_s,time_s,armature_voltage_V,armature_current_A,speed_rad_s\n",
+            1,
+            Some(COL_TIME),
+        );
+    }
+
+    #[test]
+    fn not_a_number() {
+        let s = error(
+            "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,1,2,3\n0.1,1,abc,3\n",
+            3,
+            Some(COL_CURRENT),
+        );
+        assert!(s.ends_with("\"abc\" is not a number"), "{s}");
+        let s = error(
+            "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,,2,3\n",
+            2,
+            Some(COL_VOLTAGE),
+        );
+        assert!(s.contains("\"\" is not a number"), "{s}");
+    }
+
+    #[test]
+    fn nan_and_inf() {
+        for bad in ["NaN", "nan", "inf", "-infinity"] {
+            let s = error(
+                &format!(
+                    "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,1,2,3\n1,1,2,{bad}\n"
+                ),
+                3,
+                Some(COL_SPEED),
+            );
+            assert!(s.contains("not a finite number"), "{s}");
+        }
+    }
+
+    #[test]
+    fn time_must_increase_strictly() {
+        let head = "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n";
+        let s = error(
+            &format!("{head}0,1,2,3\n0.5,1,2,3\n0.5,1,2,3\n"),
+            4,
+            Some(COL_TIME),
+        );
+        assert!(s.contains("line 3"), "{s}");
+        error(
+            &format!("{head}0,1,2,3\n# x\n-1,1,2,3\n"),
+            4,
+            Some(COL_TIME),
+        );
+    }
+
+    #[test]
+    fn wrong_number_of_fields() {
+        let head = "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n";
+        let s = error(&format!("{head}0,1,2\n"), 2, Some(COL_SPEED));
+        assert!(s.contains("3 fields, the header has 4"), "{s}");
+        let s = error(&format!("{head}0,1,2,3,4\n"), 2, None);
+        assert!(s.contains("5 fields"), "{s}");
+    }
+
+    #[test]
+    fn empty_file_and_no_rows() {
+        let s = error("", 1, None);
+        assert!(s.contains("no header"), "{s}");
+        let s = error("# only a comment\n\n", 2, None);
+        assert!(s.contains("no header"), "{s}");
+        let s = error(
+            "# c\ntime_s,armature_voltage_V,armature_current_A,speed_rad_s\n# nothing\n",
+            2,
+            None,
+        );
+        assert!(s.contains("no data rows"), "{s}");
+    }
+
+    #[test]
+    fn missing_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = read_dc_csv(&dir.path().join("nope.csv"), SegmentKind::DcStep, 0).unwrap_err();
+        assert!(e.to_string().contains("nope.csv"), "{e}");
+    }
+}

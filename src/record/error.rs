@@ -1,0 +1,213 @@
+//! Errors of the record module.
+//!
+//! Every message fits on one line and names the file it is about; CSV
+//! errors also name the line and the column, e.g.
+//! `data.csv:17: column armature_current_A: "abc" is not a number`.
+
+use std::path::{Path, PathBuf};
+
+/// What can go wrong while recording, reading or importing a record.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// The file could not be created, read or written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
+
+    /// The MCAP library could not write or decode the file.
+    #[error("{}: MCAP: {source}", path.display())]
+    Mcap {
+        /// The file.
+        path: PathBuf,
+        /// The library's error.
+        #[source]
+        source: mcap::McapError,
+    },
+
+    /// A CSV file is malformed.
+    #[error("{}:{line}: {}{reason}", path.display(), column_prefix(column))]
+    Csv {
+        /// The file.
+        path: PathBuf,
+        /// Line number, from 1.
+        line: usize,
+        /// Column name, where the problem is in one column.
+        column: Option<String>,
+        /// What is wrong.
+        reason: String,
+    },
+
+    /// A message in an MCAP file does not decode as its topic's schema.
+    #[error("{}: topic {topic} at log_time {log_time}: {reason}", path.display())]
+    BadMessage {
+        /// The file.
+        path: PathBuf,
+        /// The message's topic.
+        topic: String,
+        /// The message's log time, ns since the start of the test.
+        log_time: u64,
+        /// What is wrong.
+        reason: String,
+    },
+
+    /// The file is readable but is not a motorbench record (no
+    /// `motorbench.test` metadata, a missing key, a channel without its
+    /// metadata, …).
+    #[error("{}: not a motorbench record: {reason}", path.display())]
+    NotMotorbench {
+        /// The file.
+        path: PathBuf,
+        /// What is missing or wrong.
+        reason: String,
+    },
+
+    /// The record was written under a contract version this build does
+    /// not read.
+    #[error(
+        "{}: schema_version \"{found}\" is not supported (this build reads schema_version \"{}\")",
+        path.display(),
+        crate::record::SCHEMA_VERSION
+    )]
+    UnsupportedVersion {
+        /// The file.
+        path: PathBuf,
+        /// The `schema_version` found in the file.
+        found: String,
+    },
+
+    /// The input is valid but asks for something not implemented yet.
+    #[error("{}: {reason}", path.display())]
+    Unsupported {
+        /// The file.
+        path: PathBuf,
+        /// What is not supported.
+        reason: String,
+    },
+
+    /// The caller handed the recorder something it cannot record (a channel
+    /// index out of range, a channel whose topic does not match its
+    /// quantity, …). Nothing was written for it.
+    #[error("{}: {reason}", path.display())]
+    InvalidInput {
+        /// The record file.
+        path: PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+
+    /// The recorder's writer thread failed (or died); the message is its
+    /// error.
+    #[error("recorder thread for {} failed: {reason}", path.display())]
+    WriterFailed {
+        /// The record file.
+        path: PathBuf,
+        /// The thread's error.
+        reason: String,
+    },
+}
+
+fn column_prefix(column: &Option<String>) -> String {
+    match column {
+        Some(c) => format!("column {c}: "),
+        None => String::new(),
+    }
+}
+
+impl RecordError {
+    /// An I/O error on `path`.
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> RecordError {
+        RecordError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    /// An MCAP library error on `path`.
+    pub(crate) fn mcap(path: &Path, source: mcap::McapError) -> RecordError {
+        RecordError::Mcap {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    /// A "not a motorbench record" error on `path`.
+    pub(crate) fn not_motorbench(path: &Path, reason: impl Into<String>) -> RecordError {
+        RecordError::NotMotorbench {
+            path: path.to_path_buf(),
+            reason: reason.into(),
+        }
+    }
+
+    /// A CSV error at `line` (from 1), in `column` if given.
+    pub(crate) fn csv(
+        path: &Path,
+        line: usize,
+        column: Option<&str>,
+        reason: impl Into<String>,
+    ) -> RecordError {
+        RecordError::Csv {
+            path: path.to_path_buf(),
+            line,
+            column: column.map(str::to_string),
+            reason: reason.into(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_message_names_file_line_and_column() {
+        let e = RecordError::csv(
+            Path::new("data.csv"),
+            17,
+            Some("armature_current_A"),
+            "\"abc\" is not a number",
+        );
+        assert_eq!(
+            e.to_string(),
+            "data.csv:17: column armature_current_A: \"abc\" is not a number"
+        );
+        let e = RecordError::csv(Path::new("data.csv"), 3, None, "no data rows");
+        assert_eq!(e.to_string(), "data.csv:3: no data rows");
+    }
+
+    #[test]
+    fn version_message_is_clear() {
+        let e = RecordError::UnsupportedVersion {
+            path: PathBuf::from("run.mcap"),
+            found: "2".into(),
+        };
+        let s = e.to_string();
+        assert!(s.starts_with("run.mcap: schema_version \"2\" is not supported"));
+        assert!(s.contains("\"1\""));
+        assert!(!s.contains('\n'));
+    }
+
+    #[test]
+    fn io_and_not_motorbench_name_the_file() {
+        let e = RecordError::io(
+            Path::new("x.mcap"),
+            std::io::Error::new(std::io::ErrorKind::NotFound, "gone"),
+        );
+        assert_eq!(e.to_string(), "x.mcap: gone");
+        let e = RecordError::not_motorbench(Path::new("x.mcap"), "no motorbench.test metadata");
+        assert_eq!(
+            e.to_string(),
+            "x.mcap: not a motorbench record: no motorbench.test metadata"
+        );
+    }
+
+    #[test]
+    fn error_is_send_sync() {
+        fn assert_send_sync<T: Send + Sync + 'static>() {}
+        assert_send_sync::<RecordError>();
+    }
+}

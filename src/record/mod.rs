@@ -1,0 +1,24 @@
+//! Recording and reading records: the MCAP layout of the data contract
+//! (`shared/spec/data-format.md`), the recorder thread, and CSV import.
+//!
+//! - [`Recorder`] writes a test to MCAP off the async reactor.
+//! - [`read_mcap`] reads it back (also a truncated file) into a [`Record`].
+//! - [`RecordBuilder`] turns entries into a [`Record`]; the live bench and
+//!   the reader share it, so a replay gives bit-identical data.
+//! - [`read_dc_csv`] imports one DC segment from CSV.
+//! - [`schema`] holds the topic and schema names and the JSON Schemas.
+
+mod builder;
+mod csv;
+mod error;
+mod reader;
+pub mod schema;
+mod types;
+mod writer;
+
+pub use builder::{RecordBuilder, INCOMPLETE_SUFFIX};
+pub use csv::read_dc_csv;
+pub use error::RecordError;
+pub use reader::{read_entries, read_mcap, Entries};
+pub use types::*;
+pub use writer::{library_name, Recorder, RecorderStats};

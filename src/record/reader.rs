@@ -1,0 +1,799 @@
+//! Reads a motorbench MCAP file back into entries and a [`Record`].
+//!
+//! The file is read in one linear pass over its records (chunks are
+//! decompressed on the way), so a truncated file, e.g. from a killed
+//! process, still yields everything before the damage: the read error there
+//! is taken as the end of the data and reported in [`Record::recovery`].
+//! No index or summary is needed.
+//!
+//! Refused: files without the `motorbench.test` metadata record, with a
+//! `schema_version` other than [`SCHEMA_VERSION`], with a missing metadata
+//! key, a sample channel without its `unit`/`quantity`/`source` metadata,
+//! a channel not encoded as JSON, or a message that does not decode (the
+//! error names the file, the topic and the log time).
+//!
+//! Consecutive sample messages with one log time are grouped into one
+//! [`Entry::Samples`].
+//! `/bench/operating_point` messages are checked to be JSON objects but not
+//! returned yet ([`Entry`] has no variant for them). Topics outside the
+//! contract are ignored.
+
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+
+use mcap::records::Record as McapRecord;
+use serde::Deserialize;
+
+use super::builder::RecordBuilder;
+use super::error::RecordError;
+use super::schema::{
+    is_sample_topic_for, COMMAND_PREFIX, MESSAGE_ENCODING, METADATA_NAME, SENSOR_PREFIX,
+    TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT,
+};
+use super::types::{ChannelSpec, Entry, Record, Recovery, SegmentKind, TestMeta, SCHEMA_VERSION};
+
+/// Everything [`read_entries`] finds in a file: the metadata, the sample
+/// channels (in the order their channel records appear; [`Entry::Samples`]
+/// indexes into this list), the entries in file order, and what was lost
+/// if the file is damaged.
+pub type Entries = (TestMeta, Vec<ChannelSpec>, Vec<Entry>, Option<Recovery>);
+
+/// Where the messages of one channel go.
+#[derive(Debug, Clone, Copy)]
+enum Route {
+    Sample(usize),
+    Segment,
+    OperatingPoint,
+    Event,
+    Result,
+    Ignore,
+}
+
+#[derive(Deserialize)]
+struct SamplePayload {
+    value: f64,
+}
+
+/// Reads a record file into a [`Record`] (through [`RecordBuilder`], like
+/// the live bench).
+pub fn read_mcap(path: &Path) -> Result<Record, RecordError> {
+    let (meta, channels, entries, recovery) = read_entries(path)?;
+    let mut builder = RecordBuilder::new(Some(meta), channels);
+    for e in &entries {
+        builder.push(e);
+    }
+    let mut record = builder.finish();
+    record.recovery = recovery;
+    Ok(record)
+}
+
+/// Reads a record file into its metadata, sample channels and entries.
+/// See the module docs for what is refused.
+pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
+    let bytes = std::fs::read(path).map_err(|e| RecordError::io(path, e))?;
+    let records =
+        mcap::read::ChunkFlattener::new(&bytes).map_err(|e| RecordError::mcap(path, e))?;
+
+    let mut state = Reading::new(path);
+    let mut header_seen = false;
+    let mut past_data_end = false;
+    let mut metadata: Option<BTreeMap<String, String>> = None;
+    let mut damage: Option<String> = None;
+    // The first content error; reported only if the metadata is in order
+    // (a file of another schema_version is refused as such).
+    let mut failure: Option<RecordError> = None;
+
+    for record in records {
+        let record = match record {
+            Ok(r) => r,
+            Err(e) if !header_seen => return Err(RecordError::mcap(path, e)),
+            Err(e) => {
+                damage = Some(e.to_string());
+                break;
+            }
+        };
+        match record {
+            McapRecord::Header(_) => header_seen = true,
+            McapRecord::Metadata(m) if m.name == METADATA_NAME && metadata.is_none() => {
+                metadata = Some(m.metadata);
+            }
+            // The summary repeats schemas and channels; read on only to
+            // notice damage at the end of the file.
+            _ if past_data_end || failure.is_some() => {}
+            McapRecord::DataEnd(_) => past_data_end = true,
+            other => {
+                if let Err(e) = state.take(other) {
+                    failure = Some(e);
+                }
+            }
+        }
+    }
+
+    let Some(metadata) = metadata else {
+        let reason = match &damage {
+            Some(d) => format!("no {METADATA_NAME} metadata record (the file is damaged: {d})"),
+            None => format!("no {METADATA_NAME} metadata record"),
+        };
+        return Err(RecordError::not_motorbench(path, reason));
+    };
+    let meta = meta_from(path, &metadata)?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    let (channels, entries, messages) = state.finish();
+    let recovery = damage.map(|reason| Recovery { messages, reason });
+    Ok((meta, channels, entries, recovery))
+}
+
+/// Channels and entries read so far.
+struct Reading<'p> {
+    path: &'p Path,
+    routes: HashMap<u16, (String, Route)>,
+    channels: Vec<ChannelSpec>,
+    entries: Vec<Entry>,
+    /// Sample values at one log time, not yet made an entry.
+    pending: Option<(u64, Vec<(usize, f64)>)>,
+    messages: u64,
+}
+
+impl<'p> Reading<'p> {
+    fn new(path: &'p Path) -> Self {
+        Reading {
+            path,
+            routes: HashMap::new(),
+            channels: Vec::new(),
+            entries: Vec::new(),
+            pending: None,
+            messages: 0,
+        }
+    }
+
+    /// Takes one data-section record (other than metadata).
+    fn take(&mut self, record: McapRecord<'_>) -> Result<(), RecordError> {
+        let path = self.path;
+        match record {
+            McapRecord::Channel(c) if !self.routes.contains_key(&c.id) => {
+                let route = route_of(path, &c, &mut self.channels)?;
+                self.routes.insert(c.id, (c.topic, route));
+            }
+            McapRecord::Message { header, data } => {
+                self.messages += 1;
+                let Some((topic, route)) = self.routes.get(&header.channel_id) else {
+                    return Err(RecordError::not_motorbench(
+                        path,
+                        format!(
+                            "message at log_time {} on undeclared channel id {}",
+                            header.log_time, header.channel_id
+                        ),
+                    ));
+                };
+                let t_ns = header.log_time;
+                let bad = |reason: String| RecordError::BadMessage {
+                    path: path.to_path_buf(),
+                    topic: topic.clone(),
+                    log_time: t_ns,
+                    reason,
+                };
+                if let Route::Sample(index) = *route {
+                    let s: SamplePayload = decode(&data).map_err(bad)?;
+                    let value = (index, s.value);
+                    match &mut self.pending {
+                        Some((t, values)) if *t == t_ns => values.push(value),
+                        _ => {
+                            self.flush_pending();
+                            self.pending = Some((t_ns, vec![value]));
+                        }
+                    }
+                    return Ok(());
+                }
+                let entry = match route {
+                    Route::Segment => Some(Entry::Segment {
+                        t_ns,
+                        marker: decode(&data).map_err(bad)?,
+                    }),
+                    Route::Event => Some(Entry::Event {
+                        t_ns,
+                        event: decode(&data).map_err(bad)?,
+                    }),
+                    Route::Result => {
+                        let report: serde_json::Value = decode(&data).map_err(bad)?;
+                        if !report.is_object() {
+                            return Err(bad("the report is not a JSON object".into()));
+                        }
+                        Some(Entry::Result { t_ns, report })
+                    }
+                    Route::OperatingPoint => {
+                        let point: serde_json::Value = decode(&data).map_err(bad)?;
+                        if !point.is_object() {
+                            return Err(bad("the operating point is not a JSON object".into()));
+                        }
+                        None
+                    }
+                    Route::Sample(_) | Route::Ignore => None,
+                };
+                if let Some(entry) = entry {
+                    self.flush_pending();
+                    self.entries.push(entry);
+                }
+            }
+            _ => {}
+        }
+        Ok(())
+    }
+
+    fn flush_pending(&mut self) {
+        if let Some((t_ns, values)) = self.pending.take() {
+            if !values.is_empty() {
+                self.entries.push(Entry::Samples { t_ns, values });
+            }
+        }
+    }
+
+    /// The sample channels, the entries and the number of messages read.
+    fn finish(mut self) -> (Vec<ChannelSpec>, Vec<Entry>, u64) {
+        self.flush_pending();
+        (self.channels, self.entries, self.messages)
+    }
+}
+
+fn decode<'a, T: Deserialize<'a>>(data: &'a [u8]) -> Result<T, String> {
+    serde_json::from_slice(data).map_err(|e| {
+        let text = String::from_utf8_lossy(data);
+        let shown: String = text.chars().take(80).collect();
+        let more = if text.chars().count() > 80 { "…" } else { "" };
+        format!("cannot decode {shown:?}{more}: {e}")
+    })
+}
+
+/// Routes a channel, adding sample channels to `channels`.
+fn route_of(
+    path: &Path,
+    c: &mcap::records::Channel,
+    channels: &mut Vec<ChannelSpec>,
+) -> Result<Route, RecordError> {
+    let is_sample = c.topic.starts_with(SENSOR_PREFIX) || c.topic.starts_with(COMMAND_PREFIX);
+    let route = match c.topic.as_str() {
+        _ if is_sample => Route::Sample(channels.len()),
+        TOPIC_SEGMENT => Route::Segment,
+        TOPIC_OPERATING_POINT => Route::OperatingPoint,
+        TOPIC_EVENT => Route::Event,
+        TOPIC_RESULT => Route::Result,
+        _ => return Ok(Route::Ignore),
+    };
+    if c.message_encoding != MESSAGE_ENCODING {
+        return Err(RecordError::not_motorbench(
+            path,
+            format!(
+                "channel {} has message encoding \"{}\", not \"{MESSAGE_ENCODING}\"",
+                c.topic, c.message_encoding
+            ),
+        ));
+    }
+    if is_sample {
+        let get = |key: &str| {
+            c.metadata.get(key).cloned().ok_or_else(|| {
+                RecordError::not_motorbench(
+                    path,
+                    format!("channel {} has no \"{key}\" metadata", c.topic),
+                )
+            })
+        };
+        let spec = ChannelSpec {
+            topic: c.topic.clone(),
+            quantity: get("quantity")?,
+            unit: get("unit")?,
+            source: get("source")?,
+        };
+        if !is_sample_topic_for(&spec.topic, &spec.quantity) {
+            return Err(RecordError::not_motorbench(
+                path,
+                format!(
+                    "channel {} has quantity \"{}\", which does not match its topic",
+                    spec.topic, spec.quantity
+                ),
+            ));
+        }
+        channels.push(spec);
+    }
+    Ok(route)
+}
+
+/// The [`TestMeta`] of a `motorbench.test` metadata record.
+fn meta_from(path: &Path, md: &BTreeMap<String, String>) -> Result<TestMeta, RecordError> {
+    let get = |key: &str| {
+        md.get(key).cloned().ok_or_else(|| {
+            RecordError::not_motorbench(path, format!("{METADATA_NAME} metadata has no \"{key}\""))
+        })
+    };
+    let schema_version = get("schema_version")?;
+    if schema_version != SCHEMA_VERSION {
+        return Err(RecordError::UnsupportedVersion {
+            path: path.to_path_buf(),
+            found: schema_version,
+        });
+    }
+    let kind_text = get("kind")?;
+    let kind = SegmentKind::parse(&kind_text).ok_or_else(|| {
+        RecordError::not_motorbench(
+            path,
+            format!(
+                "{METADATA_NAME} kind \"{kind_text}\" is not dc_step, dc_coastdown or im_slip_sweep"
+            ),
+        )
+    })?;
+    let motor_id = get("motor_id")?;
+    let started_at = get("started_at")?;
+    let nameplate_text = get("nameplate")?;
+    let nameplate: serde_json::Value = serde_json::from_str(&nameplate_text).map_err(|e| {
+        RecordError::not_motorbench(path, format!("{METADATA_NAME} nameplate is not JSON: {e}"))
+    })?;
+    if !nameplate.is_object() {
+        return Err(RecordError::not_motorbench(
+            path,
+            format!("{METADATA_NAME} nameplate is not a JSON object"),
+        ));
+    }
+    let config = get("config")?;
+    Ok(TestMeta {
+        schema_version,
+        kind,
+        motor_id,
+        started_at,
+        nameplate,
+        config,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::types::{Event, EventLevel, SegmentMarker, SegmentPhase};
+    use crate::record::writer::Recorder;
+    use mcap::records::{MessageHeader, Metadata};
+    use std::io::BufWriter;
+
+    fn meta() -> TestMeta {
+        TestMeta {
+            schema_version: SCHEMA_VERSION.into(),
+            kind: SegmentKind::DcStep,
+            motor_id: "motor-7".into(),
+            started_at: "2026-11-21T10:00:00Z".into(),
+            nameplate: serde_json::json!({"power_W": 250.0, "voltage_V": 24.0, "current_A": 12.5, "speed_rpm": 3000.0}),
+            config: "[test]\nkind = \"dc_step\"\n".into(),
+        }
+    }
+
+    fn channels() -> Vec<ChannelSpec> {
+        vec![
+            ChannelSpec::sensor("armature_voltage", "V", "daq0"),
+            ChannelSpec::sensor("armature_current", "A", "daq0"),
+            ChannelSpec::sensor("speed", "rad/s", "enc0"),
+            ChannelSpec::command("armature_voltage", "V", "psu0"),
+        ]
+    }
+
+    fn marker(t_ns: u64, index: u32, phase: SegmentPhase, label: &str) -> Entry {
+        Entry::Segment {
+            t_ns,
+            marker: SegmentMarker {
+                index,
+                kind: SegmentKind::DcStep,
+                phase,
+                label: label.into(),
+            },
+        }
+    }
+
+    /// A 10 s test at 1 kHz with two segments (0.001..=1.999 s and
+    /// 1.999..=9.999 s), an event and a result.
+    fn test_entries() -> Vec<Entry> {
+        let mut out = vec![Entry::Event {
+            t_ns: 0,
+            event: Event {
+                level: EventLevel::Info,
+                message: "start".into(),
+            },
+        }];
+        for k in 0..10_000u64 {
+            let t = k * 1_000_000;
+            if k == 1 {
+                out.push(marker(t, 0, SegmentPhase::Start, "0 V → 12 V"));
+            }
+            let x = k as f64 * 1e-3;
+            out.push(Entry::Samples {
+                t_ns: t,
+                values: vec![
+                    (0, 12.0 + 0.1 * x.sin()),
+                    (1, (x * 3.7).cos() * 1.234_567_890_123),
+                    (2, 100.0 * (1.0 - (-x).exp())),
+                    (3, if k < 2000 { 12.0 } else { 6.0 }),
+                ],
+            });
+            if k == 1999 {
+                out.push(marker(t, 0, SegmentPhase::End, "0 V → 12 V"));
+                out.push(marker(t, 1, SegmentPhase::Start, "12 V → 6 V"));
+            }
+        }
+        out.push(marker(9_999_000_000, 1, SegmentPhase::End, "12 V → 6 V"));
+        out.push(Entry::Result {
+            t_ns: 10_000_000_000,
+            report: serde_json::json!({"schema_version": "1", "kind": "dc_step", "methods": {}, "best": null, "warnings": []}),
+        });
+        out
+    }
+
+    fn record_to(path: &Path, entries: &[Entry]) -> crate::record::RecorderStats {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap();
+        rt.block_on(async {
+            let rec = Recorder::start(path, &meta(), &channels(), 64).unwrap();
+            for e in entries {
+                rec.send(e.clone()).await.unwrap();
+            }
+            rec.finish().await.unwrap()
+        })
+    }
+
+    fn live(entries: &[Entry]) -> Record {
+        let mut b = RecordBuilder::new(Some(meta()), channels());
+        for e in entries {
+            b.push(e);
+        }
+        b.finish()
+    }
+
+    /// `(t, channel, value bits)` of every sample, in order.
+    fn flat(entries: &[Entry]) -> Vec<(u64, usize, u64)> {
+        entries
+            .iter()
+            .flat_map(|e| match e {
+                Entry::Samples { t_ns, values } => values
+                    .iter()
+                    .map(|&(i, v)| (*t_ns, i, v.to_bits()))
+                    .collect::<Vec<_>>(),
+                _ => Vec::new(),
+            })
+            .collect()
+    }
+
+    #[test]
+    fn round_trip_is_bit_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("awkward.mcap");
+        let awkward = [
+            0.1 + 0.2,
+            1e-300,
+            -0.0,
+            0.0,
+            123456.789e10,
+            f64::MIN_POSITIVE,
+            5e-324,
+            f64::MAX,
+            -f64::MAX,
+            1.0 / 3.0,
+            -2.5e-17,
+            9007199254740991.0,
+        ];
+        let mut entries = vec![marker(0, 0, SegmentPhase::Start, "awkward")];
+        for (k, &v) in awkward.iter().enumerate() {
+            entries.push(Entry::Samples {
+                t_ns: k as u64 * 10,
+                values: vec![(0, v), (1, -v), (2, v * 0.5), (3, v)],
+            });
+        }
+        entries.push(Entry::Event {
+            t_ns: 95,
+            event: Event {
+                level: EventLevel::Warn,
+                message: "ünïcode \"quoted\"\nnewline".into(),
+            },
+        });
+        entries.push(marker(110, 0, SegmentPhase::End, "awkward"));
+        let stats = record_to(&path, &entries);
+        assert_eq!(stats.messages, awkward.len() as u64 * 4 + 3);
+
+        let (m, chans, back, recovery) = read_entries(&path).unwrap();
+        assert_eq!(m, meta());
+        assert_eq!(chans, channels());
+        assert!(recovery.is_none());
+        assert_eq!(back, entries);
+        // PartialEq on f64 treats -0.0 == 0.0: compare bits as well.
+        assert_eq!(flat(&back), flat(&entries));
+        let neg_zero = flat(&back)
+            .into_iter()
+            .find(|&(t, i, _)| t == 20 && i == 0)
+            .unwrap();
+        assert_eq!(neg_zero.2, (-0.0f64).to_bits());
+
+        let replay = read_mcap(&path).unwrap();
+        assert_eq!(replay, live(&entries));
+        let seg = &replay.segments[0];
+        assert_eq!(seg.current.len(), awkward.len());
+        for (a, b) in seg.voltage.iter().zip(awkward) {
+            assert_eq!(a.to_bits(), b.to_bits());
+        }
+    }
+
+    #[test]
+    fn replay_equals_live_for_a_whole_test() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("test.mcap");
+        let entries = test_entries();
+        let stats = record_to(&path, &entries);
+        assert_eq!(stats.per_topic["/sensor/speed"], 10_000);
+        assert_eq!(stats.per_topic["/bench/segment"], 4);
+        assert_eq!(stats.per_topic["/bench/operating_point"], 0);
+        let (_, _, back, _) = read_entries(&path).unwrap();
+        assert_eq!(flat(&back), flat(&entries));
+        let replay = read_mcap(&path).unwrap();
+        let want = live(&entries);
+        assert_eq!(replay, want);
+        assert_eq!(replay.segments.len(), 2);
+        assert_eq!(replay.segments[0].time.len(), 1999);
+        assert_eq!(replay.segments[1].time.len(), 8001);
+        assert_eq!(replay.events.len(), 1);
+        assert!(replay.recorded_result.is_some());
+        for (a, b) in replay.segments.iter().zip(&want.segments) {
+            for (x, y) in [
+                (&a.time, &b.time),
+                (&a.voltage, &b.voltage),
+                (&a.current, &b.current),
+                (&a.speed, &b.speed),
+            ] {
+                let xb: Vec<u64> = x.iter().map(|v| v.to_bits()).collect();
+                let yb: Vec<u64> = y.iter().map(|v| v.to_bits()).collect();
+                assert_eq!(xb, yb);
+            }
+        }
+    }
+
+    #[test]
+    fn non_finite_reading_becomes_a_warning_event() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("nan.mcap");
+        let entries = vec![
+            Entry::Samples {
+                t_ns: 0,
+                values: vec![(0, 1.0), (1, f64::NAN), (2, 2.0)],
+            },
+            Entry::Samples {
+                t_ns: 2,
+                values: vec![(1, 3.0)],
+            },
+        ];
+        let stats = record_to(&path, &entries);
+        assert_eq!(stats.messages, 4, "three samples and one event");
+        let (_, chans, back, _) = read_entries(&path).unwrap();
+        let samples: Vec<(u64, usize, f64)> = back
+            .iter()
+            .flat_map(|e| match e {
+                Entry::Samples { t_ns, values } => {
+                    values.iter().map(|&(c, v)| (*t_ns, c, v)).collect()
+                }
+                _ => vec![],
+            })
+            .collect();
+        assert_eq!(samples, vec![(0, 0, 1.0), (0, 2, 2.0), (2, 1, 3.0)]);
+        let events: Vec<&Event> = back
+            .iter()
+            .filter_map(|e| match e {
+                Entry::Event { t_ns: 0, event } => Some(event),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(events.len(), 1);
+        assert_eq!(events[0].level, EventLevel::Warn);
+        assert!(events[0].message.contains("NaN") && events[0].message.contains(&chans[1].topic));
+    }
+
+    #[test]
+    fn truncated_file_reads_a_prefix_with_recovery() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("full.mcap");
+        let entries = test_entries();
+        record_to(&path, &entries);
+        let bytes = std::fs::read(&path).unwrap();
+        let all = flat(&entries);
+        for frac in [0.5, 0.999] {
+            let cut = dir.path().join(format!("cut-{frac}.mcap"));
+            let n = (bytes.len() as f64 * frac) as usize;
+            std::fs::write(&cut, &bytes[..n]).unwrap();
+            let (m, chans, back, recovery) = read_entries(&cut).unwrap();
+            assert_eq!(m, meta());
+            assert_eq!(chans, channels());
+            let recovery = recovery.expect("a cut file is damaged");
+            assert!(!recovery.reason.is_empty());
+            let got = flat(&back);
+            assert!(!got.is_empty(), "{frac}");
+            assert_eq!(got[..], all[..got.len()], "{frac}: a prefix");
+            if frac < 0.9 {
+                assert!(got.len() < all.len());
+                // At most a second (4 channels at 1 kHz) more than half.
+                assert!(got.len() > all.len() / 4, "{} of {}", got.len(), all.len());
+            } else {
+                assert_eq!(got.len(), all.len(), "only the summary was cut");
+            }
+            let record = read_mcap(&cut).unwrap();
+            assert_eq!(
+                record.recovery.as_ref().unwrap().messages,
+                recovery.messages
+            );
+            if frac < 0.9 {
+                // The second segment is open: it keeps its start, loses its end.
+                let last = record.segments.last().unwrap();
+                assert!(last.label.ends_with(" (incomplete)"), "{}", last.label);
+                assert!(record.recorded_result.is_none());
+            } else {
+                assert_eq!(record.segments, live(&entries).segments);
+            }
+        }
+    }
+
+    #[test]
+    fn killed_writer_loses_at_most_about_a_second() {
+        // A writer that is never finished (as if the process were killed):
+        // only what the 1 s flushes put on disk survives.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("killed.mcap");
+        let entries = test_entries();
+        record_to(&path, &entries);
+        // Reproduce the on-disk state at a kill: keep the bytes up to the
+        // end of the last chunk that starts before the 5.5 s mark.
+        let bytes = std::fs::read(&path).unwrap();
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        let mut chunks = summary.chunk_indexes.clone();
+        chunks.sort_by_key(|c| c.chunk_start_offset);
+        let kept = chunks
+            .iter()
+            .rfind(|c| c.message_end_time <= 5_500_000_000)
+            .unwrap();
+        let end = (kept.chunk_start_offset + kept.chunk_length) as usize;
+        let cut = dir.path().join("cut.mcap");
+        std::fs::write(&cut, &bytes[..end]).unwrap();
+        let (_, _, back, recovery) = read_entries(&cut).unwrap();
+        assert!(recovery.is_some());
+        let last_t = flat(&back).last().unwrap().0;
+        assert!(last_t >= 4_500_000_000, "lost more than a second: {last_t}");
+        // Chunks are closed at least every second of log time.
+        for c in &chunks {
+            assert!(
+                c.message_end_time - c.message_start_time <= 1_000_000_000,
+                "{:?}",
+                chunks
+                    .iter()
+                    .map(|c| (c.message_start_time, c.message_end_time))
+                    .collect::<Vec<_>>()
+            );
+        }
+    }
+
+    fn raw_file(path: &Path, metadata: Option<BTreeMap<String, String>>, event: &[u8]) {
+        let file = std::fs::File::create(path).unwrap();
+        let mut w = mcap::WriteOptions::new()
+            .create(BufWriter::new(file))
+            .unwrap();
+        if let Some(md) = metadata {
+            w.write_metadata(&Metadata {
+                name: METADATA_NAME.into(),
+                metadata: md,
+            })
+            .unwrap();
+        }
+        let schema = w
+            .add_schema(
+                "motorbench.Event",
+                "jsonschema",
+                crate::record::schema::EVENT_JSON_SCHEMA.as_bytes(),
+            )
+            .unwrap();
+        let ch = w
+            .add_channel(schema, TOPIC_EVENT, "json", &BTreeMap::new())
+            .unwrap();
+        w.write_to_known_channel(
+            &MessageHeader {
+                channel_id: ch,
+                sequence: 0,
+                log_time: 42,
+                publish_time: 42,
+            },
+            event,
+        )
+        .unwrap();
+        w.finish().unwrap();
+    }
+
+    fn good_metadata() -> BTreeMap<String, String> {
+        BTreeMap::from([
+            ("schema_version".into(), "1".into()),
+            ("kind".into(), "dc_step".into()),
+            ("motor_id".into(), "m".into()),
+            ("started_at".into(), "2026-11-21T10:00:00Z".into()),
+            ("nameplate".into(), "{}".into()),
+            ("config".into(), String::new()),
+        ])
+    }
+
+    const EVENT: &[u8] = br#"{"level":"info","message":"hi"}"#;
+
+    #[test]
+    fn missing_metadata_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("foreign.mcap");
+        raw_file(&path, None, EVENT);
+        let e = read_mcap(&path).unwrap_err();
+        assert!(matches!(e, RecordError::NotMotorbench { .. }), "{e}");
+        let s = e.to_string();
+        assert!(
+            s.contains("foreign.mcap") && s.contains("not a motorbench record"),
+            "{s}"
+        );
+        assert!(s.contains("motorbench.test"), "{s}");
+    }
+
+    #[test]
+    fn missing_metadata_key_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("nokey.mcap");
+        let mut md = good_metadata();
+        md.remove("motor_id");
+        raw_file(&path, Some(md), EVENT);
+        let s = read_mcap(&path).unwrap_err().to_string();
+        assert!(
+            s.contains("not a motorbench record") && s.contains("motor_id"),
+            "{s}"
+        );
+    }
+
+    #[test]
+    fn other_schema_version_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("v2.mcap");
+        let mut md = good_metadata();
+        md.insert("schema_version".into(), "2".into());
+        // A message that does not decode under version 1 does not hide
+        // the version.
+        raw_file(&path, Some(md), br#"{"level":"fatal","message":"x"}"#);
+        let e = read_mcap(&path).unwrap_err();
+        assert!(matches!(e, RecordError::UnsupportedVersion { .. }), "{e}");
+        assert!(e.to_string().contains("schema_version \"2\""), "{e}");
+    }
+
+    #[test]
+    fn minimal_foreign_writer_file_reads() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("ok.mcap");
+        raw_file(&path, Some(good_metadata()), EVENT);
+        let r = read_mcap(&path).unwrap();
+        assert_eq!(r.events.len(), 1);
+        assert_eq!(r.events[0].0, 42);
+        assert!(r.recovery.is_none());
+    }
+
+    #[test]
+    fn undecodable_message_names_file_topic_and_time() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.mcap");
+        raw_file(&path, Some(good_metadata()), b"{\"level\":\"loud\"");
+        let e = read_mcap(&path).unwrap_err();
+        let s = e.to_string();
+        assert!(matches!(e, RecordError::BadMessage { .. }), "{s}");
+        assert!(
+            s.contains("bad.mcap") && s.contains("/bench/event") && s.contains("42"),
+            "{s}"
+        );
+    }
+
+    #[test]
+    fn not_an_mcap_file_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("x.mcap");
+        std::fs::write(&path, "time_s,armature_voltage_V\n0,1\n").unwrap();
+        let s = read_mcap(&path).unwrap_err().to_string();
+        assert!(s.contains("x.mcap"), "{s}");
+        let s = read_mcap(&dir.path().join("absent.mcap"))
+            .unwrap_err()
+            .to_string();
+        assert!(s.contains("absent.mcap"), "{s}");
+    }
+}

@@ -1,0 +1,198 @@
+//! Names and JSON Schemas of the contract's MCAP layout.
+//!
+//! Every channel carries JSON messages (`message_encoding = "json"`) with a
+//! JSON Schema (draft 2020-12, `encoding = "jsonschema"`). The schema texts
+//! below are written into every record as they are; changing one is a new
+//! `schema_version`.
+
+/// Message encoding of every channel.
+pub const MESSAGE_ENCODING: &str = "json";
+/// Schema encoding of every schema.
+pub const SCHEMA_ENCODING: &str = "jsonschema";
+
+/// Name of the metadata record that describes the test.
+pub const METADATA_NAME: &str = "motorbench.test";
+
+/// Required keys of the `motorbench.test` metadata record.
+pub const METADATA_KEYS: [&str; 6] = [
+    "schema_version",
+    "kind",
+    "motor_id",
+    "started_at",
+    "nameplate",
+    "config",
+];
+
+/// Topic prefix of measured channels.
+pub const SENSOR_PREFIX: &str = "/sensor/";
+/// Topic prefix of commanded channels.
+pub const COMMAND_PREFIX: &str = "/command/";
+
+/// Topic of segment start/end markers.
+pub const TOPIC_SEGMENT: &str = "/bench/segment";
+/// Topic of induction-machine operating points.
+pub const TOPIC_OPERATING_POINT: &str = "/bench/operating_point";
+/// Topic of bench events.
+pub const TOPIC_EVENT: &str = "/bench/event";
+/// Topic of the identification (and diagnosis) report.
+pub const TOPIC_RESULT: &str = "/bench/result";
+
+/// Schema of `/sensor/*` and `/command/*` messages.
+pub const SCHEMA_SAMPLE: &str = "motorbench.Sample";
+/// Schema of `/bench/segment` messages.
+pub const SCHEMA_SEGMENT: &str = "motorbench.Segment";
+/// Schema of `/bench/operating_point` messages.
+pub const SCHEMA_OPERATING_POINT: &str = "motorbench.OperatingPoint";
+/// Schema of `/bench/event` messages.
+pub const SCHEMA_EVENT: &str = "motorbench.Event";
+/// Schema of `/bench/result` messages.
+pub const SCHEMA_RESULT: &str = "motorbench.Result";
+
+/// JSON Schema of `motorbench.Sample`: `{"value": number}`. (A non-finite
+/// reading, which JSON cannot carry, is reported on `/bench/event`.)
+pub const SAMPLE_JSON_SCHEMA: &str = r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "motorbench.Sample",
+  "description": "One reading of a /sensor/ or /command/ channel, in the channel's SI unit.",
+  "type": "object",
+  "properties": {
+    "value": {"type": "number"}
+  },
+  "required": ["value"],
+  "additionalProperties": false
+}"#;
+
+/// JSON Schema of `motorbench.Segment`.
+pub const SEGMENT_JSON_SCHEMA: &str = r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "motorbench.Segment",
+  "description": "Start or end of a segment: one step, one coast-down or one sweep.",
+  "type": "object",
+  "properties": {
+    "index": {"type": "integer", "minimum": 0},
+    "kind": {"enum": ["dc_step", "dc_coastdown", "im_slip_sweep"]},
+    "phase": {"enum": ["start", "end"]},
+    "label": {"type": "string"}
+  },
+  "required": ["index", "kind", "phase", "label"],
+  "additionalProperties": false
+}"#;
+
+/// JSON Schema of `motorbench.OperatingPoint`.
+pub const OPERATING_POINT_JSON_SCHEMA: &str = r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "motorbench.OperatingPoint",
+  "description": "One steady-state operating point of an induction-machine slip sweep (SI units; slip is a fraction).",
+  "type": "object",
+  "properties": {
+    "segment": {"type": "integer", "minimum": 0},
+    "slip": {"type": "number"},
+    "line_voltage": {"type": "number"},
+    "line_current": {"type": "number"},
+    "input_power": {"type": "number"},
+    "speed": {"type": "number"},
+    "frequency": {"type": "number"},
+    "torque": {"type": ["number", "null"]}
+  },
+  "required": ["segment", "slip", "line_voltage", "line_current", "input_power", "speed", "frequency", "torque"],
+  "additionalProperties": false
+}"#;
+
+/// JSON Schema of `motorbench.Event`.
+pub const EVENT_JSON_SCHEMA: &str = r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "motorbench.Event",
+  "description": "Something the bench did or saw, for a person.",
+  "type": "object",
+  "properties": {
+    "level": {"enum": ["info", "warn", "abort"]},
+    "message": {"type": "string"}
+  },
+  "required": ["level", "message"],
+  "additionalProperties": false
+}"#;
+
+/// JSON Schema of `motorbench.Result`: the report as the CLI's `--json`
+/// prints it, a JSON object.
+pub const RESULT_JSON_SCHEMA: &str = r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "motorbench.Result",
+  "description": "The identification (and diagnosis) report, as printed by the CLI's --json.",
+  "type": "object"
+}"#;
+
+/// The `/bench/*` topics with their schema names and schema texts, in the
+/// order the recorder declares them.
+pub const BENCH_TOPICS: [(&str, &str, &str); 4] = [
+    (TOPIC_SEGMENT, SCHEMA_SEGMENT, SEGMENT_JSON_SCHEMA),
+    (
+        TOPIC_OPERATING_POINT,
+        SCHEMA_OPERATING_POINT,
+        OPERATING_POINT_JSON_SCHEMA,
+    ),
+    (TOPIC_EVENT, SCHEMA_EVENT, EVENT_JSON_SCHEMA),
+    (TOPIC_RESULT, SCHEMA_RESULT, RESULT_JSON_SCHEMA),
+];
+
+/// Whether `topic` is the contract's topic for a sample channel of
+/// `quantity`: `/sensor/<quantity>` or `/command/<quantity>`.
+pub fn is_sample_topic_for(topic: &str, quantity: &str) -> bool {
+    !quantity.is_empty()
+        && [SENSOR_PREFIX, COMMAND_PREFIX]
+            .iter()
+            .any(|p| topic.strip_prefix(p) == Some(quantity))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn schemas_are_json_objects_of_draft_2020_12() {
+        let all = [
+            (SCHEMA_SAMPLE, SAMPLE_JSON_SCHEMA),
+            (SCHEMA_SEGMENT, SEGMENT_JSON_SCHEMA),
+            (SCHEMA_OPERATING_POINT, OPERATING_POINT_JSON_SCHEMA),
+            (SCHEMA_EVENT, EVENT_JSON_SCHEMA),
+            (SCHEMA_RESULT, RESULT_JSON_SCHEMA),
+        ];
+        for (name, text) in all {
+            let v: serde_json::Value = serde_json::from_str(text).unwrap();
+            assert_eq!(
+                v["$schema"], "https://json-schema.org/draft/2020-12/schema",
+                "{name}"
+            );
+            assert_eq!(v["title"], name);
+            assert_eq!(v["type"], "object");
+        }
+    }
+
+    #[test]
+    fn segment_schema_matches_the_contract() {
+        let v: serde_json::Value = serde_json::from_str(SEGMENT_JSON_SCHEMA).unwrap();
+        assert_eq!(
+            v["properties"]["kind"]["enum"],
+            serde_json::json!(["dc_step", "dc_coastdown", "im_slip_sweep"])
+        );
+        assert_eq!(
+            v["properties"]["phase"]["enum"],
+            serde_json::json!(["start", "end"])
+        );
+        let v: serde_json::Value = serde_json::from_str(EVENT_JSON_SCHEMA).unwrap();
+        assert_eq!(
+            v["properties"]["level"]["enum"],
+            serde_json::json!(["info", "warn", "abort"])
+        );
+        let v: serde_json::Value = serde_json::from_str(OPERATING_POINT_JSON_SCHEMA).unwrap();
+        assert_eq!(v["required"].as_array().unwrap().len(), 8);
+    }
+
+    #[test]
+    fn sample_topics() {
+        assert!(is_sample_topic_for("/sensor/speed", "speed"));
+        assert!(is_sample_topic_for("/command/dyno_speed", "dyno_speed"));
+        assert!(!is_sample_topic_for("/sensor/speed", "torque"));
+        assert!(!is_sample_topic_for("/bench/speed", "speed"));
+        assert!(!is_sample_topic_for("/sensor/", ""));
+    }
+}

@@ -1,0 +1,226 @@
+//! The in-memory shape of a record: what the bench sends to the recorder,
+//! and what identification reads back (from the bench, MCAP or CSV).
+
+use serde::{Deserialize, Serialize};
+
+/// Contract version written to every record and report.
+pub const SCHEMA_VERSION: &str = "1";
+
+/// The test kinds of the data contract.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]
+#[serde(rename_all = "snake_case")]
+pub enum SegmentKind {
+    /// Armature-voltage step of a separately excited DC motor.
+    DcStep,
+    /// Armature opened from a steady speed; the speed decays to rest.
+    DcCoastdown,
+    /// Induction-machine slip sweep.
+    ImSlipSweep,
+}
+
+impl SegmentKind {
+    /// The contract's name for the kind.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            SegmentKind::DcStep => "dc_step",
+            SegmentKind::DcCoastdown => "dc_coastdown",
+            SegmentKind::ImSlipSweep => "im_slip_sweep",
+        }
+    }
+
+    /// Parse the contract's name; `None` for anything else.
+    pub fn parse(s: &str) -> Option<SegmentKind> {
+        match s {
+            "dc_step" => Some(SegmentKind::DcStep),
+            "dc_coastdown" => Some(SegmentKind::DcCoastdown),
+            "im_slip_sweep" => Some(SegmentKind::ImSlipSweep),
+            _ => None,
+        }
+    }
+}
+
+impl std::fmt::Display for SegmentKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Severity of a `/bench/event` message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EventLevel {
+    /// Progress and facts.
+    Info,
+    /// Something a user should look at; the test went on.
+    Warn,
+    /// The test was stopped and the rig put in its safe state.
+    Abort,
+}
+
+/// Phase of a `/bench/segment` marker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SegmentPhase {
+    /// The segment begins at this message's time.
+    Start,
+    /// The segment ends at this message's time.
+    End,
+}
+
+/// A `/bench/segment` message.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SegmentMarker {
+    /// Segment index, from 0.
+    pub index: u32,
+    /// Test kind of the segment.
+    pub kind: SegmentKind,
+    /// Start or end.
+    pub phase: SegmentPhase,
+    /// Free text, e.g. `60 V → 248 V`.
+    pub label: String,
+}
+
+/// A `/bench/event` message.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Event {
+    /// Severity.
+    pub level: EventLevel,
+    /// What happened, for a person.
+    pub message: String,
+}
+
+/// One recorded channel (`/sensor/*` or `/command/*`) and its metadata.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChannelSpec {
+    /// MCAP topic, e.g. `/sensor/armature_current`.
+    pub topic: String,
+    /// Contract quantity, e.g. `armature_current`.
+    pub quantity: String,
+    /// SI unit, e.g. `A`.
+    pub unit: String,
+    /// Driver id of the device that produced it.
+    pub source: String,
+}
+
+impl ChannelSpec {
+    /// A `/sensor/<quantity>` channel.
+    pub fn sensor(quantity: &str, unit: &str, source: &str) -> ChannelSpec {
+        ChannelSpec {
+            topic: format!("/sensor/{quantity}"),
+            quantity: quantity.to_string(),
+            unit: unit.to_string(),
+            source: source.to_string(),
+        }
+    }
+
+    /// A `/command/<quantity>` channel.
+    pub fn command(quantity: &str, unit: &str, source: &str) -> ChannelSpec {
+        ChannelSpec {
+            topic: format!("/command/{quantity}"),
+            quantity: quantity.to_string(),
+            unit: unit.to_string(),
+            source: source.to_string(),
+        }
+    }
+}
+
+/// The `motorbench.test` metadata record (all values strings in MCAP).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TestMeta {
+    /// Contract version, [`SCHEMA_VERSION`] for what we write.
+    pub schema_version: String,
+    /// Test kind of the record as a whole.
+    pub kind: SegmentKind,
+    /// Free-form id of the motor under test.
+    pub motor_id: String,
+    /// Wall-clock start, RFC 3339.
+    pub started_at: String,
+    /// Rated values, a JSON object (contract keys: `power_W`, …).
+    pub nameplate: serde_json::Value,
+    /// The resolved configuration, TOML text.
+    pub config: String,
+}
+
+/// What the bench hands the recorder; the MCAP reader yields the same.
+///
+/// `t_ns` is nanoseconds since the start of the test (MCAP `log_time`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Entry {
+    /// Readings taken at one instant: `(channel index, value)` pairs, the
+    /// index into the channel list given when recording started.
+    Samples {
+        /// Time of the readings.
+        t_ns: u64,
+        /// `(channel index, value)`.
+        values: Vec<(usize, f64)>,
+    },
+    /// A segment boundary.
+    Segment {
+        /// Time of the boundary.
+        t_ns: u64,
+        /// The marker.
+        marker: SegmentMarker,
+    },
+    /// A bench event.
+    Event {
+        /// When it happened.
+        t_ns: u64,
+        /// What happened.
+        event: Event,
+    },
+    /// The final identification (and diagnosis) report.
+    Result {
+        /// When it was produced.
+        t_ns: u64,
+        /// The report, as the CLI's `--json` prints it.
+        report: serde_json::Value,
+    },
+}
+
+/// One DC segment as identification sees it: series on one time base.
+///
+/// All series have the length of `time`. Channels recorded at other
+/// instants are linearly interpolated onto the armature-current instants.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct DcSegment {
+    /// Segment index.
+    pub index: u32,
+    /// `DcStep` or `DcCoastdown`.
+    pub kind: Option<SegmentKind>,
+    /// Free text label.
+    pub label: String,
+    /// Seconds since the start of the test.
+    pub time: Vec<f64>,
+    /// Armature voltage, V.
+    pub voltage: Vec<f64>,
+    /// Armature current, A.
+    pub current: Vec<f64>,
+    /// Shaft speed, rad/s.
+    pub speed: Vec<f64>,
+}
+
+/// How much of a damaged (truncated) file could be read.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Recovery {
+    /// Messages read before the damage.
+    pub messages: u64,
+    /// What the reader reported at the damage.
+    pub reason: String,
+}
+
+/// A whole record, ready for identification.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Record {
+    /// Metadata, when the source had it (MCAP does; CSV does not).
+    pub meta: Option<TestMeta>,
+    /// The segments, in index order.
+    pub segments: Vec<DcSegment>,
+    /// Bench events in time order.
+    pub events: Vec<(u64, Event)>,
+    /// The `/bench/result` found in the file, if any.
+    pub recorded_result: Option<serde_json::Value>,
+    /// Set when the file was damaged and only partly read.
+    pub recovery: Option<Recovery>,
+}

@@ -1,0 +1,733 @@
+//! The recorder: writes a test to MCAP per the data contract.
+//!
+//! [`Recorder::start`] creates the file and writes everything that is known
+//! before the first sample (header, the `motorbench.test` metadata, schemas
+//! and channels). Entries then go through a bounded queue to a writer
+//! thread, so MCAP writing and compression never run on the async reactor;
+//! a full queue makes [`Recorder::send`] wait, it never drops an entry.
+//!
+//! Layout of the messages:
+//!
+//! - [`Entry::Samples`] with N values becomes N messages, one per channel,
+//!   payload `{"value": <f64>}`. JSON cannot carry NaN or infinity: a
+//!   non-finite value is not written as a sample; a `/bench/event` warning
+//!   names the channel and the value at that time instead.
+//! - Segment markers, events and the result go to their `/bench/*` topics;
+//!   the result payload is the report JSON as it is.
+//! - `log_time = publish_time = t_ns`; sequence numbers count up from 0 per
+//!   channel.
+//!
+//! Crash safety: the current chunk is closed and the file buffer flushed
+//! whenever log time has advanced by 1 s or more since the last flush, and
+//! after every segment marker, abort event and result. A killed process
+//! loses about the last second; the reader recovers the rest.
+//!
+//! If the recorder is dropped without [`Recorder::finish`], the writer
+//! thread still writes what was queued and the summary, in the background.
+
+use std::collections::BTreeMap;
+use std::fs::{File, OpenOptions};
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+
+use mcap::records::{MessageHeader, Metadata};
+use mcap::{Compression, WriteOptions, Writer};
+use serde::Serialize;
+use tokio::sync::{mpsc, oneshot};
+
+use super::error::RecordError;
+use super::schema::{
+    is_sample_topic_for, BENCH_TOPICS, MESSAGE_ENCODING, METADATA_NAME, SAMPLE_JSON_SCHEMA,
+    SCHEMA_ENCODING, SCHEMA_SAMPLE, TOPIC_EVENT, TOPIC_RESULT, TOPIC_SEGMENT,
+};
+use super::types::{ChannelSpec, Entry, Event, EventLevel, TestMeta, SCHEMA_VERSION};
+
+/// Log time between two flushes, ns.
+const FLUSH_INTERVAL_NS: u64 = 1_000_000_000;
+
+/// Header `library` of every file we write.
+pub fn library_name() -> String {
+    format!("motorbench/{}", env!("CARGO_PKG_VERSION"))
+}
+
+/// What a finished recording wrote.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RecorderStats {
+    /// Messages written, all topics.
+    pub messages: u64,
+    /// Messages written per topic; every declared topic is listed, with 0
+    /// where nothing was written.
+    pub per_topic: BTreeMap<String, u64>,
+    /// How many times [`Recorder::send`] had to wait for room in the queue.
+    pub backpressure_waits: u64,
+    /// The file.
+    pub path: PathBuf,
+}
+
+/// State shared by the recorder handle and its writer thread.
+#[derive(Debug, Default)]
+struct Shared {
+    backpressure_waits: AtomicU64,
+    /// The writer thread's error, once it has failed.
+    failure: Mutex<Option<String>>,
+}
+
+/// Records one test to an MCAP file. See the module docs.
+#[derive(Debug)]
+pub struct Recorder {
+    tx: mpsc::Sender<Entry>,
+    done: oneshot::Receiver<Result<RecorderStats, RecordError>>,
+    thread: std::thread::JoinHandle<()>,
+    shared: Arc<Shared>,
+    channel_count: usize,
+    path: PathBuf,
+}
+
+/// Channel ids and counters, owned by the writer thread. Positions
+/// `0..n` are the sample channels in the caller's order, then the
+/// `/bench/*` topics in [`BENCH_TOPICS`] order.
+struct Channels {
+    topics: Vec<String>,
+    ids: Vec<u16>,
+    sequence: Vec<u32>,
+    counts: Vec<u64>,
+    samples: usize,
+}
+
+impl Channels {
+    fn position_of_bench(&self, topic: &str) -> usize {
+        let k = BENCH_TOPICS
+            .iter()
+            .position(|(t, _, _)| *t == topic)
+            .expect("a /bench topic of the contract");
+        self.samples + k
+    }
+}
+
+#[derive(Serialize)]
+struct SamplePayload {
+    /// Always finite (non-finite readings become events).
+    value: f64,
+}
+
+impl Recorder {
+    /// Creates the file (refusing to overwrite an existing one), writes the
+    /// header (profile `""`, library `motorbench/<version>`), the
+    /// `motorbench.test` metadata, the schemas and the channels (the given
+    /// sample channels with their `unit`/`quantity`/`source` metadata, then
+    /// the four `/bench/*` topics), and starts the writer thread.
+    ///
+    /// `queue_capacity` is the number of entries the queue holds (at least
+    /// 1). Refuses a `meta` whose `schema_version` is not
+    /// [`SCHEMA_VERSION`] or whose nameplate is not a JSON object, and
+    /// channels whose topic is not `/sensor/<quantity>` or
+    /// `/command/<quantity>` or appears twice.
+    pub fn start(
+        path: &Path,
+        meta: &TestMeta,
+        channels: &[ChannelSpec],
+        queue_capacity: usize,
+    ) -> Result<Recorder, RecordError> {
+        validate(path, meta, channels)?;
+        let file = OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(path)
+            .map_err(|e| RecordError::io(path, e))?;
+        let options = WriteOptions::new()
+            .profile("")
+            .library(library_name())
+            .compression(Some(Compression::Zstd))
+            .use_chunks(true)
+            .chunk_size(Some(WriteOptions::DEFAULT_CHUNK_SIZE))
+            .compression_threads(0);
+        let mcap_err = |e| RecordError::mcap(path, e);
+        let mut writer = options.create(BufWriter::new(file)).map_err(mcap_err)?;
+        writer
+            .write_metadata(&Metadata {
+                name: METADATA_NAME.to_string(),
+                metadata: metadata_map(meta),
+            })
+            .map_err(mcap_err)?;
+
+        let sample_schema = writer
+            .add_schema(
+                SCHEMA_SAMPLE,
+                SCHEMA_ENCODING,
+                SAMPLE_JSON_SCHEMA.as_bytes(),
+            )
+            .map_err(mcap_err)?;
+        let mut table = Channels {
+            topics: Vec::new(),
+            ids: Vec::new(),
+            sequence: Vec::new(),
+            counts: Vec::new(),
+            samples: channels.len(),
+        };
+        for c in channels {
+            let md = BTreeMap::from([
+                ("unit".to_string(), c.unit.clone()),
+                ("quantity".to_string(), c.quantity.clone()),
+                ("source".to_string(), c.source.clone()),
+            ]);
+            let id = writer
+                .add_channel(sample_schema, &c.topic, MESSAGE_ENCODING, &md)
+                .map_err(mcap_err)?;
+            table.topics.push(c.topic.clone());
+            table.ids.push(id);
+        }
+        for (topic, name, text) in BENCH_TOPICS {
+            let schema = writer
+                .add_schema(name, SCHEMA_ENCODING, text.as_bytes())
+                .map_err(mcap_err)?;
+            let id = writer
+                .add_channel(schema, topic, MESSAGE_ENCODING, &BTreeMap::new())
+                .map_err(mcap_err)?;
+            table.topics.push(topic.to_string());
+            table.ids.push(id);
+        }
+        table.sequence = vec![0; table.ids.len()];
+        table.counts = vec![0; table.ids.len()];
+        // The declarations reach the disk before the first sample.
+        writer.flush().map_err(mcap_err)?;
+
+        let (tx, rx) = mpsc::channel(queue_capacity.max(1));
+        let (done_tx, done) = oneshot::channel();
+        let shared = Arc::new(Shared::default());
+        let thread_shared = Arc::clone(&shared);
+        let thread_path = path.to_path_buf();
+        let thread = std::thread::Builder::new()
+            .name("mcap-writer".to_string())
+            .spawn(move || {
+                let mut rx = rx;
+                let result = run(writer, &mut rx, table, &thread_path);
+                if let Err(e) = &result {
+                    *thread_shared
+                        .failure
+                        .lock()
+                        .unwrap_or_else(|p| p.into_inner()) = Some(e.to_string());
+                    rx.close();
+                }
+                drop(rx);
+                // The receiver is gone if the recorder was dropped unfinished.
+                let _ = done_tx.send(result);
+            })
+            .map_err(|e| RecordError::io(path, e))?;
+
+        Ok(Recorder {
+            tx,
+            done,
+            thread,
+            shared,
+            channel_count: channels.len(),
+            path: path.to_path_buf(),
+        })
+    }
+
+    /// Queues an entry. Waits when the queue is full (never drops),
+    /// counting each wait in [`RecorderStats::backpressure_waits`].
+    ///
+    /// Returns the writer's error if the writer thread has failed, and
+    /// refuses (without writing anything) samples whose channel index is
+    /// outside the channel list and results that are not JSON objects.
+    pub async fn send(&self, entry: Entry) -> Result<(), RecordError> {
+        if let Some(reason) = self.failure() {
+            return Err(self.writer_failed(reason));
+        }
+        self.check(&entry)?;
+        match self.tx.try_send(entry) {
+            Ok(()) => Ok(()),
+            Err(mpsc::error::TrySendError::Full(entry)) => {
+                self.shared
+                    .backpressure_waits
+                    .fetch_add(1, Ordering::Relaxed);
+                self.tx.send(entry).await.map_err(|_| self.writer_stopped())
+            }
+            Err(mpsc::error::TrySendError::Closed(_)) => Err(self.writer_stopped()),
+        }
+    }
+
+    /// Closes the queue, lets the writer thread write the rest and the
+    /// summary, and returns what was written.
+    pub async fn finish(self) -> Result<RecorderStats, RecordError> {
+        let Recorder {
+            tx,
+            done,
+            thread,
+            shared,
+            path,
+            ..
+        } = self;
+        drop(tx);
+        let result = done.await;
+        // The thread has sent its result (or died): joining is immediate.
+        let panicked = thread.join().is_err();
+        match result {
+            Ok(Ok(mut stats)) => {
+                stats.backpressure_waits = shared.backpressure_waits.load(Ordering::Relaxed);
+                Ok(stats)
+            }
+            Ok(Err(e)) => Err(e),
+            Err(_) => Err(RecordError::WriterFailed {
+                path,
+                reason: if panicked {
+                    "the writer thread panicked".to_string()
+                } else {
+                    "the writer thread ended without a result".to_string()
+                },
+            }),
+        }
+    }
+
+    /// The file being written.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    fn failure(&self) -> Option<String> {
+        self.shared
+            .failure
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .clone()
+    }
+
+    fn writer_failed(&self, reason: String) -> RecordError {
+        RecordError::WriterFailed {
+            path: self.path.clone(),
+            reason,
+        }
+    }
+
+    fn writer_stopped(&self) -> RecordError {
+        let reason = self
+            .failure()
+            .unwrap_or_else(|| "the writer thread stopped".to_string());
+        self.writer_failed(reason)
+    }
+
+    fn check(&self, entry: &Entry) -> Result<(), RecordError> {
+        let reason = match entry {
+            Entry::Samples { values, .. } => values
+                .iter()
+                .find(|(i, _)| *i >= self.channel_count)
+                .map(|(i, _)| {
+                    format!(
+                        "sample for channel index {i}, but only {} channels were declared",
+                        self.channel_count
+                    )
+                }),
+            Entry::Result { report, .. } if !report.is_object() => {
+                Some("the result report is not a JSON object".to_string())
+            }
+            _ => None,
+        };
+        match reason {
+            Some(reason) => Err(RecordError::InvalidInput {
+                path: self.path.clone(),
+                reason,
+            }),
+            None => Ok(()),
+        }
+    }
+}
+
+/// The `motorbench.test` metadata of `meta` (all values strings).
+fn metadata_map(meta: &TestMeta) -> BTreeMap<String, String> {
+    BTreeMap::from([
+        ("schema_version".to_string(), meta.schema_version.clone()),
+        ("kind".to_string(), meta.kind.as_str().to_string()),
+        ("motor_id".to_string(), meta.motor_id.clone()),
+        ("started_at".to_string(), meta.started_at.clone()),
+        ("nameplate".to_string(), meta.nameplate.to_string()),
+        ("config".to_string(), meta.config.clone()),
+    ])
+}
+
+fn validate(path: &Path, meta: &TestMeta, channels: &[ChannelSpec]) -> Result<(), RecordError> {
+    let invalid = |reason: String| RecordError::InvalidInput {
+        path: path.to_path_buf(),
+        reason,
+    };
+    if meta.schema_version != SCHEMA_VERSION {
+        return Err(invalid(format!(
+            "schema_version \"{}\" cannot be written (this build writes \"{SCHEMA_VERSION}\")",
+            meta.schema_version
+        )));
+    }
+    if !meta.nameplate.is_object() {
+        return Err(invalid("the nameplate is not a JSON object".to_string()));
+    }
+    for (i, c) in channels.iter().enumerate() {
+        if !is_sample_topic_for(&c.topic, &c.quantity) {
+            return Err(invalid(format!(
+                "channel topic {} does not match quantity \"{}\" (want /sensor/{1} or /command/{1})",
+                c.topic, c.quantity
+            )));
+        }
+        if channels[..i].iter().any(|o| o.topic == c.topic) {
+            return Err(invalid(format!(
+                "channel topic {} is declared twice",
+                c.topic
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The writer thread's body: writes queued entries until the queue closes,
+/// then the summary.
+fn run(
+    mut writer: Writer<BufWriter<File>>,
+    rx: &mut mpsc::Receiver<Entry>,
+    mut table: Channels,
+    path: &Path,
+) -> Result<RecorderStats, RecordError> {
+    let mcap_err = |e| RecordError::mcap(path, e);
+    let mut payload = Vec::with_capacity(64);
+    let mut last_flush = 0u64;
+    while let Some(entry) = rx.blocking_recv() {
+        let (t_ns, urgent) = match &entry {
+            Entry::Samples { t_ns, values } => {
+                for &(index, value) in values {
+                    if value.is_finite() {
+                        payload.clear();
+                        serde_json::to_writer(&mut payload, &SamplePayload { value })
+                            .expect("serializing a sample cannot fail");
+                        write_message(&mut writer, &mut table, index, *t_ns, &payload)
+                            .map_err(mcap_err)?;
+                    } else {
+                        // JSON has no NaN or infinity: say so on /bench/event
+                        // instead of losing the reading silently.
+                        let event = Event {
+                            level: EventLevel::Warn,
+                            message: format!(
+                                "non-finite reading ({value}) on {} not representable in JSON; not recorded as a sample",
+                                table.topics[index]
+                            ),
+                        };
+                        let pos = table.position_of_bench(TOPIC_EVENT);
+                        let data = serde_json::to_vec(&event).expect("an event serializes");
+                        write_message(&mut writer, &mut table, pos, *t_ns, &data)
+                            .map_err(mcap_err)?;
+                    }
+                }
+                (*t_ns, false)
+            }
+            Entry::Segment { t_ns, marker } => {
+                let pos = table.position_of_bench(TOPIC_SEGMENT);
+                let data = serde_json::to_vec(marker).expect("a marker serializes");
+                write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
+                (*t_ns, true)
+            }
+            Entry::Event { t_ns, event } => {
+                let pos = table.position_of_bench(TOPIC_EVENT);
+                let data = serde_json::to_vec(event).expect("an event serializes");
+                write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
+                (*t_ns, event.level == EventLevel::Abort)
+            }
+            Entry::Result { t_ns, report } => {
+                let pos = table.position_of_bench(TOPIC_RESULT);
+                let data = serde_json::to_vec(report).expect("a JSON value serializes");
+                write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
+                (*t_ns, true)
+            }
+        };
+        if urgent || t_ns >= last_flush.saturating_add(FLUSH_INTERVAL_NS) {
+            // Closes the chunk and flushes the BufWriter into the file.
+            writer.flush().map_err(mcap_err)?;
+            last_flush = last_flush.max(t_ns);
+        }
+    }
+    writer.finish().map_err(mcap_err)?;
+    let file = writer
+        .into_inner()
+        .into_inner()
+        .map_err(|e| RecordError::io(path, e.into_error()))?;
+    file.sync_all().map_err(|e| RecordError::io(path, e))?;
+
+    let per_topic: BTreeMap<String, u64> = table
+        .topics
+        .iter()
+        .cloned()
+        .zip(table.counts.iter().copied())
+        .collect();
+    Ok(RecorderStats {
+        messages: table.counts.iter().sum(),
+        per_topic,
+        backpressure_waits: 0,
+        path: path.to_path_buf(),
+    })
+}
+
+fn write_message(
+    writer: &mut Writer<BufWriter<File>>,
+    table: &mut Channels,
+    pos: usize,
+    t_ns: u64,
+    data: &[u8],
+) -> Result<(), mcap::McapError> {
+    let header = MessageHeader {
+        channel_id: table.ids[pos],
+        sequence: table.sequence[pos],
+        log_time: t_ns,
+        publish_time: t_ns,
+    };
+    writer.write_to_known_channel(&header, data)?;
+    table.sequence[pos] = table.sequence[pos].wrapping_add(1);
+    table.counts[pos] += 1;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::types::{Event, SegmentKind};
+    use std::time::{Duration, Instant};
+
+    fn meta() -> TestMeta {
+        TestMeta {
+            schema_version: SCHEMA_VERSION.into(),
+            kind: SegmentKind::DcCoastdown,
+            motor_id: "m".into(),
+            started_at: "2026-11-21T10:00:00Z".into(),
+            nameplate: serde_json::json!({"power_W": 100.0}),
+            config: String::new(),
+        }
+    }
+
+    fn channels() -> Vec<ChannelSpec> {
+        vec![
+            ChannelSpec::sensor("armature_current", "A", "daq"),
+            ChannelSpec::sensor("speed", "rad/s", "enc"),
+        ]
+    }
+
+    fn runtime() -> tokio::runtime::Runtime {
+        tokio::runtime::Builder::new_current_thread()
+            .enable_time()
+            .build()
+            .unwrap()
+    }
+
+    fn samples(t_ns: u64) -> Entry {
+        Entry::Samples {
+            t_ns,
+            values: vec![(0, t_ns as f64), (1, 2.0)],
+        }
+    }
+
+    /// Polls `f` for up to 10 s.
+    fn eventually(mut f: impl FnMut() -> bool) -> bool {
+        let start = Instant::now();
+        while start.elapsed() < Duration::from_secs(10) {
+            if f() {
+                return true;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        false
+    }
+
+    #[test]
+    fn writes_header_metadata_and_stats() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("r.mcap");
+        let stats = runtime().block_on(async {
+            let rec = Recorder::start(&path, &meta(), &channels(), 8).unwrap();
+            assert_eq!(rec.path(), path);
+            for k in 0..100 {
+                rec.send(samples(k * 1_000_000)).await.unwrap();
+            }
+            rec.send(Entry::Event {
+                t_ns: 5,
+                event: Event {
+                    level: EventLevel::Abort,
+                    message: "limit".into(),
+                },
+            })
+            .await
+            .unwrap();
+            rec.finish().await.unwrap()
+        });
+        assert_eq!(stats.messages, 201);
+        assert_eq!(stats.path, path);
+        assert_eq!(stats.per_topic.len(), 6);
+        assert_eq!(stats.per_topic["/sensor/armature_current"], 100);
+        assert_eq!(stats.per_topic["/bench/event"], 1);
+        assert_eq!(stats.per_topic["/bench/result"], 0);
+
+        let bytes = std::fs::read(&path).unwrap();
+        let mut header = None;
+        let mut metadata = None;
+        for r in mcap::read::LinearReader::new(&bytes).unwrap() {
+            match r.unwrap() {
+                mcap::records::Record::Header(h) => header = Some(h),
+                mcap::records::Record::Metadata(m) => metadata = Some(m),
+                _ => {}
+            }
+        }
+        let header = header.unwrap();
+        assert_eq!(header.profile, "");
+        assert_eq!(
+            header.library,
+            format!("motorbench/{}", env!("CARGO_PKG_VERSION"))
+        );
+        let md = metadata.unwrap();
+        assert_eq!(md.name, "motorbench.test");
+        assert_eq!(md.metadata["schema_version"], "1");
+        assert_eq!(md.metadata["kind"], "dc_coastdown");
+        assert_eq!(md.metadata["nameplate"], r#"{"power_W":100.0}"#);
+
+        let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+        assert_eq!(summary.stats.unwrap().message_count, 201);
+        assert!(summary
+            .chunk_indexes
+            .iter()
+            .all(|c| c.compression == "zstd"));
+        let speed = summary
+            .channels
+            .values()
+            .find(|c| c.topic == "/sensor/speed")
+            .unwrap();
+        assert_eq!(speed.message_encoding, "json");
+        assert_eq!(speed.metadata["unit"], "rad/s");
+        assert_eq!(speed.metadata["quantity"], "speed");
+        assert_eq!(speed.metadata["source"], "enc");
+        let schema = speed.schema.as_ref().unwrap();
+        assert_eq!(schema.name, "motorbench.Sample");
+        assert_eq!(schema.encoding, "jsonschema");
+
+        // Sequence numbers count up per channel; log_time == publish_time.
+        let mut seq: BTreeMap<String, Vec<u32>> = BTreeMap::new();
+        for m in mcap::MessageStream::new(&bytes).unwrap() {
+            let m = m.unwrap();
+            assert_eq!(m.log_time, m.publish_time);
+            seq.entry(m.channel.topic.clone())
+                .or_default()
+                .push(m.sequence);
+        }
+        assert_eq!(seq["/sensor/speed"], (0..100).collect::<Vec<u32>>());
+    }
+
+    #[test]
+    fn refuses_to_overwrite() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("exists.mcap");
+        std::fs::write(&path, b"keep me").unwrap();
+        let e = Recorder::start(&path, &meta(), &channels(), 8).unwrap_err();
+        assert!(matches!(e, RecordError::Io { .. }), "{e}");
+        assert!(e.to_string().contains("exists.mcap"), "{e}");
+        assert_eq!(std::fs::read(&path).unwrap(), b"keep me");
+    }
+
+    #[test]
+    fn refuses_bad_input() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.mcap");
+        let mut m = meta();
+        m.schema_version = "2".into();
+        assert!(Recorder::start(&path, &m, &channels(), 8).is_err());
+        let mut m = meta();
+        m.nameplate = serde_json::json!([1]);
+        assert!(Recorder::start(&path, &m, &channels(), 8).is_err());
+        let mut c = channels();
+        c[0].topic = "/sensor/current".into();
+        let e = Recorder::start(&path, &meta(), &c, 8).unwrap_err();
+        assert!(e.to_string().contains("/sensor/current"), "{e}");
+        let mut c = channels();
+        c.push(c[0].clone());
+        assert!(Recorder::start(&path, &meta(), &c, 8).is_err());
+        assert!(!path.exists(), "nothing is created for refused input");
+
+        runtime().block_on(async {
+            let rec = Recorder::start(&path, &meta(), &channels(), 8).unwrap();
+            let e = rec
+                .send(Entry::Samples {
+                    t_ns: 0,
+                    values: vec![(0, 1.0), (2, 1.0)],
+                })
+                .await
+                .unwrap_err();
+            assert!(matches!(e, RecordError::InvalidInput { .. }), "{e}");
+            let e = rec
+                .send(Entry::Result {
+                    t_ns: 0,
+                    report: serde_json::json!("text"),
+                })
+                .await
+                .unwrap_err();
+            assert!(e.to_string().contains("not a JSON object"), "{e}");
+            // The recorder goes on.
+            rec.send(samples(1)).await.unwrap();
+            let stats = rec.finish().await.unwrap();
+            assert_eq!(stats.messages, 2);
+        });
+    }
+
+    #[test]
+    fn full_queue_waits_and_never_drops() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bp.mcap");
+        let n = 20_000u64;
+        let stats = runtime().block_on(async {
+            let rec = Recorder::start(&path, &meta(), &channels(), 1).unwrap();
+            for k in 0..n {
+                rec.send(samples(k * 1_000)).await.unwrap();
+            }
+            rec.finish().await.unwrap()
+        });
+        assert_eq!(stats.messages, 2 * n);
+        assert!(stats.backpressure_waits > 0);
+        assert!(stats.backpressure_waits <= n);
+    }
+
+    #[test]
+    fn data_reaches_the_disk_while_recording() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("live.mcap");
+        let rt = runtime();
+        let rec = Recorder::start(&path, &meta(), &channels(), 64).unwrap();
+        rt.block_on(async {
+            // 2.5 s of log time at 100 Hz.
+            for k in 0..250u64 {
+                rec.send(samples(k * 10_000_000)).await.unwrap();
+            }
+        });
+        // Unfinished: the reader sees the flushed prefix (up to 2 s).
+        let ok = eventually(|| match crate::record::read_entries(&path) {
+            Ok((_, _, entries, recovery)) => {
+                recovery.is_some()
+                    && entries
+                        .iter()
+                        .any(|e| matches!(e, Entry::Samples { t_ns, .. } if *t_ns >= 2_000_000_000))
+            }
+            Err(_) => false,
+        });
+        assert!(ok, "the first 2 s were not flushed");
+        let stats = rt.block_on(rec.finish()).unwrap();
+        assert_eq!(stats.messages, 500);
+    }
+
+    #[test]
+    fn dropped_recorder_still_finishes_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("dropped.mcap");
+        runtime().block_on(async {
+            let rec = Recorder::start(&path, &meta(), &channels(), 8).unwrap();
+            for k in 0..10 {
+                rec.send(samples(k)).await.unwrap();
+            }
+        });
+        let ok = eventually(|| {
+            std::fs::read(&path)
+                .ok()
+                .and_then(|b| mcap::Summary::read(&b).ok().flatten())
+                .and_then(|s| s.stats)
+                .is_some_and(|s| s.message_count == 20)
+        });
+        assert!(ok);
+    }
+}

@@ -1,0 +1,12 @@
+//! Reports for people and programs: JSON per the contract, a text table,
+//! SVG plots.
+
+mod json;
+mod overlay;
+pub mod plot;
+mod text;
+
+pub use json::{IdentificationReport, MethodReport, ParamEstimate};
+pub use overlay::segment_plots;
+pub use plot::{render_segments_svg, write_segments_svg, SegmentPlot, Trace};
+pub use text::render_text;

@@ -1,0 +1,44 @@
+//! Helpers shared by the end-to-end tests.
+#![allow(dead_code)]
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+/// Run the `motorbench` binary built for these tests.
+pub fn motorbench(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_motorbench"))
+        .args(args)
+        .output()
+        .expect("motorbench runs")
+}
+
+/// Stdout and stderr as text.
+pub fn text(o: &Output) -> (String, String) {
+    (
+        String::from_utf8_lossy(&o.stdout).into_owned(),
+        String::from_utf8_lossy(&o.stderr).into_owned(),
+    )
+}
+
+/// Run the Python `mcap` reader check on `file`; panics with its output on
+/// failure. The README's test command installs the reader; a missing
+/// reader fails the test rather than skipping it.
+pub fn python_check_mcap(file: &Path, expect: &[String]) -> serde_json::Value {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_mcap.py");
+    let mut cmd = Command::new("python3");
+    cmd.arg(script).arg(file);
+    for e in expect {
+        cmd.arg("--expect-topic").arg(e);
+    }
+    let out = cmd.output().expect("python3 runs");
+    let (stdout, stderr) = text(&out);
+    assert!(
+        out.status.success(),
+        "check_mcap.py failed:\n{stdout}\n{stderr}"
+    );
+    let last = stdout
+        .lines()
+        .last()
+        .expect("check_mcap.py prints its counts last");
+    serde_json::from_str(last).expect("the last line is JSON")
+}

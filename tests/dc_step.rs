@@ -1,0 +1,155 @@
+//! End to end on the simulated rig: the embedded default DC step test,
+//! recorded to MCAP, read by the Python `mcap` reader, identified, and
+//! replayed to the same result.
+
+mod common;
+
+use motorbench::bench::{commission, CommissionOptions, NoProgress, Outcome};
+use motorbench::config::{Backend, Config};
+use motorbench::identify::identify_dc;
+use motorbench::record::{read_mcap, SegmentKind};
+
+fn param(report: &motorbench::report::IdentificationReport, key: &str) -> f64 {
+    report.methods["steady_state"].params.as_ref().unwrap()[key].value
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn default_run_identifies_the_seed_motor_and_replays_identically() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = Config::embedded_default();
+    let Backend::Simulated(sim) = &cfg.backend;
+    let truth = sim.motor;
+    let (_tx, rx) = tokio::sync::watch::channel(false);
+    let opts = CommissionOptions {
+        out_dir: dir.path().to_path_buf(),
+        realtime: false,
+    };
+    let done = commission(&cfg, &opts, &NoProgress, &rx).await.unwrap();
+    assert_eq!(done.outcome, Outcome::Completed);
+
+    // The acceptance: K within 1 %, Ra within 3 %.
+    let r = &done.identification.report;
+    let (k, ra) = (param(r, "K"), param(r, "Ra"));
+    assert!(((k - truth.k) / truth.k).abs() < 0.01, "K = {k}");
+    assert!(((ra - truth.ra) / truth.ra).abs() < 0.03, "Ra = {ra}");
+    // Viscous friction and static torque too, within 5 %.
+    assert!(((param(r, "f") - truth.f) / truth.f).abs() < 0.05);
+    assert!(((param(r, "Tst") - truth.tst) / truth.tst).abs() < 0.05);
+    // Every interval given covers the truth.
+    for (key, t) in [
+        ("K", truth.k),
+        ("Ra", truth.ra),
+        ("f", truth.f),
+        ("Tst", truth.tst),
+    ] {
+        let p = &r.methods["steady_state"].params.as_ref().unwrap()[key];
+        let [lo, hi] = p.ci95.unwrap();
+        assert!(lo <= t && t <= hi, "{key}: {t} outside [{lo}, {hi}]");
+    }
+
+    // Segments: every level of the staircase plus the coast-down.
+    let kinds: Vec<_> = done.record.segments.iter().map(|s| s.kind).collect();
+    assert_eq!(kinds.len(), 9);
+    assert_eq!(kinds[8], Some(SegmentKind::DcCoastdown));
+    let coast = &done.record.segments[8];
+    // Its first sample is the boundary reading (the last one at the level).
+    assert!(
+        coast.current[1..].iter().all(|i| i.abs() < 0.02),
+        "open armature carries no current"
+    );
+    assert_eq!(
+        *coast.speed.last().unwrap(),
+        0.0,
+        "the coast-down runs to rest"
+    );
+
+    // The file replays to the same record and the same identification.
+    let replayed = read_mcap(&done.mcap_path).unwrap();
+    assert!(replayed.recovery.is_none());
+    assert_eq!(
+        replayed.segments, done.record.segments,
+        "replay sees exactly the samples the bench saw"
+    );
+    let again = identify_dc(&replayed);
+    assert_eq!(again.report, done.identification.report);
+    let recorded = replayed
+        .recorded_result
+        .expect("the report is in the record");
+    assert_eq!(
+        recorded,
+        serde_json::to_value(&done.identification.report).unwrap()
+    );
+
+    // Nothing was dropped: one message per sample per channel.
+    let samples = done
+        .record
+        .segments
+        .iter()
+        .map(|s| s.time.len())
+        .sum::<usize>();
+    assert!(samples > 10_000);
+    assert_eq!(done.stats.per_topic["/bench/segment"], 18);
+    assert_eq!(done.stats.per_topic["/bench/result"], 1);
+    let sensor = done.stats.per_topic["/sensor/armature_current"];
+    assert_eq!(done.stats.per_topic["/sensor/armature_voltage"], sensor);
+    assert_eq!(done.stats.per_topic["/sensor/encoder_count"], sensor);
+    assert_eq!(
+        done.stats.per_topic["/sensor/speed"],
+        sensor - 1,
+        "speed starts at the second encoder reading"
+    );
+
+    // The Python reader accepts the file and counts the same messages.
+    let expect: Vec<String> = done
+        .stats
+        .per_topic
+        .iter()
+        .map(|(t, n)| format!("{t}={n}"))
+        .collect();
+    let counts = common::python_check_mcap(&done.mcap_path, &expect);
+    assert_eq!(counts["/sensor/armature_current"], sensor);
+
+    // The report files exist and hold what was printed.
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&done.report_path).unwrap()).unwrap();
+    assert_eq!(json, recorded);
+    let svg = std::fs::read_to_string(&done.svg_path).unwrap();
+    assert!(
+        svg.contains("<svg")
+            && svg.contains("segment 1: 60 V → 248 V")
+            && svg.contains("steady_state")
+    );
+}
+
+#[test]
+fn cli_run_then_replay_prints_the_same_json_to_the_last_digit() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    let run = common::motorbench(&["run", "--out", out, "--json", "--quiet"]);
+    let (run_json, stderr) = common::text(&run);
+    assert!(run.status.success(), "{stderr}");
+    let mcap = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .expect("run wrote an MCAP");
+    let replay = common::motorbench(&["replay", "--json", "--check", mcap.to_str().unwrap()]);
+    let (replay_json, stderr) = common::text(&replay);
+    assert!(replay.status.success(), "{stderr}");
+    assert!(stderr.contains("identical to the recorded"), "{stderr}");
+    assert_eq!(run_json, replay_json);
+    let v: serde_json::Value = serde_json::from_str(&run_json).unwrap();
+    assert_eq!(v["schema_version"], "1");
+    assert_eq!(v["best"], "steady_state");
+}
+
+#[test]
+fn cli_text_report_shows_the_truth_beside_the_estimate() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = common::motorbench(&["run", "--out", dir.path().to_str().unwrap(), "--quiet"]);
+    let (stdout, stderr) = common::text(&run);
+    assert!(run.status.success(), "{stderr}");
+    assert!(stdout.contains("method steady_state"), "{stdout}");
+    assert!(stdout.contains("simulated 1.323"), "{stdout}");
+    assert!(stdout.contains("record: "), "{stdout}");
+}
