@@ -7,11 +7,13 @@
 
 mod levels;
 mod nrmse;
+mod simulate;
 mod stats;
 mod steady_state;
 
 pub use levels::{is_coastdown, settled_level, SettledLevel};
 pub use nrmse::nrmse;
+pub use simulate::simulate_segment;
 pub use steady_state::{SteadyStateEstimate, SteadyStateFit};
 
 use crate::record::{Record, SegmentKind};
