@@ -86,6 +86,7 @@ enum Command {
 }
 
 #[derive(Clone, Copy, ValueEnum)]
+#[value(rename_all = "snake_case")]
 enum KindArg {
     DcStep,
     DcCoastdown,

@@ -150,6 +150,6 @@ fn cli_text_report_shows_the_truth_beside_the_estimate() {
     let (stdout, stderr) = common::text(&run);
     assert!(run.status.success(), "{stderr}");
     assert!(stdout.contains("method steady_state"), "{stdout}");
-    assert!(stdout.contains("simulated 1.323"), "{stdout}");
+    assert!(stdout.contains("simulated 1.32300"), "{stdout}");
     assert!(stdout.contains("record: "), "{stdout}");
 }

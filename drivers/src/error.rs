@@ -55,3 +55,27 @@ impl DriverError {
         matches!(self, DriverError::Link { .. } | DriverError::Timeout { .. })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn link_failures_are_kept_apart_from_device_refusals() {
+        let link = DriverError::Link {
+            device: "psu".into(),
+            reason: "broken pipe".into(),
+        };
+        let timeout = DriverError::Timeout {
+            device: "psu".into(),
+            timeout_ms: 100,
+        };
+        let refused = DriverError::Device {
+            device: "psu".into(),
+            reason: "illegal data address".into(),
+        };
+        assert!(link.is_link_failure() && timeout.is_link_failure());
+        assert!(!refused.is_link_failure());
+        assert_eq!(timeout.to_string(), "psu did not answer within 100 ms");
+    }
+}

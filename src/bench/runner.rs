@@ -267,11 +267,7 @@ impl Bench<'_> {
         }
         let st = self.cfg.settle;
         let window = (st.window_s * self.cfg.sample_rate_hz).round() as usize;
-        let floors = vec![
-            st.tolerance * self.cfg.limits.max_current,
-            st.tolerance * self.cfg.limits.max_speed,
-        ];
-        let mut settle = SettleDetector::new(window, st.tolerance, floors);
+        let mut settle = SettleDetector::new(window, st.tolerance, 2);
         let start = self.t_ns;
         let mut settled_at = None;
         loop {

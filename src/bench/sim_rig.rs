@@ -287,6 +287,24 @@ mod tests {
         sim_rig(&sim, 2000.0, false).unwrap()
     }
 
+    #[tokio::test(start_paused = true)]
+    async fn realtime_mode_paces_batches_at_the_wall_clock() {
+        let Backend::Simulated(sim) = Config::embedded_default().backend;
+        let (_, mut fast) = sim_rig(&sim, 2000.0, false).unwrap();
+        let start = tokio::time::Instant::now();
+        for _ in 0..2000 {
+            fast.next_batch().await.unwrap();
+        }
+        assert_eq!(start.elapsed(), Duration::ZERO, "virtual clock: no waiting");
+        let (_, mut paced) = sim_rig(&sim, 2000.0, true).unwrap();
+        let start = tokio::time::Instant::now();
+        for _ in 0..2000 {
+            paced.next_batch().await.unwrap();
+        }
+        // The paused clock advances exactly to each sample's deadline.
+        assert_eq!(start.elapsed(), Duration::from_secs(1));
+    }
+
     #[tokio::test]
     async fn disabled_output_leaves_the_motor_at_rest() {
         let (_, mut sensors) = rig();

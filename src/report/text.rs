@@ -18,6 +18,20 @@ fn param_value(truth: Option<&DcParams>, key: &str) -> Option<f64> {
     })
 }
 
+/// `v` with `digits` significant digits, plain where that reads well.
+pub fn sig(v: f64, digits: usize) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let mag = v.abs().log10().floor() as i32;
+    if (-3..5).contains(&mag) {
+        let decimals = (digits as i32 - 1 - mag).max(0) as usize;
+        format!("{v:.decimals$}")
+    } else {
+        format!("{v:.prec$e}", prec = digits.saturating_sub(1))
+    }
+}
+
 /// Render `id` as text. With `truth` (the simulated rig's motor) each
 /// parameter also shows the true value and the relative error.
 pub fn render_text(id: &Identification, truth: Option<&DcParams>) -> String {
@@ -56,15 +70,13 @@ pub fn render_text(id: &Identification, truth: Option<&DcParams>) -> String {
         if let Some(params) = &m.params {
             for (key, p) in params {
                 let ci = p.ci95.map_or("no interval".to_string(), |[lo, hi]| {
-                    format!("95 % CI [{lo:.5e}, {hi:.5e}]")
+                    format!("95 % CI [{}, {}]", sig(lo, 5), sig(hi, 5))
                 });
-                let _ = write!(out, "  {key:<4} {:>14.6e} {:<10} {ci}", p.value, p.unit);
+                let value = sig(p.value, 6);
+                let _ = write!(out, "  {key:<4} {value:>12} {:<10} {ci}", p.unit);
                 if let Some(t) = param_value(truth, key) {
-                    let _ = write!(
-                        out,
-                        "   simulated {t:.6e} ({:+.3} %)",
-                        100.0 * (p.value - t) / t
-                    );
+                    let err = 100.0 * (p.value - t) / t;
+                    let _ = write!(out, "   simulated {} ({err:+.3} %)", sig(t, 6));
                 }
                 let _ = writeln!(out);
             }
@@ -100,4 +112,19 @@ pub fn render_text(id: &Identification, truth: Option<&DcParams>) -> String {
 
 fn name_of_static(r: &crate::report::IdentificationReport) -> bool {
     r.methods.get("steady_state").is_some_and(|m| m.applies) && r.methods.len() == 1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::sig;
+
+    #[test]
+    fn significant_digits_read_naturally() {
+        assert_eq!(sig(30.95496, 6), "30.9550");
+        assert_eq!(sig(1.322951, 6), "1.32295");
+        assert_eq!(sig(0.0005003559, 4), "5.004e-4");
+        assert_eq!(sig(0.128, 3), "0.128");
+        assert_eq!(sig(123456.0, 3), "1.23e5");
+        assert_eq!(sig(-0.0, 3), "-0");
+    }
 }

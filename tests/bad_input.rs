@@ -1,0 +1,168 @@
+//! Bad input through the CLI: a one-line error naming the file (and line
+//! and field where there is one), exit code 2, never a panic.
+
+mod common;
+
+use std::path::Path;
+
+fn run_bad(args: &[&str]) -> String {
+    let out = common::motorbench(args);
+    let (_, stderr) = common::text(&out);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "exit code for {args:?}; stderr: {stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(stderr.trim_end().lines().count(), 1, "one line: {stderr}");
+    stderr
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> String {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p.to_str().unwrap().to_string()
+}
+
+#[test]
+fn config_with_an_unknown_key_names_file_line_and_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let text =
+        motorbench::config::DEFAULT_CONFIG.replace("[limits]", "[limits]\nmax_torque_Nm = 3");
+    let path = write(dir.path(), "rig.toml", &text);
+    let err = run_bad(&[
+        "run",
+        "--config",
+        &path,
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    let line = text
+        .lines()
+        .position(|l| l.starts_with("max_torque_Nm"))
+        .unwrap()
+        + 1;
+    assert!(err.contains(&format!("rig.toml:{line}:")), "{err}");
+    assert!(err.contains("max_torque_Nm"), "{err}");
+}
+
+#[test]
+fn config_with_an_invalid_value_names_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let text =
+        motorbench::config::DEFAULT_CONFIG.replace("sample_rate_Hz = 2000", "sample_rate_Hz = -5");
+    let path = write(dir.path(), "rig.toml", &text);
+    let err = run_bad(&[
+        "run",
+        "--config",
+        &path,
+        "--out",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert!(
+        err.contains("rig.toml") && err.contains("rig.sample_rate_Hz"),
+        "{err}"
+    );
+}
+
+#[test]
+fn missing_config_file_is_named() {
+    let err = run_bad(&["run", "--config", "no/such/rig.toml"]);
+    assert!(err.contains("no/such/rig.toml"), "{err}");
+}
+
+#[test]
+fn csv_with_a_non_number_names_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv =
+        "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,60,0.11,42\n0.001,60,abc,42\n";
+    let path = write(dir.path(), "step.csv", csv);
+    let err = run_bad(&["identify", "--kind", "dc_step", &path]);
+    assert!(
+        err.contains("step.csv:3") && err.contains("armature_current_A"),
+        "{err}"
+    );
+}
+
+#[test]
+fn csv_with_a_missing_column_or_time_going_back_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        dir.path(),
+        "a.csv",
+        "time_s,armature_voltage_V,speed_rad_s\n0,60,42\n",
+    );
+    let err = run_bad(&["identify", "--kind", "dc_step", &path]);
+    assert!(
+        err.contains("a.csv") && err.contains("armature_current_A"),
+        "{err}"
+    );
+    let csv =
+        "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,60,0.1,42\n0,60,0.1,42\n";
+    let path = write(dir.path(), "b.csv", csv);
+    let err = run_bad(&["identify", "--kind", "dc_step", &path]);
+    assert!(err.contains("b.csv:3") && err.contains("time_s"), "{err}");
+}
+
+#[test]
+fn garbage_and_empty_mcap_are_refused_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(dir.path(), "junk.mcap", "this is not an MCAP file at all");
+    let err = run_bad(&["replay", &path]);
+    assert!(err.contains("junk.mcap"), "{err}");
+    let path = write(dir.path(), "empty.mcap", "");
+    let err = run_bad(&["identify", "--kind", "dc_step", &path]);
+    assert!(err.contains("empty.mcap"), "{err}");
+}
+
+#[test]
+fn nameplate_that_is_not_json_names_file_and_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let csv = write(
+        dir.path(),
+        "s.csv",
+        "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,1,1,1\n",
+    );
+    let np = write(dir.path(), "np.json", "{\n  \"power_W\": 180,\n  oops\n}\n");
+    let err = run_bad(&["identify", "--kind", "dc_step", "--nameplate", &np, &csv]);
+    assert!(err.contains("np.json:3"), "{err}");
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    let out = common::motorbench(&["identify", "--kind", "dc_step"]);
+    assert_eq!(out.status.code(), Some(2));
+    let out = common::motorbench(&["frobnicate"]);
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn a_truncated_record_replays_what_it_holds_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = common::motorbench(&[
+        "run",
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--quiet",
+        "--json",
+    ]);
+    assert!(out.status.success());
+    let mcap = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .unwrap();
+    let bytes = std::fs::read(&mcap).unwrap();
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 6 / 10]).unwrap();
+    let out = common::motorbench(&["replay", cut.to_str().unwrap()]);
+    let (stdout, stderr) = common::text(&out);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        stderr.contains("damaged") && stderr.contains("recovered"),
+        "{stderr}"
+    );
+    // About 60 % of the staircase survives: enough levels to identify.
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(stdout.contains("method steady_state"), "{stdout}");
+}
