@@ -138,7 +138,7 @@ impl Bar {
         };
         bar.set_style(
             ProgressStyle::with_template(
-                "{spinner} [{elapsed_precise}] {bar:24} segment {pos}/{len} {msg}",
+                "{spinner} [{elapsed_precise}] test time {prefix} {bar:24} segment {pos}/{len} {msg}",
             )
             .expect("valid template"),
         );
