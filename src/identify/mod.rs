@@ -5,11 +5,14 @@
 //! staircase). Identification is a pure function of the record, so a
 //! replayed record gives the same report, bit for bit.
 
+mod abacus;
 mod levels;
 mod nrmse;
+mod pasek;
 mod simulate;
 mod stats;
 mod steady_state;
+mod step;
 
 pub use levels::{is_coastdown, settled_level, SettledLevel};
 pub use nrmse::nrmse;
