@@ -7,6 +7,7 @@
 
 mod abacus;
 mod levels;
+mod moments;
 mod nrmse;
 mod pasek;
 mod simulate;
