@@ -6,6 +6,7 @@
 //! replayed record gives the same report, bit for bit.
 
 mod abacus;
+mod level_error;
 mod levels;
 mod moments;
 mod nrmse;
