@@ -30,6 +30,11 @@ pub struct VoltageStep {
     pub tail_start: usize,
     /// Standard deviation of the current samples in the settled tail, A.
     pub current_noise: f64,
+    /// Speed before the step, rad/s: the level's, refined by
+    /// [`counter_speed`] where the previous segment is at hand.
+    pub w0: f64,
+    /// Speed after the step, rad/s, likewise.
+    pub w1: f64,
 }
 
 impl VoltageStep {
@@ -45,7 +50,7 @@ impl VoltageStep {
 
     /// Δω(∞), rad/s.
     pub fn dw_final(&self) -> f64 {
-        self.after.speed - self.before.speed
+        self.w1 - self.w0
     }
 }
 
@@ -96,7 +101,40 @@ pub fn voltage_step(
         transition_end,
         tail_start,
         current_noise,
+        w0: before.speed,
+        w1: counter_speed(&seg.time[tail_start..], &seg.speed[tail_start..]),
     })
+}
+
+/// The mean speed over a window, as the least-squares slope of the angle
+/// (the running sum of speed × interval) against time.
+///
+/// For a speed derived from encoder counts the running sum is the count
+/// itself, each reading off by its own quantisation (±1/2 count, nearly
+/// independent), so the slope averages them; the plain mean of the speed
+/// samples is the count change between the window's two ends only, off
+/// by up to a count over the window. The moments method integrates its
+/// final-value error with weights up to t³/6, so the difference shows.
+pub fn counter_speed(time: &[f64], speed: &[f64]) -> f64 {
+    let n = time.len().min(speed.len());
+    if n < 3 {
+        return speed[..n].iter().sum::<f64>() / n.max(1) as f64;
+    }
+    let mut angle = Vec::with_capacity(n);
+    let mut acc = 0.0;
+    angle.push(0.0);
+    for k in 1..n {
+        acc += speed[k] * (time[k] - time[k - 1]);
+        angle.push(acc);
+    }
+    let tm = time[..n].iter().sum::<f64>() / n as f64;
+    let am = angle.iter().sum::<f64>() / n as f64;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for k in 0..n {
+        sxy += (time[k] - tm) * (angle[k] - am);
+        sxx += (time[k] - tm).powi(2);
+    }
+    sxy / sxx
 }
 
 /// Every usable step of `record`: a step segment whose level and whose
@@ -118,7 +156,10 @@ pub fn voltage_steps(record: &Record, levels: &[SettledLevel]) -> Vec<VoltageSte
         let (Some(before), Some(after)) = (level(prev.index), level(seg.index)) else {
             continue;
         };
-        if let Ok(step) = voltage_step(seg, before, after) {
+        if let Ok(mut step) = voltage_step(seg, before, after) {
+            let m = prev.time.len();
+            let start = m - before.samples.min(m);
+            step.w0 = counter_speed(&prev.time[start..], &prev.speed[start..]);
             out.push(step);
         }
     }
