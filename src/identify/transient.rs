@@ -6,8 +6,10 @@
 //!   settled levels ([`super::step::fit_step`]).
 //! - La, J, f and Tst get a 95 % interval from the estimates of every
 //!   usable step (the fit step included): value ± t(n−1)·sd, the spread a
-//!   single step's estimate has. It needs three steps; with fewer,
-//!   `ci95` is null. Ra and K are the steady-state fit's, with its
+//!   single step's estimate has; La and J (∝ Ra and ≈ 1/Ra) add the
+//!   steady state's relative uncertainty of Ra in quadrature, which no
+//!   spread over steps can show (every step uses the same Ra). It needs
+//!   three steps; with fewer, `ci95` is null. Ra and K are the steady-state fit's, with its
 //!   intervals.
 //! - Validation: the full model with these parameters is simulated on
 //!   every other step segment with the measured voltage
@@ -122,12 +124,21 @@ pub fn assemble(
         .map(|(_, p)| *p)
         .expect("the fit step has an estimate");
     let values = as_array(&params);
+    // La = Ra·τe and J ≈ τm·K²/Ra carry Ra's relative uncertainty too.
+    let ra_rel = ss.std_error[1] / ss.estimate.ra.abs();
     let ci95 = std::array::from_fn(|n| match n {
         0 => ss.ci95[1],
         2 => ss.ci95[0],
         _ => {
             let all: Vec<f64> = per_step.iter().map(|(_, p)| as_array(p)[n]).collect();
-            spread_interval(values[n], &all)
+            let [lo, hi] = spread_interval(values[n], &all)?;
+            let extra = if n == 1 || n == 3 {
+                1.96 * ra_rel * values[n].abs()
+            } else {
+                0.0
+            };
+            let h = (((hi - lo) / 2.0).powi(2) + extra * extra).sqrt();
+            Some([values[n] - h, values[n] + h])
         }
     });
     let mut warnings = Vec::new();
