@@ -6,8 +6,8 @@
 use motorbench::bench::{commission, CommissionOptions, NoProgress, Outcome};
 use motorbench::config::Config;
 use motorbench::identify::{nrmse, simulate_segment};
-use motorbench::record::{Record, SegmentKind};
 use motorbench::model::DcParams;
+use motorbench::record::{Record, SegmentKind};
 use motorbench::report::IdentificationReport;
 
 /// The embedded default configuration with another motor, levels, rate
@@ -28,8 +28,14 @@ fn config(
     let end = base.find("[rig.simulated.power_stage]").unwrap();
     let levels: Vec<String> = levels.iter().map(|v| v.to_string()).collect();
     let text = format!("{}{}\n{}", &base[..start], motor, &base[end..])
-        .replace("sample_rate_Hz = 2000", &format!("sample_rate_Hz = {rate_hz}"))
-        .replace("current_bits = 12", &format!("current_bits = {current_bits}"))
+        .replace(
+            "sample_rate_Hz = 2000",
+            &format!("sample_rate_Hz = {rate_hz}"),
+        )
+        .replace(
+            "current_bits = 12",
+            &format!("current_bits = {current_bits}"),
+        )
         .replace(
             "current_full_scale_A = 5",
             &format!("current_full_scale_A = {current_scale}"),
@@ -194,7 +200,10 @@ async fn real_poles_pasek_and_moments_agree_with_the_truth() {
             } else {
                 assert!(la < 0.05, "{method}: La off {la}");
             }
-            assert!(v < 1.1 * floor, "{method} validation NRMSE {v}, floor {floor}");
+            assert!(
+                v < 1.1 * floor,
+                "{method} validation NRMSE {v}, floor {floor}"
+            );
         }
     }
 }
