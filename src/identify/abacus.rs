@@ -97,7 +97,7 @@ impl CurrentStep {
         let ratio = (self.mu + self.lambda * self.p2) / (self.mu + self.lambda * self.p1);
         let gap = self.p1 - self.p2;
         let x = if self.real_poles() {
-            if !(ratio.re > 1.0) {
+            if ratio.re.is_nan() || ratio.re <= 1.0 {
                 return None;
             }
             ratio.re.ln() / gap.re
@@ -188,14 +188,14 @@ pub fn invert_delta(delta: f64, mu: f64) -> Result<(f64, f64), AbacusError> {
             .unwrap_or(f64::NAN)
     };
     let (d_lo, d_hi) = (at(lambda_min), at(LAMBDA_MAX));
-    if !(delta >= d_lo) {
+    if delta.is_nan() || d_lo.is_nan() || delta < d_lo {
         return Err(AbacusError::ComplexPoles {
             delta,
             delta_min: d_lo,
             lambda_min,
         });
     }
-    if !(delta < d_hi) {
+    if d_hi.is_nan() || delta >= d_hi {
         return Err(AbacusError::TooLarge {
             delta,
             delta_max: d_hi,

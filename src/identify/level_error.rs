@@ -137,7 +137,7 @@ mod tests {
         let lsb = 800.0 / 4096.0;
         let x: Vec<f64> = [3, 5, 4, 9, 3].iter().map(|&c| c as f64 * lsb).collect();
         assert!((resolution(&x) - lsb).abs() < 1e-12);
-        assert_eq!(resolution(&[1.0, 1.1234567, 2.718281828]), 0.0);
+        assert_eq!(resolution(&[1.0, 1.1234567, 2.7193]), 0.0);
         assert_eq!(resolution(&[2.0, 2.0]), 0.0);
     }
 

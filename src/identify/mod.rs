@@ -95,7 +95,7 @@ impl CoastdownFit {
     /// The contract's view.
     pub fn method_report(&self) -> MethodReport {
         let ci = |[v, se]: [f64; 2]| {
-            (se.is_finite() && se > 0.0).then(|| [v - 1.96 * se, v + 1.96 * se])
+            (se.is_finite() && se > 0.0).then_some([v - 1.96 * se, v + 1.96 * se])
         };
         let entry = |value: f64, ci95, unit: &str| ParamEstimate {
             value,
@@ -141,7 +141,7 @@ fn coastdown_method(record: &Record, ss: Option<&SteadyStateFit>) -> Result<Coas
     let ss = ss.ok_or("needs f from the steady-state fit, which did not apply")?;
     let decay = fit_decay(seg)?;
     let (f, f_se) = (ss.estimate.f, ss.std_error[2]);
-    if !(f > 0.0) {
+    if f.is_nan() || f <= 0.0 {
         return Err(format!(
             "needs a positive f from the steady state (got {f:.3e}) to turn f/J into J"
         ));

@@ -211,7 +211,7 @@ pub fn estimate(
             speed.a1, speed.a2
         )
     })?;
-    if !(small > 0.0) {
+    if small.is_nan() || small <= 0.0 {
         return Err(format!(
             "Eq. 43 gives no positive τe (a1 = {:.4e} s, a2 = {:.4e} s²)",
             speed.a1, speed.a2
