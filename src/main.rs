@@ -88,8 +88,12 @@ enum Command {
 #[derive(Clone, Copy, ValueEnum)]
 #[value(rename_all = "snake_case")]
 enum KindArg {
+    /// The contract's names (`dc_step`, …); the kebab-case forms too.
+    #[value(name = "dc_step", alias = "dc-step")]
     DcStep,
+    #[value(name = "dc_coastdown", alias = "dc-coastdown")]
     DcCoastdown,
+    #[value(name = "im_slip_sweep", alias = "im-slip-sweep")]
     ImSlipSweep,
 }
 

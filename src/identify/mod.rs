@@ -1,23 +1,43 @@
 //! Parameter identification from a [`Record`].
 //!
-//! Today: the steady-state method (the seed paper's Eqs. 7, 9, 39 and 44,
-//! generalised to a least-squares fit over every settled level of a
-//! staircase). Identification is a pure function of the record, so a
-//! replayed record gives the same report, bit for bit.
+//! Methods (report keys): `steady_state` (the seed paper's Eqs. 7, 9, 39
+//! and 44, generalised to a least-squares fit over every settled level of
+//! a staircase, with propagated uncertainty), `pasek` (Eqs. 10–20, on an
+//! abacus computed from the exact response), `moments` (Eqs. 21–44) and
+//! `coastdown` (J and Coulomb friction from the open-armature decay).
+//! Identification is a pure function of the record, so a replayed record
+//! gives the same report, bit for bit.
 
+mod abacus;
+mod coastdown;
+mod level_error;
 mod levels;
+mod moments;
 mod nrmse;
+mod pasek;
 mod simulate;
 mod stats;
 mod steady_state;
+mod step;
+mod transient;
 
+pub use abacus::{
+    invert_delta, paper_delta, paper_t1_over_tau_e, real_pole_threshold, AbacusError, CurrentStep,
+};
+pub use coastdown::{fit_decay, DecayFit};
+pub use level_error::LevelError;
 pub use levels::{is_coastdown, settled_level, SettledLevel};
+pub use moments::{MomentsEstimate, TransferCoefficients};
 pub use nrmse::nrmse;
+pub use pasek::{PasekEstimate, PasekReading};
 pub use simulate::simulate_segment;
-pub use steady_state::{SteadyStateEstimate, SteadyStateFit};
+pub use steady_state::{PairEstimate, SteadyStateEstimate, SteadyStateFit};
+pub use step::VoltageStep;
+pub use transient::TransientFit;
 
-use crate::record::{Record, SegmentKind};
-use crate::report::{IdentificationReport, MethodReport};
+use crate::model::DcParams;
+use crate::record::{DcSegment, Record, SegmentKind};
+use crate::report::{IdentificationReport, MethodReport, ParamEstimate};
 
 /// A model's response on one segment, for plots.
 #[derive(Debug, Clone, PartialEq)]
@@ -44,6 +64,147 @@ pub struct Identification {
     pub steady_state: Option<SteadyStateFit>,
     /// Model responses per segment, for plots.
     pub simulated: Vec<SimulatedSegment>,
+    /// Pasek's method on every usable step (segment, estimate or why not).
+    pub pasek_steps: Vec<(u32, Result<PasekEstimate, String>)>,
+    /// The method of moments on every usable step.
+    pub moments_steps: Vec<(u32, Result<MomentsEstimate, String>)>,
+    /// The transient methods' fits (`pasek`, `moments`) that applied.
+    pub transient: Vec<TransientFit>,
+    /// The coast-down fit, when it applied.
+    pub coastdown: Option<CoastdownFit>,
+}
+
+/// The coast-down method's result.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CoastdownFit {
+    /// The decay fit.
+    pub decay: DecayFit,
+    /// J and its standard error, kg·m² (with f from the steady state).
+    pub j: [f64; 2],
+    /// Coulomb torque Tc and its standard error, N·m.
+    pub tc: [f64; 2],
+    /// Viscous friction from the steady state and its standard error.
+    pub f: [f64; 2],
+    /// The f interval reported (the steady state's).
+    pub f_ci95: Option<[f64; 2]>,
+    /// Speed NRMSE on other coast-down segments, if any.
+    pub validation_nrmse: Option<f64>,
+}
+
+impl CoastdownFit {
+    /// The contract's view.
+    pub fn method_report(&self) -> MethodReport {
+        let ci = |[v, se]: [f64; 2]| {
+            (se.is_finite() && se > 0.0).then_some([v - 1.96 * se, v + 1.96 * se])
+        };
+        let entry = |value: f64, ci95, unit: &str| ParamEstimate {
+            value,
+            ci95,
+            unit: unit.into(),
+        };
+        let params = [
+            ("J".to_string(), entry(self.j[0], ci(self.j), "kg*m^2")),
+            ("f".to_string(), entry(self.f[0], self.f_ci95, "N*m*s/rad")),
+            ("Tc".to_string(), entry(self.tc[0], ci(self.tc), "N*m")),
+        ]
+        .into_iter()
+        .collect();
+        MethodReport {
+            applies: true,
+            params: Some(params),
+            validation_nrmse: self.validation_nrmse,
+            reason: None,
+        }
+    }
+}
+
+/// Every segment holding a coast-down (marked, or recognised from data),
+/// as a coast-down.
+fn coastdown_segments(record: &Record) -> Vec<DcSegment> {
+    record
+        .segments
+        .iter()
+        .filter(|s| !s.time.is_empty())
+        .filter(|s| s.kind == Some(SegmentKind::DcCoastdown) || is_coastdown(s))
+        .map(|s| DcSegment {
+            kind: Some(SegmentKind::DcCoastdown),
+            ..s.clone()
+        })
+        .collect()
+}
+
+fn coastdown_method(record: &Record, ss: Option<&SteadyStateFit>) -> Result<CoastdownFit, String> {
+    let segs = coastdown_segments(record);
+    let seg = segs
+        .first()
+        .ok_or("the record holds no coast-down segment")?;
+    let ss = ss.ok_or("needs f from the steady-state fit, which did not apply")?;
+    let decay = fit_decay(seg)?;
+    let (f, f_se) = (ss.estimate.f, ss.std_error[2]);
+    if f.is_nan() || f <= 0.0 {
+        return Err(format!(
+            "needs a positive f from the steady state (got {f:.3e}) to turn f/J into J"
+        ));
+    }
+    let (j, tc) = coastdown::inertia_and_coulomb(&decay, f, f_se);
+    let params = DcParams {
+        ra: ss.estimate.ra,
+        // The armature is open: La plays no part; any valid value will do.
+        la: 1.0,
+        k: ss.estimate.k,
+        j: j[0],
+        f,
+        tst: tc[0].max(0.0),
+    };
+    let scores: Vec<f64> = segs[1..]
+        .iter()
+        .filter_map(|s| {
+            let (_, w) = simulate_segment(&params, s).ok()?;
+            nrmse(&s.speed, &w)
+        })
+        .collect();
+    Ok(CoastdownFit {
+        decay,
+        j,
+        tc,
+        f: [f, f_se],
+        f_ci95: ss.ci95[2],
+        validation_nrmse: (!scores.is_empty())
+            .then(|| scores.iter().sum::<f64>() / scores.len() as f64),
+    })
+}
+
+impl CoastdownFit {
+    /// The fitted decay on the coast-down segment, for plots.
+    fn simulate(&self, record: &Record) -> Vec<SimulatedSegment> {
+        let Some(seg) = record
+            .segments
+            .iter()
+            .find(|s| s.index == self.decay.segment)
+        else {
+            return Vec::new();
+        };
+        let (start, _) = self.decay.range;
+        let t0 = seg.time[start];
+        let speed = seg
+            .time
+            .iter()
+            .enumerate()
+            .map(|(k, t)| {
+                if k < start {
+                    seg.speed[k]
+                } else {
+                    self.decay.speed(t - t0).max(0.0) * self.decay.theta[0].signum()
+                }
+            })
+            .collect();
+        vec![SimulatedSegment {
+            index: seg.index,
+            model: "coastdown".into(),
+            current: vec![0.0; seg.time.len()],
+            speed,
+        }]
+    }
 }
 
 /// Identify a DC motor from a `dc_step` / `dc_coastdown` record.
@@ -78,7 +239,7 @@ pub fn identify_dc(record: &Record) -> Identification {
     }
 
     let fit = steady_state::fit(record, &levels);
-    let (method, steady_state, simulated) = match fit {
+    let (method, steady_state, mut simulated) = match fit {
         Ok(fit) => {
             report.warnings.extend(fit.warnings.iter().cloned());
             let simulated = fit.simulate(record);
@@ -86,14 +247,139 @@ pub fn identify_dc(record: &Record) -> Identification {
         }
         Err(reason) => (MethodReport::not_applicable(reason), None, Vec::new()),
     };
-    if method.applies {
-        report.best = Some("steady_state".into());
-    }
     report.methods.insert("steady_state".into(), method);
+
+    // Pasek and moments, on every usable step; fitted on the largest rise.
+    let steps = step::voltage_steps(record, &levels);
+    let fit_at = step::fit_step(&steps);
+    let segment = |index: u32| record.segments.iter().find(|s| s.index == index);
+    let mut pasek_steps = Vec::new();
+    let mut moments_steps = Vec::new();
+    if let Some(ss) = &steady_state {
+        for st in &steps {
+            let seg = segment(st.segment).expect("a step comes from a segment");
+            pasek_steps.push((st.segment, pasek::estimate(seg, st, &ss.estimate)));
+            moments_steps.push((st.segment, moments::estimate(seg, st, &ss.estimate)));
+        }
+    }
+    let mut transient = Vec::new();
+    for (name, per_step) in [
+        (
+            "pasek",
+            collect_params(&pasek_steps, |e: &PasekEstimate| e.params),
+        ),
+        (
+            "moments",
+            collect_params(&moments_steps, |e: &MomentsEstimate| e.params),
+        ),
+    ] {
+        let outcome = match (&steady_state, fit_at) {
+            (None, _) => {
+                Err("needs K, Ra and f from the steady-state fit, which did not apply".to_string())
+            }
+            (_, None) => Err(
+                "no voltage step between two settled levels at which the rotor turns the same way"
+                    .to_string(),
+            ),
+            (Some(ss), Some(n)) => {
+                let fit_segment = steps[n].segment;
+                match per_step.iter().find(|(s, _)| *s == fit_segment) {
+                    Some(_) => Ok(transient::assemble(
+                        name,
+                        record,
+                        fit_segment,
+                        per_step.clone(),
+                        ss,
+                    )),
+                    None => {
+                        let why = match name {
+                            "pasek" => pasek_steps
+                                .iter()
+                                .find(|(s, _)| *s == fit_segment)
+                                .and_then(|(_, r)| r.as_ref().err().cloned()),
+                            _ => moments_steps
+                                .iter()
+                                .find(|(s, _)| *s == fit_segment)
+                                .and_then(|(_, r)| r.as_ref().err().cloned()),
+                        };
+                        Err(format!(
+                            "segment {fit_segment}: {}",
+                            why.unwrap_or_default()
+                        ))
+                    }
+                }
+            }
+        };
+        match outcome {
+            Ok(fit) => {
+                report.warnings.extend(fit.warnings.iter().cloned());
+                simulated.extend(transient::simulate_steps(&fit.params, record, name));
+                report.methods.insert(name.into(), fit.method_report());
+                transient.push(fit);
+            }
+            Err(reason) => {
+                report
+                    .methods
+                    .insert(name.into(), MethodReport::not_applicable(reason));
+            }
+        }
+    }
+
+    let coastdown = match coastdown_method(record, steady_state.as_ref()) {
+        Ok(fit) => {
+            simulated.extend(fit.simulate(record));
+            report
+                .methods
+                .insert("coastdown".into(), fit.method_report());
+            Some(fit)
+        }
+        Err(reason) => {
+            report
+                .methods
+                .insert("coastdown".into(), MethodReport::not_applicable(reason));
+            None
+        }
+    };
+
+    report.best = best_method(&report);
     Identification {
         report,
         levels,
         steady_state,
         simulated,
+        pasek_steps,
+        moments_steps,
+        transient,
+        coastdown,
     }
+}
+
+/// The per-step parameters of the steps where a method gave numbers.
+fn collect_params<E>(
+    steps: &[(u32, Result<E, String>)],
+    params: impl Fn(&E) -> DcParams,
+) -> Vec<(u32, DcParams)> {
+    steps
+        .iter()
+        .filter_map(|(s, r)| r.as_ref().ok().map(|e| (*s, params(e))))
+        .collect()
+}
+
+/// The applying method with the lowest validation NRMSE; without any
+/// NRMSE, the steady state if it applies.
+fn best_method(report: &IdentificationReport) -> Option<String> {
+    report
+        .methods
+        .iter()
+        .filter(|(_, m)| m.applies)
+        .filter_map(|(k, m)| m.validation_nrmse.map(|v| (k, v)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(k, _)| k.clone())
+        .or_else(|| {
+            report
+                .methods
+                .get("steady_state")
+                .filter(|m| m.applies)
+                .map(|_| "steady_state".to_string())
+        })
 }
