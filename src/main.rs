@@ -14,7 +14,7 @@ use std::time::Duration;
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use motorbench::bench::{commission, CommissionOptions, Outcome, Progress};
-use motorbench::config::{load_or_default, Backend};
+use motorbench::config::load_or_default;
 use motorbench::identify::{identify_dc, Identification};
 use motorbench::record::{read_dc_csv, read_mcap, Record, SegmentKind};
 use motorbench::report::{render_text, segment_plots, write_segments_svg};
@@ -214,10 +214,11 @@ async fn run(
         realtime,
     };
     if !json && !quiet {
-        let Backend::Simulated(_) = &cfg.backend;
         eprintln!(
-            "motorbench: {} on the simulated rig ({})",
-            cfg.motor_id, cfg.source
+            "motorbench: {} on {} ({})",
+            cfg.motor_id,
+            cfg.backend.describe(),
+            cfg.source
         );
     }
     let done = commission(&cfg, &opts, &progress, &stop_rx)

@@ -6,7 +6,10 @@ mod encoder;
 mod limits;
 mod plan;
 mod progress;
+mod rig;
 mod runner;
+mod sampling;
+mod served;
 mod settle;
 mod sim_rig;
 
@@ -15,8 +18,11 @@ pub use encoder::SpeedFromEncoder;
 pub use limits::{check_limits, Trip};
 pub use plan::{plan_steps, PlanStep};
 pub use progress::{NoProgress, Progress};
+pub use rig::{build_rig, ModbusProbe, Rig, RigError, SERVED_PLANT_RATE_HZ};
 pub use runner::{
     record_channels, run_test, BenchError, Outcome, RecordSink, SUPPLY_LIMIT_FRACTION,
 };
+pub use sampling::SamplingEvents;
+pub use served::{ServeError, ServedLink, ServedRig};
 pub use settle::SettleDetector;
 pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};

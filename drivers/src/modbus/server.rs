@@ -14,7 +14,8 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use tokio::net::TcpListener;
 use tokio::task::JoinHandle;
-use tokio_modbus::prelude::{ExceptionCode, Request, Response, SlaveRequest};
+pub use tokio_modbus::prelude::ExceptionCode;
+use tokio_modbus::prelude::{Request, Response, SlaveRequest};
 use tokio_serial::SerialStream;
 
 use super::profile::DeviceProfile;

@@ -7,7 +7,8 @@
 
 use std::time::Duration;
 
-use tokio_serial::{SerialPort, SerialPortBuilderExt, SerialStream};
+pub use tokio_serial::SerialStream;
+use tokio_serial::{SerialPort, SerialPortBuilderExt};
 
 use crate::DriverError;
 
