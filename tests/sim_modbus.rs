@@ -194,3 +194,47 @@ async fn a_pulled_sensor_cable_ends_the_test_with_the_stage_commanded_safe() {
         abort[0].1.message
     );
 }
+
+#[test]
+fn probe_reads_every_channel_and_actuates_only_when_asked() {
+    let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-modbus-dc.toml");
+    let cfg = cfg.to_str().unwrap();
+    let value = |stdout: &str, step: &str, quantity: &str| -> f64 {
+        let prefix = format!("[{step:>4}] {quantity} ");
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with(&prefix))
+            .unwrap_or_else(|| panic!("no {step} {quantity} in:\n{stdout}"));
+        line[prefix.len()..]
+            .split_whitespace()
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap()
+    };
+
+    let out = common::motorbench(&["probe", "--config", cfg]);
+    let (stdout, stderr) = common::text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    for q in ["armature_voltage", "armature_current", "encoder_count"] {
+        value(&stdout, "idle", q);
+    }
+    assert!(
+        !stdout.contains("[cmd ]"),
+        "nothing is driven without --actuate:\n{stdout}"
+    );
+
+    let out = common::motorbench(&["probe", "--config", cfg, "--actuate"]);
+    let (stdout, stderr) = common::text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    // 5 % of the 60 V limit, measured through the served DAQ (12-bit ADC
+    // over ±400 V: 0.2 V steps, 0.1 V noise).
+    let on = value(&stdout, "on", "armature_voltage");
+    assert!((on - 3.0).abs() < 0.6, "{on}\n{stdout}");
+    assert!(stdout.contains("[cmd ] safe state: ok"), "{stdout}");
+    let safe = value(&stdout, "safe", "armature_voltage");
+    assert!(
+        safe.abs() < 0.6,
+        "the output is off after the probe: {safe}\n{stdout}"
+    );
+}

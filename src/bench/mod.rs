@@ -5,6 +5,7 @@ mod commission;
 mod encoder;
 mod limits;
 mod plan;
+mod probe;
 mod progress;
 mod rig;
 mod runner;
@@ -17,6 +18,7 @@ pub use commission::{commission, CommissionError, CommissionOptions, Commissione
 pub use encoder::SpeedFromEncoder;
 pub use limits::{check_limits, Trip};
 pub use plan::{plan_steps, PlanStep};
+pub use probe::{probe, ProbeLine, ProbeReport, PROBE_CURRENT_FRACTION, PROBE_SETPOINT_FRACTION};
 pub use progress::{NoProgress, Progress};
 pub use rig::{build_rig, ModbusProbe, Rig, RigError, SERVED_PLANT_RATE_HZ};
 pub use runner::{
