@@ -11,6 +11,10 @@ use thiserror::Error;
 
 use crate::model::DcParams;
 
+mod modbus;
+
+pub use modbus::{LinkSpec, ModbusDeviceLink, ModbusRig, SimulatedTransport};
+
 /// The embedded default configuration: the simulated rig with the seed
 /// paper's Table 4 motor.
 pub const DEFAULT_CONFIG: &str = include_str!("../config/sim-dc.toml");
@@ -78,6 +82,7 @@ struct RawRig {
     #[serde(rename = "sample_rate_Hz")]
     sample_rate_hz: f64,
     simulated: Option<SimulatedRig>,
+    modbus: Option<modbus::RawModbusRig>,
 }
 
 /// The simulated rig: the motor it simulates and its imperfections.
@@ -190,6 +195,46 @@ fn default_coastdown_timeout() -> f64 {
 pub enum Backend {
     /// The simulated rig, in process.
     Simulated(SimulatedRig),
+    /// A power stage and sensors over Modbus TCP or RTU; with
+    /// `simulated`, the simulated rig served behind those links.
+    Modbus {
+        /// The links and device profiles.
+        rig: Box<ModbusRig>,
+        /// The simulated rig served behind the links (`rig.modbus.simulate`).
+        simulated: Option<SimulatedRig>,
+    },
+}
+
+impl Backend {
+    /// The simulated rig's configuration, when the test runs on one
+    /// (directly or behind a protocol).
+    pub fn simulated(&self) -> Option<&SimulatedRig> {
+        match self {
+            Backend::Simulated(sim) => Some(sim),
+            Backend::Modbus { simulated, .. } => simulated.as_ref(),
+        }
+    }
+
+    /// A short description for messages.
+    pub fn describe(&self) -> String {
+        match self {
+            Backend::Simulated(_) => "the simulated rig".into(),
+            Backend::Modbus {
+                rig,
+                simulated: Some(_),
+            } => format!(
+                "the simulated rig served over Modbus {}",
+                match rig.simulate {
+                    Some(SimulatedTransport::Rtu) => "RTU (pseudo-terminals)",
+                    _ => "TCP (loopback)",
+                }
+            ),
+            Backend::Modbus { rig, .. } => format!(
+                "Modbus: {} and {}",
+                rig.power_stage.profile.name, rig.sensors.profile.name
+            ),
+        }
+    }
 }
 
 /// The test plan to run.
@@ -281,6 +326,56 @@ impl Config {
             .map_err(|e| invalid("motor.nameplate", e.to_string()))?;
 
         positive("rig.sample_rate_Hz", raw.rig.sample_rate_hz)?;
+        let check_simulated = |sim: &SimulatedRig| -> Result<(), ConfigError> {
+            sim.motor
+                .validate()
+                .map_err(|e| invalid(&format!("rig.simulated.motor.{}", e.name), e.to_string()))?;
+            let ps = &sim.power_stage;
+            positive("rig.simulated.power_stage.max_voltage_V", ps.max_voltage)?;
+            positive("rig.simulated.power_stage.slew_V_per_s", ps.slew)?;
+            positive(
+                "rig.simulated.power_stage.current_limit_A",
+                ps.current_limit,
+            )?;
+            let s = &sim.sensors;
+            positive(
+                "rig.simulated.sensors.voltage_full_scale_V",
+                s.voltage_full_scale,
+            )?;
+            positive(
+                "rig.simulated.sensors.current_full_scale_A",
+                s.current_full_scale,
+            )?;
+            for (key, bits) in [
+                ("voltage_bits", s.voltage_bits),
+                ("current_bits", s.current_bits),
+            ] {
+                if !(2..=24).contains(&bits) {
+                    return Err(invalid(
+                        &format!("rig.simulated.sensors.{key}"),
+                        format!("{bits} must be 2 to 24"),
+                    ));
+                }
+            }
+            for (key, v) in [
+                ("voltage_noise_V", s.voltage_noise),
+                ("current_noise_A", s.current_noise),
+            ] {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(invalid(
+                        &format!("rig.simulated.sensors.{key}"),
+                        format!("{v} must be ≥ 0"),
+                    ));
+                }
+            }
+            if s.encoder_lines == 0 {
+                return Err(invalid(
+                    "rig.simulated.sensors.encoder_lines",
+                    "must be > 0".into(),
+                ));
+            }
+            Ok(())
+        };
         let backend = match raw.rig.backend.as_str() {
             "simulated" => {
                 let sim = raw.rig.simulated.ok_or_else(|| {
@@ -289,59 +384,36 @@ impl Config {
                         "missing: backend \"simulated\" needs it".into(),
                     )
                 })?;
-                sim.motor.validate().map_err(|e| {
-                    invalid(&format!("rig.simulated.motor.{}", e.name), e.to_string())
-                })?;
-                let ps = &sim.power_stage;
-                positive("rig.simulated.power_stage.max_voltage_V", ps.max_voltage)?;
-                positive("rig.simulated.power_stage.slew_V_per_s", ps.slew)?;
-                positive(
-                    "rig.simulated.power_stage.current_limit_A",
-                    ps.current_limit,
-                )?;
-                let s = &sim.sensors;
-                positive(
-                    "rig.simulated.sensors.voltage_full_scale_V",
-                    s.voltage_full_scale,
-                )?;
-                positive(
-                    "rig.simulated.sensors.current_full_scale_A",
-                    s.current_full_scale,
-                )?;
-                for (key, bits) in [
-                    ("voltage_bits", s.voltage_bits),
-                    ("current_bits", s.current_bits),
-                ] {
-                    if !(2..=24).contains(&bits) {
-                        return Err(invalid(
-                            &format!("rig.simulated.sensors.{key}"),
-                            format!("{bits} must be 2 to 24"),
-                        ));
-                    }
-                }
-                for (key, v) in [
-                    ("voltage_noise_V", s.voltage_noise),
-                    ("current_noise_A", s.current_noise),
-                ] {
-                    if !(v.is_finite() && v >= 0.0) {
-                        return Err(invalid(
-                            &format!("rig.simulated.sensors.{key}"),
-                            format!("{v} must be ≥ 0"),
-                        ));
-                    }
-                }
-                if s.encoder_lines == 0 {
-                    return Err(invalid(
-                        "rig.simulated.sensors.encoder_lines",
-                        "must be > 0".into(),
-                    ));
-                }
+                check_simulated(&sim)?;
                 Backend::Simulated(sim)
+            }
+            "modbus" => {
+                let m = raw.rig.modbus.ok_or_else(|| {
+                    invalid("rig.modbus", "missing: backend \"modbus\" needs it".into())
+                })?;
+                if let Some(sim) = &raw.rig.simulated {
+                    check_simulated(sim)?;
+                }
+                let dir = Path::new(source).parent().unwrap_or(Path::new("."));
+                let rig = m
+                    .validate(dir, raw.rig.simulated.is_some())
+                    .map_err(|(key, reason)| invalid(&key, reason))?;
+                let simulated = if rig.simulate.is_some() {
+                    raw.rig.simulated
+                } else {
+                    None
+                };
+                Backend::Modbus {
+                    rig: Box::new(rig),
+                    simulated,
+                }
             }
             other => {
                 return Err(invalid(
                     "rig.backend",
-                    format!("unknown backend \"{other}\" (this version has: \"simulated\")"),
+                    format!(
+                        "unknown backend \"{other}\" (this version has: \"simulated\", \"modbus\")"
+                    ),
                 ))
             }
         };
@@ -473,7 +545,7 @@ mod tests {
     #[test]
     fn embedded_default_is_the_seed_motor() {
         let c = Config::embedded_default();
-        let Backend::Simulated(sim) = &c.backend;
+        let sim = c.backend.simulated().unwrap();
         assert_eq!(sim.motor, DcParams::SEED_TABLE4_MOMENTS);
         assert_eq!(c.nameplate["power_W"], 180);
         assert!(
@@ -539,7 +611,7 @@ mod tests {
             err.contains("test.plan") && err.contains("unknown plan"),
             "{err}"
         );
-        let err = with("backend = \"simulated\"", "backend = \"modbus\"")
+        let err = with("backend = \"simulated\"", "backend = \"canbus\"")
             .unwrap_err()
             .to_string();
         assert!(err.contains("rig.backend"), "{err}");

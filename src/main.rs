@@ -13,8 +13,8 @@ use std::time::Duration;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
-use motorbench::bench::{commission, CommissionOptions, Outcome, Progress};
-use motorbench::config::{load_or_default, Backend};
+use motorbench::bench::{build_rig, commission, probe, CommissionOptions, Outcome, Progress};
+use motorbench::config::load_or_default;
 use motorbench::identify::{identify_dc, Identification};
 use motorbench::record::{read_dc_csv, read_mcap, Record, SegmentKind};
 use motorbench::report::{render_text, segment_plots, write_segments_svg};
@@ -50,6 +50,18 @@ enum Command {
         /// No progress bar.
         #[arg(long, short)]
         quiet: bool,
+    },
+    /// Check a rig's wiring: read every sensor channel once; with --actuate,
+    /// also drive the power stage at a harmless set point (5 % of the
+    /// voltage limit, current limited to 10 % of the current limit), read
+    /// again, and return it to its safe state.
+    Probe {
+        /// Rig configuration (TOML).
+        #[arg(long)]
+        config: PathBuf,
+        /// Exercise the power stage (off without it: nothing is driven).
+        #[arg(long)]
+        actuate: bool,
     },
     /// Read a recorded MCAP (also a truncated one) and identify the motor again.
     Replay {
@@ -219,10 +231,11 @@ async fn run(
         realtime,
     };
     if !json && !quiet {
-        let Backend::Simulated(_) = &cfg.backend;
         eprintln!(
-            "motorbench: {} on the simulated rig ({})",
-            cfg.motor_id, cfg.source
+            "motorbench: {} on {} ({})",
+            cfg.motor_id,
+            cfg.backend.describe(),
+            cfg.source
         );
     }
     let done = commission(&cfg, &opts, &progress, &stop_rx)
@@ -266,6 +279,48 @@ async fn wait_for_stop_signal() {
     #[cfg(not(unix))]
     {
         let _ = tokio::signal::ctrl_c().await;
+    }
+}
+
+async fn probe_rig(config: &Path, actuate: bool) -> Result<(), Failure> {
+    let cfg = motorbench::config::Config::load(config).map_err(bad_input)?;
+    eprintln!(
+        "motorbench: probing {} ({}){}",
+        cfg.backend.describe(),
+        cfg.source,
+        if actuate {
+            ", with the power stage at a harmless set point"
+        } else {
+            ", reading only"
+        }
+    );
+    let mut rig = build_rig(&cfg, false).await.map_err(runtime)?;
+    println!(
+        "power stage: {} (current limit: {}, largest set point {})",
+        rig.stage.id(),
+        if rig.stage.capabilities().current_limit {
+            "yes"
+        } else {
+            "no"
+        },
+        rig.stage.capabilities().max_setpoint
+    );
+    let report = probe(&cfg, &mut rig, actuate).await;
+    for line in &report.lines {
+        println!("{line}");
+    }
+    if report.passed() {
+        println!(
+            "probe: every channel read{}",
+            if actuate {
+                ", every command accepted"
+            } else {
+                ""
+            }
+        );
+        Ok(())
+    } else {
+        Err(runtime("probe: something failed (see above)"))
     }
 }
 
@@ -386,6 +441,11 @@ fn main() -> ExitCode {
             .build()
             .map_err(runtime)
             .and_then(|rt| rt.block_on(run(config, out, realtime, json, quiet))),
+        Command::Probe { config, actuate } => tokio::runtime::Builder::new_multi_thread()
+            .enable_all()
+            .build()
+            .map_err(runtime)
+            .and_then(|rt| rt.block_on(probe_rig(&config, actuate))),
         Command::Replay {
             log,
             json,

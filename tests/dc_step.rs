@@ -5,7 +5,7 @@
 mod common;
 
 use motorbench::bench::{commission, CommissionOptions, NoProgress, Outcome};
-use motorbench::config::{Backend, Config};
+use motorbench::config::Config;
 use motorbench::identify::identify_dc;
 use motorbench::record::{read_mcap, SegmentKind};
 
@@ -17,7 +17,7 @@ fn param(report: &motorbench::report::IdentificationReport, key: &str) -> f64 {
 async fn default_run_identifies_the_seed_motor_and_replays_identically() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = Config::embedded_default();
-    let Backend::Simulated(sim) = &cfg.backend;
+    let sim = cfg.backend.simulated().expect("a simulated rig");
     let truth = sim.motor;
     let (_tx, rx) = tokio::sync::watch::channel(false);
     let opts = CommissionOptions {

@@ -6,7 +6,7 @@ use motorbench::bench::{
     plan_steps, record_channels, run_test, sim_rig, BenchError, NoProgress, Outcome, RecordSink,
     SimSensors,
 };
-use motorbench::config::{Backend, Config, Plan};
+use motorbench::config::{Config, Plan};
 use motorbench::record::{EventLevel, Record};
 use motorbench_drivers::{ChannelInfo, DriverError, SampleBatch, SensorStream};
 
@@ -61,7 +61,7 @@ struct Ran {
 /// Run `cfg` on the simulated rig, the stage and the sensors sharing one
 /// plant; `fail_after` batches the sensors fail; `hide` channels dropped.
 async fn run(cfg: &Config, fail_after: Option<usize>, hide_encoder: bool, stop: bool) -> Ran {
-    let Backend::Simulated(sim) = &cfg.backend;
+    let sim = cfg.backend.simulated().expect("a simulated rig");
     let (mut stage, inner) = sim_rig(sim, cfg.sample_rate_hz, false).unwrap();
     let mut channels = inner.channels().to_vec();
     if hide_encoder {

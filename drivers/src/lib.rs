@@ -9,15 +9,33 @@
 //! - [`SensorStream`]: something that delivers timestamped samples of named
 //!   channels (a DAQ, a power meter, an encoder interface).
 //!
-//! Backends (the simulated rig in the `motorbench` crate today; Modbus, CAN
-//! and serial transports later) implement these traits. The traits speak of
-//! set points, channels and samples only: what a channel *means* for a motor
-//! is the caller's business.
+//! Backends implement these traits: the simulated rig in the `motorbench`
+//! crate, and the transports here. The traits speak of set points,
+//! channels and samples only: what a channel *means* for a motor is the
+//! caller's business.
+//!
+//! Transports and codecs, each written over byte streams or frame streams
+//! so that a TCP socket, a pseudo-terminal, an in-process duplex or real
+//! hardware are interchangeable:
+//!
+//! - [`modbus`]: Modbus TCP and RTU clients (tokio-modbus) with timeouts,
+//!   retries of idempotent calls and typed errors; register maps loaded
+//!   from TOML device profiles; a Modbus power stage and polled sensors.
+//! - [`can`]: one frame-stream trait with SocketCAN, SLCAN and in-process
+//!   backends; DBC signal decoding.
+//! - [`serial`]: ASCII and binary line protocols for streaming sensors,
+//!   serial ports and pseudo-terminals.
+//! - [`ChannelStats`]: jitter and loss per channel, kept by the streams.
 
+pub mod can;
 mod error;
+pub mod modbus;
 mod power_stage;
 mod sensor;
+pub mod serial;
+mod stats;
 
 pub use error::DriverError;
 pub use power_stage::{PowerStage, StageCapabilities};
 pub use sensor::{ChannelInfo, Sample, SampleBatch, SensorStream};
+pub use stats::{ChannelStats, IntervalStats};

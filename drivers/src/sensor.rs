@@ -2,7 +2,7 @@
 
 use async_trait::async_trait;
 
-use crate::DriverError;
+use crate::{ChannelStats, DriverError};
 
 /// Static description of one channel a stream delivers.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,4 +50,16 @@ pub trait SensorStream: Send {
 
     /// Wait for and return the next batch of readings.
     async fn next_batch(&mut self) -> Result<SampleBatch, DriverError>;
+
+    /// Sampling statistics per channel so far (received, lost, jitter).
+    /// Streams that keep none return an empty list (the default).
+    fn sampling_stats(&self) -> Vec<ChannelStats> {
+        Vec::new()
+    }
+
+    /// Warnings raised since the last call (lost readings, a late poll,
+    /// garbage on the line), for the caller to record. Default: none.
+    fn take_warnings(&mut self) -> Vec<String> {
+        Vec::new()
+    }
 }

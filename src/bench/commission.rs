@@ -8,9 +8,9 @@ use thiserror::Error;
 use tokio::sync::watch;
 
 use super::{
-    plan_steps, record_channels, run_test, sim_rig, BenchError, Outcome, Progress, RecordSink,
+    build_rig, plan_steps, record_channels, run_test, BenchError, Outcome, Progress, RecordSink,
 };
-use crate::config::{Backend, Config, Plan};
+use crate::config::{Config, Plan};
 use crate::identify::{identify_dc, Identification};
 use crate::model::DcParams;
 use crate::record::{
@@ -119,14 +119,12 @@ pub async fn commission(
         move |source| CommissionError::Io { path, source }
     };
     std::fs::create_dir_all(&opts.out_dir).map_err(io(&opts.out_dir))?;
-    let Backend::Simulated(sim) = &cfg.backend;
-    let (mut stage, mut sensors) = sim_rig(sim, cfg.sample_rate_hz, opts.realtime)
+    let mut rig = build_rig(cfg, opts.realtime)
+        .await
         .map_err(|e| CommissionError::Rig(e.to_string()))?;
-    let counts_per_rev = 4.0 * f64::from(sim.sensors.encoder_lines);
-    let truth = Some(sim.motor);
-
-    use motorbench_drivers::{PowerStage, SensorStream};
-    let channels = record_channels(sensors.channels(), stage.id());
+    let counts_per_rev = rig.counts_per_rev;
+    let truth = rig.truth;
+    let channels = record_channels(rig.sensors.channels(), rig.stage.id());
     let started_at = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
     let stem = unique_stem(&opts.out_dir, &cfg.motor_id, &started_at);
     let kind = match cfg.plan {
@@ -148,8 +146,8 @@ pub async fn commission(
     let outcome = run_test(
         cfg,
         &steps,
-        &mut stage,
-        &mut sensors,
+        rig.stage.as_mut(),
+        rig.sensors.as_mut(),
         counts_per_rev,
         &mut sink,
         progress,

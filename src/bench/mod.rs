@@ -5,8 +5,12 @@ mod commission;
 mod encoder;
 mod limits;
 mod plan;
+mod probe;
 mod progress;
+mod rig;
 mod runner;
+mod sampling;
+mod served;
 mod settle;
 mod sim_rig;
 
@@ -14,9 +18,13 @@ pub use commission::{commission, CommissionError, CommissionOptions, Commissione
 pub use encoder::SpeedFromEncoder;
 pub use limits::{check_limits, Trip};
 pub use plan::{plan_steps, PlanStep};
+pub use probe::{probe, ProbeLine, ProbeReport, PROBE_CURRENT_FRACTION, PROBE_SETPOINT_FRACTION};
 pub use progress::{NoProgress, Progress};
+pub use rig::{build_rig, ModbusProbe, Rig, RigError, SERVED_PLANT_RATE_HZ};
 pub use runner::{
     record_channels, run_test, BenchError, Outcome, RecordSink, SUPPLY_LIMIT_FRACTION,
 };
+pub use sampling::SamplingEvents;
+pub use served::{ServeError, ServedLink, ServedRig};
 pub use settle::SettleDetector;
 pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};

@@ -12,7 +12,7 @@ use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
 use thiserror::Error;
 use tokio::sync::watch;
 
-use super::{check_limits, PlanStep, Progress, SettleDetector, SpeedFromEncoder};
+use super::{check_limits, PlanStep, Progress, SamplingEvents, SettleDetector, SpeedFromEncoder};
 use crate::config::Config;
 use crate::record::{
     ChannelSpec, Entry, Event, EventLevel, Record, RecordBuilder, RecordError, Recorder,
@@ -158,6 +158,7 @@ struct Bench<'a> {
     encoder: SpeedFromEncoder,
     t_ns: u64,
     stale: Duration,
+    sampling: SamplingEvents,
 }
 
 /// One reading of the quantities the plan watches.
@@ -242,6 +243,9 @@ impl Bench<'_> {
             })
             .await?;
         self.progress.tick(batch.t_ns as f64 * 1e-9);
+        for message in self.sampling.admit(self.sensors.take_warnings()) {
+            self.event(EventLevel::Warn, message).await?;
+        }
         if let Some(trip) = check_limits(&self.cfg.limits, voltage, current, speed) {
             return Ok(Err(Stop::Fault(format!("limit tripped: {trip}"))));
         }
@@ -361,6 +365,7 @@ impl Bench<'_> {
             }
         }
         let safe = self.stage.safe_state().await;
+        self.sampling_summary().await?;
         let message = match &safe {
             Ok(()) => "test complete; power stage in its safe state".to_string(),
             Err(e) => format!("test complete, but the safe-state command failed: {e}"),
@@ -372,6 +377,16 @@ impl Bench<'_> {
         };
         self.event(level, message).await?;
         Ok(Outcome::Completed)
+    }
+
+    /// The sensors' sampling statistics, one event per channel.
+    async fn sampling_summary(&mut self) -> Result<(), RecordError> {
+        let stats = self.sensors.sampling_stats();
+        let events = self.sampling.summary(&stats, self.sensors.channels());
+        for (level, message) in events {
+            self.event(level, message).await?;
+        }
+        Ok(())
     }
 
     /// Safe state first, then the record of why.
@@ -389,6 +404,7 @@ impl Bench<'_> {
         if let Some((index, step)) = open {
             self.marker(index, step, SegmentPhase::End).await?;
         }
+        self.sampling_summary().await?;
         Ok(Outcome::Aborted { reason: message })
     }
 }
@@ -425,6 +441,7 @@ pub async fn run_test(
         encoder: SpeedFromEncoder::new(counts_per_rev),
         t_ns: 0,
         stale,
+        sampling: SamplingEvents::new(),
     };
     match bench.run(steps).await {
         Ok(outcome) => Ok(outcome),

@@ -247,18 +247,29 @@ impl SensorStream for SimSensors {
     }
 
     async fn next_batch(&mut self) -> Result<SampleBatch, DriverError> {
+        let batch = self.sample();
+        let step = (batch.t_ns as f64 / self.period_ns).round() as u64;
+        if let Some(start) = self.realtime_start {
+            tokio::time::sleep_until(start + Duration::from_nanos(batch.t_ns)).await;
+        } else if step % 1024 == 0 {
+            // Let other tasks (signal handlers, the recorder's queue) run.
+            tokio::task::yield_now().await;
+        }
+        Ok(batch)
+    }
+}
+
+impl SimSensors {
+    /// Advance the plant by one sample period and read the sensors (what
+    /// [`SensorStream::next_batch`] does, without any pacing): for
+    /// simulated devices that run the plant on their own clock.
+    pub fn sample(&mut self) -> SampleBatch {
         let (step, terminal_voltage, state) = {
             let mut p = lock(&self.plant);
             let u = p.advance();
             (p.step, u, p.state)
         };
         let t_ns = (step as f64 * self.period_ns).round() as u64;
-        if let Some(start) = self.realtime_start {
-            tokio::time::sleep_until(start + Duration::from_nanos(t_ns)).await;
-        } else if step % 1024 == 0 {
-            // Let other tasks (signal handlers, the recorder's queue) run.
-            tokio::task::yield_now().await;
-        }
         let samples = vec![
             Sample {
                 channel: channel::VOLTAGE,
@@ -273,17 +284,21 @@ impl SensorStream for SimSensors {
                 value: (state.angle * self.counts_per_rad).floor(),
             },
         ];
-        Ok(SampleBatch { t_ns, samples })
+        SampleBatch { t_ns, samples }
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{Backend, Config};
+    use crate::config::Config;
 
     fn rig() -> (SimPowerStage, SimSensors) {
-        let Backend::Simulated(sim) = Config::embedded_default().backend;
+        let sim = Config::embedded_default()
+            .backend
+            .simulated()
+            .cloned()
+            .unwrap();
         sim_rig(&sim, 2000.0, false).unwrap()
     }
 

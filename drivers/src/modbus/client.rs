@@ -1,0 +1,430 @@
+//! A Modbus client with a deadline on every call, retries of idempotent
+//! calls, reconnection after a link failure, and errors that keep "the
+//! device answered with an exception" apart from "the link failed".
+//!
+//! Error mapping:
+//!
+//! | what happened | [`DriverError`] | retried? |
+//! |---|---|---|
+//! | no answer within [`CallPolicy::timeout`] | `Timeout` | yes, if idempotent |
+//! | I/O error, connection refused or closed, garbled frame | `Link` | yes, if idempotent |
+//! | the device answered with exception code *n* | `Device` | only `ServerDeviceBusy` (0x06), if idempotent |
+//!
+//! Idempotent (safe to send twice): every read, and writes of absolute
+//! values (write single / multiple registers, write single / multiple
+//! coils). A set point written twice leaves the same set point: a lost
+//! answer to a write that did reach the device costs nothing when the write
+//! is repeated. Not idempotent: mask writes, read/write-multiple and custom
+//! function codes (their effect may depend on the state they find).
+//!
+//! After a `Link` or `Timeout` error the connection is dropped and opened
+//! afresh on the next attempt: a late answer to an abandoned request must
+//! not be taken for the answer to the next one.
+
+use std::borrow::Cow;
+use std::net::SocketAddr;
+use std::time::Duration;
+
+use tokio::io::{AsyncRead, AsyncWrite};
+use tokio_modbus::client::{Client, Context};
+use tokio_modbus::prelude::{ExceptionCode, Request, Response, Slave};
+
+use crate::serial::port::{open_serial, SerialSettings};
+use crate::DriverError;
+
+/// Deadlines and retries of every call.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CallPolicy {
+    /// Deadline of one attempt (and of opening the connection).
+    pub timeout: Duration,
+    /// Extra attempts of an idempotent call after a failed one.
+    pub retries: u32,
+    /// Pause before each retry.
+    pub retry_delay: Duration,
+}
+
+impl Default for CallPolicy {
+    fn default() -> Self {
+        CallPolicy {
+            timeout: Duration::from_millis(250),
+            retries: 2,
+            retry_delay: Duration::from_millis(20),
+        }
+    }
+}
+
+/// Counts kept by a client.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LinkStats {
+    /// Calls made (not attempts).
+    pub calls: u64,
+    /// Retries made.
+    pub retries: u64,
+    /// Attempts that timed out.
+    pub timeouts: u64,
+    /// Attempts that failed on the link.
+    pub link_errors: u64,
+    /// Exception answers.
+    pub exceptions: u64,
+    /// Connections opened.
+    pub connects: u64,
+}
+
+/// Whether a request may be sent again after an unknown outcome.
+pub fn is_idempotent(req: &Request<'_>) -> bool {
+    matches!(
+        req,
+        Request::ReadCoils(..)
+            | Request::ReadDiscreteInputs(..)
+            | Request::ReadInputRegisters(..)
+            | Request::ReadHoldingRegisters(..)
+            | Request::ReadDeviceIdentification(..)
+            | Request::WriteSingleCoil(..)
+            | Request::WriteMultipleCoils(..)
+            | Request::WriteSingleRegister(..)
+            | Request::WriteMultipleRegisters(..)
+    )
+}
+
+enum Link {
+    Tcp(SocketAddr),
+    Rtu(SerialSettings),
+    /// A stream handed in by the caller: usable once, never reopened.
+    Attached(Option<Context>),
+}
+
+/// A Modbus client for one device (one unit id) on one link.
+pub struct ModbusClient {
+    device: String,
+    unit: u8,
+    link: Link,
+    ctx: Option<Context>,
+    policy: CallPolicy,
+    stats: LinkStats,
+}
+
+impl std::fmt::Debug for ModbusClient {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ModbusClient")
+            .field("device", &self.device)
+            .field("unit", &self.unit)
+            .field("policy", &self.policy)
+            .field("stats", &self.stats)
+            .finish()
+    }
+}
+
+impl ModbusClient {
+    fn new(device: &str, unit: u8, link: Link, policy: CallPolicy) -> ModbusClient {
+        ModbusClient {
+            device: device.to_string(),
+            unit,
+            link,
+            ctx: None,
+            policy,
+            stats: LinkStats::default(),
+        }
+    }
+
+    /// Modbus TCP to `addr`, unit `unit` (connects on first use).
+    pub fn tcp(device: &str, addr: SocketAddr, unit: u8, policy: CallPolicy) -> ModbusClient {
+        ModbusClient::new(device, unit, Link::Tcp(addr), policy)
+    }
+
+    /// Modbus RTU on a serial port (opened on first use, reopened after a
+    /// link failure).
+    pub fn rtu(device: &str, serial: SerialSettings, unit: u8, policy: CallPolicy) -> ModbusClient {
+        ModbusClient::new(device, unit, Link::Rtu(serial), policy)
+    }
+
+    /// Modbus TCP framing (MBAP header) over a stream the caller opened.
+    /// After a link failure it cannot be reopened: later calls fail.
+    pub fn attach_tcp<T>(device: &str, io: T, unit: u8, policy: CallPolicy) -> ModbusClient
+    where
+        T: AsyncRead + AsyncWrite + std::fmt::Debug + Unpin + Send + 'static,
+    {
+        let ctx = tokio_modbus::client::tcp::attach_slave(io, Slave(unit));
+        ModbusClient::new(device, unit, Link::Attached(Some(ctx)), policy)
+    }
+
+    /// Modbus RTU framing (CRC) over a stream the caller opened (a PTY, a
+    /// duplex). After a link failure it cannot be reopened.
+    pub fn attach_rtu<T>(device: &str, io: T, unit: u8, policy: CallPolicy) -> ModbusClient
+    where
+        T: AsyncRead + AsyncWrite + std::fmt::Debug + Unpin + Send + 'static,
+    {
+        let ctx = tokio_modbus::client::rtu::attach_slave(io, Slave(unit));
+        ModbusClient::new(device, unit, Link::Attached(Some(ctx)), policy)
+    }
+
+    /// Address later calls to unit `unit` (several devices on one RTU
+    /// line share one client).
+    pub fn set_unit(&mut self, unit: u8) {
+        use tokio_modbus::prelude::SlaveContext;
+        if unit != self.unit {
+            self.unit = unit;
+            if let Some(ctx) = &mut self.ctx {
+                ctx.set_slave(Slave(unit));
+            }
+        }
+    }
+
+    /// The unit id calls go to.
+    pub fn unit(&self) -> u8 {
+        self.unit
+    }
+
+    /// Driver id (used in errors).
+    pub fn device(&self) -> &str {
+        &self.device
+    }
+
+    /// The call policy.
+    pub fn policy(&self) -> CallPolicy {
+        self.policy
+    }
+
+    /// Counts so far.
+    pub fn stats(&self) -> LinkStats {
+        self.stats
+    }
+
+    fn link_error(&self, reason: String) -> DriverError {
+        DriverError::Link {
+            device: self.device.clone(),
+            reason,
+        }
+    }
+
+    fn timeout_error(&self) -> DriverError {
+        DriverError::Timeout {
+            device: self.device.clone(),
+            timeout_ms: self.policy.timeout.as_millis() as u64,
+        }
+    }
+
+    async fn connect(&mut self) -> Result<(), DriverError> {
+        if self.ctx.is_some() {
+            return Ok(());
+        }
+        let slave = Slave(self.unit);
+        let ctx = match &mut self.link {
+            Link::Tcp(addr) => {
+                let addr = *addr;
+                match tokio::time::timeout(
+                    self.policy.timeout,
+                    tokio_modbus::client::tcp::connect_slave(addr, slave),
+                )
+                .await
+                {
+                    Err(_) => return Err(self.timeout_error()),
+                    Ok(Err(e)) => return Err(self.link_error(format!("connect to {addr}: {e}"))),
+                    Ok(Ok(ctx)) => ctx,
+                }
+            }
+            Link::Rtu(settings) => {
+                let port = open_serial(settings)?;
+                tokio_modbus::client::rtu::attach_slave(port, slave)
+            }
+            Link::Attached(ctx) => match ctx.take() {
+                Some(ctx) => ctx,
+                None => {
+                    return Err(self.link_error(
+                        "the attached stream failed earlier and cannot be reopened".into(),
+                    ))
+                }
+            },
+        };
+        self.stats.connects += 1;
+        self.ctx = Some(ctx);
+        Ok(())
+    }
+
+    async fn attempt(&mut self, req: Request<'static>) -> Result<Response, DriverError> {
+        self.connect().await?;
+        let ctx = self.ctx.as_mut().expect("connected above");
+        match tokio::time::timeout(self.policy.timeout, ctx.call(req)).await {
+            Err(_) => {
+                self.stats.timeouts += 1;
+                Err(self.timeout_error())
+            }
+            Ok(Err(tokio_modbus::Error::Transport(e))) => {
+                self.stats.link_errors += 1;
+                Err(self.link_error(e.to_string()))
+            }
+            Ok(Err(tokio_modbus::Error::Protocol(e))) => {
+                self.stats.link_errors += 1;
+                Err(self.link_error(format!("garbled answer: {e}")))
+            }
+            Ok(Ok(Err(exception))) => {
+                self.stats.exceptions += 1;
+                Err(DriverError::Device {
+                    device: self.device.clone(),
+                    reason: format!(
+                        "Modbus exception {:#04x} ({exception:?})",
+                        u8::from(exception)
+                    ),
+                })
+            }
+            Ok(Ok(Ok(response))) => Ok(response),
+        }
+    }
+
+    /// Send one request; retry per the policy when it is idempotent.
+    pub async fn call(&mut self, req: Request<'static>) -> Result<Response, DriverError> {
+        self.stats.calls += 1;
+        let attempts = if is_idempotent(&req) {
+            1 + self.policy.retries
+        } else {
+            1
+        };
+        let mut last = None;
+        for n in 0..attempts {
+            if n > 0 {
+                self.stats.retries += 1;
+                tokio::time::sleep(self.policy.retry_delay).await;
+            }
+            match self.attempt(req.clone()).await {
+                Ok(r) => return Ok(r),
+                Err(e) if e.is_link_failure() => {
+                    // Never reuse a connection after an unknown outcome.
+                    self.ctx = None;
+                    last = Some(e);
+                }
+                Err(e) if is_busy(&e) => last = Some(e),
+                Err(e) => return Err(e),
+            }
+        }
+        Err(last.expect("at least one attempt"))
+    }
+
+    /// Read `count` holding registers from `addr`.
+    pub async fn read_holding(&mut self, addr: u16, count: u16) -> Result<Vec<u16>, DriverError> {
+        match self
+            .call(Request::ReadHoldingRegisters(addr, count))
+            .await?
+        {
+            Response::ReadHoldingRegisters(words) => self.check_len(words, count),
+            other => Err(self.unexpected(other)),
+        }
+    }
+
+    /// Read `count` input registers from `addr`.
+    pub async fn read_input(&mut self, addr: u16, count: u16) -> Result<Vec<u16>, DriverError> {
+        match self.call(Request::ReadInputRegisters(addr, count)).await? {
+            Response::ReadInputRegisters(words) => self.check_len(words, count),
+            other => Err(self.unexpected(other)),
+        }
+    }
+
+    /// Read `count` coils from `addr`.
+    pub async fn read_coils(&mut self, addr: u16, count: u16) -> Result<Vec<bool>, DriverError> {
+        match self.call(Request::ReadCoils(addr, count)).await? {
+            Response::ReadCoils(mut bits) if bits.len() >= usize::from(count) => {
+                bits.truncate(usize::from(count));
+                Ok(bits)
+            }
+            other => Err(self.unexpected(other)),
+        }
+    }
+
+    /// Read `count` discrete inputs from `addr`.
+    pub async fn read_discrete(&mut self, addr: u16, count: u16) -> Result<Vec<bool>, DriverError> {
+        match self.call(Request::ReadDiscreteInputs(addr, count)).await? {
+            Response::ReadDiscreteInputs(mut bits) if bits.len() >= usize::from(count) => {
+                bits.truncate(usize::from(count));
+                Ok(bits)
+            }
+            other => Err(self.unexpected(other)),
+        }
+    }
+
+    /// Write registers from `addr`: function 06 for one word, 16 for more.
+    pub async fn write_registers(&mut self, addr: u16, words: &[u16]) -> Result<(), DriverError> {
+        let req = if words.len() == 1 {
+            Request::WriteSingleRegister(addr, words[0])
+        } else {
+            Request::WriteMultipleRegisters(addr, Cow::Owned(words.to_vec()))
+        };
+        self.call(req).await.map(|_| ())
+    }
+
+    /// Write one coil.
+    pub async fn write_coil(&mut self, addr: u16, on: bool) -> Result<(), DriverError> {
+        self.call(Request::WriteSingleCoil(addr, on))
+            .await
+            .map(|_| ())
+    }
+
+    fn check_len(&self, words: Vec<u16>, count: u16) -> Result<Vec<u16>, DriverError> {
+        if words.len() == usize::from(count) {
+            Ok(words)
+        } else {
+            Err(self.link_error(format!("asked for {count} registers, got {}", words.len())))
+        }
+    }
+
+    fn unexpected(&self, r: Response) -> DriverError {
+        self.link_error(format!("unexpected answer {r:?}"))
+    }
+}
+
+fn is_busy(e: &DriverError) -> bool {
+    let busy = format!("{:#04x}", u8::from(ExceptionCode::ServerDeviceBusy));
+    matches!(e, DriverError::Device { reason, .. } if reason.contains(&busy))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reads_and_absolute_writes_are_idempotent_the_rest_not() {
+        assert!(is_idempotent(&Request::ReadHoldingRegisters(0, 1)));
+        assert!(is_idempotent(&Request::WriteSingleRegister(8, 6000)));
+        assert!(is_idempotent(&Request::WriteMultipleRegisters(
+            8,
+            Cow::Owned(vec![1, 2])
+        )));
+        assert!(!is_idempotent(&Request::MaskWriteRegister(0, 0xFF, 0)));
+        assert!(!is_idempotent(&Request::ReadWriteMultipleRegisters(
+            0,
+            1,
+            2,
+            Cow::Owned(vec![3])
+        )));
+        assert!(!is_idempotent(&Request::Custom(0x41, Cow::Owned(vec![]))));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn silence_is_a_timeout_after_the_retries_and_a_closed_stream_a_link_error() {
+        let (ours, _theirs) = tokio::io::duplex(64);
+        let policy = CallPolicy::default();
+        let mut c = ModbusClient::attach_tcp("psu", ours, 1, policy);
+        let err = c.read_holding(0, 1).await.unwrap_err();
+        // The attached stream is dropped after the first timeout; the
+        // retries then find no stream to reopen.
+        assert!(err.is_link_failure(), "{err}");
+        assert_eq!(c.stats().timeouts, 1);
+        assert_eq!(c.stats().retries, 2);
+
+        let (ours, theirs) = tokio::io::duplex(64);
+        drop(theirs);
+        let mut c = ModbusClient::attach_rtu("psu", ours, 1, policy);
+        let err = c.write_registers(8, &[100]).await.unwrap_err();
+        assert!(matches!(err, DriverError::Link { .. }), "{err}");
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn a_refused_tcp_connection_is_a_link_error() {
+        // Bind and drop a listener: its port is closed now.
+        let addr = std::net::TcpListener::bind("127.0.0.1:0")
+            .unwrap()
+            .local_addr()
+            .unwrap();
+        let mut c = ModbusClient::tcp("psu", addr, 1, CallPolicy::default());
+        let err = c.read_input(0, 2).await.unwrap_err();
+        assert!(matches!(err, DriverError::Link { .. }), "{err}");
+        assert_eq!(c.stats().retries, 2);
+    }
+}

@@ -1,0 +1,205 @@
+//! Build the rig a configuration names: the simulated rig in process, or a
+//! power stage and sensors over Modbus (with the simulated rig served
+//! behind the links when the configuration asks for it).
+
+use motorbench_drivers::modbus::{
+    spawn_bus, BusHandle, CallPolicy, ModbusClient, ModbusPowerStage, ModbusSensors, PolledChannel,
+};
+use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
+
+use super::served::{ServeError, ServedLink, ServedRig};
+use super::sim_rig;
+use crate::config::{Backend, Config, LinkSpec, ModbusDeviceLink, ModbusRig};
+use crate::model::DcParams;
+
+/// Plant rate of the simulated rig when it is served behind a protocol,
+/// Hz (independent of the bench's poll rate).
+pub const SERVED_PLANT_RATE_HZ: f64 = 2000.0;
+
+/// A rig ready for a test.
+pub struct Rig {
+    /// What drives the motor.
+    pub stage: Box<dyn PowerStage>,
+    /// What measures it.
+    pub sensors: Box<dyn SensorStream>,
+    /// Encoder counts per revolution.
+    pub counts_per_rev: f64,
+    /// The simulated motor's true parameters (simulated rigs only).
+    pub truth: Option<DcParams>,
+    /// The simulated rig's servers, when it is served behind a protocol.
+    pub served: Option<ServedRig>,
+    /// The Modbus sensors again, for a one-shot read (`probe`).
+    pub modbus_sensors: Option<ModbusProbe>,
+}
+
+/// What `probe` needs to read every channel once.
+pub struct ModbusProbe {
+    bus: BusHandle,
+    channels: Vec<PolledChannel>,
+}
+
+impl ModbusProbe {
+    /// Read every sensor channel once: `(channel, value or error)`.
+    pub async fn read_each(&self) -> Vec<(ChannelInfo, Result<f64, DriverError>)> {
+        let mut out = Vec::new();
+        for c in &self.channels {
+            let r = self
+                .bus
+                .read(
+                    c.unit,
+                    vec![c.register.clone()],
+                    motorbench_drivers::modbus::Priority::Routine,
+                )
+                .await
+                .map(|r| r.values[0]);
+            out.push((c.info.clone(), r));
+        }
+        out
+    }
+}
+
+/// Why a rig could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum RigError {
+    /// The simulated motor is not valid.
+    #[error("simulated rig: {0}")]
+    Simulated(String),
+    /// Serving the simulated rig failed.
+    #[error(transparent)]
+    Serve(#[from] ServeError),
+}
+
+fn client(
+    name: &str,
+    link: &LinkSpec,
+    served: Option<&ServedLink>,
+    unit: u8,
+    policy: CallPolicy,
+) -> ModbusClient {
+    match (link, served) {
+        (_, Some(ServedLink::Tcp(addr))) | (LinkSpec::Tcp(addr), None) => {
+            ModbusClient::tcp(name, *addr, unit, policy)
+        }
+        (_, Some(ServedLink::Rtu(s))) | (LinkSpec::Rtu(s), None) => {
+            ModbusClient::rtu(name, s.clone(), unit, policy)
+        }
+        (LinkSpec::Simulated, None) => unreachable!("a simulated link is always served"),
+    }
+}
+
+fn same_link(a: &ModbusDeviceLink, b: &ModbusDeviceLink) -> bool {
+    match (&a.link, &b.link) {
+        (LinkSpec::Tcp(x), LinkSpec::Tcp(y)) => x == y,
+        (LinkSpec::Rtu(x), LinkSpec::Rtu(y)) => x.path == y.path,
+        _ => false,
+    }
+}
+
+async fn modbus_rig(
+    m: &ModbusRig,
+    simulated: Option<&crate::config::SimulatedRig>,
+    sample_rate_hz: f64,
+) -> Result<Rig, RigError> {
+    let served = match (m.simulate, simulated) {
+        (Some(t), Some(sim)) => Some(
+            ServedRig::start(
+                sim,
+                SERVED_PLANT_RATE_HZ,
+                t,
+                (&m.power_stage.profile, m.power_stage.unit_id),
+                (&m.sensors.profile, m.sensors.unit_id),
+            )
+            .await?,
+        ),
+        _ => None,
+    };
+    let stage_bus = spawn_bus(client(
+        "modbus-stage",
+        &m.power_stage.link,
+        served.as_ref().map(|s| &s.stage_link),
+        m.power_stage.unit_id,
+        m.policy,
+    ));
+    // One task per link: a stage and sensors on one line share it.
+    let sensor_bus = if served.is_none() && same_link(&m.power_stage, &m.sensors) {
+        stage_bus.clone()
+    } else {
+        spawn_bus(client(
+            "modbus-sensors",
+            &m.sensors.link,
+            served.as_ref().map(|s| &s.daq_link),
+            m.sensors.unit_id,
+            m.policy,
+        ))
+    };
+    let stage_id = format!("modbus:{}", m.power_stage.profile.name);
+    let stage = ModbusPowerStage::new(
+        &stage_id,
+        stage_bus,
+        m.power_stage.unit_id,
+        &m.power_stage.profile,
+    )
+    .map_err(|e| RigError::Simulated(e.to_string()))?;
+    let source = format!("modbus:{}", m.sensors.profile.name);
+    let channels: Vec<PolledChannel> = m
+        .channels
+        .iter()
+        .map(|(quantity, register)| {
+            let r = m
+                .sensors
+                .profile
+                .register(register)
+                .expect("checked when the configuration was loaded")
+                .clone();
+            PolledChannel {
+                unit: m.sensors.unit_id,
+                info: ChannelInfo {
+                    quantity: quantity.clone(),
+                    unit: r.unit.clone(),
+                    source: source.clone(),
+                    rate_hz: sample_rate_hz,
+                },
+                register: r,
+            }
+        })
+        .collect();
+    let sensors = ModbusSensors::new(
+        &source,
+        sensor_bus.clone(),
+        channels.clone(),
+        m.max_lost_polls,
+    );
+    Ok(Rig {
+        stage: Box::new(stage),
+        sensors: Box::new(sensors),
+        counts_per_rev: 4.0 * f64::from(m.encoder_lines),
+        truth: simulated.filter(|_| m.simulate.is_some()).map(|s| s.motor),
+        served,
+        modbus_sensors: Some(ModbusProbe {
+            bus: sensor_bus,
+            channels,
+        }),
+    })
+}
+
+/// Build `cfg`'s rig. `realtime` paces the in-process simulated rig at
+/// wall-clock time (a served or real rig always runs on it).
+pub async fn build_rig(cfg: &Config, realtime: bool) -> Result<Rig, RigError> {
+    match &cfg.backend {
+        Backend::Simulated(sim) => {
+            let (stage, sensors) = sim_rig::sim_rig(sim, cfg.sample_rate_hz, realtime)
+                .map_err(|e| RigError::Simulated(e.to_string()))?;
+            Ok(Rig {
+                stage: Box::new(stage),
+                sensors: Box::new(sensors),
+                counts_per_rev: 4.0 * f64::from(sim.sensors.encoder_lines),
+                truth: Some(sim.motor),
+                served: None,
+                modbus_sensors: None,
+            })
+        }
+        Backend::Modbus { rig, simulated } => {
+            modbus_rig(rig, simulated.as_ref(), cfg.sample_rate_hz).await
+        }
+    }
+}

@@ -1,0 +1,347 @@
+//! The simulated rig behind the real protocols: the simulated supply
+//! served as a Modbus device with a shipped profile's register map (e.g.
+//! the Riden RD6006's), and the simulated sensors as a Modbus DAQ
+//! (`config/devices/sim-daq.toml`), each on its own Modbus TCP server on
+//! 127.0.0.1 (a port the OS picks) or its own RTU server on a
+//! pseudo-terminal pair. The bench then reaches them through the real
+//! driver code, exactly as it would reach hardware.
+//!
+//! The plant runs on the wall clock: every request first advances it to
+//! "now" in steps of its own sample period, so a set point written at
+//! time t acts from t on, and a read returns the sensors' latest sample.
+
+use std::future::Future;
+use std::pin::pin;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::task::{Context, Poll, Waker};
+use std::time::Instant;
+
+use motorbench_drivers::modbus::server::{
+    lock_bank, serve_rtu, serve_tcp, BankService, ExceptionCode, RegisterBank, SharedBank,
+    SimulatedDevice, WriteSpan,
+};
+use motorbench_drivers::modbus::{DeviceProfile, Register};
+use motorbench_drivers::serial::port::{pty_pair, SerialSettings, SerialStream};
+use motorbench_drivers::{PowerStage, SampleBatch};
+use tokio::task::JoinHandle;
+
+use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
+use crate::config::{SimulatedRig, SimulatedTransport};
+
+/// Why the simulated rig could not be served.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    /// The profile lacks a register the simulation needs.
+    #[error("{profile}: the simulated rig needs a register named `{register}`")]
+    MissingRegister {
+        /// Profile name.
+        profile: String,
+        /// Register name.
+        register: String,
+    },
+    /// The simulated motor is not valid.
+    #[error("simulated motor: {0}")]
+    Motor(String),
+    /// A socket or pseudo-terminal could not be opened.
+    #[error("serving the simulated rig: {0}")]
+    Io(String),
+}
+
+/// Run a future that never waits (the simulated stage's methods only lock
+/// a mutex) to completion, here and now.
+fn ready_now<F: Future>(f: F) -> F::Output {
+    let mut f = pin!(f);
+    match f.as_mut().poll(&mut Context::from_waker(Waker::noop())) {
+        Poll::Ready(v) => v,
+        Poll::Pending => unreachable!("the simulated rig's calls never wait"),
+    }
+}
+
+/// The simulated plant on the wall clock.
+struct RealtimePlant {
+    stage: SimPowerStage,
+    sensors: SimSensors,
+    start: Instant,
+    period_s: f64,
+    steps: u64,
+    last: Option<SampleBatch>,
+}
+
+impl RealtimePlant {
+    fn catch_up(&mut self) {
+        let due = (self.start.elapsed().as_secs_f64() / self.period_s) as u64;
+        while self.steps < due {
+            self.last = Some(self.sensors.sample());
+            self.steps += 1;
+        }
+    }
+
+    fn reading(&self, ch: usize) -> f64 {
+        self.last
+            .as_ref()
+            .and_then(|b| b.samples.iter().find(|s| s.channel == ch))
+            .map_or(0.0, |s| s.value)
+    }
+}
+
+type SharedPlant = Arc<Mutex<RealtimePlant>>;
+
+fn lock(p: &SharedPlant) -> MutexGuard<'_, RealtimePlant> {
+    p.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn register(profile: &DeviceProfile, name: &str) -> Result<Register, ServeError> {
+    profile
+        .register(name)
+        .cloned()
+        .ok_or_else(|| ServeError::MissingRegister {
+            profile: profile.name.clone(),
+            register: name.to_string(),
+        })
+}
+
+fn touches(span: &WriteSpan, r: &Register) -> bool {
+    span.kind == r.kind
+        && span.address < r.address + r.data_type.width()
+        && r.address < span.address + span.count
+}
+
+/// The simulated supply behind its profile's power-stage registers, with
+/// optional readback registers `voltage_out` / `current_out`.
+struct SupplyDevice {
+    plant: SharedPlant,
+    setpoint: Register,
+    enable: Option<(Register, u16, u16)>,
+    current_limit: Option<Register>,
+    voltage_out: Option<Register>,
+    current_out: Option<Register>,
+}
+
+impl SimulatedDevice for SupplyDevice {
+    fn before_read(&self, bank: &mut RegisterBank) {
+        let mut p = lock(&self.plant);
+        p.catch_up();
+        if let Some(r) = &self.voltage_out {
+            bank.set(r, p.reading(channel::VOLTAGE).max(0.0));
+        }
+        if let Some(r) = &self.current_out {
+            bank.set(r, p.reading(channel::CURRENT).max(0.0));
+        }
+    }
+
+    fn after_write(
+        &self,
+        bank: &mut RegisterBank,
+        _before: &RegisterBank,
+        span: WriteSpan,
+    ) -> Result<(), ExceptionCode> {
+        let mut p = lock(&self.plant);
+        p.catch_up();
+        if touches(&span, &self.setpoint) {
+            ready_now(p.stage.set_setpoint(bank.get(&self.setpoint)))
+                .map_err(|_| ExceptionCode::IllegalDataValue)?;
+        }
+        if let Some(r) = &self.current_limit {
+            if touches(&span, r) {
+                ready_now(p.stage.set_current_limit(bank.get(r)))
+                    .map_err(|_| ExceptionCode::IllegalDataValue)?;
+            }
+        }
+        if let Some((r, on, off)) = &self.enable {
+            if touches(&span, r) {
+                let raw = bank.get(r) as u16;
+                let enabled = if raw == *on {
+                    true
+                } else if raw == *off {
+                    false
+                } else {
+                    return Err(ExceptionCode::IllegalDataValue);
+                };
+                ready_now(p.stage.set_output_enabled(enabled))
+                    .map_err(|_| ExceptionCode::ServerDeviceFailure)?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The simulated sensors as a DAQ: voltage, current, encoder count.
+struct DaqDevice {
+    plant: SharedPlant,
+    voltage: Register,
+    current: Register,
+    count: Register,
+}
+
+impl SimulatedDevice for DaqDevice {
+    fn before_read(&self, bank: &mut RegisterBank) {
+        let mut p = lock(&self.plant);
+        p.catch_up();
+        bank.set(&self.voltage, p.reading(channel::VOLTAGE));
+        bank.set(&self.current, p.reading(channel::CURRENT));
+        bank.set(&self.count, p.reading(channel::ENCODER));
+    }
+}
+
+/// Where a served device can be reached.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ServedLink {
+    /// Modbus TCP on this loopback address.
+    Tcp(std::net::SocketAddr),
+    /// Modbus RTU: open this pseudo-terminal path.
+    Rtu(SerialSettings),
+}
+
+/// The simulated rig, served. Dropping it stops the servers.
+pub struct ServedRig {
+    /// Where the supply answers.
+    pub stage_link: ServedLink,
+    /// Where the DAQ answers.
+    pub daq_link: ServedLink,
+    /// The supply's registers (for tests and diagnostics).
+    pub stage_bank: SharedBank,
+    /// The DAQ's registers.
+    pub daq_bank: SharedBank,
+    stage_task: Option<JoinHandle<()>>,
+    daq_task: Option<JoinHandle<()>>,
+    _pty_ends: Vec<SerialStream>,
+    stage: SimPowerStage,
+}
+
+impl std::fmt::Debug for ServedRig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ServedRig")
+            .field("stage_link", &self.stage_link)
+            .field("daq_link", &self.daq_link)
+            .finish()
+    }
+}
+
+impl ServedRig {
+    /// Serve `sim` (its plant stepped at `plant_rate_hz`): the supply with
+    /// `supply`'s register map on unit `supply_unit`, the sensors with
+    /// `daq`'s map on unit `daq_unit`.
+    pub async fn start(
+        sim: &SimulatedRig,
+        plant_rate_hz: f64,
+        transport: SimulatedTransport,
+        supply: (&DeviceProfile, u8),
+        daq: (&DeviceProfile, u8),
+    ) -> Result<ServedRig, ServeError> {
+        let (stage, sensors) =
+            sim_rig(sim, plant_rate_hz, false).map_err(|e| ServeError::Motor(e.to_string()))?;
+        let plant = Arc::new(Mutex::new(RealtimePlant {
+            stage: stage.clone(),
+            sensors,
+            start: Instant::now(),
+            period_s: 1.0 / plant_rate_hz,
+            steps: 0,
+            last: None,
+        }));
+        let (sp, su) = supply;
+        let map = sp
+            .power_stage
+            .as_ref()
+            .ok_or_else(|| ServeError::MissingRegister {
+                profile: sp.name.clone(),
+                register: "[power_stage] section".into(),
+            })?;
+        let supply_dev = SupplyDevice {
+            plant: plant.clone(),
+            setpoint: register(sp, &map.setpoint)?,
+            enable: match &map.enable {
+                Some((n, on, off)) => Some((register(sp, n)?, *on, *off)),
+                None => None,
+            },
+            current_limit: match &map.current_limit {
+                Some(n) => Some(register(sp, n)?),
+                None => None,
+            },
+            voltage_out: sp.register("voltage_out").cloned(),
+            current_out: sp.register("current_out").cloned(),
+        };
+        let (dp, du) = daq;
+        let daq_dev = DaqDevice {
+            plant,
+            voltage: register(dp, "armature_voltage")?,
+            current: register(dp, "armature_current")?,
+            count: register(dp, "encoder_count")?,
+        };
+        let stage_bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(sp)));
+        let daq_bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(dp)));
+        let stage_service = BankService::new(su, stage_bank.clone(), Arc::new(supply_dev));
+        let daq_service = BankService::new(du, daq_bank.clone(), Arc::new(daq_dev));
+        let io = |e: std::io::Error| ServeError::Io(e.to_string());
+        let mut pty_ends = Vec::new();
+        let mut serve = |service: BankService,
+                         baud: u32|
+         -> Result<(ServedLink, JoinHandle<()>), ServeError> {
+            match transport {
+                SimulatedTransport::Tcp => {
+                    let std_listener = std::net::TcpListener::bind("127.0.0.1:0").map_err(io)?;
+                    std_listener.set_nonblocking(true).map_err(io)?;
+                    let listener = tokio::net::TcpListener::from_std(std_listener).map_err(io)?;
+                    let (addr, task) = serve_tcp(listener, service).map_err(io)?;
+                    Ok((ServedLink::Tcp(addr), task))
+                }
+                SimulatedTransport::Rtu => {
+                    let pty = pty_pair().map_err(|e| ServeError::Io(e.to_string()))?;
+                    let task = serve_rtu(pty.host, service);
+                    let settings = SerialSettings::new_8n1(&pty.device_path, baud);
+                    pty_ends.push(pty.device_end);
+                    Ok((ServedLink::Rtu(settings), task))
+                }
+            }
+        };
+        let baud = |p: &DeviceProfile| p.serial.map_or(115_200, |s| s.baud_rate);
+        let (stage_link, stage_task) = serve(stage_service, baud(sp))?;
+        let (daq_link, daq_task) = serve(daq_service, baud(dp))?;
+        Ok(ServedRig {
+            stage_link,
+            daq_link,
+            stage_bank,
+            daq_bank,
+            stage_task: Some(stage_task),
+            daq_task: Some(daq_task),
+            _pty_ends: pty_ends,
+            stage,
+        })
+    }
+
+    /// Stop serving the sensors, as if their cable were pulled: the
+    /// connection closes (TCP) or the line goes silent (RTU).
+    pub fn pull_sensor_cable(&mut self) {
+        if let Some(t) = self.daq_task.take() {
+            t.abort();
+        }
+    }
+
+    /// Stop serving the power stage (its cable pulled).
+    pub fn pull_stage_cable(&mut self) {
+        if let Some(t) = self.stage_task.take() {
+            t.abort();
+        }
+    }
+
+    /// The simulated supply's output enable, as the plant sees it.
+    pub fn stage_output_enabled(&self) -> bool {
+        self.stage.output_enabled()
+    }
+
+    /// The simulated supply's set point, as the plant sees it.
+    pub fn stage_setpoint(&self) -> f64 {
+        self.stage.setpoint()
+    }
+
+    /// The value (SI) a supply register holds.
+    pub fn stage_register(&self, r: &Register) -> f64 {
+        lock_bank(&self.stage_bank).get(r)
+    }
+}
+
+impl Drop for ServedRig {
+    fn drop(&mut self) {
+        self.pull_sensor_cable();
+        self.pull_stage_cable();
+    }
+}

@@ -1,0 +1,320 @@
+//! The `modbus` rig backend: a power stage and polled sensors reached over
+//! Modbus TCP or RTU, each described by a device profile
+//! (`config/devices/*.toml`), optionally with the simulated rig served
+//! behind those links so the whole test runs through the real driver code.
+//!
+//! ```toml
+//! [rig]
+//! backend = "modbus"
+//! sample_rate_Hz = 500          # poll rate of the sensor channels
+//!
+//! [rig.modbus]
+//! simulate = "tcp"              # serve [rig.simulated] on loopback TCP ("rtu": PTY pairs); omit on a real rig
+//! timeout_ms = 200              # deadline of every Modbus call
+//! retries = 2                   # extra attempts of idempotent calls
+//! max_lost_polls = 5            # failed polls in a row that end the test
+//!
+//! [rig.modbus.power_stage]
+//! profile = "devices/riden-rd6006.toml"   # relative to this file
+//! unit_id = 1                   # default: the profile's
+//! transport = "tcp"             # or "rtu"
+//! address = "192.168.0.20:502"  # tcp
+//! # path = "/dev/ttyUSB0"       # rtu; baud_rate, parity, stop_bits default to the profile's
+//!
+//! [rig.modbus.sensors]
+//! profile = "devices/sim-daq.toml"
+//! transport = "tcp"
+//! address = "192.168.0.21:502"
+//! encoder_lines = 2500
+//! channels = { armature_voltage = "armature_voltage", armature_current = "armature_current", encoder_count = "encoder_count" }
+//! ```
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::path::Path;
+use std::time::Duration;
+
+use motorbench_drivers::modbus::{CallPolicy, DeviceProfile};
+use motorbench_drivers::serial::port::{Parity, SerialSettings};
+use serde::Deserialize;
+
+/// Raw `[rig.modbus]` table.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct RawModbusRig {
+    simulate: Option<String>,
+    #[serde(default = "default_timeout")]
+    timeout_ms: u64,
+    #[serde(default = "default_retries")]
+    retries: u32,
+    #[serde(default = "default_lost")]
+    max_lost_polls: u32,
+    power_stage: RawLink,
+    sensors: RawSensors,
+}
+
+fn default_timeout() -> u64 {
+    200
+}
+fn default_retries() -> u32 {
+    2
+}
+fn default_lost() -> u32 {
+    5
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLink {
+    profile: String,
+    unit_id: Option<u8>,
+    transport: Option<String>,
+    address: Option<String>,
+    path: Option<String>,
+    baud_rate: Option<u32>,
+    parity: Option<Parity>,
+    stop_bits: Option<u8>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawSensors {
+    #[serde(flatten)]
+    link: RawLink,
+    encoder_lines: u32,
+    channels: BTreeMap<String, String>,
+}
+
+/// Where a Modbus device is reached.
+#[derive(Debug, Clone, PartialEq)]
+pub enum LinkSpec {
+    /// Modbus TCP.
+    Tcp(SocketAddr),
+    /// Modbus RTU on a serial port.
+    Rtu(SerialSettings),
+    /// Served by the simulated rig (the address is known at run time).
+    Simulated,
+}
+
+/// How the simulated rig is served behind the links.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SimulatedTransport {
+    /// Modbus TCP servers on 127.0.0.1, ports the OS picks.
+    Tcp,
+    /// Modbus RTU servers on pseudo-terminal pairs.
+    Rtu,
+}
+
+/// One Modbus device of the rig.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModbusDeviceLink {
+    /// The profile file, as resolved.
+    pub profile_path: String,
+    /// Its register map.
+    pub profile: DeviceProfile,
+    /// Unit id.
+    pub unit_id: u8,
+    /// Where it is.
+    pub link: LinkSpec,
+}
+
+/// The `modbus` backend, validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModbusRig {
+    /// Serve the simulated rig behind the links.
+    pub simulate: Option<SimulatedTransport>,
+    /// Deadline and retries of every call.
+    pub policy: CallPolicy,
+    /// Failed polls in a row that end the test.
+    pub max_lost_polls: u32,
+    /// The device that drives the motor.
+    pub power_stage: ModbusDeviceLink,
+    /// The device whose registers are the sensor channels.
+    pub sensors: ModbusDeviceLink,
+    /// `(quantity, register name)` per sensor channel.
+    pub channels: Vec<(String, String)>,
+    /// Encoder lines per revolution (4 counts per line).
+    pub encoder_lines: u32,
+}
+
+/// Quantities the DC bench needs from the sensors.
+const REQUIRED: [&str; 3] = ["armature_voltage", "armature_current", "encoder_count"];
+
+impl RawModbusRig {
+    /// Validate; `dir` resolves relative profile paths; errors are
+    /// `(key, reason)`.
+    pub(super) fn validate(
+        self,
+        dir: &Path,
+        simulated_present: bool,
+    ) -> Result<ModbusRig, (String, String)> {
+        let simulate = match self.simulate.as_deref() {
+            None => None,
+            Some("tcp") => Some(SimulatedTransport::Tcp),
+            Some("rtu") => Some(SimulatedTransport::Rtu),
+            Some(other) => {
+                return Err((
+                    "rig.modbus.simulate".into(),
+                    format!("\"{other}\": use \"tcp\" or \"rtu\", or leave it out on a real rig"),
+                ))
+            }
+        };
+        if simulate.is_some() && !simulated_present {
+            return Err((
+                "rig.simulated".into(),
+                "missing: rig.modbus.simulate serves the simulated rig, which needs it".into(),
+            ));
+        }
+        if self.timeout_ms == 0 {
+            return Err(("rig.modbus.timeout_ms".into(), "must be > 0".into()));
+        }
+        let policy = CallPolicy {
+            timeout: Duration::from_millis(self.timeout_ms),
+            retries: self.retries,
+            retry_delay: Duration::from_millis(10),
+        };
+        let power_stage =
+            self.power_stage
+                .validate("rig.modbus.power_stage", dir, simulate.is_some())?;
+        if power_stage.profile.power_stage.is_none() {
+            return Err((
+                "rig.modbus.power_stage.profile".into(),
+                format!(
+                    "{} has no [power_stage] section: it cannot drive the rig",
+                    power_stage.profile_path
+                ),
+            ));
+        }
+        let sensors = self
+            .sensors
+            .link
+            .validate("rig.modbus.sensors", dir, simulate.is_some())?;
+        let mut channels = Vec::new();
+        for (quantity, register) in self.sensors.channels {
+            let key = format!("rig.modbus.sensors.channels.{quantity}");
+            match sensors.profile.register(&register) {
+                None => {
+                    return Err((
+                        key,
+                        format!("{} has no register `{register}`", sensors.profile_path),
+                    ))
+                }
+                Some(r) if r.access == motorbench_drivers::modbus::Access::Write => {
+                    return Err((key, format!("register `{register}` is write-only")))
+                }
+                Some(_) => channels.push((quantity, register)),
+            }
+        }
+        for q in REQUIRED {
+            if !channels.iter().any(|(c, _)| c == q) {
+                return Err((
+                    "rig.modbus.sensors.channels".into(),
+                    format!("missing `{q}`: a DC test needs armature voltage, current and the encoder count"),
+                ));
+            }
+        }
+        if self.sensors.encoder_lines == 0 {
+            return Err((
+                "rig.modbus.sensors.encoder_lines".into(),
+                "must be > 0".into(),
+            ));
+        }
+        Ok(ModbusRig {
+            simulate,
+            policy,
+            max_lost_polls: self.max_lost_polls.max(1),
+            power_stage,
+            sensors,
+            channels,
+            encoder_lines: self.sensors.encoder_lines,
+        })
+    }
+}
+
+impl RawLink {
+    fn validate(
+        self,
+        key: &str,
+        dir: &Path,
+        simulated: bool,
+    ) -> Result<ModbusDeviceLink, (String, String)> {
+        let path = dir.join(&self.profile);
+        let profile_path = path.display().to_string();
+        let profile =
+            DeviceProfile::load(&path).map_err(|e| (format!("{key}.profile"), e.to_string()))?;
+        let unit_id = self.unit_id.unwrap_or(profile.unit_id);
+        if unit_id == 0 {
+            return Err((
+                format!("{key}.unit_id"),
+                "0 is the broadcast address".into(),
+            ));
+        }
+        let given = self.address.is_some() || self.path.is_some() || self.transport.is_some();
+        let link = if simulated {
+            if given {
+                return Err((
+                    key.to_string(),
+                    "transport, address and path come from rig.modbus.simulate here: leave them out".into(),
+                ));
+            }
+            LinkSpec::Simulated
+        } else {
+            match self.transport.as_deref() {
+                Some("tcp") => {
+                    let a = self.address.ok_or_else(|| {
+                        (
+                            format!("{key}.address"),
+                            "missing: tcp needs host:port".into(),
+                        )
+                    })?;
+                    let addr = a.parse().map_err(|e| {
+                        (
+                            format!("{key}.address"),
+                            format!("\"{a}\" is not host:port: {e}"),
+                        )
+                    })?;
+                    LinkSpec::Tcp(addr)
+                }
+                Some("rtu") => {
+                    let p = self.path.ok_or_else(|| {
+                        (
+                            format!("{key}.path"),
+                            "missing: rtu needs a serial port path".into(),
+                        )
+                    })?;
+                    let d = profile.serial;
+                    let baud = self.baud_rate.or(d.map(|s| s.baud_rate)).ok_or_else(|| {
+                        (
+                            format!("{key}.baud_rate"),
+                            "missing (the profile has no default)".into(),
+                        )
+                    })?;
+                    LinkSpec::Rtu(SerialSettings {
+                        path: p,
+                        baud_rate: baud,
+                        parity: self.parity.or(d.map(|s| s.parity)).unwrap_or_default(),
+                        stop_bits: self.stop_bits.or(d.map(|s| s.stop_bits)).unwrap_or(1),
+                    })
+                }
+                Some(other) => {
+                    return Err((
+                        format!("{key}.transport"),
+                        format!("\"{other}\": use \"tcp\" or \"rtu\""),
+                    ))
+                }
+                None => {
+                    return Err((
+                        format!("{key}.transport"),
+                        "missing: \"tcp\" or \"rtu\"".into(),
+                    ))
+                }
+            }
+        };
+        Ok(ModbusDeviceLink {
+            profile_path,
+            profile,
+            unit_id,
+            link,
+        })
+    }
+}
