@@ -5,12 +5,21 @@
 //! staircase). Identification is a pure function of the record, so a
 //! replayed record gives the same report, bit for bit.
 
+mod im_recursive;
+mod im_sweep;
 mod levels;
 mod nrmse;
 mod simulate;
 mod stats;
 mod steady_state;
 
+pub use im_recursive::{
+    paper_cost, recursive_estimate, Innovation, RecursiveEstimate, RecursiveOptions, RecursiveStop,
+    THETA_DOUBLE_L5, THETA_DOUBLE_L7, THETA_SINGLE_FE_L6, THETA_SINGLE_L4,
+};
+pub use im_sweep::{
+    predict, predict_gradient, slip_grid, Channels, PhaseData, SlipSweep, SweepNoise, SweepPoint,
+};
 pub use levels::{is_coastdown, settled_level, SettledLevel};
 pub use nrmse::nrmse;
 pub use simulate::simulate_segment;
