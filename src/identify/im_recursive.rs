@@ -214,8 +214,6 @@ pub fn recursive_estimate(
     opts: &RecursiveOptions,
 ) -> RecursiveEstimate {
     let l = free.len();
-    let mut theta0 =
-        DVector::from_iterator(l, free.iter().map(|&p| start.get(p).unwrap_or(f64::NAN)));
     let mut circuit0 = *start;
     let mut w0 = DMatrix::<f64>::identity(l, l) * opts.w0;
     let mut j0 = paper_cost(data, &circuit0, opts.channels);
@@ -261,7 +259,6 @@ pub fn recursive_estimate(
         if jn > j0 {
             w0 /= 2.0;
         } else {
-            theta0 = theta;
             circuit0 = circuit_n;
             w0 = w;
             j0 = jn;
