@@ -5,6 +5,9 @@
 //! staircase). Identification is a pure function of the record, so a
 //! replayed record gives the same report, bit for bit.
 
+mod im_classical;
+mod im_identifiability;
+mod im_lm;
 mod im_recursive;
 mod im_sweep;
 mod levels;
@@ -13,9 +16,15 @@ mod simulate;
 mod stats;
 mod steady_state;
 
+pub use im_classical::{classical_single, classical_starts};
+pub use im_identifiability::{weak_directions, Identifiability, WeakDirection, STRUCTURAL_LIMIT};
+pub use im_lm::{
+    fit_lm, FittedParam, LmFit, LmOptions, ParamSource, ResidualScale, SplitPolicy, PRACTICAL_LIMIT,
+};
 pub use im_recursive::{
-    paper_cost, recursive_estimate, Innovation, RecursiveEstimate, RecursiveOptions, RecursiveStop,
-    THETA_DOUBLE_L5, THETA_DOUBLE_L7, THETA_SINGLE_FE_L6, THETA_SINGLE_L4,
+    paper_cost, recursive_estimate, recursive_pass, Innovation, RecursiveEstimate,
+    RecursiveOptions, RecursiveStop, THETA_DOUBLE_L5, THETA_DOUBLE_L7, THETA_SINGLE_FE_L6,
+    THETA_SINGLE_L4,
 };
 pub use im_sweep::{
     predict, predict_gradient, slip_grid, Channels, PhaseData, SlipSweep, SweepNoise, SweepPoint,

@@ -543,6 +543,42 @@ impl ImCircuit {
         self.rotor_admittance(s).inv()
     }
 
+    /// Rotor-branch impedance at slip `s > 0` and its derivative with
+    /// respect to each of `params` (zero for non-rotor elements).
+    pub fn rotor_impedance_gradient(&self, s: f64, params: &[ImParam]) -> (C64, Vec<C64>) {
+        let zero = C64::new(0.0, 0.0);
+        let (y, parts): (C64, Vec<(ImParam, C64)>) = match self.rotor {
+            RotorCage::Single { rr, xr } => {
+                let (y, dr, dx) = branch_admittance(s, rr, xr);
+                (y, vec![(ImParam::Rr, dr), (ImParam::Xr, dx)])
+            }
+            RotorCage::Double { rr1, rr2, xr1, xr2 } => {
+                let (y1, dr1, dx1) = branch_admittance(s, rr1, xr1);
+                let (y2, dr2, dx2) = branch_admittance(s, rr2, xr2);
+                (
+                    y1 + y2,
+                    vec![
+                        (ImParam::Rr1, dr1),
+                        (ImParam::Xr1, dx1),
+                        (ImParam::Rr2, dr2),
+                        (ImParam::Xr2, dx2),
+                    ],
+                )
+            }
+        };
+        let z = y.inv();
+        let grads = params
+            .iter()
+            .map(|p| {
+                parts
+                    .iter()
+                    .find(|(q, _)| q == p)
+                    .map_or(zero, |(_, dy)| -z * z * dy)
+            })
+            .collect();
+        (z, grads)
+    }
+
     /// Magnetising-branch admittance `1/Rfe + 1/(jXm)`.
     pub fn magnetising_admittance(&self) -> C64 {
         C64::new(self.rfe.map_or(0.0, |r| 1.0 / r), -1.0 / self.xm)
