@@ -48,9 +48,11 @@ pub enum ResidualScale {
 /// When to impose the conventional leakage split.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SplitPolicy {
-    /// When the data leave a direction that moves `Xs` undetermined.
+    /// When the data leave a direction that moves a leakage reactance
+    /// undetermined, and only if the constrained fit is not significantly
+    /// worse (likelihood-ratio test on one degree of freedom).
     Auto,
-    /// Always (IEEE 112 practice).
+    /// Always, whatever the data say (IEEE 112 practice).
     Always,
     /// Never: report the family instead.
     Never,
@@ -490,9 +492,25 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
         .expect("best exists");
 
     // Stage B: whiten with the residual covariance of the best fit, refit.
+    // Relative residuals are then scaled by the first fit's prediction
+    // rather than by the noisy reading itself (which would bias the fit
+    // towards readings that happen to be high).
     let dof = data.len().saturating_sub(free.len());
-    let probe = make(open(best), weights.clone(), &best);
     let mut weights = weights;
+    if opts.residual_scale == ResidualScale::Relative {
+        for k in 0..data.len() {
+            let (i, p) = predict(&best, data.slip[k], data.voltage[k]);
+            weights.scale_i[k] = i
+                .abs()
+                .max(1e-3 * weights.scale_i[k])
+                .max(f64::MIN_POSITIVE);
+            weights.scale_p[k] = p
+                .abs()
+                .max(1e-3 * weights.scale_p[k])
+                .max(f64::MIN_POSITIVE);
+        }
+    }
+    let probe = make(open(best), weights.clone(), &best);
     weights.l_inv = whitening(&probe.raw_residuals(&best), dof, opts.channels.uses_power());
     let (p, _, _) = solve(make(open(best), weights.clone(), &best));
     evaluations += p.evaluations.get();
@@ -537,7 +555,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
         // Keep the convention only where the data do not contradict it: a
         // likelihood-ratio test on one degree of freedom (whitened
         // residuals, so s² ≈ 1), at about the 0.2 % level.
-        if cost - free_cost <= 10.0 * analysis.s2 {
+        if opts.split_policy == SplitPolicy::Always || cost - free_cost <= 10.0 * analysis.s2 {
             problem = p;
             analysis = analyse(&problem)?;
             convention = Some(format!(
@@ -550,6 +568,24 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
                 "the data reject the conventional leakage split (cost {cost:.3e} against {free_cost:.3e} with Xs free): \
                  the split is reported as fitted"
             ));
+        }
+    }
+    // Canonical cage order: cage 1 is the outer (starting) cage, the one
+    // with the smaller Xr/Rr.
+    if let Some(c) = problem.param.circuit(&problem.x) {
+        if let crate::model::RotorCage::Double { rr1, rr2, xr1, xr2 } = c.rotor {
+            if xr1 / rr1 > xr2 / rr2 {
+                let mut swapped = c;
+                swapped.rotor = crate::model::RotorCage::Double {
+                    rr1: rr2,
+                    rr2: rr1,
+                    xr1: xr2,
+                    xr2: xr1,
+                };
+                problem.param.base = swapped;
+                problem.x = problem.param.x_of(&swapped);
+                analysis = analyse(&problem)?;
+            }
         }
     }
     let circuit = problem
