@@ -1,10 +1,14 @@
 //! Parameter identification from a [`Record`].
 //!
-//! Today: the steady-state method (the seed paper's Eqs. 7, 9, 39 and 44,
+//! Induction machines: [`identify_im`] on a slip sweep (the seed paper's
+//! recursive estimator and Levenberg–Marquardt, `im_*` files).
+//!
+//! DC: the steady-state method (the seed paper's Eqs. 7, 9, 39 and 44,
 //! generalised to a least-squares fit over every settled level of a
 //! staircase). Identification is a pure function of the record, so a
 //! replayed record gives the same report, bit for bit.
 
+mod im;
 mod im_classical;
 mod im_identifiability;
 mod im_lm;
@@ -16,6 +20,7 @@ mod simulate;
 mod stats;
 mod steady_state;
 
+pub use im::{identify_im, sweep_of, ImIdentification};
 pub use im_classical::{classical_single, classical_starts};
 pub use im_identifiability::{weak_directions, Identifiability, WeakDirection, STRUCTURAL_LIMIT};
 pub use im_lm::{
