@@ -4,7 +4,8 @@
 //!
 //! - The point of smallest slip stands for the no-load test: its reactance
 //!   is `Xs + Xm`, its power less the stator copper loss is the iron loss,
-//!   `Rfe = 3·E²/P_fe` with `E` the voltage behind the stator impedance.
+//!   `Rfe = 3·E²/P_fe` with `E` the voltage behind the stator impedance
+//!   (less the rotor's `3·E²·s/Rr`, since the sweep's point is not uncoupled).
 //! - The point of largest slip stands for the locked-rotor test:
 //!   `Z_lr = R_lr + jX_lr`, the leakage split by design class
 //!   (`Xs = share·X_lr`), `Rr = (R_lr − Rs)·((Xr + Xm)/Xm)²`.
@@ -69,7 +70,10 @@ pub fn classical_single(
     let rfe = iron_loss.then(|| {
         let (v, i, p) = (data.voltage[nl], data.current[nl], data.power[nl]);
         let e = (C64::new(v, 0.0) - C64::new(i, 0.0) * C64::new(rs, xs)).norm();
-        let p_fe = p - 3.0 * i * i * rs;
+        // Near synchronism the rotor branch is about Rr/s: take its power off
+        // too (IEEE 112's no-load point is uncoupled; a sweep's is not quite).
+        let s_nl = data.slip[nl];
+        let p_fe = p - 3.0 * i * i * rs - 3.0 * e * e * s_nl / rr;
         if p_fe > 0.0 {
             (3.0 * e * e / p_fe).max(2.0 * xm)
         } else {

@@ -27,7 +27,7 @@ use nalgebra::{DMatrix, DVector, Dyn};
 
 use super::im_identifiability::{weak_directions, Identifiability};
 use super::im_recursive::paper_cost;
-use super::im_sweep::{predict, predict_gradient, Channels, PhaseData};
+use super::im_sweep::{predict, predict_gradient_into, Channels, PhaseData, MAX_PARAMS};
 use super::stats::t975;
 use crate::model::{standstill_rotor_leakage, ImCircuit, ImModel, ImParam, LeakageSplit};
 
@@ -315,11 +315,21 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for SweepProblem<'_> {
         let q = self.param.free.len();
         let l = &self.weights.l_inv;
         let mut jac = DMatrix::zeros(self.rows(), q);
+        let mut di = [0.0; MAX_PARAMS];
+        let mut dp = [0.0; MAX_PARAMS];
+        let np = self.model_params.len();
         for k in 0..n {
-            let (_, _, di, dp) = predict_gradient(&c, d.slip[k], d.voltage[k], self.model_params);
+            predict_gradient_into(
+                &c,
+                d.slip[k],
+                d.voltage[k],
+                self.model_params,
+                &mut di[..np],
+                &mut dp[..np],
+            );
             for j in 0..q {
                 let (mut gi, mut gp) = (0.0, 0.0);
-                for (row, (a, b)) in di.iter().zip(&dp).enumerate() {
+                for (row, (a, b)) in di[..np].iter().zip(&dp[..np]).enumerate() {
                     let tj = t[(row, j)];
                     if tj != 0.0 {
                         gi += a * tj;

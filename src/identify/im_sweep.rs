@@ -6,7 +6,7 @@
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
-use crate::model::{Connection, ImCircuit, ImParam, ImSupply};
+use crate::model::{Connection, ImCircuit, ImParam, ImSupply, C64};
 
 /// One averaged operating point of a sweep, line quantities, SI.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -241,16 +241,37 @@ pub fn predict_gradient(
     v: f64,
     params: &[ImParam],
 ) -> (f64, f64, Vec<f64>, Vec<f64>) {
-    let (z, dz) = c.impedance_gradient(s, params);
+    let mut di = vec![0.0; params.len()];
+    let mut dp = vec![0.0; params.len()];
+    let (i, p) = predict_gradient_into(c, s, v, params, &mut di, &mut dp);
+    (i, p, di, dp)
+}
+
+/// Most elements of any model (for the stack buffers of
+/// [`predict_gradient_into`]).
+pub const MAX_PARAMS: usize = 10;
+
+/// [`predict_gradient`] without allocating: the derivatives go to `di`
+/// and `dp` (at least `params.len()` long, at most [`MAX_PARAMS`]).
+pub fn predict_gradient_into(
+    c: &ImCircuit,
+    s: f64,
+    v: f64,
+    params: &[ImParam],
+    di: &mut [f64],
+    dp: &mut [f64],
+) -> (f64, f64) {
+    let mut dz = [C64::new(0.0, 0.0); MAX_PARAMS];
+    let n = params.len().min(MAX_PARAMS);
+    let z = c.impedance_gradient_into(s, &params[..n], &mut dz[..n]);
     let zn = z.norm();
     let y = z.inv();
     let z2inv = y * y;
-    let di = dz
-        .iter()
-        .map(|d| -v * (z.conj() * d).re / (zn * zn * zn))
-        .collect();
-    let dp = dz.iter().map(|d| -3.0 * v * v * (d * z2inv).re).collect();
-    (v / zn, 3.0 * v * v * y.re, di, dp)
+    for k in 0..n {
+        di[k] = -v * (z.conj() * dz[k]).re / (zn * zn * zn);
+        dp[k] = -3.0 * v * v * (dz[k] * z2inv).re;
+    }
+    (v / zn, 3.0 * v * v * y.re)
 }
 
 #[cfg(test)]

@@ -32,7 +32,8 @@ pub use im_recursive::{
     THETA_SINGLE_L4,
 };
 pub use im_sweep::{
-    predict, predict_gradient, slip_grid, Channels, PhaseData, SlipSweep, SweepNoise, SweepPoint,
+    predict, predict_gradient, predict_gradient_into, slip_grid, Channels, PhaseData, SlipSweep,
+    SweepNoise, SweepPoint, MAX_PARAMS,
 };
 pub use levels::{is_coastdown, settled_level, SettledLevel};
 pub use nrmse::nrmse;

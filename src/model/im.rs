@@ -593,6 +593,14 @@ impl ImCircuit {
     /// Input impedance and its derivative with respect to each of
     /// `params` (all must belong to the model).
     pub fn impedance_gradient(&self, s: f64, params: &[ImParam]) -> (C64, Vec<C64>) {
+        let mut grads = vec![C64::new(0.0, 0.0); params.len()];
+        let z = self.impedance_gradient_into(s, params, &mut grads);
+        (z, grads)
+    }
+
+    /// [`ImCircuit::impedance_gradient`] without allocating: the
+    /// derivatives go to `out` (at least `params.len()` long).
+    pub fn impedance_gradient_into(&self, s: f64, params: &[ImParam], out: &mut [C64]) -> C64 {
         let mut y_ag = self.magnetising_admittance();
         // dY_ag/dθ for the rotor elements.
         let mut dy_rotor: [(ImParam, C64); 4] = [(ImParam::Rr, C64::new(0.0, 0.0)); 4];
@@ -618,9 +626,8 @@ impl ImCircuit {
         let z_ag = y_ag.inv();
         let z = C64::new(self.rs, self.xs) + z_ag;
         let minus_z_ag2 = -z_ag * z_ag;
-        let grads = params
-            .iter()
-            .map(|&p| match p {
+        for (slot, &p) in out.iter_mut().zip(params) {
+            *slot = match p {
                 ImParam::Rs => C64::new(1.0, 0.0),
                 ImParam::Xs => J,
                 ImParam::Xm => minus_z_ag2 * J / (self.xm * self.xm),
@@ -632,9 +639,9 @@ impl ImCircuit {
                     .iter()
                     .find(|(q, _)| *q == other)
                     .map_or(C64::new(f64::NAN, f64::NAN), |(_, dy)| minus_z_ag2 * dy),
-            })
-            .collect();
-        (z, grads)
+            };
+        }
+        z
     }
 
     /// Phase current for a phase voltage `v_phase` at slip `s`, complex
