@@ -537,6 +537,11 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
     let xs_weak = weak_before
         .iter()
         .any(|w| leakages.iter().any(|&p| w.moves(p, 0.2)));
+    // An exact family costs nothing to close; only a practical weakness
+    // (iron loss) needs the data's consent.
+    let exact_family = weak_before
+        .iter()
+        .any(|w| w.structural && leakages.iter().any(|&p| w.moves(p, 0.2)));
     let use_convention = !pins_family
         && match opts.split_policy {
             SplitPolicy::Always => true,
@@ -565,7 +570,10 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
         // Keep the convention only where the data do not contradict it: a
         // likelihood-ratio test on one degree of freedom (whitened
         // residuals, so s² ≈ 1), at about the 0.2 % level.
-        if opts.split_policy == SplitPolicy::Always || cost - free_cost <= 10.0 * analysis.s2 {
+        if opts.split_policy == SplitPolicy::Always
+            || exact_family
+            || cost - free_cost <= 10.0 * analysis.s2
+        {
             problem = p;
             analysis = analyse(&problem)?;
             convention = Some(format!(
@@ -800,4 +808,132 @@ fn analyse(problem: &SweepProblem<'_>) -> Result<Analysis, String> {
         cov,
         at_bound,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identify::im_sweep::{slip_grid, SlipSweep, SweepNoise};
+    use crate::model::{with_leakage_split, Connection, ImSupply, RotorCage};
+    use proptest::prelude::*;
+    use proptest::test_runner::RngSeed;
+    use rand::rngs::StdRng;
+    use rand::SeedableRng;
+
+    fn data(c: &ImCircuit, noise: f64) -> PhaseData {
+        let supply = ImSupply {
+            line_voltage: 400.0,
+            frequency: 50.0,
+            connection: Connection::Star,
+            pole_pairs: 2,
+        };
+        let mut rng = StdRng::seed_from_u64(9);
+        SlipSweep::simulate(
+            c,
+            &supply,
+            &slip_grid(40, 0.002),
+            &SweepNoise::relative(noise),
+            0,
+            &mut rng,
+        )
+        .phase_data()
+    }
+
+    fn single(rs: f64, xs: f64, xm: f64, rr: f64, xr: f64) -> ImCircuit {
+        ImCircuit {
+            rs,
+            xs,
+            xm,
+            rfe: None,
+            rotor: RotorCage::Single { rr, xr },
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 24, rng_seed: RngSeed::Fixed(12), ..ProptestConfig::default() })]
+
+        /// identify(simulate(θ)) = the conventional member of θ's family.
+        #[test]
+        fn noise_free_single_cage_gives_the_conventional_circuit(
+            rs in 0.3f64..3.0, xs in 0.8f64..4.0, xm in 30.0f64..150.0, rr in 0.3f64..3.0, xr in 0.8f64..5.0,
+        ) {
+            let c = single(rs, xs, xm, rr, xr);
+            let fit = fit_lm(&data(&c, 0.0), &LmOptions::new(ImModel::Single)).unwrap();
+            let target = with_leakage_split(&c, LeakageSplit::default()).unwrap();
+            prop_assert!(fit.identifiability.convention.is_some());
+            for (x, y) in fit.circuit.values().iter().zip(target.values()) {
+                prop_assert!((x - y).abs() < 1e-5 * y, "{:?} vs {:?}", fit.circuit, target);
+            }
+        }
+    }
+
+    #[test]
+    fn without_the_convention_the_family_is_reported_and_flagged() {
+        let c = single(1.0, 2.0, 60.0, 1.2, 3.0);
+        let mut o = LmOptions::new(ImModel::Single);
+        o.split_policy = SplitPolicy::Never;
+        let fit = fit_lm(&data(&c, 0.003), &o).unwrap();
+        assert!(fit.identifiability.convention.is_none());
+        let family = fit
+            .identifiability
+            .weak
+            .iter()
+            .find(|w| w.structural)
+            .expect("family found");
+        assert!(
+            family.moves(ImParam::Xs, 0.2) && family.moves(ImParam::Xr, 0.2),
+            "{}",
+            family.describe()
+        );
+        for p in [ImParam::Xs, ImParam::Xr, ImParam::Xm, ImParam::Rr] {
+            let f = fit.param(p).unwrap();
+            assert!(!f.identifiable && f.ci95.is_none(), "{p} should be flagged");
+        }
+        // Rs is not on the family: it keeps its interval.
+        let rs = fit.param(ImParam::Rs).unwrap();
+        assert!(rs.identifiable && rs.ci95.is_some_and(|[lo, hi]| lo <= 1.0 && 1.0 <= hi));
+    }
+
+    #[test]
+    fn fixed_elements_are_held_and_checked() {
+        let c = single(1.0, 2.0, 60.0, 1.2, 3.0);
+        let mut o = LmOptions::new(ImModel::Single);
+        o.fixed = vec![(ImParam::Rs, 1.0), (ImParam::Xs, 2.0)];
+        // Xs known pins the family: no convention, the true circuit back.
+        let exact = fit_lm(&data(&c, 0.0), &o).unwrap();
+        assert!(exact.identifiability.convention.is_none());
+        for (x, y) in exact.circuit.values().iter().zip(c.values()) {
+            assert!((x - y).abs() < 1e-6 * y, "{:?}", exact.circuit);
+        }
+        let fit = fit_lm(&data(&c, 0.003), &o).unwrap();
+        let rs = fit.param(ImParam::Rs).unwrap();
+        assert_eq!(
+            (rs.value, rs.source, rs.ci95),
+            (1.0, ParamSource::Fixed, None)
+        );
+        for p in [ImParam::Xm, ImParam::Rr, ImParam::Xr] {
+            let f = fit.param(p).unwrap();
+            let t = c.get(p).unwrap();
+            let sd = f.relative_std.unwrap();
+            assert!(((f.value / t).ln()).abs() < 4.0 * sd, "{p}: {f:?}");
+        }
+        o.fixed = vec![(ImParam::Rr1, 1.0)];
+        assert!(fit_lm(&data(&c, 0.003), &o)
+            .unwrap_err()
+            .contains("not part of the single model"));
+        o.fixed = vec![(ImParam::Rs, -1.0)];
+        assert!(fit_lm(&data(&c, 0.003), &o).unwrap_err().contains("> 0"));
+    }
+
+    #[test]
+    fn too_few_points_are_refused() {
+        let c = single(1.0, 2.0, 60.0, 1.2, 3.0);
+        let mut d = data(&c, 0.0);
+        for v in [&mut d.slip, &mut d.voltage, &mut d.current, &mut d.power] {
+            v.truncate(2);
+        }
+        assert!(fit_lm(&d, &LmOptions::new(ImModel::Single))
+            .unwrap_err()
+            .contains("fewer than needed"));
+    }
 }

@@ -336,4 +336,25 @@ mod tests {
         assert_eq!(LeakageSplit::parse("1.5"), None);
         assert!((LeakageSplit::DESIGN_C.ratio() - 0.3 / 0.7).abs() < 1e-15);
     }
+
+    use proptest::prelude::*;
+    use proptest::test_runner::RngSeed;
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 200, rng_seed: RngSeed::Fixed(4), ..ProptestConfig::default() })]
+
+        /// Every member of the family has the same Z(s), for any double cage.
+        #[test]
+        fn family_members_are_equivalent(
+            rs in 0.005f64..0.1, xs in 0.02f64..0.2, xm in 1.0f64..6.0,
+            rr1 in 0.02f64..0.3, rr2 in 0.005f64..0.05, xr1 in 0.002f64..0.1, xr2 in 0.03f64..0.3,
+            at in 0.01f64..0.99,
+        ) {
+            let c = ImCircuit { rs, xs, xm, rfe: None, rotor: RotorCage::Double { rr1, rr2, xr1, xr2 } };
+            let (_, max) = stator_leakage_range(&c);
+            let m = with_stator_leakage(&c, at * max).unwrap();
+            prop_assert!(impedance_mismatch(&c, &m, &slips()) < 1e-9);
+            prop_assert!(m.validate().is_ok());
+        }
+    }
 }
