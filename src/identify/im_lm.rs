@@ -350,12 +350,18 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for SweepProblem<'_> {
     }
 }
 
-fn solve(mut problem: SweepProblem<'_>) -> (SweepProblem<'_>, f64, bool) {
+/// Relative tolerance of the starts' fits (enough to rank them; the best
+/// is refined afterwards).
+const SCREEN_TOL: f64 = 1e-8;
+/// Relative tolerance of the final fits.
+const FINAL_TOL: f64 = 1e-12;
+
+fn solve(mut problem: SweepProblem<'_>, tol: f64) -> (SweepProblem<'_>, f64, bool) {
     let start_ok = problem.residuals().is_some();
     if !start_ok {
         return (problem, f64::INFINITY, false);
     }
-    let lm = LevenbergMarquardt::new().with_patience(200);
+    let lm = LevenbergMarquardt::new().with_patience(200).with_tol(tol);
     let (p, report) = lm.minimize(problem);
     problem = p;
     let cost = problem
@@ -481,7 +487,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
     };
     let mut results = Vec::new();
     for s in &starts {
-        let (p, cost, ok) = solve(make(open(*s), weights.clone(), s));
+        let (p, cost, ok) = solve(make(open(*s), weights.clone(), s), SCREEN_TOL);
         evaluations += p.evaluations.get();
         if let Some(c) = p.param.circuit(&p.x) {
             results.push((cost, ok, c));
@@ -522,7 +528,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
     }
     let probe = make(open(best), weights.clone(), &best);
     weights.l_inv = whitening(&probe.raw_residuals(&best), dof, opts.channels.uses_power());
-    let (p, _, _) = solve(make(open(best), weights.clone(), &best));
+    let (p, _, _) = solve(make(open(best), weights.clone(), &best), FINAL_TOL);
     evaluations += p.evaluations.get();
     let mut problem = p;
     let mut analysis = analyse(&problem)?;
@@ -565,7 +571,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
         let free_cost = problem
             .residuals()
             .map_or(f64::INFINITY, |r| r.norm_squared());
-        let (p, cost, _) = solve(make(param, weights.clone(), &start));
+        let (p, cost, _) = solve(make(param, weights.clone(), &start), FINAL_TOL);
         evaluations += p.evaluations.get();
         // Keep the convention only where the data do not contradict it: a
         // likelihood-ratio test on one degree of freedom (whitened
