@@ -15,9 +15,12 @@ use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use motorbench::bench::{build_rig, commission, probe, CommissionOptions, Outcome, Progress};
 use motorbench::config::load_or_default;
-use motorbench::identify::{identify_dc, Identification};
-use motorbench::record::{read_dc_csv, read_mcap, Record, SegmentKind};
-use motorbench::report::{render_text, segment_plots, write_segments_svg};
+use motorbench::identify::{identify_dc, identify_im, Identification, ImIdentification};
+use motorbench::model::{Connection, ImModel};
+use motorbench::record::{read_dc_csv, read_im_csv, read_mcap, Record, SegmentKind, TestMeta};
+use motorbench::report::{
+    render_im_text, render_text, segment_plots, write_im_svg, write_segments_svg,
+};
 
 #[derive(Parser)]
 #[command(
@@ -94,7 +97,54 @@ enum Command {
         /// Also write the measured-vs-model plot here (SVG).
         #[arg(long)]
         svg: Option<PathBuf>,
+        /// Induction machine: winding connection (overrides the nameplate's).
+        #[arg(long, value_enum)]
+        connection: Option<ConnectionArg>,
+        /// Induction machine: equivalent circuit to fit.
+        #[arg(long, value_enum, default_value = "single-fe")]
+        model: ModelArg,
+        /// Induction machine, CSV: supply frequency in Hz where the files
+        /// have no frequency_Hz column (overrides the nameplate's).
+        #[arg(long)]
+        frequency: Option<f64>,
     },
+}
+
+/// Winding connection of an induction machine.
+#[derive(Clone, Copy, ValueEnum)]
+enum ConnectionArg {
+    Star,
+    Delta,
+}
+
+impl From<ConnectionArg> for Connection {
+    fn from(c: ConnectionArg) -> Connection {
+        match c {
+            ConnectionArg::Star => Connection::Star,
+            ConnectionArg::Delta => Connection::Delta,
+        }
+    }
+}
+
+/// Equivalent circuit of an induction machine.
+#[derive(Clone, Copy, ValueEnum)]
+enum ModelArg {
+    Single,
+    #[value(alias = "single_fe")]
+    SingleFe,
+    Double,
+    DoubleFe,
+}
+
+impl From<ModelArg> for ImModel {
+    fn from(m: ModelArg) -> ImModel {
+        match m {
+            ModelArg::Single => ImModel::Single,
+            ModelArg::SingleFe => ImModel::SingleFe,
+            ModelArg::Double => ImModel::Double,
+            ModelArg::DoubleFe => ImModel::DoubleFe,
+        }
+    }
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -341,6 +391,12 @@ fn replay(log: &Path, json: bool, svg: Option<&Path>, check: bool) -> Result<(),
             r.reason
         );
     }
+    if !record.operating_points.is_empty() {
+        // An induction-machine record: the default circuit, the nameplate's
+        // connection.
+        let id = identify_im(&record, None, ImModel::SingleFe);
+        return print_im(&id, json, svg);
+    }
     let id = identify_dc(&record);
     print_identification(&id, json, None);
     write_svg(svg, &record, &id)?;
@@ -367,10 +423,9 @@ fn load_record(
     kind: SegmentKind,
     files: &[PathBuf],
     nameplate: Option<&Path>,
+    frequency: Option<f64>,
 ) -> Result<Record, Failure> {
-    if kind == SegmentKind::ImSlipSweep {
-        return Err(bad_input("identify --kind im_slip_sweep: induction-machine identification is not in this version yet"));
-    }
+    let mut plate = None;
     if let Some(path) = nameplate {
         let text = std::fs::read_to_string(path)
             .map_err(|e| bad_input(format!("{}: {e}", path.display())))?;
@@ -382,6 +437,7 @@ fn load_record(
                 path.display()
             )));
         }
+        plate = Some(v);
     }
     let is_mcap = |p: &PathBuf| {
         p.extension()
@@ -397,6 +453,39 @@ fn load_record(
         }
     }
     let mut record = Record::default();
+    if kind == SegmentKind::ImSlipSweep {
+        let number = |key: &str| {
+            plate
+                .as_ref()
+                .and_then(|p| p.get(key))
+                .and_then(|v| v.as_f64())
+        };
+        let frequency = frequency.or_else(|| number("frequency_Hz"));
+        let pole_pairs = number("poles").map(|p| (p / 2.0).round() as u32);
+        let mut seen: Vec<(u32, &PathBuf)> = Vec::new();
+        for (n, path) in files.iter().enumerate() {
+            let seg = read_im_csv(path, n as u32, frequency, pole_pairs).map_err(bad_input)?;
+            if let Some((_, other)) = seen.iter().find(|(i, _)| *i == seg.index) {
+                return Err(bad_input(format!(
+                    "{}: segment index {} is already used by {}",
+                    path.display(),
+                    seg.index,
+                    other.display()
+                )));
+            }
+            seen.push((seg.index, path));
+            record.operating_points.extend(seg.points);
+        }
+        record.meta = plate.map(|nameplate| TestMeta {
+            schema_version: motorbench::record::SCHEMA_VERSION.to_string(),
+            kind,
+            motor_id: String::new(),
+            started_at: String::new(),
+            nameplate,
+            config: String::new(),
+        });
+        return Ok(record);
+    }
     for (n, path) in files.iter().enumerate() {
         let seg = read_dc_csv(path, kind, n as u32).map_err(bad_input)?;
         if let Some(other) = record.segments.iter().position(|s| s.index == seg.index) {
@@ -413,14 +502,45 @@ fn load_record(
     Ok(record)
 }
 
+/// Options of induction-machine identification from the command line.
+struct ImArgs {
+    connection: Option<Connection>,
+    model: ImModel,
+    frequency: Option<f64>,
+}
+
+fn print_im(id: &ImIdentification, json: bool, svg: Option<&Path>) -> Result<(), Failure> {
+    if json {
+        println!("{}", id.report.to_json_pretty());
+    } else {
+        print!("{}", render_im_text(id));
+    }
+    if let Some(path) = svg {
+        write_im_svg(path, id).map_err(runtime)?;
+    }
+    if id.report.best.is_some() {
+        Ok(())
+    } else {
+        Err(Failure {
+            code: 4,
+            message: "no identification method applies to this data (see the warnings)".into(),
+        })
+    }
+}
+
 fn identify(
     kind: SegmentKind,
     files: &[PathBuf],
     nameplate: Option<&Path>,
     json: bool,
     svg: Option<&Path>,
+    im: ImArgs,
 ) -> Result<(), Failure> {
-    let record = load_record(kind, files, nameplate)?;
+    let record = load_record(kind, files, nameplate, im.frequency)?;
+    if kind == SegmentKind::ImSlipSweep {
+        let id = identify_im(&record, im.connection, im.model);
+        return print_im(&id, json, svg);
+    }
     let id = identify_dc(&record);
     print_identification(&id, json, None);
     write_svg(svg, &record, &id)?;
@@ -458,12 +578,20 @@ fn main() -> ExitCode {
             nameplate,
             json,
             svg,
+            connection,
+            model,
+            frequency,
         } => identify(
             kind.into(),
             &files,
             nameplate.as_deref(),
             json,
             svg.as_deref(),
+            ImArgs {
+                connection: connection.map(Into::into),
+                model: model.into(),
+                frequency,
+            },
         ),
     };
     match result {

@@ -41,7 +41,9 @@ fn motor(
 
 fn run(p: DcParams, v: f64, i: f64) -> motorbench::identify::Identification {
     let mut cfg = Config::embedded_default();
-    let Backend::Simulated(sim) = &mut cfg.backend;
+    let Backend::Simulated(sim) = &mut cfg.backend else {
+        unreachable!("the embedded default is the simulated rig")
+    };
     sim.motor = p;
     sim.power_stage.max_voltage = 2.0 * v;
     sim.power_stage.current_limit = 1e6;

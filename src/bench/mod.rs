@@ -1,8 +1,10 @@
 //! The bench: test plans, settle detection, limits and the safe state, the
-//! simulated rig, and the sequencing that ties them to the recorder.
+//! simulated rigs (DC; induction machine with VFD and dynamometer, with the
+//! `im_slip_sweep` plan), and the sequencing that ties them to the recorder.
 
 mod commission;
 mod encoder;
+mod im_sweep;
 mod limits;
 mod plan;
 mod probe;
@@ -12,10 +14,12 @@ mod runner;
 mod sampling;
 mod served;
 mod settle;
+mod sim_im_rig;
 mod sim_rig;
 
 pub use commission::{commission, CommissionError, CommissionOptions, Commissioned};
 pub use encoder::SpeedFromEncoder;
+pub use im_sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
 pub use limits::{check_limits, Trip};
 pub use plan::{plan_steps, PlanStep};
 pub use probe::{probe, ProbeLine, ProbeReport, PROBE_CURRENT_FRACTION, PROBE_SETPOINT_FRACTION};
@@ -27,4 +31,5 @@ pub use runner::{
 pub use sampling::SamplingEvents;
 pub use served::{ServeError, ServedLink, ServedRig};
 pub use settle::SettleDetector;
+pub use sim_im_rig::{sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd, COPPER_ALPHA};
 pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};

@@ -80,6 +80,7 @@ impl RecordSink {
             Entry::Samples { t_ns, .. }
             | Entry::Segment { t_ns, .. }
             | Entry::Event { t_ns, .. }
+            | Entry::OperatingPoint { t_ns, .. }
             | Entry::Result { t_ns, .. } => *t_ns,
         };
         self.last_t_ns = self.last_t_ns.max(t_ns);

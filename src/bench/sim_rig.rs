@@ -304,7 +304,7 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn realtime_mode_paces_batches_at_the_wall_clock() {
-        let Backend::Simulated(sim) = Config::embedded_default().backend;
+        let sim = Config::embedded_default().backend.simulated().cloned().unwrap();
         let (_, mut fast) = sim_rig(&sim, 2000.0, false).unwrap();
         let start = tokio::time::Instant::now();
         for _ in 0..2000 {

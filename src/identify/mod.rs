@@ -7,9 +7,18 @@
 //! `coastdown` (J and Coulomb friction from the open-armature decay).
 //! Identification is a pure function of the record, so a replayed record
 //! gives the same report, bit for bit.
+//!
+//! Induction machines: [`identify_im`] on a slip sweep (the seed paper's
+//! recursive estimator and Levenberg–Marquardt, `im_*` files).
 
 mod abacus;
 mod coastdown;
+mod im;
+mod im_classical;
+mod im_identifiability;
+mod im_lm;
+mod im_recursive;
+mod im_sweep;
 mod level_error;
 mod levels;
 mod moments;
@@ -26,6 +35,21 @@ pub use abacus::{
 };
 pub use coastdown::{fit_decay, DecayFit};
 pub use level_error::LevelError;
+pub use im::{identify_im, sweep_of, ImIdentification};
+pub use im_classical::{classical_single, classical_starts};
+pub use im_identifiability::{weak_directions, Identifiability, WeakDirection, STRUCTURAL_LIMIT};
+pub use im_lm::{
+    fit_lm, FittedParam, LmFit, LmOptions, ParamSource, ResidualScale, SplitPolicy, PRACTICAL_LIMIT,
+};
+pub use im_recursive::{
+    paper_cost, recursive_estimate, recursive_pass, Innovation, RecursiveEstimate,
+    RecursiveOptions, RecursiveStop, THETA_DOUBLE_L5, THETA_DOUBLE_L7, THETA_SINGLE_FE_L6,
+    THETA_SINGLE_L4,
+};
+pub use im_sweep::{
+    predict, predict_gradient, predict_gradient_into, slip_grid, Channels, PhaseData, SlipSweep,
+    SweepNoise, SweepPoint, MAX_PARAMS,
+};
 pub use levels::{is_coastdown, settled_level, SettledLevel};
 pub use moments::{MomentsEstimate, TransferCoefficients};
 pub use nrmse::nrmse;

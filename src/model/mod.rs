@@ -1,4 +1,5 @@
-//! Machine models: equations, unmodelled effects, simulation.
+//! Machine models: equations, unmodelled effects, simulation (DC motor;
+//! induction-machine steady-state equivalent circuits in `im*`).
 //!
 //! Shared by the simulated rig (which produces data) and identification
 //! (which fits the same equations to data). Units are SI throughout.
@@ -10,3 +11,17 @@ mod zoh;
 pub use dc::{DcMotor, DcParams, DcState, ParamError, Terminal};
 pub use effects::{BrushDrop, CoulombFriction, DcEffect, Effect, Machine};
 pub use zoh::Zoh;
+
+mod im;
+mod im_closed_form;
+mod im_equivalent;
+
+pub use im::{
+    Connection, ImCircuit, ImCircuitError, ImModel, ImOperatingPoint, ImParam, ImSupply,
+    PerUnitBase, RotorCage, C64,
+};
+pub use im_closed_form::{DoubleCageForms, PaperTerms, SingleCageForms};
+pub use im_equivalent::{
+    impedance_mismatch, standstill_rotor_leakage, stator_leakage_range, with_leakage_split,
+    with_stator_leakage, EquivalentError, LeakageSplit,
+};

@@ -32,7 +32,8 @@ use std::collections::BTreeMap;
 
 use super::schema::SENSOR_PREFIX;
 use super::types::{
-    ChannelSpec, DcSegment, Entry, Event, Record, SegmentKind, SegmentPhase, TestMeta,
+    ChannelSpec, DcSegment, Entry, Event, OperatingPoint, Record, SegmentKind, SegmentPhase,
+    TestMeta,
 };
 
 /// Appended to the label of a segment that has no end marker.
@@ -66,6 +67,7 @@ pub struct RecordBuilder {
     spans: BTreeMap<u32, SegmentSpan>,
     events: Vec<(u64, Event)>,
     result: Option<serde_json::Value>,
+    points: Vec<OperatingPoint>,
 }
 
 impl Series {
@@ -113,6 +115,7 @@ impl RecordBuilder {
             spans: BTreeMap::new(),
             events: Vec::new(),
             result: None,
+            points: Vec::new(),
         }
     }
 
@@ -147,6 +150,7 @@ impl RecordBuilder {
             },
             Entry::Event { t_ns, event } => self.events.push((*t_ns, event.clone())),
             Entry::Result { report, .. } => self.result = Some(report.clone()),
+            Entry::OperatingPoint { point, .. } => self.points.push(*point),
         }
     }
 
@@ -158,6 +162,7 @@ impl RecordBuilder {
             spans,
             mut events,
             result,
+            points,
             ..
         } = self;
         for s in &mut samples {
@@ -198,6 +203,7 @@ impl RecordBuilder {
             meta,
             segments,
             events,
+            operating_points: points,
             recorded_result: result,
             recovery: None,
         }

@@ -18,7 +18,7 @@
 //! missing column, a field that is not a number, NaN or infinity, time not
 //! strictly increasing, a row whose number of fields differs from the
 //! header's, a malformed declaration, a file without a header or data rows.
-//! `im_slip_sweep` files are not supported yet.
+//! `im_slip_sweep` files are read by [`super::read_im_csv`].
 
 use std::path::Path;
 
@@ -44,10 +44,10 @@ const RPM_TO_RAD_S: f64 = 2.0 * std::f64::consts::PI / 60.0;
 
 /// What the declaration comment says.
 #[derive(Debug, Default)]
-struct Declaration {
-    index: Option<u32>,
-    kind: Option<SegmentKind>,
-    label: Option<String>,
+pub(super) struct Declaration {
+    pub(super) index: Option<u32>,
+    pub(super) kind: Option<SegmentKind>,
+    pub(super) label: Option<String>,
 }
 
 /// Reads one DC segment from a CSV file. `default_kind` and
@@ -84,7 +84,7 @@ pub fn read_dc_csv(
     if kind == SegmentKind::ImSlipSweep {
         return Err(RecordError::Unsupported {
             path: path.to_path_buf(),
-            reason: "CSV import of im_slip_sweep segments is not supported yet".to_string(),
+            reason: "an im_slip_sweep file holds operating points, not DC samples (read it with read_im_csv)".to_string(),
         });
     }
 
@@ -191,7 +191,7 @@ pub fn read_dc_csv(
 }
 
 /// The text after `# motorbench segment`, if `line` is a declaration.
-fn declaration_text(line: &str) -> Option<&str> {
+pub(super) fn declaration_text(line: &str) -> Option<&str> {
     let rest = line.trim().strip_prefix('#')?.trim_start();
     let rest = rest.strip_prefix(DECLARATION)?;
     if rest.is_empty() || rest.starts_with(char::is_whitespace) {
@@ -202,7 +202,7 @@ fn declaration_text(line: &str) -> Option<&str> {
 }
 
 /// Parses `<index> kind=<kind> label=<free text>`.
-fn parse_declaration(text: &str) -> Result<Declaration, String> {
+pub(super) fn parse_declaration(text: &str) -> Result<Declaration, String> {
     let mut decl = Declaration::default();
     let (index, mut rest) = split_word(text);
     if index.is_empty() {
@@ -240,7 +240,7 @@ fn split_word(s: &str) -> (&str, &str) {
 }
 
 /// Trims blanks and one pair of surrounding quotes.
-fn unquote(s: &str) -> &str {
+pub(super) fn unquote(s: &str) -> &str {
     let s = s.trim();
     for q in ['"', '\''] {
         if let Some(inner) = s.strip_prefix(q).and_then(|r| r.strip_suffix(q)) {
@@ -351,10 +351,10 @@ mod tests {
     }
 
     #[test]
-    fn im_slip_sweep_is_not_supported_yet() {
+    fn im_slip_sweep_is_not_a_dc_file() {
         let e = read("# motorbench segment 0 kind=im_slip_sweep label=sweep\nslip\n").unwrap_err();
         assert!(matches!(e, RecordError::Unsupported { .. }), "{e}");
-        assert!(e.to_string().contains("not supported yet"), "{e}");
+        assert!(e.to_string().contains("read_im_csv"), "{e}");
         let dir = tempfile::tempdir().unwrap();
         let p = write(&dir, "s.csv", "slip\n0.1\n");
         let e = read_dc_csv(&p, SegmentKind::ImSlipSweep, 0).unwrap_err();

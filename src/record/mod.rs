@@ -5,11 +5,13 @@
 //! - [`read_mcap`] reads it back (also a truncated file) into a [`Record`].
 //! - [`RecordBuilder`] turns entries into a [`Record`]; the live bench and
 //!   the reader share it, so a replay gives bit-identical data.
-//! - [`read_dc_csv`] imports one DC segment from CSV.
+//! - [`read_dc_csv`] imports one DC segment from CSV, [`read_im_csv`] one
+//!   induction-machine slip sweep.
 //! - [`schema`] holds the topic and schema names and the JSON Schemas.
 
 mod builder;
 mod csv;
+mod csv_im;
 mod error;
 mod reader;
 pub mod schema;
@@ -18,6 +20,7 @@ mod writer;
 
 pub use builder::{RecordBuilder, INCOMPLETE_SUFFIX};
 pub use csv::read_dc_csv;
+pub use csv_im::{read_im_csv, ImCsvSegment};
 pub use error::RecordError;
 pub use reader::{read_entries, read_mcap, Entries};
 pub use types::*;

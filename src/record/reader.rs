@@ -14,9 +14,9 @@
 //!
 //! Consecutive sample messages with one log time are grouped into one
 //! [`Entry::Samples`].
-//! `/bench/operating_point` messages are checked to be JSON objects but not
-//! returned yet ([`Entry`] has no variant for them). Topics outside the
-//! contract are ignored.
+//! `/bench/operating_point` messages become [`Entry::OperatingPoint`] (a
+//! message that does not decode as `motorbench.OperatingPoint` is refused).
+//! Topics outside the contract are ignored.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -202,13 +202,10 @@ impl<'p> Reading<'p> {
                         }
                         Some(Entry::Result { t_ns, report })
                     }
-                    Route::OperatingPoint => {
-                        let point: serde_json::Value = decode(&data).map_err(bad)?;
-                        if !point.is_object() {
-                            return Err(bad("the operating point is not a JSON object".into()));
-                        }
-                        None
-                    }
+                    Route::OperatingPoint => Some(Entry::OperatingPoint {
+                        t_ns,
+                        point: decode(&data).map_err(bad)?,
+                    }),
                     Route::Sample(_) | Route::Ignore => None,
                 };
                 if let Some(entry) = entry {

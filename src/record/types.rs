@@ -170,6 +170,13 @@ pub enum Entry {
         /// What happened.
         event: Event,
     },
+    /// One averaged steady-state point of an induction-machine slip sweep.
+    OperatingPoint {
+        /// When the point was taken (the end of its averaging window).
+        t_ns: u64,
+        /// The point.
+        point: OperatingPoint,
+    },
     /// The final identification (and diagnosis) report.
     Result {
         /// When it was produced.
@@ -177,6 +184,50 @@ pub enum Entry {
         /// The report, as the CLI's `--json` prints it.
         report: serde_json::Value,
     },
+}
+
+/// A `/bench/operating_point` message: one averaged steady-state point of
+/// an induction-machine slip sweep, SI units, slip a fraction.
+///
+/// `speed` and `frequency` are NaN where the source did not give them (a
+/// CSV import without those columns); such a point cannot be written to
+/// MCAP, whose JSON has no NaN.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OperatingPoint {
+    /// Segment (sweep) index.
+    pub segment: u32,
+    /// Slip, 0 (synchronous) to 1 (locked rotor).
+    pub slip: f64,
+    /// RMS line-to-line voltage, V.
+    pub line_voltage: f64,
+    /// RMS line current, A.
+    pub line_current: f64,
+    /// Three-phase input power, W.
+    pub input_power: f64,
+    /// Shaft speed, rad/s.
+    pub speed: f64,
+    /// Supply frequency, Hz.
+    pub frequency: f64,
+    /// Shaft torque where a torque sensor exists, N·m.
+    pub torque: Option<f64>,
+}
+
+impl OperatingPoint {
+    /// The first field that is not a finite number, if any.
+    pub fn non_finite_field(&self) -> Option<(&'static str, f64)> {
+        [
+            ("slip", self.slip),
+            ("line_voltage", self.line_voltage),
+            ("line_current", self.line_current),
+            ("input_power", self.input_power),
+            ("speed", self.speed),
+            ("frequency", self.frequency),
+            ("torque", self.torque.unwrap_or(0.0)),
+        ]
+        .into_iter()
+        .find(|(_, v)| !v.is_finite())
+    }
 }
 
 /// One DC segment as identification sees it: series on one time base.
@@ -217,6 +268,8 @@ pub struct Record {
     pub meta: Option<TestMeta>,
     /// The segments, in index order.
     pub segments: Vec<DcSegment>,
+    /// Induction-machine operating points in recording order.
+    pub operating_points: Vec<OperatingPoint>,
     /// Bench events in time order.
     pub events: Vec<(u64, Event)>,
     /// The `/bench/result` found in the file, if any.

@@ -40,7 +40,8 @@ use tokio::sync::{mpsc, oneshot};
 use super::error::RecordError;
 use super::schema::{
     is_sample_topic_for, BENCH_TOPICS, MESSAGE_ENCODING, METADATA_NAME, SAMPLE_JSON_SCHEMA,
-    SCHEMA_ENCODING, SCHEMA_SAMPLE, TOPIC_EVENT, TOPIC_RESULT, TOPIC_SEGMENT,
+    SCHEMA_ENCODING, SCHEMA_SAMPLE, TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT,
+    TOPIC_SEGMENT,
 };
 use super::types::{ChannelSpec, Entry, Event, EventLevel, TestMeta, SCHEMA_VERSION};
 
@@ -322,6 +323,11 @@ impl Recorder {
             Entry::Result { report, .. } if !report.is_object() => {
                 Some("the result report is not a JSON object".to_string())
             }
+            Entry::OperatingPoint { point, .. } => point.non_finite_field().map(|(field, v)| {
+                format!(
+                    "operating point field {field} = {v} is not a finite number (JSON has none)"
+                )
+            }),
             _ => None,
         };
         match reason {
@@ -427,6 +433,12 @@ fn run(
                 let data = serde_json::to_vec(event).expect("an event serializes");
                 write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
                 (*t_ns, event.level == EventLevel::Abort)
+            }
+            Entry::OperatingPoint { t_ns, point } => {
+                let pos = table.position_of_bench(TOPIC_OPERATING_POINT);
+                let data = serde_json::to_vec(point).expect("a point serializes");
+                write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
+                (*t_ns, true)
             }
             Entry::Result { t_ns, report } => {
                 let pos = table.position_of_bench(TOPIC_RESULT);
@@ -729,5 +741,54 @@ mod tests {
                 .is_some_and(|s| s.message_count == 20)
         });
         assert!(ok);
+    }
+
+    #[test]
+    fn operating_points_round_trip_and_non_finite_ones_are_refused() {
+        use crate::record::{read_mcap, OperatingPoint};
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("im.mcap");
+        let point = |slip: f64, torque: Option<f64>| OperatingPoint {
+            segment: 0,
+            slip,
+            line_voltage: 400.0,
+            line_current: 7.5,
+            input_power: 3100.0,
+            speed: (1.0 - slip) * 157.08,
+            frequency: 50.0,
+            torque,
+        };
+        let stats = runtime().block_on(async {
+            let rec = Recorder::start(&path, &meta(), &channels(), 8).unwrap();
+            rec.send(Entry::OperatingPoint {
+                t_ns: 1,
+                point: point(0.03, Some(25.0)),
+            })
+            .await
+            .unwrap();
+            rec.send(Entry::OperatingPoint {
+                t_ns: 2,
+                point: point(1.0, None),
+            })
+            .await
+            .unwrap();
+            let mut bad = point(0.5, None);
+            bad.frequency = f64::NAN;
+            let e = rec
+                .send(Entry::OperatingPoint {
+                    t_ns: 3,
+                    point: bad,
+                })
+                .await
+                .unwrap_err();
+            assert!(e.to_string().contains("frequency"), "{e}");
+            rec.finish().await.unwrap()
+        });
+        assert_eq!(stats.per_topic["/bench/operating_point"], 2);
+        let record = read_mcap(&path).unwrap();
+        assert_eq!(
+            record.operating_points,
+            vec![point(0.03, Some(25.0)), point(1.0, None)]
+        );
     }
 }

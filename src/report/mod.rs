@@ -1,11 +1,15 @@
 //! Reports for people and programs: JSON per the contract, a text table,
 //! SVG plots.
 
+mod im_plot;
+mod im_text;
 mod json;
 mod overlay;
 pub mod plot;
 mod text;
 
+pub use im_plot::{render_im_svg, write_im_svg};
+pub use im_text::render_im_text;
 pub use json::{IdentificationReport, MethodReport, ParamEstimate};
 pub use overlay::segment_plots;
 pub use plot::{render_segments_svg, write_segments_svg, SegmentPlot, Trace};

@@ -1,0 +1,465 @@
+//! The `im_slip_sweep` test: the supply at a fixed voltage and frequency,
+//! the dynamometer stepping the shaft through a list of slips (denser near
+//! 0, where the curves bend), one segment per supply voltage. At each point
+//! the bench waits until current, power and speed have settled (detected
+//! from the signals, not a fixed wait), averages a window of samples and
+//! records it on `/bench/operating_point`; every raw sample goes to
+//! `/sensor/*`.
+//!
+//! Safety: the test stops, with both stages in their safe state first, when
+//! the line current passes `max_current`, when the winding's heating budget
+//! (`∫ max(0, (I/I_rated)² − 1) dt` with a recovery time constant, an I²t
+//! limit) is spent, on a driver
+//! error or on an operator stop. A point whose current exceeds
+//! `hot_current` (towards locked rotor) is held at most `hot_point_max_s`
+//! and followed by a cool-down with the supply off: a real rig burns the
+//! winding otherwise.
+
+use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
+use tokio::sync::watch;
+
+use super::{BenchError, Outcome, RecordSink, SettleDetector, SpeedFromEncoder};
+use crate::identify::slip_grid;
+use crate::record::{
+    ChannelSpec, Entry, Event, EventLevel, OperatingPoint, RecordError, SegmentKind, SegmentMarker,
+    SegmentPhase,
+};
+
+/// The plan of a slip sweep.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImSweepPlan {
+    /// Supply line voltage of each segment, V.
+    pub voltages: Vec<f64>,
+    /// Slip set points, in the order run.
+    pub slips: Vec<f64>,
+    /// Supply frequency, Hz.
+    pub frequency: f64,
+    /// Pole pairs of the machine.
+    pub pole_pairs: u32,
+    /// Samples per settle window (two windows are compared).
+    pub settle_window: usize,
+    /// Relative tolerance of the settle test.
+    pub settle_tolerance: f64,
+    /// Samples averaged per operating point once settled.
+    pub average_samples: usize,
+    /// Longest wait for a point to settle, s.
+    pub max_point_s: f64,
+    /// Rated line current, A (the heating budget's reference).
+    pub rated_current: f64,
+    /// Abort above this line current, A.
+    pub max_current: f64,
+    /// Points above this line current are hot: time-limited, then cooled.
+    pub hot_current: f64,
+    /// Longest time at a hot point, s.
+    pub hot_point_max_s: f64,
+    /// Pause with the supply off after a hot point, s.
+    pub cooldown_s: f64,
+    /// Heating budget: the winding's excess heat
+    /// `∫ max(0, (I/I_rated)² − 1) dt`, forgetting with
+    /// [`ImSweepPlan::i2t_time_constant_s`], may not pass this, s (about
+    /// 36 × the safe stall time at 6× rated current).
+    pub max_i2t_s: f64,
+    /// Time constant with which the heating budget recovers, s.
+    pub i2t_time_constant_s: f64,
+    /// Encoder counts per revolution (4 per line for quadrature).
+    pub encoder_counts_per_rev: f64,
+}
+
+impl ImSweepPlan {
+    /// A plan for a machine rated `line_voltage`, `line_current` at
+    /// `frequency` with `pole_pairs`: sweeps at 100 % and 80 % voltage,
+    /// 30 slips from 0.002 to 1, 25-sample settle windows at 0.2 %, 50
+    /// samples averaged, hot points above twice rated current held at most
+    /// 1.5 s and followed by 10 s off, abort at 8× rated current or past a
+    /// heating budget of 300 s (recovering with 120 s), a 1024-line encoder.
+    pub fn new(
+        line_voltage: f64,
+        line_current: f64,
+        frequency: f64,
+        pole_pairs: u32,
+    ) -> ImSweepPlan {
+        ImSweepPlan {
+            voltages: vec![line_voltage, 0.8 * line_voltage],
+            slips: slip_grid(30, 0.002),
+            frequency,
+            pole_pairs,
+            settle_window: 25,
+            settle_tolerance: 0.002,
+            average_samples: 50,
+            max_point_s: 5.0,
+            rated_current: line_current,
+            max_current: 8.0 * line_current,
+            hot_current: 2.0 * line_current,
+            hot_point_max_s: 1.5,
+            cooldown_s: 10.0,
+            max_i2t_s: 300.0,
+            i2t_time_constant_s: 120.0,
+            encoder_counts_per_rev: 4096.0,
+        }
+    }
+
+    /// Synchronous speed, rad/s.
+    pub fn synchronous_speed(&self) -> f64 {
+        std::f64::consts::TAU * self.frequency / f64::from(self.pole_pairs.max(1))
+    }
+}
+
+/// Channels recorded for a sweep: every sensor channel, then the speed
+/// derived from the encoder, then the supply-voltage and dynamometer-speed
+/// commands.
+pub fn sweep_channels(sensors: &[ChannelInfo], vfd_id: &str, dyno_id: &str) -> Vec<ChannelSpec> {
+    let mut out: Vec<ChannelSpec> = sensors
+        .iter()
+        .map(|c| ChannelSpec::sensor(&c.quantity, &c.unit, &c.source))
+        .collect();
+    let encoder = sensors
+        .iter()
+        .find(|c| c.quantity == "encoder_count")
+        .map_or("encoder", |c| c.source.as_str());
+    out.push(ChannelSpec::sensor(
+        "speed",
+        "rad/s",
+        &format!("{encoder}/derived"),
+    ));
+    out.push(ChannelSpec::command("line_voltage", "V", vfd_id));
+    out.push(ChannelSpec::command("dyno_speed", "rad/s", dyno_id));
+    out
+}
+
+/// One reading of the quantities the sweep watches.
+#[derive(Debug, Clone, Copy)]
+struct Reading {
+    voltage: f64,
+    current: f64,
+    power: f64,
+    speed: Option<f64>,
+    torque: Option<f64>,
+}
+
+struct Indices {
+    voltage: usize,
+    current: usize,
+    power: usize,
+    encoder: usize,
+    torque: Option<usize>,
+    speed_rec: usize,
+    vfd_rec: usize,
+    dyno_rec: usize,
+}
+
+enum Fault {
+    Stop(String),
+    Record(RecordError),
+}
+
+impl From<RecordError> for Fault {
+    fn from(e: RecordError) -> Fault {
+        Fault::Record(e)
+    }
+}
+
+impl From<DriverError> for Fault {
+    fn from(e: DriverError) -> Fault {
+        Fault::Stop(format!("driver error: {e}"))
+    }
+}
+
+struct Sweep<'a> {
+    plan: &'a ImSweepPlan,
+    vfd: &'a mut dyn PowerStage,
+    dyno: &'a mut dyn PowerStage,
+    sensors: &'a mut dyn SensorStream,
+    sink: &'a mut RecordSink,
+    shutdown: &'a watch::Receiver<bool>,
+    ix: Indices,
+    encoder: SpeedFromEncoder,
+    t_ns: u64,
+    i2t: f64,
+}
+
+impl Sweep<'_> {
+    async fn event(&mut self, level: EventLevel, message: String) -> Result<(), RecordError> {
+        self.sink
+            .push(Entry::Event {
+                t_ns: self.t_ns,
+                event: Event { level, message },
+            })
+            .await
+    }
+
+    async fn command(&mut self, index: usize, value: f64) -> Result<(), RecordError> {
+        self.sink
+            .push(Entry::Samples {
+                t_ns: self.t_ns,
+                values: vec![(index, value)],
+            })
+            .await
+    }
+
+    /// Next batch: recorded, checked against the limits.
+    async fn read(&mut self) -> Result<Reading, Fault> {
+        if *self.shutdown.borrow() {
+            return Err(Fault::Stop("stopped by the operator".into()));
+        }
+        let batch = self.sensors.next_batch().await?;
+        let dt = batch.t_ns.saturating_sub(self.t_ns) as f64 * 1e-9;
+        self.t_ns = batch.t_ns;
+        let mut values: Vec<(usize, f64)> =
+            batch.samples.iter().map(|s| (s.channel, s.value)).collect();
+        let get = |c: usize| {
+            batch
+                .samples
+                .iter()
+                .find(|s| s.channel == c)
+                .map(|s| s.value)
+        };
+        let speed = get(self.ix.encoder).and_then(|count| self.encoder.update(batch.t_ns, count));
+        if let Some(w) = speed {
+            values.push((self.ix.speed_rec, w));
+        }
+        self.sink
+            .push(Entry::Samples {
+                t_ns: batch.t_ns,
+                values,
+            })
+            .await?;
+        let r = Reading {
+            voltage: get(self.ix.voltage).unwrap_or(f64::NAN),
+            current: get(self.ix.current).unwrap_or(f64::NAN),
+            power: get(self.ix.power).unwrap_or(f64::NAN),
+            speed,
+            torque: self.ix.torque.and_then(get),
+        };
+        if !(r.current.is_finite() && r.current <= self.plan.max_current) {
+            return Err(Fault::Stop(format!(
+                "line_current {:.3} A beyond the limit {} A",
+                r.current, self.plan.max_current
+            )));
+        }
+        let excess = ((r.current / self.plan.rated_current).powi(2) - 1.0).max(0.0);
+        self.i2t += (excess - self.i2t / self.plan.i2t_time_constant_s.max(1e-9)) * dt;
+        if self.i2t > self.plan.max_i2t_s {
+            return Err(Fault::Stop(format!(
+                "winding heating budget spent: I²t {:.1} s beyond {} s (rated current {} A)",
+                self.i2t, self.plan.max_i2t_s, self.plan.rated_current
+            )));
+        }
+        Ok(r)
+    }
+
+    /// Hold the current point until it settles, then average it; `None`
+    /// when it did not settle in time (and was not hot).
+    async fn point(
+        &mut self,
+        segment: u32,
+        slip: f64,
+    ) -> Result<Option<(OperatingPoint, bool)>, Fault> {
+        let ws = self.plan.synchronous_speed();
+        let target = (1.0 - slip) * ws;
+        self.dyno.set_setpoint(target).await?;
+        self.command(self.ix.dyno_rec, target).await?;
+        // Line current, input power and speed.
+        let mut detector = SettleDetector::new(self.plan.settle_window, self.plan.settle_tolerance, 3);
+        let start = self.t_ns;
+        let mut recent: Vec<Reading> = Vec::new();
+        let mut hot = false;
+        let settled = loop {
+            let r = self.read().await?;
+            hot |= r.current > self.plan.hot_current;
+            recent.push(r);
+            if recent.len() > self.plan.average_samples {
+                recent.remove(0);
+            }
+            let w = r.speed.unwrap_or(f64::NAN);
+            if w.is_finite() && detector.push(&[r.current, r.power, w]) {
+                break true;
+            }
+            let elapsed = (self.t_ns - start) as f64 * 1e-9;
+            let limit = if hot {
+                self.plan.hot_point_max_s
+            } else {
+                self.plan.max_point_s
+            };
+            if elapsed > limit {
+                break false;
+            }
+        };
+        let window = if settled {
+            let mut w = Vec::with_capacity(self.plan.average_samples);
+            while w.len() < self.plan.average_samples {
+                let r = self.read().await?;
+                let elapsed = (self.t_ns - start) as f64 * 1e-9;
+                w.push(r);
+                if hot && elapsed > self.plan.hot_point_max_s {
+                    break;
+                }
+            }
+            w
+        } else if hot {
+            self.event(
+                EventLevel::Warn,
+                format!(
+                    "slip {slip:.4}: not settled within the hot-point limit {} s; the last {} samples averaged",
+                    self.plan.hot_point_max_s,
+                    recent.len()
+                ),
+            )
+            .await?;
+            recent
+        } else {
+            self.event(
+                EventLevel::Warn,
+                format!(
+                    "slip {slip:.4}: not settled within {} s; point skipped",
+                    self.plan.max_point_s
+                ),
+            )
+            .await?;
+            return Ok(None);
+        };
+        let n = window.len() as f64;
+        let mean = |f: &dyn Fn(&Reading) -> f64| window.iter().map(f).sum::<f64>() / n;
+        let speeds: Vec<f64> = window.iter().filter_map(|r| r.speed).collect();
+        let speed = speeds.iter().sum::<f64>() / speeds.len().max(1) as f64;
+        let torques: Vec<f64> = window.iter().filter_map(|r| r.torque).collect();
+        let point = OperatingPoint {
+            segment,
+            slip: (1.0 - speed / ws).clamp(0.0, 1.0),
+            line_voltage: mean(&|r| r.voltage),
+            line_current: mean(&|r| r.current),
+            input_power: mean(&|r| r.power),
+            speed,
+            frequency: self.plan.frequency,
+            torque: (!torques.is_empty())
+                .then(|| torques.iter().sum::<f64>() / torques.len() as f64),
+        };
+        Ok(Some((point, hot)))
+    }
+
+    async fn cool_down(&mut self, voltage: f64) -> Result<(), Fault> {
+        self.vfd.set_output_enabled(false).await?;
+        self.command(self.ix.vfd_rec, 0.0).await?;
+        self.event(
+            EventLevel::Info,
+            format!("cool-down: supply off for {} s", self.plan.cooldown_s),
+        )
+        .await?;
+        let start = self.t_ns;
+        while ((self.t_ns - start) as f64) * 1e-9 < self.plan.cooldown_s {
+            self.read().await?;
+        }
+        self.vfd.set_output_enabled(true).await?;
+        self.command(self.ix.vfd_rec, voltage).await?;
+        Ok(())
+    }
+
+    async fn run(&mut self) -> Result<(), Fault> {
+        let plan = self.plan;
+        for (k, &v) in plan.voltages.iter().enumerate() {
+            let label = format!("{v:.0} V, {} Hz", plan.frequency);
+            let marker = |phase| SegmentMarker {
+                index: k as u32,
+                kind: SegmentKind::ImSlipSweep,
+                phase,
+                label: label.clone(),
+            };
+            self.sink
+                .push(Entry::Segment {
+                    t_ns: self.t_ns,
+                    marker: marker(SegmentPhase::Start),
+                })
+                .await?;
+            self.vfd.set_setpoint(v).await?;
+            self.vfd.set_output_enabled(true).await?;
+            self.dyno.set_output_enabled(true).await?;
+            self.command(self.ix.vfd_rec, v).await?;
+            for &s in &plan.slips {
+                if let Some((point, hot)) = self.point(k as u32, s).await? {
+                    self.sink
+                        .push(Entry::OperatingPoint {
+                            t_ns: self.t_ns,
+                            point,
+                        })
+                        .await?;
+                    if hot {
+                        self.cool_down(v).await?;
+                    }
+                }
+            }
+            self.sink
+                .push(Entry::Segment {
+                    t_ns: self.t_ns,
+                    marker: marker(SegmentPhase::End),
+                })
+                .await?;
+        }
+        Ok(())
+    }
+}
+
+/// Run `plan` on the rig; every reading goes to `sink`. The stages are
+/// left in their safe state however the test ends.
+pub async fn run_im_sweep(
+    plan: &ImSweepPlan,
+    vfd: &mut dyn PowerStage,
+    dyno: &mut dyn PowerStage,
+    sensors: &mut dyn SensorStream,
+    sink: &mut RecordSink,
+    shutdown: &watch::Receiver<bool>,
+) -> Result<Outcome, BenchError> {
+    let channels = sensors.channels().to_vec();
+    let find = |q: &'static str| {
+        channels
+            .iter()
+            .position(|c| c.quantity == q)
+            .ok_or(BenchError::MissingChannel(q))
+    };
+    let n = channels.len();
+    let ix = Indices {
+        voltage: find("line_voltage")?,
+        current: find("line_current")?,
+        power: find("input_power")?,
+        encoder: find("encoder_count")?,
+        torque: channels.iter().position(|c| c.quantity == "torque"),
+        speed_rec: n,
+        vfd_rec: n + 1,
+        dyno_rec: n + 2,
+    };
+    let mut sweep = Sweep {
+        plan,
+        vfd,
+        dyno,
+        sensors,
+        sink,
+        shutdown,
+        ix,
+        encoder: SpeedFromEncoder::new(plan.encoder_counts_per_rev),
+        t_ns: 0,
+        i2t: 0.0,
+    };
+    let result = sweep.run().await;
+    // Safe state first, whatever happened.
+    let vfd_safe = sweep.vfd.safe_state().await;
+    let dyno_safe = sweep.dyno.safe_state().await;
+    let outcome = match result {
+        Ok(()) => Outcome::Completed,
+        Err(Fault::Record(e)) => return Err(BenchError::Record(e)),
+        Err(Fault::Stop(reason)) => {
+            sweep
+                .event(
+                    EventLevel::Abort,
+                    format!("{reason}; supply off, dynamometer braking"),
+                )
+                .await?;
+            Outcome::Aborted { reason }
+        }
+    };
+    for (name, r) in [("supply", vfd_safe), ("dynamometer", dyno_safe)] {
+        if let Err(e) = r {
+            sweep
+                .event(EventLevel::Warn, format!("{name} safe state failed: {e}"))
+                .await?;
+        }
+    }
+    Ok(outcome)
+}

@@ -1,0 +1,407 @@
+//! The simulated slip-sweep rig: an induction machine on a fixed-voltage,
+//! fixed-frequency supply (a VFD, [`SimVfd`]) whose shaft a dynamometer
+//! holds at a speed set point ([`SimDyno`]), read by [`SimImSensors`]: line
+//! voltage, line current, three-phase input power, an encoder and,
+//! optionally, a shaft-torque sensor, each with Gaussian noise.
+//!
+//! The electrical side is quasi-static (the steady-state circuit at the
+//! instantaneous slip: electrical transients last milliseconds, the
+//! mechanical ones tenths of seconds); the dynamometer's speed follows its
+//! set point with a first-order lag and a rate limit; the supply slews to
+//! its voltage. A first-order thermal model heats the winding with the
+//! machine's losses and raises `Rs` with the copper's temperature
+//! coefficient (the `thermal_drift` effect; zero heating turns it off).
+//! Each [`SensorStream::next_batch`] advances the plant by one sample
+//! period on a virtual clock.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use async_trait::async_trait;
+use motorbench_drivers::{
+    ChannelInfo, DriverError, PowerStage, Sample, SampleBatch, SensorStream, StageCapabilities,
+};
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+
+use crate::model::{ImCircuit, ImSupply};
+
+const VFD_ID: &str = "sim-vfd";
+const DYNO_ID: &str = "sim-dyno";
+const SENSORS_ID: &str = "sim-im-daq";
+
+/// Copper's temperature coefficient of resistance at 20 °C, 1/K.
+pub const COPPER_ALPHA: f64 = 0.00393;
+
+/// Settings of the simulated rig.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimImRigConfig {
+    /// The machine, Ω per phase at 20 °C (Rs) and at the supply frequency.
+    pub circuit: ImCircuit,
+    /// Rated supply: line voltage (the VFD's maximum), frequency,
+    /// connection, pole pairs.
+    pub supply: ImSupply,
+    /// Sample rate of the sensors, Hz.
+    pub sample_rate_hz: f64,
+    /// Time constant of the dynamometer's speed loop, s.
+    pub dyno_time_constant_s: f64,
+    /// Largest speed change rate of the dynamometer, rad/s².
+    pub dyno_max_accel: f64,
+    /// Supply voltage slew, V/s.
+    pub vfd_slew_v_per_s: f64,
+    /// σ of each sensor reading as a fraction of it.
+    pub noise_relative: f64,
+    /// Encoder lines per turn (4 counts per line).
+    pub encoder_lines: u32,
+    /// Whether a shaft-torque sensor is fitted.
+    pub torque_sensor: bool,
+    /// Winding temperature rise per watt of loss in steady state, K/W
+    /// (0: no heating).
+    pub thermal_resistance_k_per_w: f64,
+    /// Thermal time constant of the winding, s.
+    pub thermal_time_constant_s: f64,
+    /// Ambient (and initial winding) temperature, °C.
+    pub ambient_c: f64,
+    /// Seed of the noise.
+    pub seed: u64,
+}
+
+impl SimImRigConfig {
+    /// Defaults for `circuit` on `supply`: 500 Hz, a dynamometer with
+    /// 50 ms lag and 200 rad/s², 0.5 % sensor noise, a 1024-line encoder,
+    /// a torque sensor, a winding heating by 0.02 K/W with 60 s.
+    pub fn new(circuit: ImCircuit, supply: ImSupply) -> SimImRigConfig {
+        SimImRigConfig {
+            circuit,
+            supply,
+            sample_rate_hz: 500.0,
+            dyno_time_constant_s: 0.05,
+            dyno_max_accel: 200.0,
+            vfd_slew_v_per_s: 2000.0,
+            noise_relative: 0.005,
+            encoder_lines: 1024,
+            torque_sensor: true,
+            thermal_resistance_k_per_w: 0.02,
+            thermal_time_constant_s: 60.0,
+            ambient_c: 20.0,
+            seed: 1,
+        }
+    }
+}
+
+/// Channel indices of [`SimImSensors`].
+pub mod channel {
+    /// RMS line-to-line voltage, V.
+    pub const LINE_VOLTAGE: usize = 0;
+    /// RMS line current, A.
+    pub const LINE_CURRENT: usize = 1;
+    /// Three-phase input power, W.
+    pub const INPUT_POWER: usize = 2;
+    /// Encoder count (quadrature, 4 per line).
+    pub const ENCODER: usize = 3;
+    /// Shaft torque, N·m (when fitted).
+    pub const TORQUE: usize = 4;
+}
+
+#[derive(Debug)]
+struct Plant {
+    cfg: SimImRigConfig,
+    dt: f64,
+    vfd_setpoint: f64,
+    vfd_output: f64,
+    vfd_enabled: bool,
+    dyno_setpoint: f64,
+    dyno_enabled: bool,
+    speed: f64,
+    angle: f64,
+    winding_c: f64,
+    step: u64,
+}
+
+/// What the plant shows at one instant.
+#[derive(Debug, Clone, Copy)]
+struct Snapshot {
+    line_voltage: f64,
+    line_current: f64,
+    input_power: f64,
+    torque: f64,
+    angle: f64,
+}
+
+impl Plant {
+    fn synchronous_speed(&self) -> f64 {
+        std::f64::consts::TAU * self.cfg.supply.frequency / f64::from(self.cfg.supply.pole_pairs)
+    }
+
+    fn advance(&mut self) -> Snapshot {
+        let dt = self.dt;
+        // Supply.
+        let target_v = if self.vfd_enabled {
+            self.vfd_setpoint
+        } else {
+            0.0
+        };
+        let dv = self.cfg.vfd_slew_v_per_s * dt;
+        self.vfd_output += (target_v - self.vfd_output).clamp(-dv, dv);
+        // Shaft: the dynamometer holds its set point; without it the
+        // machine runs up to (near) synchronous speed on the supply, or
+        // coasts down with the supply off.
+        let ws = self.synchronous_speed();
+        let target_w = if self.dyno_enabled {
+            self.dyno_setpoint
+        } else if self.vfd_output > 0.0 {
+            ws
+        } else {
+            0.0
+        };
+        let tau = self.cfg.dyno_time_constant_s.max(dt);
+        let dw = ((target_w - self.speed) * dt / tau)
+            .clamp(-self.cfg.dyno_max_accel * dt, self.cfg.dyno_max_accel * dt);
+        self.speed += dw;
+        self.angle += self.speed * dt;
+        // Electrical, quasi-static, with the winding's resistance now.
+        let mut c = self.cfg.circuit;
+        c.rs *= 1.0 + COPPER_ALPHA * (self.winding_c - 20.0);
+        let slip = (1.0 - self.speed / ws).clamp(0.0, 1.0);
+        let supply = ImSupply {
+            line_voltage: self.vfd_output.max(0.0),
+            ..self.cfg.supply
+        };
+        let op = c.operating_point(&supply, slip);
+        // Heating by the losses (input less shaft power).
+        let losses = (op.input_power - op.torque * self.speed).max(0.0);
+        let rise = self.cfg.thermal_resistance_k_per_w * losses;
+        let ttau = self.cfg.thermal_time_constant_s.max(dt);
+        self.winding_c += (self.cfg.ambient_c + rise - self.winding_c) * dt / ttau;
+        self.step += 1;
+        Snapshot {
+            line_voltage: op.line_voltage,
+            line_current: op.line_current,
+            input_power: op.input_power,
+            torque: op.torque,
+            angle: self.angle,
+        }
+    }
+}
+
+fn lock(plant: &Mutex<Plant>) -> MutexGuard<'_, Plant> {
+    plant.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The simulated supply: set point = RMS line voltage, V.
+#[derive(Debug, Clone)]
+pub struct SimVfd {
+    plant: Arc<Mutex<Plant>>,
+}
+
+/// The simulated dynamometer: set point = shaft speed, rad/s.
+#[derive(Debug, Clone)]
+pub struct SimDyno {
+    plant: Arc<Mutex<Plant>>,
+}
+
+/// The simulated sensors.
+#[derive(Debug)]
+pub struct SimImSensors {
+    plant: Arc<Mutex<Plant>>,
+    channels: Vec<ChannelInfo>,
+    rng: StdRng,
+    noise: Option<Normal<f64>>,
+    counts_per_rad: f64,
+}
+
+/// The rig: supply, dynamometer, sensors, sharing one plant.
+pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors), String> {
+    cfg.circuit.validate().map_err(|e| e.to_string())?;
+    if !(cfg.sample_rate_hz.is_finite() && cfg.sample_rate_hz > 0.0) {
+        return Err(format!("sample rate {} Hz must be > 0", cfg.sample_rate_hz));
+    }
+    if cfg.supply.pole_pairs == 0
+        || !(cfg.supply.frequency.is_finite() && cfg.supply.frequency > 0.0)
+    {
+        return Err("the supply needs a frequency > 0 and at least one pole pair".into());
+    }
+    let noise = (cfg.noise_relative > 0.0)
+        .then(|| Normal::new(0.0, cfg.noise_relative).map_err(|e| e.to_string()))
+        .transpose()?;
+    let info = |quantity: &str, unit: &str| ChannelInfo {
+        quantity: quantity.into(),
+        unit: unit.into(),
+        source: SENSORS_ID.into(),
+        rate_hz: cfg.sample_rate_hz,
+    };
+    let mut channels = vec![
+        info("line_voltage", "V"),
+        info("line_current", "A"),
+        info("input_power", "W"),
+        info("encoder_count", "count"),
+    ];
+    if cfg.torque_sensor {
+        channels.push(info("torque", "N*m"));
+    }
+    let counts_per_rad = 4.0 * f64::from(cfg.encoder_lines) / std::f64::consts::TAU;
+    let rng = StdRng::seed_from_u64(cfg.seed);
+    let plant = Arc::new(Mutex::new(Plant {
+        dt: 1.0 / cfg.sample_rate_hz,
+        winding_c: cfg.ambient_c,
+        cfg,
+        vfd_setpoint: 0.0,
+        vfd_output: 0.0,
+        vfd_enabled: false,
+        dyno_setpoint: 0.0,
+        dyno_enabled: false,
+        speed: 0.0,
+        angle: 0.0,
+        step: 0,
+    }));
+    Ok((
+        SimVfd {
+            plant: plant.clone(),
+        },
+        SimDyno {
+            plant: plant.clone(),
+        },
+        SimImSensors {
+            plant,
+            channels,
+            rng,
+            noise,
+            counts_per_rad,
+        },
+    ))
+}
+
+impl SimImSensors {
+    /// Winding temperature now, °C (the simulator's truth, for tests).
+    pub fn winding_temperature(&self) -> f64 {
+        lock(&self.plant).winding_c
+    }
+}
+
+#[async_trait]
+impl PowerStage for SimVfd {
+    fn id(&self) -> &str {
+        VFD_ID
+    }
+
+    fn capabilities(&self) -> StageCapabilities {
+        StageCapabilities {
+            current_limit: false,
+            max_setpoint: lock(&self.plant).cfg.supply.line_voltage,
+        }
+    }
+
+    async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
+        let mut p = lock(&self.plant);
+        let max = p.cfg.supply.line_voltage;
+        if !(value.is_finite() && (0.0..=max * 1.0001).contains(&value)) {
+            return Err(DriverError::Device {
+                device: VFD_ID.into(),
+                reason: format!("voltage set point {value} V outside [0, {max}] V"),
+            });
+        }
+        p.vfd_setpoint = value;
+        Ok(())
+    }
+
+    async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
+        lock(&self.plant).vfd_enabled = enabled;
+        Ok(())
+    }
+
+    async fn safe_state(&mut self) -> Result<(), DriverError> {
+        let mut p = lock(&self.plant);
+        p.vfd_setpoint = 0.0;
+        p.vfd_enabled = false;
+        Ok(())
+    }
+}
+
+#[async_trait]
+impl PowerStage for SimDyno {
+    fn id(&self) -> &str {
+        DYNO_ID
+    }
+
+    fn capabilities(&self) -> StageCapabilities {
+        let p = lock(&self.plant);
+        StageCapabilities {
+            current_limit: false,
+            max_setpoint: 1.2 * p.synchronous_speed(),
+        }
+    }
+
+    async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
+        let mut p = lock(&self.plant);
+        let max = 1.2 * p.synchronous_speed();
+        if !(value.is_finite() && (0.0..=max).contains(&value)) {
+            return Err(DriverError::Device {
+                device: DYNO_ID.into(),
+                reason: format!("speed set point {value} rad/s outside [0, {max}] rad/s"),
+            });
+        }
+        p.dyno_setpoint = value;
+        Ok(())
+    }
+
+    async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
+        lock(&self.plant).dyno_enabled = enabled;
+        Ok(())
+    }
+
+    async fn safe_state(&mut self) -> Result<(), DriverError> {
+        // A dynamometer's safe state brakes the shaft to rest.
+        let mut p = lock(&self.plant);
+        p.dyno_setpoint = 0.0;
+        p.dyno_enabled = true;
+        Ok(())
+    }
+}
+
+#[async_trait]
+impl SensorStream for SimImSensors {
+    fn id(&self) -> &str {
+        SENSORS_ID
+    }
+
+    fn channels(&self) -> &[ChannelInfo] {
+        &self.channels
+    }
+
+    async fn next_batch(&mut self) -> Result<SampleBatch, DriverError> {
+        let (snap, t_ns) = {
+            let mut p = lock(&self.plant);
+            let snap = p.advance();
+            (snap, (p.step as f64 * p.dt * 1e9).round() as u64)
+        };
+        let mut read = |v: f64| match &self.noise {
+            Some(n) => v * (1.0 + n.sample(&mut self.rng)),
+            None => v,
+        };
+        let mut samples = vec![
+            Sample {
+                channel: channel::LINE_VOLTAGE,
+                value: read(snap.line_voltage),
+            },
+            Sample {
+                channel: channel::LINE_CURRENT,
+                value: read(snap.line_current),
+            },
+            Sample {
+                channel: channel::INPUT_POWER,
+                value: read(snap.input_power),
+            },
+            Sample {
+                channel: channel::ENCODER,
+                value: (snap.angle * self.counts_per_rad).floor(),
+            },
+        ];
+        if self.channels.len() > channel::TORQUE {
+            samples.push(Sample {
+                channel: channel::TORQUE,
+                value: read(snap.torque),
+            });
+        }
+        Ok(SampleBatch { t_ns, samples })
+    }
+}

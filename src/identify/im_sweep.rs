@@ -1,0 +1,361 @@
+//! Slip-sweep data as induction-machine identification sees it: one
+//! operating point per slip (line voltage, line current, input power), the
+//! model's prediction of those points with its derivatives, and a
+//! simulator for tests and benchmarks.
+
+use rand::Rng;
+use rand_distr::{Distribution, Normal};
+
+use crate::model::{Connection, ImCircuit, ImParam, ImSupply, C64};
+
+/// One averaged operating point of a sweep, line quantities, SI.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SweepPoint {
+    /// Segment (one sweep at one supply voltage) the point belongs to.
+    pub segment: u32,
+    /// Slip, 0 (synchronous) to 1 (locked rotor).
+    pub slip: f64,
+    /// RMS line-to-line voltage, V.
+    pub line_voltage: f64,
+    /// RMS line current, A.
+    pub line_current: f64,
+    /// Three-phase input power, W.
+    pub input_power: f64,
+    /// Shaft torque where a torque sensor exists, N·m.
+    pub torque: Option<f64>,
+}
+
+/// A slip sweep (one or several segments) of one machine.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SlipSweep {
+    /// Winding connection, which maps line to phase quantities.
+    pub connection: Connection,
+    /// Supply frequency, Hz, where known.
+    pub frequency: Option<f64>,
+    /// The operating points.
+    pub points: Vec<SweepPoint>,
+}
+
+/// Which measured curves a fit uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Channels {
+    /// Line current only (the paper's Eq. 15 with `I(s)`).
+    Current,
+    /// Line current and input power (the paper's Eq. 25).
+    CurrentAndPower,
+}
+
+impl Channels {
+    /// Whether the power curve is used.
+    pub fn uses_power(self) -> bool {
+        self == Channels::CurrentAndPower
+    }
+}
+
+/// Measurement noise for [`SlipSweep::simulate`]: Gaussian, independent per
+/// reading; relative parts are fractions of the reading.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SweepNoise {
+    /// σ of the voltage reading as a fraction of it.
+    pub voltage_relative: f64,
+    /// σ of the current reading as a fraction of it.
+    pub current_relative: f64,
+    /// σ of the power reading as a fraction of it.
+    pub power_relative: f64,
+    /// σ added to the current reading, A.
+    pub current_absolute: f64,
+    /// σ added to the power reading, W.
+    pub power_absolute: f64,
+}
+
+impl SweepNoise {
+    /// The same relative σ on voltage, current and power.
+    pub fn relative(sigma: f64) -> SweepNoise {
+        SweepNoise {
+            voltage_relative: sigma,
+            current_relative: sigma,
+            power_relative: sigma,
+            ..SweepNoise::default()
+        }
+    }
+}
+
+/// `n` slips from `s_min` to 1, denser near 0 where the curves bend
+/// (quadratic spacing).
+pub fn slip_grid(n: usize, s_min: f64) -> Vec<f64> {
+    match n {
+        0 => Vec::new(),
+        1 => vec![1.0],
+        _ => (0..n)
+            .map(|k| {
+                let x = k as f64 / (n - 1) as f64;
+                s_min + (1.0 - s_min) * x * x
+            })
+            .collect(),
+    }
+}
+
+fn gaussian(sigma: f64, rng: &mut impl Rng) -> f64 {
+    if sigma > 0.0 {
+        Normal::new(0.0, sigma).map_or(0.0, |n| n.sample(rng))
+    } else {
+        0.0
+    }
+}
+
+impl SlipSweep {
+    /// Simulate one segment: the circuit on `supply` at each slip, with
+    /// `noise` on the readings.
+    pub fn simulate(
+        circuit: &ImCircuit,
+        supply: &ImSupply,
+        slips: &[f64],
+        noise: &SweepNoise,
+        segment: u32,
+        rng: &mut impl Rng,
+    ) -> SlipSweep {
+        let points = slips
+            .iter()
+            .map(|&s| {
+                let op = circuit.operating_point(supply, s);
+                SweepPoint {
+                    segment,
+                    slip: s,
+                    line_voltage: op.line_voltage * (1.0 + gaussian(noise.voltage_relative, rng)),
+                    line_current: op.line_current * (1.0 + gaussian(noise.current_relative, rng))
+                        + gaussian(noise.current_absolute, rng),
+                    input_power: op.input_power * (1.0 + gaussian(noise.power_relative, rng))
+                        + gaussian(noise.power_absolute, rng),
+                    torque: Some(op.torque),
+                }
+            })
+            .collect();
+        SlipSweep {
+            connection: supply.connection,
+            frequency: Some(supply.frequency),
+            points,
+        }
+    }
+
+    /// Append the points of another sweep of the same machine.
+    pub fn extend(&mut self, other: SlipSweep) {
+        self.points.extend(other.points);
+    }
+
+    /// Check every point is usable; the error names the point.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.points.is_empty() {
+            return Err("the sweep has no operating points".into());
+        }
+        for (k, p) in self.points.iter().enumerate() {
+            let bad = |field: &str, v: f64, why: &str| {
+                Err(format!(
+                    "operating point {k} (segment {}, slip {}): {field} = {v} {why}",
+                    p.segment, p.slip
+                ))
+            };
+            if !(p.slip.is_finite() && (0.0..=1.0).contains(&p.slip)) {
+                return bad("slip", p.slip, "is outside [0, 1]");
+            }
+            if !(p.line_voltage.is_finite() && p.line_voltage > 0.0) {
+                return bad("line_voltage", p.line_voltage, "is not a finite number > 0");
+            }
+            if !(p.line_current.is_finite() && p.line_current > 0.0) {
+                return bad("line_current", p.line_current, "is not a finite number > 0");
+            }
+            if !p.input_power.is_finite() {
+                return bad("input_power", p.input_power, "is not a finite number");
+            }
+        }
+        Ok(())
+    }
+
+    /// Per-phase view of the points.
+    pub fn phase_data(&self) -> PhaseData {
+        let c = self.connection;
+        PhaseData {
+            slip: self.points.iter().map(|p| p.slip).collect(),
+            voltage: self
+                .points
+                .iter()
+                .map(|p| c.phase_voltage(p.line_voltage))
+                .collect(),
+            current: self
+                .points
+                .iter()
+                .map(|p| c.phase_current(p.line_current))
+                .collect(),
+            power: self.points.iter().map(|p| p.input_power).collect(),
+        }
+    }
+}
+
+/// A sweep per phase: what the per-phase circuit predicts.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PhaseData {
+    /// Slip of each point.
+    pub slip: Vec<f64>,
+    /// Phase (winding) voltage, V.
+    pub voltage: Vec<f64>,
+    /// Phase (winding) current, A.
+    pub current: Vec<f64>,
+    /// Three-phase input power, W.
+    pub power: Vec<f64>,
+}
+
+impl PhaseData {
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.slip.len()
+    }
+
+    /// Whether there are no points.
+    pub fn is_empty(&self) -> bool {
+        self.slip.is_empty()
+    }
+
+    /// Every value divided by its per-unit base (`z_base = v_base/i_base`,
+    /// power base `3·v_base·i_base`).
+    pub fn per_unit(&self, v_base: f64, i_base: f64) -> PhaseData {
+        let p_base = 3.0 * v_base * i_base;
+        PhaseData {
+            slip: self.slip.clone(),
+            voltage: self.voltage.iter().map(|v| v / v_base).collect(),
+            current: self.current.iter().map(|i| i / i_base).collect(),
+            power: self.power.iter().map(|p| p / p_base).collect(),
+        }
+    }
+}
+
+/// Model phase current and three-phase power at slip `s`, phase voltage `v`.
+pub fn predict(c: &ImCircuit, s: f64, v: f64) -> (f64, f64) {
+    let y = c.impedance(s).inv();
+    (v * y.norm(), 3.0 * v * v * y.re)
+}
+
+/// [`predict`] with the derivatives of current and power with respect to
+/// each of `params`: `dI = −V·Re(conj(Z)·dZ)/|Z|³`, `dP = −3V²·Re(dZ/Z²)`.
+pub fn predict_gradient(
+    c: &ImCircuit,
+    s: f64,
+    v: f64,
+    params: &[ImParam],
+) -> (f64, f64, Vec<f64>, Vec<f64>) {
+    let mut di = vec![0.0; params.len()];
+    let mut dp = vec![0.0; params.len()];
+    let (i, p) = predict_gradient_into(c, s, v, params, &mut di, &mut dp);
+    (i, p, di, dp)
+}
+
+/// Most elements of any model (for the stack buffers of
+/// [`predict_gradient_into`]).
+pub const MAX_PARAMS: usize = 10;
+
+/// [`predict_gradient`] without allocating: the derivatives go to `di`
+/// and `dp` (at least `params.len()` long, at most [`MAX_PARAMS`]).
+pub fn predict_gradient_into(
+    c: &ImCircuit,
+    s: f64,
+    v: f64,
+    params: &[ImParam],
+    di: &mut [f64],
+    dp: &mut [f64],
+) -> (f64, f64) {
+    let mut dz = [C64::new(0.0, 0.0); MAX_PARAMS];
+    let n = params.len().min(MAX_PARAMS);
+    let z = c.impedance_gradient_into(s, &params[..n], &mut dz[..n]);
+    let zn = z.norm();
+    let y = z.inv();
+    let z2inv = y * y;
+    for k in 0..n {
+        di[k] = -v * (z.conj() * dz[k]).re / (zn * zn * zn);
+        dp[k] = -3.0 * v * v * (dz[k] * z2inv).re;
+    }
+    (v / zn, 3.0 * v * v * y.re)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::RotorCage;
+    use rand::rngs::StdRng;
+    use rand::SeedableRng;
+
+    #[test]
+    fn grid_is_dense_near_zero_and_ends_at_one() {
+        let g = slip_grid(50, 0.002);
+        assert_eq!(g.len(), 50);
+        assert_eq!(g[0], 0.002);
+        assert!((g[49] - 1.0).abs() < 1e-15);
+        assert!(g[1] - g[0] < g[49] - g[48]);
+    }
+
+    #[test]
+    fn simulated_sweep_maps_back_to_phase_values() {
+        let c = ImCircuit {
+            rs: 1.0,
+            xs: 2.0,
+            xm: 60.0,
+            rfe: Some(800.0),
+            rotor: RotorCage::Single { rr: 1.2, xr: 2.5 },
+        };
+        let supply = ImSupply {
+            line_voltage: 400.0,
+            frequency: 50.0,
+            connection: Connection::Star,
+            pole_pairs: 2,
+        };
+        let mut rng = StdRng::seed_from_u64(1);
+        let sw = SlipSweep::simulate(
+            &c,
+            &supply,
+            &slip_grid(10, 0.01),
+            &SweepNoise::default(),
+            0,
+            &mut rng,
+        );
+        sw.validate().unwrap();
+        let d = sw.phase_data();
+        for k in 0..d.len() {
+            let (i, p) = predict(&c, d.slip[k], d.voltage[k]);
+            assert!((i - d.current[k]).abs() < 1e-9 && (p - d.power[k]).abs() < 1e-6);
+        }
+        let mut bad = sw.clone();
+        bad.points[3].slip = 1.5;
+        assert!(bad.validate().unwrap_err().contains("operating point 3"));
+    }
+
+    #[test]
+    fn prediction_gradient_matches_finite_differences() {
+        let c = ImCircuit {
+            rs: 0.00778,
+            xs: 0.123,
+            xm: 4.3,
+            rfe: None,
+            rotor: RotorCage::Double {
+                rr1: 0.0693,
+                rr2: 0.0132,
+                xr1: 0.00843,
+                xr2: 0.1162,
+            },
+        };
+        let params = c.model().params();
+        for s in [0.01, 0.3, 1.0] {
+            let (i, p, di, dp) = predict_gradient(&c, s, 1.0, params);
+            let (i0, p0) = predict(&c, s, 1.0);
+            assert!((i - i0).abs() < 1e-12 * i0 && (p - p0).abs() < 1e-12 * p0);
+            for (k, &q) in params.iter().enumerate() {
+                let v = c.get(q).unwrap();
+                let h = 1e-6 * v;
+                let (mut a, mut b) = (c, c);
+                a.set(q, v + h).unwrap();
+                b.set(q, v - h).unwrap();
+                let (ia, pa) = predict(&a, s, 1.0);
+                let (ib, pb) = predict(&b, s, 1.0);
+                // Round-off of the difference is about 1e-16·I/h.
+                assert!(((ia - ib) / (2.0 * h) - di[k]).abs() < 1e-6 * di[k].abs() + 1e-8 * i / v);
+                assert!(((pa - pb) / (2.0 * h) - dp[k]).abs() < 1e-6 * dp[k].abs() + 1e-8 * p / v);
+            }
+        }
+    }
+}

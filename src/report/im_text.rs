@@ -1,0 +1,105 @@
+//! The text report of an induction-machine identification: each method's
+//! parameters in Ω and per unit with their intervals, what the data do not
+//! determine, the warnings.
+
+use std::fmt::Write;
+
+use crate::identify::{ImIdentification, ParamSource};
+
+/// The report as text for a person.
+pub fn render_im_text(id: &ImIdentification) -> String {
+    let mut out = String::new();
+    let n = id.sweep.points.len();
+    let mut segs: Vec<u32> = id.sweep.points.iter().map(|p| p.segment).collect();
+    segs.sort_unstable();
+    segs.dedup();
+    let _ = writeln!(
+        out,
+        "induction machine, {n} operating points in {} segment(s), {} connection",
+        segs.len(),
+        id.sweep.connection
+    );
+    let zb = id.base.map(|b| b.impedance());
+    if let Some(b) = &id.base {
+        let _ = writeln!(
+            out,
+            "per-unit base: {:.2} V, {:.3} A per phase, Z_base = {:.4} ohm",
+            b.phase_voltage,
+            b.phase_current,
+            b.impedance()
+        );
+    }
+    let pu = |v: f64| zb.map_or(String::new(), |z| format!("{:>10.5} p.u.", v / z));
+    for (key, method) in &id.report.methods {
+        let best = if id.report.best.as_deref() == Some(key) {
+            "  (best)"
+        } else {
+            ""
+        };
+        let _ = writeln!(out, "\n{key}{best}");
+        match &method.params {
+            Some(params) if method.applies => {
+                for (name, p) in params {
+                    let ci = p.ci95.map_or("no interval".to_string(), |[lo, hi]| {
+                        format!("95 % [{lo:.4}, {hi:.4}]")
+                    });
+                    let source = id
+                        .lm
+                        .as_ref()
+                        .filter(|_| key == "lm")
+                        .and_then(|f| f.params.iter().find(|q| q.param.key() == name))
+                        .map_or("", |q| {
+                            if q.source == ParamSource::Convention {
+                                "  by convention"
+                            } else {
+                                ""
+                            }
+                        });
+                    let _ = writeln!(
+                        out,
+                        "  {name:<4} {:>12.5} ohm {} {ci}{source}",
+                        p.value,
+                        pu(p.value)
+                    );
+                }
+                if let Some(v) = method.validation_nrmse {
+                    let _ = writeln!(out, "  held-out NRMSE {v:.4}");
+                }
+            }
+            _ => {
+                let _ = writeln!(
+                    out,
+                    "  does not apply: {}",
+                    method.reason.as_deref().unwrap_or("no reason given")
+                );
+            }
+        }
+    }
+    if let Some(f) = &id.lm {
+        let _ = writeln!(
+            out,
+            "\nlm fit: rms relative residual {:.3} % (current){}; {} of {} starts reached the best cost",
+            100.0 * f.current_rms_relative,
+            f.power_rms_relative.map_or(String::new(), |p| format!(", {:.3} % (power)", 100.0 * p)),
+            f.starts.1,
+            f.starts.0
+        );
+        if !f.free.is_empty() {
+            let names: Vec<&str> = f.free.iter().map(|p| p.key()).collect();
+            let _ = writeln!(out, "correlation ({}):", names.join(", "));
+            for (i, name) in names.iter().enumerate() {
+                let row: Vec<String> = (0..f.free.len())
+                    .map(|j| format!("{:+.2}", f.correlation[(i, j)]))
+                    .collect();
+                let _ = writeln!(out, "  {name:<4} {}", row.join(" "));
+            }
+        }
+    }
+    if !id.report.warnings.is_empty() {
+        let _ = writeln!(out, "\nwarnings:");
+        for w in &id.report.warnings {
+            let _ = writeln!(out, "  - {w}");
+        }
+    }
+    out
+}
