@@ -3,11 +3,13 @@
 //! Map of the crate (data flows top to bottom):
 //!
 //! - [`config`]: rig and test configuration (TOML), validated.
-//! - [`model`]: DC machine equations, effects, exact simulation.
+//! - [`model`]: DC machine equations, effects, exact simulation; the
+//!   induction machine's steady-state equivalent circuits.
 //! - [`bench`]: test plans, settle detection, limits and safe state, the
 //!   simulated rig behind the `motorbench-drivers` traits.
 //! - [`record`]: MCAP recorder and reader per the data contract, CSV import.
-//! - [`identify`]: parameter identification from a [`record::Record`].
+//! - [`identify`]: parameter identification from a [`record::Record`]
+//!   (DC; induction machine: the seed paper's recursive estimator and LM).
 //! - [`report`]: JSON, text and SVG output.
 //!
 //! The binary (`src/main.rs`) is a thin CLI over these modules.

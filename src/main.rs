@@ -13,8 +13,11 @@ use std::time::Duration;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
-use motorbench::bench::{build_rig, commission, probe, CommissionOptions, Outcome, Progress};
-use motorbench::config::load_or_default;
+use motorbench::bench::{
+    build_rig, commission, commission_im, im_model_of_config, is_im_sweep_config, probe,
+    CommissionOptions, ImRunConfig, Outcome, Progress,
+};
+use motorbench::config::{load_or_default, Backend};
 use motorbench::identify::{identify_dc, identify_im, Identification, ImIdentification};
 use motorbench::model::{Connection, ImModel};
 use motorbench::record::{read_dc_csv, read_im_csv, read_mcap, Record, SegmentKind, TestMeta};
@@ -269,6 +272,13 @@ async fn run(
     json: bool,
     quiet: bool,
 ) -> Result<(), Failure> {
+    if let Some(path) = &config {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| bad_input(format!("{}: {e}", path.display())))?;
+        if is_im_sweep_config(&text) {
+            return run_im(path, out, json, quiet).await;
+        }
+    }
     let cfg = load_or_default(config.as_ref()).map_err(bad_input)?;
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     tokio::spawn(async move {
@@ -308,6 +318,46 @@ async fn run(
         });
     }
     identified_or_code(&done.identification)
+}
+
+/// `run` with an induction-machine slip-sweep configuration.
+async fn run_im(path: &Path, out: PathBuf, json: bool, quiet: bool) -> Result<(), Failure> {
+    let cfg = ImRunConfig::load(path).map_err(bad_input)?;
+    let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    tokio::spawn(async move {
+        wait_for_stop_signal().await;
+        let _ = stop_tx.send(true);
+    });
+    if !json && !quiet {
+        eprintln!(
+            "motorbench: {} slip sweep on the simulated rig ({})",
+            cfg.motor_id, cfg.source
+        );
+    }
+    let opts = CommissionOptions {
+        out_dir: out,
+        realtime: false,
+    };
+    let done = commission_im(&cfg, &opts, &stop_rx)
+        .await
+        .map_err(runtime)?;
+    let identified = print_im(&done.identification, json, None);
+    if !json {
+        println!(
+            "\nrecord: {} ({} messages)",
+            done.mcap_path.display(),
+            done.stats.messages
+        );
+        println!("report: {}", done.report_path.display());
+        println!("plot:   {}", done.svg_path.display());
+    }
+    if let Outcome::Aborted { reason } = &done.outcome {
+        return Err(Failure {
+            code: 3,
+            message: format!("test aborted: {reason}"),
+        });
+    }
+    identified
 }
 
 async fn wait_for_stop_signal() {
@@ -392,17 +442,36 @@ fn replay(log: &Path, json: bool, svg: Option<&Path>, check: bool) -> Result<(),
         );
     }
     if !record.operating_points.is_empty() {
-        // An induction-machine record: the default circuit, the nameplate's
-        // connection.
-        let id = identify_im(&record, None, ImModel::SingleFe);
-        return print_im(&id, json, svg);
+        // An induction-machine record: the circuit its configuration named
+        // (else single-fe), the nameplate's connection.
+        let model = record
+            .meta
+            .as_ref()
+            .and_then(|m| im_model_of_config(&m.config))
+            .unwrap_or(ImModel::SingleFe);
+        let id = identify_im(&record, None, model);
+        let identified = print_im(&id, json, svg);
+        let now = serde_json::to_value(&id.report).expect("a report always serialises");
+        compare_with_recorded(&record, &now, check)?;
+        return identified;
     }
     let id = identify_dc(&record);
     print_identification(&id, json, None);
     write_svg(svg, &record, &id)?;
     let now = serde_json::to_value(&id.report).expect("a report always serialises");
+    compare_with_recorded(&record, &now, check)?;
+    identified_or_code(&id)
+}
+
+/// Say whether the replayed report equals the recorded `/bench/result`;
+/// with `check`, a difference is exit code 5.
+fn compare_with_recorded(
+    record: &Record,
+    now: &serde_json::Value,
+    check: bool,
+) -> Result<(), Failure> {
     match &record.recorded_result {
-        Some(recorded) if *recorded == now => {
+        Some(recorded) if recorded == now => {
             eprintln!("replay: identical to the recorded /bench/result")
         }
         Some(_) => {
@@ -416,7 +485,7 @@ fn replay(log: &Path, json: bool, svg: Option<&Path>, check: bool) -> Result<(),
         }
         None => eprintln!("replay: the record holds no /bench/result to compare with"),
     }
-    identified_or_code(&id)
+    Ok(())
 }
 
 fn load_record(

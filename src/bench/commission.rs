@@ -77,7 +77,7 @@ pub enum CommissionError {
 }
 
 /// A file stem from the motor id and the start time, unique in `dir`.
-fn unique_stem(dir: &Path, motor_id: &str, started: &str) -> String {
+pub(super) fn unique_stem(dir: &Path, motor_id: &str, started: &str) -> String {
     let id: String = motor_id
         .chars()
         .map(|c| {

@@ -4,6 +4,8 @@
 
 mod commission;
 mod encoder;
+mod im_commission;
+mod im_config;
 mod im_sweep;
 mod limits;
 mod plan;
@@ -19,6 +21,8 @@ mod sim_rig;
 
 pub use commission::{commission, CommissionError, CommissionOptions, Commissioned};
 pub use encoder::SpeedFromEncoder;
+pub use im_commission::{commission_im, ImCommissioned};
+pub use im_config::{im_model_of_config, is_im_sweep_config, ImRunConfig};
 pub use im_sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
 pub use limits::{check_limits, Trip};
 pub use plan::{plan_steps, PlanStep};
