@@ -209,7 +209,7 @@ impl Bench<'_> {
                     self.stale.as_millis()
                 ))))
             }
-            Ok(Err(e)) => return Ok(Err(Stop::Fault(format!("sensor fault: {e}")))),
+            Ok(Err(e)) => return Ok(Err(Stop::Fault(sensor_stop_reason(&e)))),
             Ok(Ok(b)) => b,
         };
         self.t_ns = batch.t_ns;
@@ -390,6 +390,18 @@ impl Bench<'_> {
             self.marker(index, step, SegmentPhase::End).await?;
         }
         Ok(Outcome::Aborted { reason: message })
+    }
+}
+
+/// How a sensor-stream error reads in the abort event: a stop by the
+/// safety supervisor (see [`super::supervise`]) is named as such, any
+/// other error is a sensor fault.
+fn sensor_stop_reason(e: &DriverError) -> String {
+    match e {
+        DriverError::Device { device, reason } if device == super::SUPERVISOR_ID => {
+            format!("stopped by the safety supervisor: {reason}")
+        }
+        _ => format!("sensor fault: {e}"),
     }
 }
 
