@@ -9,6 +9,9 @@
 //! - [`record`]: MCAP recorder and reader per the data contract, CSV import.
 //! - [`identify`]: parameter identification from a [`record::Record`].
 //! - [`report`]: JSON, text and SVG output.
+//! - [`serve`]: the daemon (`motorbench serve`): control API, one test at
+//!   a time per rig under the safety supervisor, records index, systemd;
+//!   and its client (`motorbench ctl`).
 //!
 //! The binary (`src/main.rs`) is a thin CLI over these modules.
 
@@ -18,3 +21,4 @@ pub mod identify;
 pub mod model;
 pub mod record;
 pub mod report;
+pub mod serve;

@@ -4,7 +4,8 @@
 //! (usage, configuration, CSV or MCAP); 3 the test was aborted (the rig
 //! was put in its safe state; the record is still written); 4 no
 //! identification method applied to the data; 5 `replay --check` found a
-//! result that differs from the recorded one.
+//! result that differs from the recorded one. `serve` and `ctl` document
+//! their own (see `docs/daemon.md`).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -83,6 +84,11 @@ enum Command {
         #[arg(long)]
         svg: Option<PathBuf>,
     },
+    /// Run the daemon: control API, one test at a time per rig, safety
+    /// supervisor, records index (SIGTERM stops tests safely and exits 0).
+    Serve(motorbench::serve::cli::ServeArgs),
+    /// Talk to a running daemon (status, start, follow, abort, records, fetch).
+    Ctl(motorbench::serve::cli::CtlArgs),
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -368,6 +374,20 @@ fn identify(
     identified_or_code(&id)
 }
 
+/// Run `future` on a multi-threaded runtime; its value is the exit code.
+fn block_on(future: impl std::future::Future<Output = u8>) -> ExitCode {
+    match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => ExitCode::from(rt.block_on(future)),
+        Err(e) => {
+            eprintln!("motorbench: {e}");
+            ExitCode::from(1)
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -401,6 +421,13 @@ fn main() -> ExitCode {
             json,
             svg.as_deref(),
         ),
+        Command::Serve(args) => {
+            return block_on(motorbench::serve::cli::run_serve(
+                args,
+                wait_for_stop_signal(),
+            ))
+        }
+        Command::Ctl(args) => return block_on(motorbench::serve::cli::run_ctl(args)),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
