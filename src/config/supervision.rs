@@ -172,3 +172,23 @@ impl RawSupervisor {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::config::Config;
+
+    /// `config/sim-dc-daemon.toml` writes the defaults out: they must be
+    /// the defaults.
+    #[test]
+    fn the_documented_defaults_are_the_defaults() {
+        let written = Config::parse(
+            "sim-dc-daemon.toml",
+            include_str!("../../config/sim-dc-daemon.toml"),
+        )
+        .unwrap();
+        let default = Config::embedded_default();
+        assert_eq!(written.supervision, default.supervision);
+        assert_eq!(written.retention, default.retention);
+        assert_eq!(written.limits, default.limits);
+    }
+}
