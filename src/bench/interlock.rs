@@ -434,6 +434,11 @@ impl Task {
                     }
                     Some(Command::Finish) | None => break,
                 },
+                // Before the read: when the sensors deliver in a burst
+                // (catching up after a stall) the heartbeat still goes out.
+                _ = tick.tick() => {
+                    self.pet().await;
+                }
                 (sensors, result) = &mut read, if reading => {
                     let read_after_safe = self.read_after_safe;
                     match result {
@@ -484,9 +489,6 @@ impl Task {
                     read = read_next(sensors, self.timing.bus_loss);
                     self.read_after_safe = self.shared.stopped.load(Ordering::SeqCst);
                 },
-                _ = tick.tick() => {
-                    self.pet().await;
-                }
             }
             self.shared.touch();
         }
