@@ -14,6 +14,15 @@ use crate::model::DcParams;
 mod modbus;
 
 pub use modbus::{LinkSpec, ModbusDeviceLink, ModbusRig, SimulatedTransport};
+mod retention;
+mod supervision;
+
+pub use retention::{Retention, DEFAULT_MAX_TOTAL_GIB};
+pub use supervision::{
+    Supervision, ThermalModel, DEFAULT_AMBIENT_C, DEFAULT_BUS_LOSS_TIMEOUT_S,
+    DEFAULT_MAX_WINDING_C, DEFAULT_RATED_RISE_K, DEFAULT_STALE_TIMEOUT_S,
+    DEFAULT_THERMAL_TIME_CONSTANT_S,
+};
 
 /// The embedded default configuration: the simulated rig with the seed
 /// paper's Table 4 motor.
@@ -65,6 +74,10 @@ struct RawConfig {
     rig: RawRig,
     limits: Limits,
     test: RawTest,
+    #[serde(default)]
+    supervisor: supervision::RawSupervisor,
+    #[serde(default)]
+    records: retention::RawRetention,
 }
 
 #[derive(Debug, Deserialize)]
@@ -111,6 +124,15 @@ pub struct SimPowerStageConfig {
     /// rating), A. The bench sets a lower limit at the start of a test.
     #[serde(rename = "current_limit_A")]
     pub current_limit: f64,
+    /// Keep-alive timeout of the supply's heartbeat, s: once armed by a
+    /// first heartbeat, the supply goes to its safe state by itself when
+    /// not petted within this time.
+    #[serde(rename = "heartbeat_timeout_s", default = "default_heartbeat_timeout")]
+    pub heartbeat_timeout: f64,
+}
+
+fn default_heartbeat_timeout() -> f64 {
+    0.25
 }
 
 /// The simulated sensors: noise, ADC resolution, encoder.
@@ -276,6 +298,10 @@ pub struct Config {
     pub plan: Plan,
     /// Settle detection.
     pub settle: Settle,
+    /// What the safety supervisor enforces beyond `limits`.
+    pub supervision: Supervision,
+    /// How long the daemon keeps this rig's records.
+    pub retention: Retention,
 }
 
 impl Config {
@@ -336,6 +362,10 @@ impl Config {
             positive(
                 "rig.simulated.power_stage.current_limit_A",
                 ps.current_limit,
+            )?;
+            positive(
+                "rig.simulated.power_stage.heartbeat_timeout_s",
+                ps.heartbeat_timeout,
             )?;
             let s = &sim.sensors;
             positive(
@@ -508,6 +538,9 @@ impl Config {
             ));
         }
 
+        let supervision = raw.supervisor.validate(source, &raw.limits, &nameplate)?;
+        let retention = raw.records.validate(source)?;
+
         Ok(Config {
             source: source.to_string(),
             text: text.to_string(),
@@ -518,6 +551,8 @@ impl Config {
             limits: raw.limits,
             plan,
             settle: st,
+            supervision,
+            retention,
         })
     }
 }
@@ -622,6 +657,54 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("rig.backend"), "{err}");
+    }
+
+    #[test]
+    fn supervisor_and_records_sections_default_and_validate() {
+        let c = Config::embedded_default();
+        assert_eq!(c.supervision.max_power, 280.0 * 6.0);
+        assert_eq!(
+            c.supervision.thermal.rated_current, 1.1,
+            "from the nameplate"
+        );
+        assert_eq!(c.supervision.stale_timeout, DEFAULT_STALE_TIMEOUT_S);
+        assert_eq!(c.supervision.estop_channel, None);
+        assert_eq!(c.retention.max_total_bytes, 20 << 30);
+        assert_eq!(c.retention.max_age_s, None);
+
+        let extra = "[supervisor]\nmax_power_W = 900\nestop_channel = \"emergency_stop\"\n\
+            [supervisor.thermal]\ntime_constant_s = 60\nmax_winding_C = 100\n\
+            [records]\nmax_total_GiB = 0.5\nmax_age_days = 30\n";
+        let c = Config::parse("rig.toml", &format!("{DEFAULT_CONFIG}\n{extra}")).unwrap();
+        assert_eq!(c.supervision.max_power, 900.0);
+        assert_eq!(
+            c.supervision.estop_channel.as_deref(),
+            Some("emergency_stop")
+        );
+        assert_eq!(c.supervision.thermal.time_constant, 60.0);
+        assert_eq!(c.supervision.thermal.max_winding, 100.0);
+        assert_eq!(c.retention.max_total_bytes, 1 << 29);
+        assert_eq!(c.retention.max_age_s, Some(30.0 * 86_400.0));
+
+        let bad = |extra: &str| {
+            Config::parse("rig.toml", &format!("{DEFAULT_CONFIG}\n{extra}"))
+                .unwrap_err()
+                .to_string()
+        };
+        let e = bad("[supervisor]\nmax_power_kW = 1\n");
+        assert!(e.contains("rig.toml:") && e.contains("max_power_kW"), "{e}");
+        let e = bad("[supervisor.thermal]\nmax_winding_C = 20\n");
+        assert!(e.contains("supervisor.thermal.max_winding_C"), "{e}");
+        let e = bad("[supervisor]\nbus_loss_timeout_s = 0\n");
+        assert!(e.contains("supervisor.bus_loss_timeout_s"), "{e}");
+        let e = bad("[records]\nmax_age_days = -1\n");
+        assert!(e.contains("records.max_age_days"), "{e}");
+        let e = bad("[records]\nkeep = 3\n");
+        assert!(e.contains("keep"), "{e}");
+        // Without a nameplate current the rated current must be given.
+        let text = DEFAULT_CONFIG.replace("current_A = 1.1\n", "");
+        let e = Config::parse("rig.toml", &text).unwrap_err().to_string();
+        assert!(e.contains("supervisor.thermal.rated_current_A"), "{e}");
     }
 
     #[test]

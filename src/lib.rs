@@ -11,6 +11,9 @@
 //! - [`identify`]: parameter identification from a [`record::Record`]
 //!   (DC; induction machine: the seed paper's recursive estimator and LM).
 //! - [`report`]: JSON, text and SVG output.
+//! - [`serve`]: the daemon (`motorbench serve`): control API, one test at
+//!   a time per rig under the safety supervisor, records index, systemd;
+//!   and its client (`motorbench ctl`).
 //!
 //! The binary (`src/main.rs`) is a thin CLI over these modules.
 
@@ -20,3 +23,4 @@ pub mod identify;
 pub mod model;
 pub mod record;
 pub mod report;
+pub mod serve;

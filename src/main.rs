@@ -4,7 +4,8 @@
 //! (usage, configuration, CSV or MCAP); 3 the test was aborted (the rig
 //! was put in its safe state; the record is still written); 4 no
 //! identification method applied to the data; 5 `replay --check` found a
-//! result that differs from the recorded one.
+//! result that differs from the recorded one. `serve` and `ctl` document
+//! their own (see `docs/daemon.md`).
 
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -17,7 +18,7 @@ use motorbench::bench::{
     build_rig, commission, commission_im, im_model_of_config, is_im_sweep_config, probe,
     CommissionOptions, ImRunConfig, Outcome, Progress,
 };
-use motorbench::config::{load_or_default, Backend};
+use motorbench::config::load_or_default;
 use motorbench::identify::{identify_dc, identify_im, Identification, ImIdentification};
 use motorbench::model::{Connection, ImModel};
 use motorbench::record::{read_dc_csv, read_im_csv, read_mcap, Record, SegmentKind, TestMeta};
@@ -111,6 +112,11 @@ enum Command {
         #[arg(long)]
         frequency: Option<f64>,
     },
+    /// Run the daemon: control API, one test at a time per rig, safety
+    /// supervisor, records index (SIGTERM stops tests safely and exits 0).
+    Serve(motorbench::serve::cli::ServeArgs),
+    /// Talk to a running daemon (status, start, follow, abort, records, fetch).
+    Ctl(motorbench::serve::cli::CtlArgs),
 }
 
 /// Winding connection of an induction machine.
@@ -616,6 +622,20 @@ fn identify(
     identified_or_code(&id)
 }
 
+/// Run `future` on a multi-threaded runtime; its value is the exit code.
+fn block_on(future: impl std::future::Future<Output = u8>) -> ExitCode {
+    match tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+    {
+        Ok(rt) => ExitCode::from(rt.block_on(future)),
+        Err(e) => {
+            eprintln!("motorbench: {e}");
+            ExitCode::from(1)
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
@@ -662,6 +682,13 @@ fn main() -> ExitCode {
                 frequency,
             },
         ),
+        Command::Serve(args) => {
+            return block_on(motorbench::serve::cli::run_serve(
+                args,
+                wait_for_stop_signal(),
+            ))
+        }
+        Command::Ctl(args) => return block_on(motorbench::serve::cli::run_ctl(args)),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

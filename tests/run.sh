@@ -10,6 +10,12 @@ if ! command -v python3 >/dev/null 2>&1 || ! python3 -m pip --version >/dev/null
     $SUDO apt-get update -qq
     $SUDO apt-get install -y -qq python3 python3-pip
 fi
+if ! command -v systemd-analyze >/dev/null 2>&1; then
+    echo "== installing systemd's tools (systemd-analyze verifies the unit)"
+    if [ "$(id -u)" -eq 0 ]; then SUDO=""; else SUDO="sudo"; fi
+    $SUDO apt-get update -qq
+    $SUDO apt-get install -y -qq systemd
+fi
 echo "== installing the Python test peers and readers (tests/python/requirements.txt)"
 python3 -m pip install --quiet --disable-pip-version-check --root-user-action=ignore \
     -r tests/python/requirements.txt

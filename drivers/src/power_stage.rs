@@ -1,5 +1,7 @@
 //! The [`PowerStage`] trait: anything that drives the machine under test.
 
+use std::time::Duration;
+
 use async_trait::async_trait;
 
 use crate::DriverError;
@@ -42,5 +44,60 @@ pub trait PowerStage: Send {
             device: self.id().to_string(),
             what: "a current limit",
         })
+    }
+
+    /// The keep-alive timeout of the stage's heartbeat, when it has one:
+    /// once armed by a first [`PowerStage::heartbeat`], a stage that is not
+    /// petted again within this time goes to its safe state by itself, so a
+    /// dead or hung controller leaves a safe rig. `None` (the default): no
+    /// heartbeat.
+    fn heartbeat_timeout(&self) -> Option<Duration> {
+        None
+    }
+
+    /// Pet the heartbeat (arming it on the first call). Call it only while
+    /// the controller is healthy. Optional.
+    async fn heartbeat(&mut self) -> Result<(), DriverError> {
+        Err(DriverError::Unsupported {
+            device: self.id().to_string(),
+            what: "a heartbeat",
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A stage with only the required operations.
+    struct Plain;
+
+    #[async_trait]
+    impl PowerStage for Plain {
+        fn id(&self) -> &str {
+            "plain"
+        }
+        fn capabilities(&self) -> StageCapabilities {
+            StageCapabilities::default()
+        }
+        async fn set_setpoint(&mut self, _: f64) -> Result<(), DriverError> {
+            Ok(())
+        }
+        async fn set_output_enabled(&mut self, _: bool) -> Result<(), DriverError> {
+            Ok(())
+        }
+        async fn safe_state(&mut self) -> Result<(), DriverError> {
+            Ok(())
+        }
+    }
+
+    #[tokio::test]
+    async fn optional_capabilities_default_to_unsupported() {
+        let mut stage = Plain;
+        assert_eq!(stage.heartbeat_timeout(), None);
+        let e = stage.heartbeat().await.unwrap_err();
+        assert_eq!(e.to_string(), "plain does not support a heartbeat");
+        let e = stage.set_current_limit(1.0).await.unwrap_err();
+        assert!(matches!(e, DriverError::Unsupported { .. }));
     }
 }

@@ -259,7 +259,8 @@ impl Sweep<'_> {
         self.dyno.set_setpoint(target).await?;
         self.command(self.ix.dyno_rec, target).await?;
         // Line current, input power and speed.
-        let mut detector = SettleDetector::new(self.plan.settle_window, self.plan.settle_tolerance, 3);
+        let mut detector =
+            SettleDetector::new(self.plan.settle_window, self.plan.settle_tolerance, 3);
         let start = self.t_ns;
         let mut recent: Vec<Reading> = Vec::new();
         let mut hot = false;

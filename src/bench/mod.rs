@@ -1,12 +1,15 @@
 //! The bench: test plans, settle detection, limits and the safe state, the
 //! simulated rigs (DC; induction machine with VFD and dynamometer, with the
-//! `im_slip_sweep` plan), and the sequencing that ties them to the recorder.
+//! `im_slip_sweep` plan), the sequencing that ties them to the recorder,
+//! and the safety supervisor that watches a running test independently of
+//! the sequencing.
 
 mod commission;
 mod encoder;
 mod im_commission;
 mod im_config;
 mod im_sweep;
+mod interlock;
 mod limits;
 mod plan;
 mod probe;
@@ -18,12 +21,18 @@ mod served;
 mod settle;
 mod sim_im_rig;
 mod sim_rig;
+mod supervisor;
+mod thermal;
 
 pub use commission::{commission, CommissionError, CommissionOptions, Commissioned};
 pub use encoder::SpeedFromEncoder;
 pub use im_commission::{commission_im, ImCommissioned};
 pub use im_config::{im_model_of_config, is_im_sweep_config, ImRunConfig};
 pub use im_sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
+pub use interlock::{
+    supervise, InterlockedStage, StopReport, Supervised, SupervisedSensors, SupervisorHandle,
+    SupervisorSummary, SupervisorTiming,
+};
 pub use limits::{check_limits, Trip};
 pub use plan::{plan_steps, PlanStep};
 pub use probe::{probe, ProbeLine, ProbeReport, PROBE_CURRENT_FRACTION, PROBE_SETPOINT_FRACTION};
@@ -37,3 +46,5 @@ pub use served::{ServeError, ServedLink, ServedRig};
 pub use settle::SettleDetector;
 pub use sim_im_rig::{sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd, COPPER_ALPHA};
 pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};
+pub use supervisor::{Readings, SafetyMonitor, StopCause, SUPERVISOR_ID};
+pub use thermal::WindingTemperature;

@@ -76,14 +76,7 @@ impl RecordSink {
 
     /// Record one entry (waits when the recorder's queue is full).
     pub async fn push(&mut self, entry: Entry) -> Result<(), RecordError> {
-        let t_ns = match &entry {
-            Entry::Samples { t_ns, .. }
-            | Entry::Segment { t_ns, .. }
-            | Entry::Event { t_ns, .. }
-            | Entry::OperatingPoint { t_ns, .. }
-            | Entry::Result { t_ns, .. } => *t_ns,
-        };
-        self.last_t_ns = self.last_t_ns.max(t_ns);
+        self.last_t_ns = self.last_t_ns.max(entry.t_ns());
         self.builder.push(&entry);
         if let Some(r) = &self.recorder {
             r.send(entry).await?;
@@ -211,7 +204,7 @@ impl Bench<'_> {
                     self.stale.as_millis()
                 ))))
             }
-            Ok(Err(e)) => return Ok(Err(Stop::Fault(format!("sensor fault: {e}")))),
+            Ok(Err(e)) => return Ok(Err(Stop::Fault(sensor_stop_reason(&e)))),
             Ok(Ok(b)) => b,
         };
         self.t_ns = batch.t_ns;
@@ -407,6 +400,18 @@ impl Bench<'_> {
         }
         self.sampling_summary().await?;
         Ok(Outcome::Aborted { reason: message })
+    }
+}
+
+/// How a sensor-stream error reads in the abort event: a stop by the
+/// safety supervisor (see [`super::supervise`]) is named as such, any
+/// other error is a sensor fault.
+fn sensor_stop_reason(e: &DriverError) -> String {
+    match e {
+        DriverError::Device { device, reason } if device == super::SUPERVISOR_ID => {
+            format!("stopped by the safety supervisor: {reason}")
+        }
+        _ => format!("sensor fault: {e}"),
     }
 }
 

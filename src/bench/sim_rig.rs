@@ -45,11 +45,28 @@ struct Plant {
     max_voltage: f64,
     slew_per_step: f64,
     step: u64,
+    /// Heartbeat timeout, in plant steps.
+    heartbeat_timeout_steps: u64,
+    /// Step of the last heartbeat; `None` until armed.
+    last_heartbeat: Option<u64>,
+    /// The heartbeat timed out and the supply made itself safe; the output
+    /// stays off until the next heartbeat.
+    heartbeat_lost: bool,
 }
 
 impl Plant {
     /// Advance one sample period; the terminal voltage over the period.
     fn advance(&mut self) -> f64 {
+        if let Some(last) = self.last_heartbeat {
+            if self.step - last > self.heartbeat_timeout_steps {
+                // Nobody petted the heartbeat: safe state, by itself.
+                self.setpoint = 0.0;
+                self.output = 0.0;
+                self.enabled = false;
+                self.heartbeat_lost = true;
+                self.last_heartbeat = None;
+            }
+        }
         let target = if self.enabled { self.setpoint } else { 0.0 };
         self.output += (target - self.output).clamp(-self.slew_per_step, self.slew_per_step);
         self.state = if self.enabled {
@@ -143,6 +160,9 @@ pub fn sim_rig(
         max_voltage: cfg.power_stage.max_voltage,
         slew_per_step: cfg.power_stage.slew * dt,
         step: 0,
+        heartbeat_timeout_steps: (cfg.power_stage.heartbeat_timeout * sample_rate_hz).ceil() as u64,
+        last_heartbeat: None,
+        heartbeat_lost: false,
     }));
     let s = &cfg.sensors;
     let info = |quantity: &str, unit: &str| ChannelInfo {
@@ -178,6 +198,12 @@ impl SimPowerStage {
     pub fn setpoint(&self) -> f64 {
         lock(&self.plant).setpoint
     }
+
+    /// True when the heartbeat timed out and the supply made itself safe
+    /// (cleared by the next heartbeat).
+    pub fn heartbeat_lost(&self) -> bool {
+        lock(&self.plant).heartbeat_lost
+    }
 }
 
 #[async_trait]
@@ -207,6 +233,12 @@ impl PowerStage for SimPowerStage {
 
     async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
         let mut p = lock(&self.plant);
+        if enabled && p.heartbeat_lost {
+            return Err(DriverError::Device {
+                device: STAGE_ID.into(),
+                reason: "heartbeat lost: the output stays off until the next heartbeat".into(),
+            });
+        }
         if !enabled {
             p.output = 0.0;
         }
@@ -232,6 +264,23 @@ impl PowerStage for SimPowerStage {
         let mut p = lock(&self.plant);
         // The supply cannot limit above its own rating.
         p.current_limit = amperes.min(p.current_rating);
+        Ok(())
+    }
+
+    fn heartbeat_timeout(&self) -> Option<Duration> {
+        let p = lock(&self.plant);
+        let dt = p.motor.dt();
+        Some(Duration::from_secs_f64(
+            p.heartbeat_timeout_steps as f64 * dt,
+        ))
+    }
+
+    /// Arms the heartbeat (in plant time: the supply counts sample
+    /// periods) and clears a lost heartbeat.
+    async fn heartbeat(&mut self) -> Result<(), DriverError> {
+        let mut p = lock(&self.plant);
+        p.last_heartbeat = Some(p.step);
+        p.heartbeat_lost = false;
         Ok(())
     }
 }
@@ -304,7 +353,11 @@ mod tests {
 
     #[tokio::test(start_paused = true)]
     async fn realtime_mode_paces_batches_at_the_wall_clock() {
-        let sim = Config::embedded_default().backend.simulated().cloned().unwrap();
+        let sim = Config::embedded_default()
+            .backend
+            .simulated()
+            .cloned()
+            .unwrap();
         let (_, mut fast) = sim_rig(&sim, 2000.0, false).unwrap();
         let start = tokio::time::Instant::now();
         for _ in 0..2000 {
@@ -360,6 +413,48 @@ mod tests {
         stage.safe_state().await.unwrap();
         assert!(!stage.output_enabled());
         assert_eq!(stage.setpoint(), 0.0);
+    }
+
+    #[tokio::test]
+    async fn unpetted_heartbeat_makes_the_supply_safe_by_itself() {
+        let (mut stage, mut sensors) = rig();
+        // 0.25 s at 2 kHz: 500 steps.
+        let timeout = stage.heartbeat_timeout().unwrap().as_secs_f64();
+        assert!((timeout - 0.25).abs() < 1e-9, "{timeout}");
+        stage.set_setpoint(60.0).await.unwrap();
+        stage.set_output_enabled(true).await.unwrap();
+        // Not armed yet: no heartbeat needed (the CLI's `run` never pets).
+        for _ in 0..2000 {
+            sensors.next_batch().await.unwrap();
+        }
+        assert!(stage.output_enabled());
+        // Armed and petted every 100 steps: stays on.
+        for k in 0..2000 {
+            if k % 100 == 0 {
+                stage.heartbeat().await.unwrap();
+            }
+            sensors.next_batch().await.unwrap();
+        }
+        assert!(stage.output_enabled() && !stage.heartbeat_lost());
+        // Petting stops (a dead controller): safe after the timeout.
+        let mut on = 0;
+        for _ in 0..600 {
+            let b = sensors.next_batch().await.unwrap();
+            if stage.output_enabled() {
+                on += 1;
+            } else {
+                assert!(b.samples[channel::CURRENT].value.abs() < 0.02);
+            }
+        }
+        assert!(!stage.output_enabled() && stage.heartbeat_lost());
+        assert_eq!(stage.setpoint(), 0.0);
+        // Last pet at step 3900 (k = 1900), 99 steps before petting
+        // stopped; the supply trips on the first step more than 500 after it.
+        assert_eq!(on, 500 - 99);
+        // It will not switch on again until a controller pets it.
+        assert!(stage.set_output_enabled(true).await.is_err());
+        stage.heartbeat().await.unwrap();
+        stage.set_output_enabled(true).await.unwrap();
     }
 
     #[tokio::test]

@@ -34,7 +34,6 @@ pub use abacus::{
     invert_delta, paper_delta, paper_t1_over_tau_e, real_pole_threshold, AbacusError, CurrentStep,
 };
 pub use coastdown::{fit_decay, DecayFit};
-pub use level_error::LevelError;
 pub use im::{identify_im, sweep_of, ImIdentification};
 pub use im_classical::{classical_single, classical_starts};
 pub use im_identifiability::{weak_directions, Identifiability, WeakDirection, STRUCTURAL_LIMIT};
@@ -50,6 +49,7 @@ pub use im_sweep::{
     predict, predict_gradient, predict_gradient_into, slip_grid, Channels, PhaseData, SlipSweep,
     SweepNoise, SweepPoint, MAX_PARAMS,
 };
+pub use level_error::LevelError;
 pub use levels::{is_coastdown, settled_level, SettledLevel};
 pub use moments::{MomentsEstimate, TransferCoefficients};
 pub use nrmse::nrmse;

@@ -230,6 +230,19 @@ impl OperatingPoint {
     }
 }
 
+impl Entry {
+    /// The entry's time, ns since the start of the test.
+    pub fn t_ns(&self) -> u64 {
+        match self {
+            Entry::Samples { t_ns, .. }
+            | Entry::OperatingPoint { t_ns, .. }
+            | Entry::Segment { t_ns, .. }
+            | Entry::Event { t_ns, .. }
+            | Entry::Result { t_ns, .. } => *t_ns,
+        }
+    }
+}
+
 /// One DC segment as identification sees it: series on one time base.
 ///
 /// All series have the length of `time`. Channels recorded at other

@@ -1,0 +1,584 @@
+//! The safety supervisor at run time: a task that owns the sensor stream,
+//! checks every batch before the sequencer sees it, watches for bus loss,
+//! pets the power stage's heartbeat while healthy, and on any reason to
+//! stop commands the safe state *first*, then records the cause, then
+//! hands the sequencer an error so the test ends as aborted.
+//!
+//! [`supervise`] splits a rig into:
+//!
+//! - an [`InterlockedStage`] for the sequencer: it forwards commands to the
+//!   power stage until the supervisor stops the test, then refuses all but
+//!   the safe state (and set points beyond the limit, always);
+//! - [`SupervisedSensors`] for the sequencer: the batches the supervisor
+//!   has checked, then, after a stop, one more batch read after the safe
+//!   state took effect (so the record shows it) and an error
+//!   ([`super::SUPERVISOR_ID`]) whose text is the cause;
+//! - a [`SupervisorHandle`] for the daemon: operator stops, the trip,
+//!   health, the latest readings.
+//!
+//! Operator stops ([`SupervisorHandle::stop`]) take the same path as
+//! trips; the reply comes once the safe-state command has returned.
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex as StdMutex};
+use std::time::Duration;
+
+use async_trait::async_trait;
+use motorbench_drivers::{
+    ChannelInfo, DriverError, PowerStage, SampleBatch, SensorStream, StageCapabilities,
+};
+use tokio::sync::{mpsc, oneshot, watch, Mutex};
+use tokio::time::Instant;
+
+use super::supervisor::{Readings, SafetyMonitor, StopCause, SUPERVISOR_ID};
+
+/// The power stage, shared by the sequencer's [`InterlockedStage`] and the
+/// supervisor task.
+type SharedStage = Arc<Mutex<Box<dyn PowerStage>>>;
+
+/// What the supervisor did about a stop.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StopReport {
+    /// Why.
+    pub cause: StopCause,
+    /// Data time of the latest batch when the stop was requested or the
+    /// trip detected, ns.
+    pub requested_t_ns: u64,
+    /// The safe-state command's result.
+    pub safe_state: Result<(), String>,
+    /// Wall-clock time from the request (or detection) to the return of
+    /// the safe-state command.
+    pub safe_after: Duration,
+    /// Data time of the first batch read after the safe-state command
+    /// returned, ns (when one came).
+    pub first_safe_t_ns: Option<u64>,
+}
+
+impl StopReport {
+    /// One line for a person and for the record.
+    pub fn describe(&self) -> String {
+        let safe = match &self.safe_state {
+            Ok(()) => format!(
+                "rig commanded to its safe state {:.3} ms after the {} (test time {:.4} s)",
+                self.safe_after.as_secs_f64() * 1e3,
+                if matches!(
+                    self.cause,
+                    StopCause::OperatorAbort
+                        | StopCause::Shutdown
+                        | StopCause::EmergencyStop { .. }
+                ) {
+                    "request"
+                } else {
+                    "detection"
+                },
+                self.requested_t_ns as f64 * 1e-9
+            ),
+            Err(e) => format!("SAFE-STATE COMMAND FAILED: {e}"),
+        };
+        format!("{}; {safe}", self.cause)
+    }
+}
+
+/// State shared by the supervisor task and its handles.
+#[derive(Debug)]
+struct Shared {
+    stopped: AtomicBool,
+    stop: StdMutex<Option<StopReport>>,
+    safe_state_failed: AtomicBool,
+    /// Milliseconds since `epoch` at the task's latest loop.
+    alive_ms: AtomicU64,
+    epoch: Instant,
+}
+
+impl Shared {
+    fn touch(&self) {
+        let ms = self.epoch.elapsed().as_millis() as u64;
+        self.alive_ms.store(ms, Ordering::Relaxed);
+    }
+}
+
+fn lock<T>(m: &StdMutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Commands to the supervisor task.
+enum Command {
+    Stop(StopCause, Instant, oneshot::Sender<StopReport>),
+    Finish,
+}
+
+/// How the supervisor ended.
+#[derive(Debug, Clone)]
+pub struct SupervisorSummary {
+    /// The stop, if there was one.
+    pub stop: Option<StopReport>,
+    /// Winding rise above ambient at the end, K.
+    pub winding_rise_k: f64,
+    /// Batches checked.
+    pub batches: u64,
+    /// Heartbeats sent to the power stage.
+    pub heartbeats: u64,
+}
+
+/// The daemon's view of a running supervisor.
+#[derive(Debug, Clone)]
+pub struct SupervisorHandle {
+    commands: mpsc::Sender<Command>,
+    shared: Arc<Shared>,
+    readings: watch::Receiver<Readings>,
+    loop_period: Duration,
+}
+
+impl std::fmt::Debug for Command {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Command::Stop(c, ..) => write!(f, "Stop({c})"),
+            Command::Finish => write!(f, "Finish"),
+        }
+    }
+}
+
+impl SupervisorHandle {
+    /// Stop the test: the safe state first, then the cause is recorded.
+    /// Returns once the safe-state command has returned; `None` when the
+    /// supervisor has already finished. A second stop returns the first
+    /// one's report.
+    pub async fn stop(&self, cause: StopCause) -> Option<StopReport> {
+        let (tx, rx) = oneshot::channel();
+        let requested = Instant::now();
+        self.commands
+            .send(Command::Stop(cause, requested, tx))
+            .await
+            .ok()?;
+        rx.await.ok()
+    }
+
+    /// The stop, once there is one.
+    pub fn stopped(&self) -> Option<StopReport> {
+        lock(&self.shared.stop).clone()
+    }
+
+    /// The latest readings.
+    pub fn readings(&self) -> watch::Receiver<Readings> {
+        self.readings.clone()
+    }
+
+    /// Healthy: the task is looping (it loops at least every heartbeat
+    /// period) and no safe-state command has failed.
+    pub fn healthy(&self) -> bool {
+        let now = self.shared.epoch.elapsed().as_millis() as u64;
+        let alive = self.shared.alive_ms.load(Ordering::Relaxed);
+        let stale_ms = (4 * self.loop_period.as_millis() as u64).max(1000);
+        !self.shared.safe_state_failed.load(Ordering::Relaxed)
+            && now.saturating_sub(alive) <= stale_ms
+    }
+
+    /// Ask the task to end (after the sequencer is done).
+    pub async fn finish(&self) {
+        let _ = self.commands.send(Command::Finish).await;
+    }
+}
+
+/// The power stage as the sequencer sees it. See the module docs.
+pub struct InterlockedStage {
+    id: String,
+    capabilities: StageCapabilities,
+    stage: SharedStage,
+    shared: Arc<Shared>,
+    max_setpoint: f64,
+}
+
+impl InterlockedStage {
+    fn refuse(&self, what: &str) -> DriverError {
+        let why = lock(&self.shared.stop).as_ref().map_or_else(
+            || "the test was stopped".to_string(),
+            |s| s.cause.to_string(),
+        );
+        DriverError::Device {
+            device: SUPERVISOR_ID.into(),
+            reason: format!("{what} refused after the stop: {why}"),
+        }
+    }
+}
+
+#[async_trait]
+impl PowerStage for InterlockedStage {
+    fn id(&self) -> &str {
+        &self.id
+    }
+
+    fn capabilities(&self) -> StageCapabilities {
+        self.capabilities
+    }
+
+    async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
+        if !value.is_finite() || value.abs() > self.max_setpoint {
+            return Err(DriverError::Device {
+                device: SUPERVISOR_ID.into(),
+                reason: format!(
+                    "set point {value} is beyond the limit ±{}",
+                    self.max_setpoint
+                ),
+            });
+        }
+        let mut stage = self.stage.lock().await;
+        // Checked under the lock: a stop takes the lock before commanding
+        // the safe state, so nothing gets past it.
+        if self.shared.stopped.load(Ordering::SeqCst) {
+            return Err(self.refuse("set point"));
+        }
+        stage.set_setpoint(value).await
+    }
+
+    async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
+        let mut stage = self.stage.lock().await;
+        if enabled && self.shared.stopped.load(Ordering::SeqCst) {
+            return Err(self.refuse("output enable"));
+        }
+        stage.set_output_enabled(enabled).await
+    }
+
+    async fn safe_state(&mut self) -> Result<(), DriverError> {
+        self.stage.lock().await.safe_state().await
+    }
+
+    async fn set_current_limit(&mut self, amperes: f64) -> Result<(), DriverError> {
+        let mut stage = self.stage.lock().await;
+        if self.shared.stopped.load(Ordering::SeqCst) {
+            return Err(self.refuse("current limit"));
+        }
+        stage.set_current_limit(amperes).await
+    }
+}
+
+/// The sensor stream as the sequencer sees it. See the module docs.
+pub struct SupervisedSensors {
+    id: String,
+    channels: Vec<ChannelInfo>,
+    rx: mpsc::Receiver<Result<SampleBatch, DriverError>>,
+}
+
+#[async_trait]
+impl SensorStream for SupervisedSensors {
+    fn id(&self) -> &str {
+        &self.id
+    }
+
+    fn channels(&self) -> &[ChannelInfo] {
+        &self.channels
+    }
+
+    async fn next_batch(&mut self) -> Result<SampleBatch, DriverError> {
+        match self.rx.recv().await {
+            Some(r) => r,
+            None => Err(DriverError::Ended {
+                device: SUPERVISOR_ID.into(),
+            }),
+        }
+    }
+}
+
+/// A rig under supervision. See the module docs.
+pub struct Supervised {
+    /// For the sequencer.
+    pub stage: InterlockedStage,
+    /// For the sequencer.
+    pub sensors: SupervisedSensors,
+    /// For the daemon.
+    pub handle: SupervisorHandle,
+    /// The task; its result once [`SupervisorHandle::finish`] was called.
+    pub task: tokio::task::JoinHandle<SupervisorSummary>,
+}
+
+/// Timing of the supervisor.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SupervisorTiming {
+    /// No batch for this long is a bus loss.
+    pub bus_loss: Duration,
+    /// Batches the sequencer may fall behind before it counts as stalled.
+    pub queue: usize,
+}
+
+impl SupervisorTiming {
+    /// From the configured bus-loss timeout and the sample rate: the
+    /// queue holds two bus-loss timeouts of batches (at least 64).
+    pub fn new(bus_loss_s: f64, sample_rate_hz: f64) -> SupervisorTiming {
+        SupervisorTiming {
+            bus_loss: Duration::from_secs_f64(bus_loss_s),
+            queue: ((2.0 * bus_loss_s * sample_rate_hz).ceil() as usize).max(64),
+        }
+    }
+}
+
+type ReadResult = (
+    Box<dyn SensorStream>,
+    Result<Result<SampleBatch, DriverError>, tokio::time::error::Elapsed>,
+);
+
+fn read_next(
+    mut sensors: Box<dyn SensorStream>,
+    bus_loss: Duration,
+) -> std::pin::Pin<Box<dyn std::future::Future<Output = ReadResult> + Send>> {
+    Box::pin(async move {
+        let r = tokio::time::timeout(bus_loss, sensors.next_batch()).await;
+        (sensors, r)
+    })
+}
+
+/// Put `stage` and `sensors` under supervision and start the supervisor
+/// task (on the current tokio runtime). `max_setpoint` bounds every set
+/// point the sequencer may command.
+pub fn supervise(
+    stage: Box<dyn PowerStage>,
+    sensors: Box<dyn SensorStream>,
+    monitor: SafetyMonitor,
+    timing: SupervisorTiming,
+    max_setpoint: f64,
+) -> Supervised {
+    let shared = Arc::new(Shared {
+        stopped: AtomicBool::new(false),
+        stop: StdMutex::new(None),
+        safe_state_failed: AtomicBool::new(false),
+        alive_ms: AtomicU64::new(0),
+        epoch: Instant::now(),
+    });
+    let heartbeat = stage.heartbeat_timeout().map(|t| t / 4);
+    let loop_period = heartbeat
+        .unwrap_or(Duration::from_millis(100))
+        .min(Duration::from_millis(100));
+    let id = stage.id().to_string();
+    let capabilities = stage.capabilities();
+    let stage: SharedStage = Arc::new(Mutex::new(stage));
+    let (batch_tx, batch_rx) = mpsc::channel(timing.queue);
+    let (cmd_tx, cmd_rx) = mpsc::channel(8);
+    let (readings_tx, readings_rx) = watch::channel(monitor.readings());
+    let sensors_out = SupervisedSensors {
+        id: sensors.id().to_string(),
+        channels: sensors.channels().to_vec(),
+        rx: batch_rx,
+    };
+    let task = Task {
+        stage: stage.clone(),
+        shared: shared.clone(),
+        monitor,
+        batch_tx,
+        readings: readings_tx,
+        stream_id: sensors.id().to_string(),
+        timing,
+        heartbeat,
+        loop_period,
+        heartbeats: 0,
+        batches: 0,
+        stop_delivered: false,
+        read_after_safe: false,
+    };
+    let task = tokio::spawn(task.run(sensors, cmd_rx));
+    Supervised {
+        stage: InterlockedStage {
+            id,
+            capabilities,
+            stage,
+            shared: shared.clone(),
+            max_setpoint,
+        },
+        sensors: sensors_out,
+        handle: SupervisorHandle {
+            commands: cmd_tx,
+            shared,
+            readings: readings_rx,
+            loop_period,
+        },
+        task,
+    }
+}
+
+struct Task {
+    stage: SharedStage,
+    shared: Arc<Shared>,
+    monitor: SafetyMonitor,
+    batch_tx: mpsc::Sender<Result<SampleBatch, DriverError>>,
+    readings: watch::Sender<Readings>,
+    stream_id: String,
+    timing: SupervisorTiming,
+    heartbeat: Option<Duration>,
+    loop_period: Duration,
+    heartbeats: u64,
+    batches: u64,
+    /// The error has been handed to the sequencer.
+    stop_delivered: bool,
+    /// The read in flight began after the safe-state command returned.
+    read_after_safe: bool,
+}
+
+impl Task {
+    async fn run(
+        mut self,
+        sensors: Box<dyn SensorStream>,
+        mut commands: mpsc::Receiver<Command>,
+    ) -> SupervisorSummary {
+        self.shared.touch();
+        let mut read = read_next(sensors, self.timing.bus_loss);
+        let mut tick = tokio::time::interval(self.loop_period);
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        let mut reading = true;
+        loop {
+            tokio::select! {
+                biased;
+                cmd = commands.recv() => match cmd {
+                    Some(Command::Stop(cause, requested, reply)) => {
+                        let report = self.stop(cause, requested).await;
+                        let _ = reply.send(report);
+                        if !reading {
+                            self.deliver_stop().await;
+                        }
+                    }
+                    Some(Command::Finish) | None => break,
+                },
+                // Before the read: when the sensors deliver in a burst
+                // (catching up after a stall) the heartbeat still goes out.
+                _ = tick.tick() => {
+                    self.pet().await;
+                }
+                (sensors, result) = &mut read, if reading => {
+                    let read_after_safe = self.read_after_safe;
+                    match result {
+                        Err(_) => {
+                            let cause = StopCause::BusLoss {
+                                stream: self.stream_id.clone(),
+                                timeout_s: self.timing.bus_loss.as_secs_f64(),
+                            };
+                            self.stop(cause, Instant::now()).await;
+                            reading = false;
+                            self.deliver_stop().await;
+                        }
+                        Ok(Err(e)) => {
+                            let cause = StopCause::DeviceFault(e.to_string());
+                            self.stop(cause, Instant::now()).await;
+                            reading = false;
+                            self.deliver_stop().await;
+                        }
+                        Ok(Ok(batch)) => {
+                            self.batches += 1;
+                            let check = self.monitor.check(&batch);
+                            let _ = self.readings.send(self.monitor.readings());
+                            if let Err(cause) = check {
+                                self.stop(cause, Instant::now()).await;
+                            }
+                            let t_ns = batch.t_ns;
+                            if self.shared.stopped.load(Ordering::SeqCst) {
+                                if read_after_safe {
+                                    if let Some(s) = lock(&self.shared.stop).as_mut() {
+                                        s.first_safe_t_ns.get_or_insert(t_ns);
+                                    }
+                                }
+                                // The offending batch, and batches up to the
+                                // first one read after the safe state, still
+                                // go to the record.
+                                self.forward(Ok(batch)).await;
+                                // The supervisor reads on after the stop (the
+                                // readings stay live until the daemon finishes
+                                // it), but the sequencer gets no more batches.
+                                if read_after_safe {
+                                    self.deliver_stop().await;
+                                }
+                            } else {
+                                self.forward(Ok(batch)).await;
+                            }
+                        }
+                    }
+                    read = read_next(sensors, self.timing.bus_loss);
+                    self.read_after_safe = self.shared.stopped.load(Ordering::SeqCst);
+                },
+            }
+            self.shared.touch();
+        }
+        SupervisorSummary {
+            stop: lock(&self.shared.stop).clone(),
+            winding_rise_k: self.monitor.winding().rise_k(),
+            batches: self.batches,
+            heartbeats: self.heartbeats,
+        }
+    }
+
+    /// Pet the stage's heartbeat while healthy.
+    async fn pet(&mut self) {
+        if self.heartbeat.is_none() || self.shared.safe_state_failed.load(Ordering::Relaxed) {
+            return;
+        }
+        let result = self.stage.lock().await.heartbeat().await;
+        match result {
+            Ok(()) => self.heartbeats += 1,
+            Err(e) => {
+                let cause = StopCause::DeviceFault(format!("power stage heartbeat: {e}"));
+                self.stop(cause, Instant::now()).await;
+            }
+        }
+    }
+
+    /// Queue an item for the sequencer; a full queue means it stalled.
+    async fn forward(&mut self, item: Result<SampleBatch, DriverError>) {
+        if self.stop_delivered {
+            return;
+        }
+        match self.batch_tx.try_send(item) {
+            Ok(()) => {}
+            Err(mpsc::error::TrySendError::Full(_)) => {
+                self.stop(StopCause::SequencerStalled, Instant::now()).await;
+            }
+            // The sequencer is gone (the test ended): nothing to hand on.
+            Err(mpsc::error::TrySendError::Closed(_)) => {}
+        }
+    }
+
+    /// Hand the sequencer the error that ends the test.
+    async fn deliver_stop(&mut self) {
+        if self.stop_delivered {
+            return;
+        }
+        let Some(report) = lock(&self.shared.stop).clone() else {
+            return;
+        };
+        let error = DriverError::Device {
+            device: SUPERVISOR_ID.into(),
+            reason: report.describe(),
+        };
+        // After a stall the queue is full: make room for the error by
+        // letting the batch wait asynchronously; the sequencer reads the
+        // backlog first.
+        let tx = self.batch_tx.clone();
+        self.stop_delivered = true;
+        tokio::spawn(async move {
+            let _ = tx.send(Err(error)).await;
+        });
+    }
+
+    /// The safe state first, then the cause recorded. A second stop keeps
+    /// the first report.
+    async fn stop(&mut self, cause: StopCause, requested: Instant) -> StopReport {
+        if let Some(first) = lock(&self.shared.stop).clone() {
+            return first;
+        }
+        self.shared.stopped.store(true, Ordering::SeqCst);
+        let safe_state = {
+            let mut stage = self.stage.lock().await;
+            stage.safe_state().await.map_err(|e| e.to_string())
+        };
+        let safe_after = requested.elapsed();
+        if safe_state.is_err() {
+            self.shared.safe_state_failed.store(true, Ordering::Relaxed);
+        }
+        let report = StopReport {
+            cause,
+            requested_t_ns: self.monitor.last_t_ns(),
+            safe_state,
+            safe_after,
+            first_safe_t_ns: None,
+        };
+        match &report.safe_state {
+            Ok(()) => tracing::warn!(target: "motorbench::supervisor", "{}", report.describe()),
+            Err(_) => tracing::error!(target: "motorbench::supervisor", "{}", report.describe()),
+        }
+        *lock(&self.shared.stop) = Some(report.clone());
+        report
+    }
+}

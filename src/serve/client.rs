@@ -1,0 +1,344 @@
+//! A small HTTP/1.1 client for the control API, over TCP or a Unix
+//! socket (hyper's connection API; no TLS: the API is meant for the
+//! loopback interface, a Unix socket, or a tunnel).
+
+use std::path::{Path, PathBuf};
+
+use axum::body::Bytes;
+use http_body_util::{BodyExt, Full};
+use hyper::client::conn::http1;
+use hyper::{Method, Request};
+use hyper_util::rt::TokioIo;
+use thiserror::Error;
+
+/// Where the API is.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Endpoint {
+    /// `http://HOST:PORT`.
+    Tcp(String),
+    /// `unix:/path/to/socket`.
+    Unix(PathBuf),
+}
+
+impl Endpoint {
+    /// Parse `http://HOST:PORT` (no path) or `unix:PATH`.
+    pub fn parse(url: &str) -> Result<Endpoint, String> {
+        if let Some(path) = url.strip_prefix("unix:") {
+            if path.is_empty() {
+                return Err(format!("{url}: no socket path after `unix:`"));
+            }
+            return Ok(Endpoint::Unix(PathBuf::from(path)));
+        }
+        let Some(authority) = url.strip_prefix("http://") else {
+            return Err(format!(
+                "{url}: give http://HOST:PORT or unix:PATH (https is not supported: use a tunnel)"
+            ));
+        };
+        let authority = authority.trim_end_matches('/');
+        if authority.is_empty() || authority.contains('/') {
+            return Err(format!("{url}: give http://HOST:PORT with no path"));
+        }
+        Ok(Endpoint::Tcp(authority.to_string()))
+    }
+}
+
+/// A failed exchange.
+#[derive(Debug, Error)]
+pub enum ClientError {
+    /// No connection, or the connection broke.
+    #[error("cannot reach the daemon at {endpoint}: {reason}")]
+    Connect {
+        /// Where.
+        endpoint: String,
+        /// Why.
+        reason: String,
+    },
+    /// A local file could not be written.
+    #[error("{path}: {reason}")]
+    File {
+        /// The file.
+        path: String,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// An answer.
+#[derive(Debug, Clone)]
+pub struct Reply {
+    /// HTTP status code.
+    pub status: u16,
+    /// The body.
+    pub body: Bytes,
+}
+
+impl Reply {
+    /// The body as JSON (`null` when it is not JSON).
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::from_slice(&self.body).unwrap_or(serde_json::Value::Null)
+    }
+
+    /// True for 2xx.
+    pub fn ok(&self) -> bool {
+        (200..300).contains(&self.status)
+    }
+}
+
+/// The API client.
+#[derive(Debug, Clone)]
+pub struct Client {
+    endpoint: Endpoint,
+    token: Option<String>,
+}
+
+type Sender = http1::SendRequest<Full<Bytes>>;
+
+impl Client {
+    /// A client for `endpoint`, sending `token` when given.
+    pub fn new(endpoint: Endpoint, token: Option<String>) -> Client {
+        Client { endpoint, token }
+    }
+
+    fn describe(&self) -> String {
+        match &self.endpoint {
+            Endpoint::Tcp(a) => format!("http://{a}"),
+            Endpoint::Unix(p) => format!("unix:{}", p.display()),
+        }
+    }
+
+    fn connect_err(&self, reason: impl std::fmt::Display) -> ClientError {
+        ClientError::Connect {
+            endpoint: self.describe(),
+            reason: reason.to_string(),
+        }
+    }
+
+    async fn connect(&self) -> Result<Sender, ClientError> {
+        // The connection task ends with the connection.
+        let sender = match &self.endpoint {
+            Endpoint::Tcp(authority) => {
+                let stream = tokio::net::TcpStream::connect(authority)
+                    .await
+                    .map_err(|e| self.connect_err(e))?;
+                let (s, conn) = http1::handshake(TokioIo::new(stream))
+                    .await
+                    .map_err(|e| self.connect_err(e))?;
+                tokio::spawn(conn);
+                s
+            }
+            Endpoint::Unix(path) => {
+                let stream = tokio::net::UnixStream::connect(path)
+                    .await
+                    .map_err(|e| self.connect_err(e))?;
+                let (s, conn) = http1::handshake(TokioIo::new(stream))
+                    .await
+                    .map_err(|e| self.connect_err(e))?;
+                tokio::spawn(conn);
+                s
+            }
+        };
+        Ok(sender)
+    }
+
+    fn build(
+        &self,
+        method: Method,
+        path: &str,
+        body: Option<&serde_json::Value>,
+    ) -> Request<Full<Bytes>> {
+        let host = match &self.endpoint {
+            Endpoint::Tcp(a) => a.as_str(),
+            Endpoint::Unix(_) => "localhost",
+        };
+        let mut b = Request::builder()
+            .method(method)
+            .uri(path)
+            .header(hyper::header::HOST, host);
+        if let Some(t) = &self.token {
+            b = b.header(hyper::header::AUTHORIZATION, format!("Bearer {t}"));
+        }
+        let body = match body {
+            Some(v) => {
+                b = b.header(hyper::header::CONTENT_TYPE, "application/json");
+                Full::new(Bytes::from(v.to_string()))
+            }
+            None => Full::new(Bytes::new()),
+        };
+        b.body(body).expect("a valid request")
+    }
+
+    /// Send a request and read the whole answer.
+    pub async fn request(
+        &self,
+        method: Method,
+        path: &str,
+        body: Option<&serde_json::Value>,
+    ) -> Result<Reply, ClientError> {
+        let mut sender = self.connect().await?;
+        let response = sender
+            .send_request(self.build(method, path, body))
+            .await
+            .map_err(|e| self.connect_err(e))?;
+        let status = response.status().as_u16();
+        let body = response
+            .into_body()
+            .collect()
+            .await
+            .map_err(|e| self.connect_err(e))?
+            .to_bytes();
+        Ok(Reply { status, body })
+    }
+
+    /// GET `path`.
+    pub async fn get(&self, path: &str) -> Result<Reply, ClientError> {
+        self.request(Method::GET, path, None).await
+    }
+
+    /// POST `path` with an optional JSON body.
+    pub async fn post(
+        &self,
+        path: &str,
+        body: Option<&serde_json::Value>,
+    ) -> Result<Reply, ClientError> {
+        self.request(Method::POST, path, body).await
+    }
+
+    /// Follow server-sent events at `path`: `on_event(name, data)` for
+    /// each event until it returns false or the stream ends. Returns the
+    /// status when the answer is not 2xx (with its body), else `None`.
+    pub async fn events(
+        &self,
+        path: &str,
+        mut on_event: impl FnMut(&str, &str) -> bool,
+    ) -> Result<Option<Reply>, ClientError> {
+        let mut sender = self.connect().await?;
+        let response = sender
+            .send_request(self.build(Method::GET, path, None))
+            .await
+            .map_err(|e| self.connect_err(e))?;
+        let status = response.status().as_u16();
+        let mut body = response.into_body();
+        if !(200..300).contains(&status) {
+            let body = body
+                .collect()
+                .await
+                .map_err(|e| self.connect_err(e))?
+                .to_bytes();
+            return Ok(Some(Reply { status, body }));
+        }
+        let mut parser = SseParser::default();
+        while let Some(frame) = body.frame().await {
+            let frame = frame.map_err(|e| self.connect_err(e))?;
+            if let Some(data) = frame.data_ref() {
+                for (name, data) in parser.push(data) {
+                    if !on_event(&name, &data) {
+                        return Ok(None);
+                    }
+                }
+            }
+        }
+        Ok(None)
+    }
+
+    /// Download `path` into `dest` (written to `dest.part`, then renamed).
+    /// Returns the status and, on success, the byte count.
+    pub async fn download(&self, path: &str, dest: &Path) -> Result<(u16, u64), ClientError> {
+        use tokio::io::AsyncWriteExt;
+        let mut sender = self.connect().await?;
+        let response = sender
+            .send_request(self.build(Method::GET, path, None))
+            .await
+            .map_err(|e| self.connect_err(e))?;
+        let status = response.status().as_u16();
+        if !(200..300).contains(&status) {
+            return Ok((status, 0));
+        }
+        let file_err = |e: std::io::Error| ClientError::File {
+            path: dest.display().to_string(),
+            reason: e.to_string(),
+        };
+        let part = dest.with_extension("part");
+        let mut file = tokio::fs::File::create(&part).await.map_err(file_err)?;
+        let mut body = response.into_body();
+        let mut n = 0u64;
+        while let Some(frame) = body.frame().await {
+            let frame = frame.map_err(|e| self.connect_err(e))?;
+            if let Some(data) = frame.data_ref() {
+                file.write_all(data).await.map_err(file_err)?;
+                n += data.len() as u64;
+            }
+        }
+        file.flush().await.map_err(file_err)?;
+        drop(file);
+        tokio::fs::rename(&part, dest).await.map_err(file_err)?;
+        Ok((status, n))
+    }
+}
+
+/// Splits a server-sent event stream into `(event name, data)` pairs.
+#[derive(Debug, Default)]
+pub struct SseParser {
+    buffer: String,
+}
+
+impl SseParser {
+    /// Feed bytes; the events completed by them.
+    pub fn push(&mut self, bytes: &[u8]) -> Vec<(String, String)> {
+        self.buffer
+            .push_str(&String::from_utf8_lossy(bytes).replace("\r\n", "\n"));
+        let mut out = Vec::new();
+        while let Some(end) = self.buffer.find("\n\n") {
+            let block: String = self.buffer.drain(..end + 2).collect();
+            let mut name = "message".to_string();
+            let mut data: Vec<&str> = Vec::new();
+            for line in block.lines() {
+                if let Some(v) = line.strip_prefix("event:") {
+                    name = v.trim_start().to_string();
+                } else if let Some(v) = line.strip_prefix("data:") {
+                    data.push(v.strip_prefix(' ').unwrap_or(v));
+                }
+            }
+            // Comment-only blocks (keep-alives) carry no data.
+            if !data.is_empty() {
+                out.push((name, data.join("\n")));
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn endpoints_parse() {
+        assert_eq!(
+            Endpoint::parse("http://127.0.0.1:7461/").unwrap(),
+            Endpoint::Tcp("127.0.0.1:7461".into())
+        );
+        assert_eq!(
+            Endpoint::parse("unix:/run/motorbench/api.sock").unwrap(),
+            Endpoint::Unix("/run/motorbench/api.sock".into())
+        );
+        assert!(Endpoint::parse("https://host:1")
+            .unwrap_err()
+            .contains("tunnel"));
+        assert!(Endpoint::parse("http://host:1/v1").is_err());
+        assert!(Endpoint::parse("unix:").is_err());
+    }
+
+    #[test]
+    fn sse_events_split_across_chunks() {
+        let mut p = SseParser::default();
+        assert!(p.push(b"event: progress\ndata: {\"t_s\"").is_empty());
+        let got = p.push(b":1}\n\n:keep-alive\n\nevent: done\r\ndata: a\r\ndata: b\r\n\r\n");
+        assert_eq!(
+            got,
+            [
+                ("progress".to_string(), "{\"t_s\":1}".to_string()),
+                ("done".to_string(), "a\nb".to_string())
+            ]
+        );
+    }
+}

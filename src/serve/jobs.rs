@@ -1,0 +1,601 @@
+//! One test run by the daemon: the rig opened and put under the safety
+//! supervisor, the record started and indexed, the plan run by the bench's
+//! sequencer ([`run_test`]), then identification, the report files and the
+//! index updated. Progress (phase, segment, current values, ETA) is
+//! published on a watch channel for the API's live feed.
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex as StdMutex};
+use std::time::SystemTime;
+
+use serde::Serialize;
+use tokio::sync::{watch, Mutex};
+
+use super::records_index::{unix_s, IndexEntry, KeyResults, RecordOutcome, RecordsIndex};
+use crate::bench::{
+    build_rig, plan_steps, record_channels, run_test, supervise, Outcome, PlanStep, Progress,
+    Readings, RecordSink, SafetyMonitor, ServedRig, StopCause, StopReport, Supervised,
+    SupervisorHandle, SupervisorTiming,
+};
+use crate::config::{Config, Plan};
+use crate::identify::identify_dc;
+use crate::record::{Entry, Event, EventLevel, Recorder, SegmentKind, TestMeta, SCHEMA_VERSION};
+use crate::report::{segment_plots, write_segments_svg};
+
+/// Recorder queue length, in entries.
+const QUEUE_CAPACITY: usize = 4096;
+
+/// Where a test is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TestState {
+    /// The plan is running on the rig.
+    Running,
+    /// The rig is safe; identification and the report are being made.
+    Identifying,
+    /// Done: see the outcome.
+    Finished,
+}
+
+/// The segment being run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SegmentStatus {
+    /// Index, from 0.
+    pub index: usize,
+    /// Number of segments in the plan.
+    pub total: usize,
+    /// Label, e.g. `60 V → 248 V`.
+    pub label: String,
+    /// Test kind of the segment.
+    pub kind: SegmentKind,
+}
+
+/// What the supervisor did to stop the test.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StopStatus {
+    /// Machine-readable cause (`operator_abort`, `limit`, …).
+    pub kind: String,
+    /// For a person.
+    pub message: String,
+    /// Whether the safe-state command succeeded.
+    pub safe_state_ok: bool,
+    /// Wall-clock time from the request (or detection) to the safe-state
+    /// command's return, s.
+    pub safe_after_s: f64,
+    /// Test time of the last sample before the request, s.
+    pub requested_t_s: f64,
+    /// Test time of the first sample read after the safe state, s.
+    pub first_safe_sample_t_s: Option<f64>,
+}
+
+impl From<&StopReport> for StopStatus {
+    fn from(r: &StopReport) -> StopStatus {
+        StopStatus {
+            kind: r.cause.kind().to_string(),
+            message: r.describe(),
+            safe_state_ok: r.safe_state.is_ok(),
+            safe_after_s: r.safe_after.as_secs_f64(),
+            requested_t_s: r.requested_t_ns as f64 * 1e-9,
+            first_safe_sample_t_s: r.first_safe_t_ns.map(|t| t as f64 * 1e-9),
+        }
+    }
+}
+
+/// A test's status, as the API shows it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TestStatus {
+    /// Test id (also the record name).
+    pub id: String,
+    /// The rig.
+    pub rig: String,
+    /// Motor under test.
+    pub motor_id: String,
+    /// The plan, for a person.
+    pub plan: String,
+    /// Where the test is.
+    pub state: TestState,
+    /// The segment being run.
+    pub segment: Option<SegmentStatus>,
+    /// Test time, s.
+    pub t_s: f64,
+    /// Estimated time to the end of the plan, s.
+    pub eta_s: Option<f64>,
+    /// Longest it can still take (every remaining step to its timeout), s.
+    pub eta_max_s: Option<f64>,
+    /// The latest readings the supervisor checked.
+    pub values: Readings,
+    /// How it ended, once finished.
+    pub outcome: Option<RecordOutcome>,
+    /// Why it was aborted or failed.
+    pub reason: Option<String>,
+    /// The supervisor's stop, if there was one.
+    pub stop: Option<StopStatus>,
+}
+
+/// A test the daemon runs or ran; shared by the API and the job.
+#[derive(Debug)]
+pub struct TestRun {
+    status: watch::Sender<TestStatus>,
+    supervisor: SupervisorHandle,
+}
+
+impl TestRun {
+    /// Test id.
+    pub fn id(&self) -> String {
+        self.status.borrow().id.clone()
+    }
+
+    /// The current status, with the latest readings.
+    pub fn status(&self) -> TestStatus {
+        let mut s = self.status.borrow().clone();
+        if s.state != TestState::Finished {
+            s.values = *self.supervisor.readings().borrow();
+        }
+        s
+    }
+
+    /// Changes of the status (state, segment, test time, outcome).
+    pub fn subscribe(&self) -> watch::Receiver<TestStatus> {
+        self.status.subscribe()
+    }
+
+    /// True once the test has finished.
+    pub fn finished(&self) -> bool {
+        self.status.borrow().state == TestState::Finished
+    }
+
+    /// Wait until the test has finished.
+    pub async fn wait_finished(&self) {
+        let mut rx = self.status.subscribe();
+        let _ = rx.wait_for(|s| s.state == TestState::Finished).await;
+    }
+
+    /// Stop the test through the supervisor (safe state first). `None`
+    /// when the supervisor has already ended.
+    pub async fn stop(&self, cause: StopCause) -> Option<StopReport> {
+        self.supervisor.stop(cause).await
+    }
+
+    /// Healthy while running: see [`SupervisorHandle::healthy`].
+    pub fn healthy(&self) -> bool {
+        self.finished() || self.supervisor.healthy()
+    }
+}
+
+/// How a job ended, for the rig.
+#[derive(Debug, Clone)]
+pub struct JobEnd {
+    /// The stop, if it latches the rig.
+    pub latch: Option<StopReport>,
+    /// Winding rise above ambient at the end, K.
+    pub winding_rise_k: f64,
+}
+
+/// A prepared test, ready to run.
+pub struct Job {
+    run: Arc<TestRun>,
+    cfg: Config,
+    steps: Vec<PlanStep>,
+    supervised: Supervised,
+    sink: RecordSink,
+    counts_per_rev: f64,
+    index: Arc<Mutex<RecordsIndex>>,
+    dir: PathBuf,
+    name: String,
+    /// Protocol servers of a served simulated rig, kept alive for the test.
+    _served: Option<ServedRig>,
+}
+
+/// The plan for a person.
+pub fn plan_summary(plan: &Plan) -> String {
+    match plan {
+        Plan::DcStep { levels, coastdown } => {
+            let levels: Vec<String> = levels.iter().map(|v| format!("{v}")).collect();
+            let tail = if *coastdown { ", coast-down" } else { "" };
+            format!("dc_step {} V{tail}", levels.join(" → "))
+        }
+        Plan::DcCoastdown { from } => format!("dc_coastdown from {from} V"),
+    }
+}
+
+/// Open the rig, put it under supervision, start and index the record.
+/// Must be called on a tokio runtime (it starts the supervisor task).
+pub async fn prepare(
+    rig: &str,
+    cfg: Config,
+    initial_rise_k: f64,
+    index: Arc<Mutex<RecordsIndex>>,
+) -> Result<(Arc<TestRun>, Job), String> {
+    // Paced at the wall clock; a rig served behind a protocol keeps its
+    // servers alive in `served` for as long as the job holds them.
+    let built = build_rig(&cfg, true)
+        .await
+        .map_err(|e| format!("rig setup: {e}"))?;
+    let (stage, sensors, counts_per_rev, served) = (
+        built.stage,
+        built.sensors,
+        built.counts_per_rev,
+        built.served,
+    );
+    let channels = sensors.channels().to_vec();
+    let monitor = SafetyMonitor::new(
+        cfg.limits,
+        cfg.supervision.clone(),
+        &channels,
+        Some(counts_per_rev),
+        initial_rise_k,
+    )?;
+    let record_channels = record_channels(&channels, stage.id());
+    let now = SystemTime::now();
+    let started_at = humantime::format_rfc3339_seconds(now).to_string();
+    let kind = match cfg.plan {
+        Plan::DcStep { .. } => SegmentKind::DcStep,
+        Plan::DcCoastdown { .. } => SegmentKind::DcCoastdown,
+    };
+    let meta = TestMeta {
+        schema_version: SCHEMA_VERSION.to_string(),
+        kind,
+        motor_id: cfg.motor_id.clone(),
+        started_at: started_at.clone(),
+        nameplate: cfg.nameplate.clone(),
+        config: cfg.text.clone(),
+    };
+    let mut idx = index.lock().await;
+    let name = idx.new_name(&cfg.motor_id, &started_at);
+    let dir = idx.dir().to_path_buf();
+    let mcap = format!("{name}.mcap");
+    let recorder = Recorder::start(&dir.join(&mcap), &meta, &record_channels, QUEUE_CAPACITY)
+        .map_err(|e| e.to_string())?;
+    let plan = plan_summary(&cfg.plan);
+    idx.insert(IndexEntry {
+        name: name.clone(),
+        rig: rig.to_string(),
+        motor_id: cfg.motor_id.clone(),
+        kind: kind.to_string(),
+        plan: plan.clone(),
+        started_at,
+        started_unix_s: unix_s(now),
+        finished_at: None,
+        outcome: RecordOutcome::Running,
+        reason: None,
+        key_results: None,
+        mcap,
+        report: None,
+        svg: None,
+        bytes: 0,
+        recovered: None,
+    })
+    .map_err(|e| e.to_string())?;
+    drop(idx);
+
+    let timing = SupervisorTiming::new(cfg.supervision.bus_loss_timeout, cfg.sample_rate_hz);
+    let supervised = supervise(stage, sensors, monitor, timing, cfg.limits.max_voltage);
+    let (status, _) = watch::channel(TestStatus {
+        id: name.clone(),
+        rig: rig.to_string(),
+        motor_id: cfg.motor_id.clone(),
+        plan,
+        state: TestState::Running,
+        segment: None,
+        t_s: 0.0,
+        eta_s: None,
+        eta_max_s: None,
+        values: Readings::default(),
+        outcome: None,
+        reason: None,
+        stop: None,
+    });
+    let run = Arc::new(TestRun {
+        status,
+        supervisor: supervised.handle.clone(),
+    });
+    let steps = plan_steps(&cfg.plan);
+    let sink = RecordSink::new(Some(recorder), Some(meta), record_channels);
+    let job = Job {
+        run: run.clone(),
+        cfg,
+        steps,
+        supervised,
+        sink,
+        counts_per_rev,
+        index,
+        dir,
+        name,
+        _served: served,
+    };
+    Ok((run, job))
+}
+
+impl Job {
+    /// Run the test to its end (completed, aborted or failed) and update
+    /// the index.
+    pub async fn run(self) -> JobEnd {
+        let Job {
+            run,
+            cfg,
+            steps,
+            mut supervised,
+            mut sink,
+            counts_per_rev,
+            index,
+            dir,
+            name,
+            _served,
+        } = self;
+        let progress = FeedProgress::new(run.clone(), &cfg, &steps);
+        // Stops come through the supervisor; this one never fires.
+        let (_never_tx, never) = watch::channel(false);
+        let outcome = run_test(
+            &cfg,
+            &steps,
+            &mut supervised.stage,
+            &mut supervised.sensors,
+            counts_per_rev,
+            &mut sink,
+            &progress,
+            &never,
+        )
+        .await;
+        let stop = supervised.handle.stopped();
+        if let Some(s) = &stop {
+            let first = s.first_safe_t_ns.map_or_else(
+                || "no sample was read after it".to_string(),
+                |t| {
+                    format!(
+                        "first sample after it at test time {:.4} s",
+                        t as f64 * 1e-9
+                    )
+                },
+            );
+            let event = Entry::Event {
+                t_ns: s.requested_t_ns,
+                event: Event {
+                    level: EventLevel::Info,
+                    message: format!("safety supervisor: {}; {first}", s.describe()),
+                },
+            };
+            if let Err(e) = sink.push(event).await {
+                tracing::error!("{name}: recording the stop failed: {e}");
+            }
+        }
+        supervised.handle.finish().await;
+        let summary = supervised.task.await.ok();
+        run.status.send_modify(|s| s.state = TestState::Identifying);
+
+        let (outcome, reason) = match &outcome {
+            Ok(Outcome::Completed) => (RecordOutcome::Completed, None),
+            Ok(Outcome::Aborted { reason }) => (RecordOutcome::Aborted, Some(reason.clone())),
+            Err(e) => (RecordOutcome::Failed, Some(e.to_string())),
+        };
+        let t_end = sink.last_t_ns();
+        let (recorder, record) = sink.into_parts();
+        let identified = tokio::task::spawn_blocking(move || (identify_dc(&record), record)).await;
+        let (identification, record) = match identified {
+            Ok(pair) => pair,
+            Err(e) => {
+                // A bug, not a rig fault: the rig is already safe; the
+                // record stays as written so far (it replays).
+                tracing::error!("{name}: identification failed: {e}");
+                let reason = Some(format!("identification failed: {e}"));
+                finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
+                return JobEnd {
+                    latch: stop.filter(|s| s.cause.latches()),
+                    winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
+                };
+            }
+        };
+        let mut failure = None;
+        if let Some(recorder) = recorder {
+            let report = serde_json::to_value(&identification.report).expect("a report serialises");
+            let result = async {
+                recorder
+                    .send(Entry::Result {
+                        t_ns: t_end,
+                        report,
+                    })
+                    .await?;
+                recorder.finish().await
+            };
+            if let Err(e) = result.await {
+                failure = Some(format!("recording failed: {e}"));
+            }
+        }
+        let report_name = format!("{name}.report.json");
+        let svg_name = format!("{name}.svg");
+        let report_ok = std::fs::write(
+            dir.join(&report_name),
+            identification.report.to_json_pretty() + "\n",
+        )
+        .map_err(|e| tracing::error!("{name}: writing the report failed: {e}"))
+        .is_ok();
+        let svg_ok = write_segments_svg(
+            &dir.join(&svg_name),
+            &segment_plots(&record, &identification),
+        )
+        .map_err(|e| tracing::error!("{name}: writing the plot failed: {e}"))
+        .is_ok();
+        let key_results = identification.report.best.as_ref().and_then(|best| {
+            let params = identification.report.methods.get(best)?.params.as_ref()?;
+            Some(KeyResults {
+                method: best.clone(),
+                params: params.iter().map(|(k, p)| (k.clone(), p.value)).collect(),
+            })
+        });
+        let (outcome, reason) = match failure {
+            Some(f) => (RecordOutcome::Failed, Some(f)),
+            None => (outcome, reason),
+        };
+        let finished_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
+        {
+            let mut idx = index.lock().await;
+            let updated = idx.update(&name, |e| {
+                e.outcome = outcome;
+                e.reason = reason.clone();
+                e.finished_at = Some(finished_at);
+                e.key_results = key_results;
+                e.report = report_ok.then_some(report_name);
+                e.svg = svg_ok.then_some(svg_name);
+            });
+            if let Err(e) = updated {
+                tracing::error!("{name}: updating the index failed: {e}");
+            }
+            if let Err(e) =
+                idx.apply_retention(&run.status.borrow().rig, &cfg.retention, SystemTime::now())
+            {
+                tracing::error!("retention: {e}");
+            }
+        }
+        match outcome {
+            RecordOutcome::Completed => tracing::info!("{name}: test complete"),
+            _ => tracing::warn!(
+                "{name}: test {}: {}",
+                serde_json::to_value(outcome).map_or_else(
+                    |_| "ended".into(),
+                    |v| v.as_str().unwrap_or("ended").to_string()
+                ),
+                reason.as_deref().unwrap_or("")
+            ),
+        }
+        let values = *run.supervisor.readings().borrow();
+        run.status.send_modify(|s| {
+            s.state = TestState::Finished;
+            s.outcome = Some(outcome);
+            s.reason = reason;
+            s.stop = stop.as_ref().map(StopStatus::from);
+            s.values = values;
+            s.eta_s = Some(0.0);
+            s.eta_max_s = Some(0.0);
+        });
+        JobEnd {
+            latch: stop.filter(|s| s.cause.latches()),
+            winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
+        }
+    }
+}
+
+/// Mark a test failed in the index and its status.
+async fn finish_failed(
+    run: &TestRun,
+    index: &Mutex<RecordsIndex>,
+    name: &str,
+    reason: Option<String>,
+    stop: Option<&StopReport>,
+) {
+    let finished_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
+    let updated = index.lock().await.update(name, |e| {
+        e.outcome = RecordOutcome::Failed;
+        e.reason = reason.clone();
+        e.finished_at = Some(finished_at);
+    });
+    if let Err(e) = updated {
+        tracing::error!("{name}: updating the index failed: {e}");
+    }
+    run.status.send_modify(|s| {
+        s.state = TestState::Finished;
+        s.outcome = Some(RecordOutcome::Failed);
+        s.reason = reason;
+        s.stop = stop.map(StopStatus::from);
+    });
+}
+
+/// Publishes the sequencer's progress on the test's watch channel, with
+/// an ETA.
+struct FeedProgress {
+    run: Arc<TestRun>,
+    /// Expected duration of a step before any has finished, s.
+    guess_s: f64,
+    /// Longest duration of each step (its timeout), s.
+    timeouts: Vec<f64>,
+    /// Test kind of each step.
+    kinds: Vec<SegmentKind>,
+    eta: StdMutex<EtaState>,
+    last_ms: AtomicU64,
+}
+
+#[derive(Debug, Default)]
+struct EtaState {
+    index: usize,
+    started_s: f64,
+    finished: Vec<f64>,
+}
+
+impl FeedProgress {
+    fn new(run: Arc<TestRun>, cfg: &Config, steps: &[PlanStep]) -> FeedProgress {
+        let st = cfg.settle;
+        FeedProgress {
+            run,
+            guess_s: st.min_hold_s.max(2.0 * st.window_s) + st.hold_s,
+            timeouts: steps
+                .iter()
+                .map(|s| match s {
+                    PlanStep::Level { .. } => st.timeout_s + st.hold_s,
+                    PlanStep::Coastdown { .. } => st.coastdown_timeout_s,
+                })
+                .collect(),
+            kinds: steps.iter().map(PlanStep::kind).collect(),
+            eta: StdMutex::new(EtaState::default()),
+            last_ms: AtomicU64::new(0),
+        }
+    }
+
+    fn publish(&self, t_s: f64) {
+        let eta = self.eta.lock().unwrap_or_else(|p| p.into_inner());
+        let per_step = if eta.finished.is_empty() {
+            self.guess_s
+        } else {
+            eta.finished.iter().sum::<f64>() / eta.finished.len() as f64
+        };
+        let in_step = (t_s - eta.started_s).max(0.0);
+        let after = self.timeouts.len().saturating_sub(eta.index + 1) as f64;
+        let eta_s = (per_step - in_step).max(0.0) + per_step * after;
+        let eta_max_s = (self.timeouts.get(eta.index).copied().unwrap_or(0.0) - in_step).max(0.0)
+            + self.timeouts.iter().skip(eta.index + 1).sum::<f64>();
+        drop(eta);
+        self.run.status.send_modify(|s| {
+            s.t_s = t_s;
+            s.eta_s = Some(eta_s);
+            s.eta_max_s = Some(eta_max_s);
+        });
+    }
+}
+
+impl Progress for FeedProgress {
+    fn segment(&self, index: usize, total: usize, label: &str) {
+        let t_s = self.run.status.borrow().t_s;
+        {
+            let mut eta = self.eta.lock().unwrap_or_else(|p| p.into_inner());
+            if index > 0 {
+                let d = t_s - eta.started_s;
+                eta.finished.push(d);
+            }
+            eta.index = index;
+            eta.started_s = t_s;
+        }
+        let kind = self
+            .kinds
+            .get(index)
+            .copied()
+            .unwrap_or(SegmentKind::DcStep);
+        self.run.status.send_modify(|s| {
+            s.segment = Some(SegmentStatus {
+                index,
+                total,
+                label: label.to_string(),
+                kind,
+            });
+        });
+        self.publish(t_s);
+    }
+
+    fn tick(&self, t_s: f64) {
+        // At most every 50 ms of test time.
+        let ms = (t_s * 1e3) as u64;
+        if ms >= self.last_ms.load(Ordering::Relaxed) + 50 {
+            self.last_ms.store(ms, Ordering::Relaxed);
+            self.publish(t_s);
+        }
+    }
+
+    fn done(&self, _: &str) {}
+}

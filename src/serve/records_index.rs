@@ -1,0 +1,600 @@
+//! The records directory and its index: one entry per test (name, rig,
+//! motor id, plan, start, outcome, key results, files), kept in
+//! `index.json` beside the records and written atomically (a temporary
+//! file, fsync, rename, fsync of the directory), so it survives restarts
+//! and crashes.
+//!
+//! On open, entries still marked `running` belong to a daemon that died
+//! mid-test: they become `interrupted`, with what the MCAP reader could
+//! recover. MCAP files the index does not know are added the same way.
+//! [`RecordsIndex::apply_retention`] deletes a rig's oldest finished
+//! records beyond its size and age limits.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::{SystemTime, UNIX_EPOCH};
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::config::Retention;
+use crate::record::{read_entries, Entry};
+
+/// File name of the index in the records directory.
+pub const INDEX_FILE: &str = "index.json";
+
+/// Version of the index file layout.
+const INDEX_VERSION: u32 = 1;
+
+/// How a recorded test ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RecordOutcome {
+    /// The test is running now.
+    Running,
+    /// Every step of the plan ran.
+    Completed,
+    /// The test was stopped and the rig made safe (cause in `reason`).
+    Aborted,
+    /// The daemon died during the test (found `running` on the next start).
+    Interrupted,
+    /// The daemon could not finish the test (a recording error).
+    Failed,
+}
+
+/// What could be read back from an interrupted record.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Recovered {
+    /// Messages read before the damage.
+    pub messages: u64,
+    /// Test time of the last entry read, s.
+    pub last_t_s: f64,
+    /// What the reader reported at the damage (none: the file was whole).
+    pub damage: Option<String>,
+}
+
+/// Headline results: the best method and its parameter values (SI).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KeyResults {
+    /// The method whose parameters to use.
+    pub method: String,
+    /// Parameter values by contract key (`Ra`, `K`, …).
+    pub params: std::collections::BTreeMap<String, f64>,
+}
+
+/// One record in the index.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct IndexEntry {
+    /// Record name: the file stem, also the test id.
+    pub name: String,
+    /// Rig that ran it.
+    pub rig: String,
+    /// Motor under test.
+    pub motor_id: String,
+    /// Test kind (`dc_step`, …).
+    pub kind: String,
+    /// The plan, for a person (e.g. `dc_step 60 → 248 V`).
+    pub plan: String,
+    /// Wall-clock start, RFC 3339.
+    pub started_at: String,
+    /// Wall-clock start, s since the Unix epoch (for retention).
+    pub started_unix_s: f64,
+    /// Wall-clock end, RFC 3339.
+    #[serde(default)]
+    pub finished_at: Option<String>,
+    /// How it ended.
+    pub outcome: RecordOutcome,
+    /// Why it was aborted, failed or interrupted.
+    #[serde(default)]
+    pub reason: Option<String>,
+    /// Headline results, when identification gave some.
+    #[serde(default)]
+    pub key_results: Option<KeyResults>,
+    /// The MCAP file name.
+    pub mcap: String,
+    /// The report file name, once written.
+    #[serde(default)]
+    pub report: Option<String>,
+    /// The plot file name, once written.
+    #[serde(default)]
+    pub svg: Option<String>,
+    /// Size of the record's files, bytes.
+    #[serde(default)]
+    pub bytes: u64,
+    /// For an interrupted record: what the reader recovered.
+    #[serde(default)]
+    pub recovered: Option<Recovered>,
+}
+
+impl IndexEntry {
+    /// The record's files that exist (MCAP, report, plot).
+    pub fn files(&self) -> Vec<&str> {
+        std::iter::once(self.mcap.as_str())
+            .chain(self.report.as_deref())
+            .chain(self.svg.as_deref())
+            .collect()
+    }
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct IndexFile {
+    version: u32,
+    records: Vec<IndexEntry>,
+}
+
+/// The index could not be read or written.
+#[derive(Debug, Error)]
+pub enum IndexError {
+    /// A file or directory operation failed.
+    #[error("{path}: {source}")]
+    Io {
+        /// The path.
+        path: String,
+        /// The error.
+        source: std::io::Error,
+    },
+}
+
+fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> IndexError + '_ {
+    move |source| IndexError::Io {
+        path: path.display().to_string(),
+        source,
+    }
+}
+
+/// Seconds since the Unix epoch.
+pub fn unix_s(t: SystemTime) -> f64 {
+    t.duration_since(UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// The records directory and its index. See the module docs.
+#[derive(Debug)]
+pub struct RecordsIndex {
+    dir: PathBuf,
+    entries: Vec<IndexEntry>,
+}
+
+impl RecordsIndex {
+    /// Open (creating the directory if needed) and repair: `running`
+    /// entries become `interrupted`, unknown MCAP files are added. Returns
+    /// the index and the names it marked interrupted. A corrupt index file
+    /// is kept aside as `index.json.corrupt` and rebuilt from the files.
+    pub fn open(dir: &Path) -> Result<(RecordsIndex, Vec<String>), IndexError> {
+        std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+        let path = dir.join(INDEX_FILE);
+        let entries = match std::fs::read_to_string(&path) {
+            Ok(text) => match serde_json::from_str::<IndexFile>(&text) {
+                Ok(f) if f.version == INDEX_VERSION => f.records,
+                Ok(f) => {
+                    tracing::error!(
+                        "{}: index version {} is not {INDEX_VERSION}; rebuilding it from the records",
+                        path.display(),
+                        f.version
+                    );
+                    set_aside(&path)?;
+                    Vec::new()
+                }
+                Err(e) => {
+                    tracing::error!(
+                        "{}: unreadable index ({e}); kept as {INDEX_FILE}.corrupt, rebuilding it from the records",
+                        path.display()
+                    );
+                    set_aside(&path)?;
+                    Vec::new()
+                }
+            },
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => Vec::new(),
+            Err(e) => return Err(io_err(&path)(e)),
+        };
+        let mut index = RecordsIndex {
+            dir: dir.to_path_buf(),
+            entries,
+        };
+        let mut interrupted = Vec::new();
+        for e in &mut index.entries {
+            if e.outcome == RecordOutcome::Running {
+                e.outcome = RecordOutcome::Interrupted;
+                e.reason = Some("the daemon stopped during the test (killed or crashed)".into());
+                e.recovered = Some(recover(&dir.join(&e.mcap)));
+                e.bytes = files_size(dir, e);
+                interrupted.push(e.name.clone());
+            }
+        }
+        let mut unknown: Vec<PathBuf> = std::fs::read_dir(dir)
+            .map_err(io_err(dir))?
+            .filter_map(|d| d.ok().map(|d| d.path()))
+            .filter(|p| p.extension().is_some_and(|x| x == "mcap"))
+            .filter(|p| {
+                let name = p.file_name().and_then(|n| n.to_str()).unwrap_or("");
+                !index.entries.iter().any(|e| e.mcap == name)
+            })
+            .collect();
+        unknown.sort();
+        for p in unknown {
+            let entry = entry_from_file(dir, &p);
+            interrupted.push(entry.name.clone());
+            index.entries.push(entry);
+        }
+        index
+            .entries
+            .sort_by(|a, b| a.started_unix_s.total_cmp(&b.started_unix_s));
+        if !interrupted.is_empty() || !path.exists() {
+            index.save()?;
+        }
+        Ok((index, interrupted))
+    }
+
+    /// The records directory.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Every entry, oldest first.
+    pub fn entries(&self) -> &[IndexEntry] {
+        &self.entries
+    }
+
+    /// The entry named `name`.
+    pub fn get(&self, name: &str) -> Option<&IndexEntry> {
+        self.entries.iter().find(|e| e.name == name)
+    }
+
+    /// A record name from the motor id and the start time, used by no
+    /// entry and no file.
+    pub fn new_name(&self, motor_id: &str, started_at: &str) -> String {
+        let id: String = motor_id
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() || "-_.".contains(c) {
+                    c
+                } else {
+                    '_'
+                }
+            })
+            .collect();
+        let stamp: String = started_at
+            .chars()
+            .filter(|c| c.is_ascii_alphanumeric())
+            .collect();
+        let base = format!("{id}-{stamp}");
+        (1..)
+            .map(|n| {
+                if n == 1 {
+                    base.clone()
+                } else {
+                    format!("{base}-{n}")
+                }
+            })
+            .find(|s| {
+                self.get(s).is_none()
+                    && !["mcap", "report.json", "svg"]
+                        .iter()
+                        .any(|x| self.dir.join(format!("{s}.{x}")).exists())
+            })
+            .expect("an unused name exists")
+    }
+
+    /// Add an entry and save.
+    pub fn insert(&mut self, entry: IndexEntry) -> Result<(), IndexError> {
+        self.entries.retain(|e| e.name != entry.name);
+        self.entries.push(entry);
+        self.save()
+    }
+
+    /// Change the entry `name` (if there is one) and save.
+    pub fn update(
+        &mut self,
+        name: &str,
+        change: impl FnOnce(&mut IndexEntry),
+    ) -> Result<(), IndexError> {
+        if let Some(e) = self.entries.iter_mut().find(|e| e.name == name) {
+            change(e);
+            e.bytes = files_size(&self.dir, e);
+        }
+        self.save()
+    }
+
+    /// Write the index atomically.
+    pub fn save(&self) -> Result<(), IndexError> {
+        let path = self.dir.join(INDEX_FILE);
+        let tmp = self.dir.join(format!("{INDEX_FILE}.tmp"));
+        let file = IndexFile {
+            version: INDEX_VERSION,
+            records: self.entries.clone(),
+        };
+        let text = serde_json::to_string_pretty(&file).expect("the index serialises") + "\n";
+        let mut f = std::fs::File::create(&tmp).map_err(io_err(&tmp))?;
+        f.write_all(text.as_bytes()).map_err(io_err(&tmp))?;
+        f.sync_all().map_err(io_err(&tmp))?;
+        drop(f);
+        std::fs::rename(&tmp, &path).map_err(io_err(&path))?;
+        // The rename itself reaches the disk with the directory.
+        if let Ok(d) = std::fs::File::open(&self.dir) {
+            let _ = d.sync_all();
+        }
+        Ok(())
+    }
+
+    /// Delete `rig`'s oldest finished records until its records total at
+    /// most `retention.max_total_bytes` and none is older than
+    /// `retention.max_age_s`; running records are never deleted. Returns
+    /// the names deleted.
+    pub fn apply_retention(
+        &mut self,
+        rig: &str,
+        retention: &Retention,
+        now: SystemTime,
+    ) -> Result<Vec<String>, IndexError> {
+        let now_s = unix_s(now);
+        let mut total: u64 = self
+            .entries
+            .iter()
+            .filter(|e| e.rig == rig)
+            .map(|e| e.bytes)
+            .sum();
+        let mut doomed = Vec::new();
+        // Oldest first (the entries are kept in start order).
+        for e in self.entries.iter().filter(|e| e.rig == rig) {
+            if e.outcome == RecordOutcome::Running {
+                continue;
+            }
+            let too_old = retention
+                .max_age_s
+                .is_some_and(|max| now_s - e.started_unix_s > max);
+            if too_old || total > retention.max_total_bytes {
+                total = total.saturating_sub(e.bytes);
+                doomed.push(e.name.clone());
+            }
+        }
+        for name in &doomed {
+            let entry = self.get(name).expect("listed above").clone();
+            for f in entry.files() {
+                let p = self.dir.join(f);
+                match std::fs::remove_file(&p) {
+                    Ok(()) => {}
+                    Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                    Err(e) => return Err(io_err(&p)(e)),
+                }
+            }
+            tracing::info!("retention: deleted record {name}");
+            self.entries.retain(|e| &e.name != name);
+        }
+        if !doomed.is_empty() {
+            self.save()?;
+        }
+        Ok(doomed)
+    }
+}
+
+fn set_aside(path: &Path) -> Result<(), IndexError> {
+    let aside = path.with_extension("json.corrupt");
+    std::fs::rename(path, &aside).map_err(io_err(path))
+}
+
+fn files_size(dir: &Path, e: &IndexEntry) -> u64 {
+    e.files()
+        .iter()
+        .filter_map(|f| std::fs::metadata(dir.join(f)).ok())
+        .map(|m| m.len())
+        .sum()
+}
+
+/// What the MCAP reader gets back from a (possibly truncated) record.
+fn recover(path: &Path) -> Recovered {
+    match read_entries(path) {
+        Ok((_, _, entries, recovery)) => {
+            let last_t_ns = entries.iter().map(Entry::t_ns).max().unwrap_or(0);
+            let messages: u64 = match &recovery {
+                Some(r) => r.messages,
+                None => entries
+                    .iter()
+                    .map(|e| match e {
+                        Entry::Samples { values, .. } => values.len() as u64,
+                        _ => 1,
+                    })
+                    .sum(),
+            };
+            Recovered {
+                messages,
+                last_t_s: last_t_ns as f64 * 1e-9,
+                damage: recovery.map(|r| r.reason),
+            }
+        }
+        Err(e) => Recovered {
+            messages: 0,
+            last_t_s: 0.0,
+            damage: Some(e.to_string()),
+        },
+    }
+}
+
+/// An entry for an MCAP file the index did not know.
+fn entry_from_file(dir: &Path, path: &Path) -> IndexEntry {
+    let name = path
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .unwrap_or("unnamed")
+        .to_string();
+    let mcap = format!("{name}.mcap");
+    let meta = read_entries(path).ok().map(|(m, ..)| m);
+    let modified = std::fs::metadata(path)
+        .and_then(|m| m.modified())
+        .unwrap_or(UNIX_EPOCH);
+    let started_at = meta.as_ref().map_or_else(
+        || humantime::format_rfc3339_seconds(modified).to_string(),
+        |m| m.started_at.clone(),
+    );
+    let started_unix_s = humantime::parse_rfc3339(&started_at)
+        .map(unix_s)
+        .unwrap_or_else(|_| unix_s(modified));
+    let report = format!("{name}.report.json");
+    let svg = format!("{name}.svg");
+    let mut e = IndexEntry {
+        rig: String::new(),
+        motor_id: meta
+            .as_ref()
+            .map_or_else(String::new, |m| m.motor_id.clone()),
+        kind: meta
+            .as_ref()
+            .map_or_else(String::new, |m| m.kind.to_string()),
+        plan: String::new(),
+        started_at,
+        started_unix_s,
+        finished_at: None,
+        outcome: RecordOutcome::Interrupted,
+        reason: Some("found in the records directory without an index entry".into()),
+        key_results: None,
+        report: dir.join(&report).exists().then_some(report),
+        svg: dir.join(&svg).exists().then_some(svg),
+        mcap,
+        bytes: 0,
+        recovered: Some(recover(path)),
+        name,
+    };
+    e.bytes = files_size(dir, &e);
+    e
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn entry(name: &str, rig: &str, started_unix_s: f64, outcome: RecordOutcome) -> IndexEntry {
+        IndexEntry {
+            name: name.into(),
+            rig: rig.into(),
+            motor_id: "m".into(),
+            kind: "dc_step".into(),
+            plan: "dc_step 60 → 248 V".into(),
+            started_at: "2026-11-21T10:00:00Z".into(),
+            started_unix_s,
+            finished_at: None,
+            outcome,
+            reason: None,
+            key_results: None,
+            mcap: format!("{name}.mcap"),
+            report: None,
+            svg: None,
+            bytes: 0,
+            recovered: None,
+        }
+    }
+
+    fn write(dir: &Path, name: &str, bytes: usize) {
+        std::fs::write(dir.join(format!("{name}.mcap")), vec![0u8; bytes]).unwrap();
+    }
+
+    #[test]
+    fn survives_a_restart_and_marks_running_records_interrupted() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut index, interrupted) = RecordsIndex::open(dir.path()).unwrap();
+        assert!(interrupted.is_empty());
+        write(dir.path(), "a", 10);
+        write(dir.path(), "b", 20);
+        index
+            .insert(entry("a", "rig", 1.0, RecordOutcome::Completed))
+            .unwrap();
+        index
+            .insert(entry("b", "rig", 2.0, RecordOutcome::Running))
+            .unwrap();
+        drop(index);
+        assert!(!dir.path().join("index.json.tmp").exists());
+
+        let (index, interrupted) = RecordsIndex::open(dir.path()).unwrap();
+        assert_eq!(interrupted, ["b"]);
+        let b = index.get("b").unwrap();
+        assert_eq!(b.outcome, RecordOutcome::Interrupted);
+        assert_eq!(b.bytes, 20);
+        // Twenty zero bytes are no MCAP: nothing recovered, and it says why.
+        let r = b.recovered.as_ref().unwrap();
+        assert_eq!(r.messages, 0);
+        assert!(r.damage.is_some());
+        assert_eq!(index.get("a").unwrap().outcome, RecordOutcome::Completed);
+        // Marked once: the next open finds nothing new.
+        drop(index);
+        let (_, again) = RecordsIndex::open(dir.path()).unwrap();
+        assert!(again.is_empty());
+    }
+
+    #[test]
+    fn unknown_files_are_indexed_and_a_corrupt_index_is_rebuilt() {
+        let dir = tempfile::tempdir().unwrap();
+        write(dir.path(), "stray", 5);
+        std::fs::write(dir.path().join(INDEX_FILE), "{ not json").unwrap();
+        let (index, found) = RecordsIndex::open(dir.path()).unwrap();
+        assert_eq!(found, ["stray"]);
+        assert_eq!(
+            index.get("stray").unwrap().outcome,
+            RecordOutcome::Interrupted
+        );
+        assert!(dir.path().join("index.json.corrupt").exists());
+        let text = std::fs::read_to_string(dir.path().join(INDEX_FILE)).unwrap();
+        assert!(text.contains("\"stray\""));
+    }
+
+    #[test]
+    fn retention_deletes_the_oldest_finished_records_first() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut index, _) = RecordsIndex::open(dir.path()).unwrap();
+        for (k, name) in ["r1", "r2", "r3", "r4"].iter().enumerate() {
+            write(dir.path(), name, 100);
+            let outcome = if k == 0 {
+                RecordOutcome::Running
+            } else {
+                RecordOutcome::Completed
+            };
+            index.insert(entry(name, "rig", k as f64, outcome)).unwrap();
+            index.update(name, |_| {}).unwrap();
+        }
+        write(dir.path(), "other", 1000);
+        index
+            .insert(entry("other", "rig2", 0.0, RecordOutcome::Completed))
+            .unwrap();
+        index.update("other", |_| {}).unwrap();
+        let keep_250 = Retention {
+            max_total_bytes: 250,
+            max_age_s: None,
+        };
+        let now = UNIX_EPOCH + std::time::Duration::from_secs(10);
+        let gone = index.apply_retention("rig", &keep_250, now).unwrap();
+        // r1 is running (kept though oldest); r2 and r3 go; 200 B remain.
+        assert_eq!(gone, ["r2", "r3"]);
+        assert!(!dir.path().join("r2.mcap").exists());
+        assert!(dir.path().join("r1.mcap").exists() && dir.path().join("other.mcap").exists());
+        let by_age = Retention {
+            max_total_bytes: u64::MAX,
+            max_age_s: Some(5.0),
+        };
+        let now = UNIX_EPOCH + std::time::Duration::from_secs(8);
+        // r4 started at 3 s: 5 s old, not older than 5 s: kept.
+        assert!(index
+            .apply_retention("rig", &by_age, now)
+            .unwrap()
+            .is_empty());
+        let now = UNIX_EPOCH + std::time::Duration::from_secs(9);
+        assert_eq!(index.apply_retention("rig", &by_age, now).unwrap(), ["r4"]);
+        let (reopened, _) = RecordsIndex::open(dir.path()).unwrap();
+        let names: Vec<_> = reopened.entries().iter().map(|e| e.name.as_str()).collect();
+        assert_eq!(names, ["r1", "other"]);
+    }
+
+    #[test]
+    fn names_are_unique_and_safe() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut index, _) = RecordsIndex::open(dir.path()).unwrap();
+        let a = index.new_name("motor 7/a", "2026-11-21T10:00:00Z");
+        assert_eq!(a, "motor_7_a-20261121T100000Z");
+        index
+            .insert(entry(&a, "rig", 0.0, RecordOutcome::Completed))
+            .unwrap();
+        assert_eq!(
+            index.new_name("motor 7/a", "2026-11-21T10:00:00Z"),
+            "motor_7_a-20261121T100000Z-2"
+        );
+    }
+}

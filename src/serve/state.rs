@@ -1,0 +1,386 @@
+//! The daemon's state: its rigs (one test at a time each, a latched trip,
+//! the winding-temperature memory between tests), the records index, and
+//! the tests this process has run. The API handlers call into it.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex as StdMutex};
+use std::time::SystemTime;
+
+use serde::Serialize;
+use tokio::sync::Mutex;
+use tokio::task::JoinHandle;
+use tokio::time::Instant;
+
+use super::jobs::{prepare, StopStatus, TestRun};
+use super::records_index::{IndexError, RecordsIndex};
+use super::test_override::with_test_override;
+use crate::bench::{StopCause, StopReport};
+use crate::config::Config;
+
+/// A latched stop: the rig refuses new tests until an operator resets it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Latch {
+    /// Machine-readable cause (`emergency_stop`, `limit`, …).
+    pub kind: String,
+    /// For a person.
+    pub message: String,
+    /// When, RFC 3339.
+    pub at: String,
+}
+
+impl Latch {
+    fn from_report(r: &StopReport) -> Latch {
+        Latch {
+            kind: r.cause.kind().to_string(),
+            message: r.describe(),
+            at: now_rfc3339(),
+        }
+    }
+}
+
+fn now_rfc3339() -> String {
+    humantime::format_rfc3339_seconds(SystemTime::now()).to_string()
+}
+
+/// What changes on a rig while the daemon runs.
+#[derive(Debug)]
+struct RigRuntime {
+    running: Option<Arc<TestRun>>,
+    latch: Option<Latch>,
+    /// Winding rise above ambient at `winding_at`, K.
+    winding_rise_k: f64,
+    winding_at: Instant,
+}
+
+/// One rig the daemon drives.
+#[derive(Debug)]
+pub struct Rig {
+    /// Name (the configuration file's stem).
+    pub name: String,
+    /// Its configuration.
+    pub cfg: Config,
+    runtime: Mutex<RigRuntime>,
+}
+
+impl Rig {
+    /// The winding rise now, cooled since the last test, K.
+    fn rise_now(rt: &RigRuntime, cfg: &Config) -> f64 {
+        let tau = cfg.supervision.thermal.time_constant;
+        rt.winding_rise_k * (-rt.winding_at.elapsed().as_secs_f64() / tau).exp()
+    }
+}
+
+/// A rig's state as the API shows it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RigStatus {
+    /// Rig name.
+    pub name: String,
+    /// Motor under test.
+    pub motor_id: String,
+    /// Backend kind.
+    pub backend: String,
+    /// Configuration file.
+    pub config: String,
+    /// `idle`, `running` or `tripped`.
+    pub state: String,
+    /// The running test's id.
+    pub running_test: Option<String>,
+    /// The latched stop, when tripped.
+    pub trip: Option<Latch>,
+    /// Estimated winding temperature now, °C.
+    pub winding_c: f64,
+}
+
+/// Why a test could not start.
+#[derive(Debug)]
+pub enum StartError {
+    /// No rig of that name.
+    NoSuchRig(String),
+    /// The rig runs a test already.
+    Busy {
+        /// Its id.
+        running: String,
+    },
+    /// The rig is latched after a stop.
+    Tripped(Latch),
+    /// The daemon is shutting down.
+    Stopping,
+    /// The request's override is invalid.
+    BadRequest(String),
+    /// The rig or the record could not be set up.
+    Setup(String),
+}
+
+/// Why a stop request failed.
+#[derive(Debug)]
+pub enum StopError {
+    /// Unknown test or rig.
+    NotFound(String),
+    /// The test is not running.
+    NotRunning(String),
+}
+
+/// The daemon. See the module docs.
+#[derive(Debug)]
+pub struct Daemon {
+    rigs: BTreeMap<String, Arc<Rig>>,
+    index: Arc<Mutex<RecordsIndex>>,
+    tests: StdMutex<BTreeMap<String, Arc<TestRun>>>,
+    jobs: StdMutex<Vec<JoinHandle<()>>>,
+    stopping: AtomicBool,
+}
+
+fn lock<T>(m: &StdMutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl Daemon {
+    /// A daemon over `rigs` (name, configuration) recording into `records`.
+    /// Opening the index marks records left `running` as interrupted.
+    pub fn new(rigs: Vec<(String, Config)>, records: &Path) -> Result<Daemon, IndexError> {
+        let (mut index, interrupted) = RecordsIndex::open(records)?;
+        for name in &interrupted {
+            let r = index.get(name).and_then(|e| e.recovered.clone());
+            tracing::warn!(
+                "record {name} was interrupted (the daemon stopped during the test); recovered: {r:?}"
+            );
+        }
+        for (name, cfg) in &rigs {
+            index.apply_retention(name, &cfg.retention, SystemTime::now())?;
+        }
+        let rigs = rigs
+            .into_iter()
+            .map(|(name, cfg)| {
+                let rig = Rig {
+                    name: name.clone(),
+                    cfg,
+                    runtime: Mutex::new(RigRuntime {
+                        running: None,
+                        latch: None,
+                        winding_rise_k: 0.0,
+                        winding_at: Instant::now(),
+                    }),
+                };
+                (name, Arc::new(rig))
+            })
+            .collect();
+        Ok(Daemon {
+            rigs,
+            index: Arc::new(Mutex::new(index)),
+            tests: StdMutex::new(BTreeMap::new()),
+            jobs: StdMutex::new(Vec::new()),
+            stopping: AtomicBool::new(false),
+        })
+    }
+
+    /// The records index.
+    pub fn index(&self) -> &Arc<Mutex<RecordsIndex>> {
+        &self.index
+    }
+
+    /// Rig names.
+    pub fn rig_names(&self) -> Vec<String> {
+        self.rigs.keys().cloned().collect()
+    }
+
+    /// The status of every rig.
+    pub async fn rigs(&self) -> Vec<RigStatus> {
+        let mut out = Vec::new();
+        for rig in self.rigs.values() {
+            out.push(self.rig_status(rig).await);
+        }
+        out
+    }
+
+    /// The status of rig `name`.
+    pub async fn rig(&self, name: &str) -> Option<RigStatus> {
+        let rig = self.rigs.get(name)?;
+        Some(self.rig_status(rig).await)
+    }
+
+    async fn rig_status(&self, rig: &Rig) -> RigStatus {
+        let rt = rig.runtime.lock().await;
+        let running = rt.running.as_ref().filter(|r| !r.finished());
+        let state = match (&running, &rt.latch) {
+            (Some(_), _) => "running",
+            (None, Some(_)) => "tripped",
+            (None, None) => "idle",
+        };
+        let winding_c = match running {
+            Some(r) => r.status().values.winding_c,
+            None => rig.cfg.supervision.thermal.ambient + Rig::rise_now(&rt, &rig.cfg),
+        };
+        RigStatus {
+            name: rig.name.clone(),
+            motor_id: rig.cfg.motor_id.clone(),
+            backend: rig.cfg.backend.describe(),
+            config: rig.cfg.source.clone(),
+            state: state.into(),
+            running_test: running.map(|r| r.id()),
+            trip: rt.latch.clone(),
+            winding_c,
+        }
+    }
+
+    /// The test `id` run by this process.
+    pub fn test(&self, id: &str) -> Option<Arc<TestRun>> {
+        lock(&self.tests).get(id).cloned()
+    }
+
+    /// Every test run by this process, oldest first.
+    pub fn tests(&self) -> Vec<Arc<TestRun>> {
+        lock(&self.tests).values().cloned().collect()
+    }
+
+    /// Start a test on `rig`: the configured plan, with `test` (keys of
+    /// `[test]`) applied over it when given.
+    pub async fn start(
+        self: &Arc<Self>,
+        rig_name: &str,
+        test: Option<&serde_json::Map<String, serde_json::Value>>,
+    ) -> Result<Arc<TestRun>, StartError> {
+        let rig = self
+            .rigs
+            .get(rig_name)
+            .cloned()
+            .ok_or_else(|| StartError::NoSuchRig(rig_name.to_string()))?;
+        let mut rt = rig.runtime.lock().await;
+        if self.stopping.load(Ordering::SeqCst) {
+            return Err(StartError::Stopping);
+        }
+        if let Some(r) = rt.running.as_ref().filter(|r| !r.finished()) {
+            return Err(StartError::Busy { running: r.id() });
+        }
+        if let Some(latch) = &rt.latch {
+            return Err(StartError::Tripped(latch.clone()));
+        }
+        let cfg = match test {
+            Some(t) => with_test_override(&rig.cfg, t)
+                .map_err(|e| StartError::BadRequest(e.to_string()))?,
+            None => rig.cfg.clone(),
+        };
+        let rise = Rig::rise_now(&rt, &rig.cfg);
+        let (run, job) = prepare(rig_name, cfg, rise, self.index.clone())
+            .await
+            .map_err(StartError::Setup)?;
+        let id = run.id();
+        tracing::info!(
+            "{id}: test started on rig {rig_name} ({})",
+            run.status().plan
+        );
+        rt.running = Some(run.clone());
+        lock(&self.tests).insert(id, run.clone());
+        drop(rt);
+        let rig = rig.clone();
+        let handle = tokio::spawn(async move {
+            let end = job.run().await;
+            let mut rt = rig.runtime.lock().await;
+            rt.winding_rise_k = end.winding_rise_k;
+            rt.winding_at = Instant::now();
+            if let Some(stop) = &end.latch {
+                if rt.latch.is_none() {
+                    rt.latch = Some(Latch::from_report(stop));
+                }
+            }
+        });
+        let mut jobs = lock(&self.jobs);
+        jobs.retain(|j| !j.is_finished());
+        jobs.push(handle);
+        Ok(run)
+    }
+
+    /// Abort test `id`: the safe state first; returns what the supervisor
+    /// did.
+    pub async fn abort(&self, id: &str) -> Result<StopStatus, StopError> {
+        let run = self
+            .test(id)
+            .ok_or_else(|| StopError::NotFound(format!("no test `{id}`")))?;
+        if run.finished() {
+            return Err(StopError::NotRunning(format!("test `{id}` has finished")));
+        }
+        let report = run
+            .stop(StopCause::OperatorAbort)
+            .await
+            .ok_or_else(|| StopError::NotRunning(format!("test `{id}` is ending")))?;
+        Ok(StopStatus::from(&report))
+    }
+
+    /// Emergency stop on `rig`: a running test is stopped (safe state
+    /// first) and the rig latches until [`Daemon::reset`].
+    pub async fn emergency_stop(
+        &self,
+        rig_name: &str,
+        source: &str,
+    ) -> Result<RigStatus, StopError> {
+        let rig = self
+            .rigs
+            .get(rig_name)
+            .ok_or_else(|| StopError::NotFound(format!("no rig `{rig_name}`")))?;
+        let running = rig.runtime.lock().await.running.clone();
+        let cause = StopCause::EmergencyStop {
+            source: source.to_string(),
+        };
+        let latch = match running.filter(|r| !r.finished()) {
+            Some(run) => match run.stop(cause.clone()).await {
+                Some(report) => Latch::from_report(&report),
+                None => Latch {
+                    kind: cause.kind().into(),
+                    message: cause.to_string(),
+                    at: now_rfc3339(),
+                },
+            },
+            None => Latch {
+                kind: cause.kind().into(),
+                message: format!("{cause} while idle"),
+                at: now_rfc3339(),
+            },
+        };
+        tracing::warn!("rig {rig_name}: {}", latch.message);
+        // The latch set here wins over the job's own: the operator's stop
+        // is what must be acknowledged.
+        rig.runtime.lock().await.latch = Some(latch);
+        Ok(self.rig_status(rig).await)
+    }
+
+    /// Clear a latched stop on `rig`.
+    pub async fn reset(&self, rig_name: &str) -> Result<RigStatus, StopError> {
+        let rig = self
+            .rigs
+            .get(rig_name)
+            .ok_or_else(|| StopError::NotFound(format!("no rig `{rig_name}`")))?;
+        let mut rt = rig.runtime.lock().await;
+        if rt.running.as_ref().is_some_and(|r| !r.finished()) {
+            return Err(StopError::NotRunning(
+                "a test is still ending on this rig; reset after it has finished".into(),
+            ));
+        }
+        if let Some(l) = rt.latch.take() {
+            tracing::info!("rig {rig_name}: reset by the operator (was: {})", l.message);
+        }
+        drop(rt);
+        Ok(self.rig_status(rig).await)
+    }
+
+    /// True while every running test's supervisor is healthy.
+    pub fn healthy(&self) -> bool {
+        lock(&self.tests).values().all(|t| t.healthy())
+    }
+
+    /// Refuse new tests, stop the running ones (safe state first), and
+    /// wait until their records are finished and indexed.
+    pub async fn shutdown(&self) {
+        self.stopping.store(true, Ordering::SeqCst);
+        for run in self.tests() {
+            if !run.finished() {
+                // The supervisor logs what it did.
+                let _ = run.stop(StopCause::Shutdown).await;
+            }
+        }
+        let jobs: Vec<JoinHandle<()>> = std::mem::take(&mut *lock(&self.jobs));
+        for j in jobs {
+            let _ = j.await;
+        }
+    }
+}

@@ -1,0 +1,617 @@
+//! End to end: the `motorbench serve` binary on the simulated rig (paced
+//! at the wall clock), driven through its HTTP API and `motorbench ctl`.
+//!
+//! Covered: a DC test run through the API and fetched; one test at a time
+//! (409 with the running id); an abort halfway with the rig safe and the
+//! latency measured (printed, not asserted: run with `--nocapture`);
+//! SIGKILL mid-test leaving a record that replays and is marked
+//! interrupted on the next start; SIGTERM stopping a test safely with the
+//! MCAP finished; the token off loopback; the Unix socket; emergency stop
+//! and reset.
+//!
+//! Not covered here: the simulated rig behind Modbus (the drivers are
+//! built on another branch) and an induction-machine sweep (no IM bench
+//! yet).
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use motorbench::record::{read_mcap, EventLevel};
+use motorbench::serve::client::{Client, Endpoint, Reply};
+use serde_json::{json, Value};
+
+const BIN: &str = env!("CARGO_BIN_EXE_motorbench");
+
+/// Longest any wait below may take before the test fails (a bound on
+/// loops, not a timing requirement).
+const PATIENCE: Duration = Duration::from_secs(180);
+
+/// A running daemon; killed when dropped.
+struct Served {
+    child: Child,
+    url: String,
+    log: PathBuf,
+}
+
+impl Served {
+    fn start(dir: &Path, records: &Path, extra: &[&str]) -> Served {
+        let config = dir.join("rig.toml");
+        if !config.exists() {
+            std::fs::write(&config, motorbench::config::DEFAULT_CONFIG).unwrap();
+        }
+        let log = dir.join(format!(
+            "serve-{}.log",
+            std::process::id() as u128 + rand_suffix()
+        ));
+        let mut child = Command::new(BIN)
+            .arg("serve")
+            .arg("--config")
+            .arg(&config)
+            .arg("--records")
+            .arg(records)
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stderr(std::fs::File::create(&log).unwrap())
+            .spawn()
+            .expect("motorbench serve starts");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let url = line
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap_or_else(|| {
+                panic!(
+                    "no address announced: {line:?}\n{}",
+                    std::fs::read_to_string(&log).unwrap_or_default()
+                )
+            })
+            .to_string();
+        Served { child, url, log }
+    }
+
+    /// A client on the loopback address of the bound port.
+    fn client(&self, token: Option<&str>) -> Client {
+        let endpoint = match Endpoint::parse(&self.url).unwrap() {
+            Endpoint::Tcp(a) => Endpoint::Tcp(a.replace("0.0.0.0", "127.0.0.1")),
+            unix => unix,
+        };
+        Client::new(endpoint, token.map(str::to_string))
+    }
+
+    fn ctl(&self, args: &[&str]) -> Output {
+        Command::new(BIN)
+            .arg("ctl")
+            .arg("--url")
+            .arg(&self.url)
+            .args(args)
+            .output()
+            .unwrap()
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+fn rand_suffix() -> u128 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos()
+}
+
+async fn get(c: &Client, path: &str) -> Value {
+    let r = c.get(path).await.unwrap();
+    assert!(
+        r.ok(),
+        "GET {path}: {} {}",
+        r.status,
+        String::from_utf8_lossy(&r.body)
+    );
+    r.json()
+}
+
+async fn start(c: &Client, test: Option<Value>) -> Reply {
+    let body = test.map(|t| json!({ "test": t }));
+    c.post("/v1/rigs/rig/tests", body.as_ref()).await.unwrap()
+}
+
+/// Poll the test until `until` holds.
+async fn wait_test(c: &Client, id: &str, until: impl Fn(&Value) -> bool) -> Value {
+    let t0 = Instant::now();
+    loop {
+        let s = get(c, &format!("/v1/tests/{id}")).await;
+        if until(&s) {
+            return s;
+        }
+        assert!(t0.elapsed() < PATIENCE, "waited too long; last status {s}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+fn finished(s: &Value) -> bool {
+    s["state"] == "finished"
+}
+
+async fn record_entry(c: &Client, name: &str) -> Value {
+    get(c, &format!("/v1/records/{name}")).await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dc_test_through_the_api_one_at_a_time_and_abort_halfway() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    let served = Served::start(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+
+    // A short DC staircase through `ctl start --follow`.
+    let out = served.ctl(&[
+        "start",
+        "--test-json",
+        r#"{"levels_V": [60, 248], "coastdown": false}"#,
+        "--follow",
+    ]);
+    let (stdout, stderr) = common::text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}\n{}", served.log());
+    let id = stdout.lines().next().unwrap().trim().to_string();
+    assert!(stdout.contains(&format!("{id}: completed")), "{stdout}");
+    assert!(
+        stdout.contains("segment 2/2"),
+        "progress was shown: {stdout}"
+    );
+
+    let entry = record_entry(&c, &id).await;
+    assert_eq!(entry["outcome"], "completed");
+    assert_eq!(entry["plan"], "dc_step 60 → 248 V");
+    assert_eq!(entry["motor_id"], "seed-table4-dc");
+    let ra = entry["key_results"]["params"]["Ra"].as_f64().unwrap();
+    assert!((ra / 30.9 - 1.0).abs() < 0.05, "Ra {ra}");
+
+    // The report and the MCAP come back through the API, and the MCAP
+    // replays to the recorded result.
+    let fetched = dir.path().join("fetched");
+    let out = served.ctl(&["fetch", &id, "--out", fetched.to_str().unwrap()]);
+    assert!(out.status.success(), "{:?}", common::text(&out));
+    let mcap = fetched.join(format!("{id}.mcap"));
+    let report: Value = serde_json::from_str(
+        &std::fs::read_to_string(fetched.join(format!("{id}.report.json"))).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(report["best"], entry["key_results"]["method"]);
+    let replay = common::motorbench(&["replay", mcap.to_str().unwrap(), "--check"]);
+    let (_, replay_err) = common::text(&replay);
+    assert!(replay.status.success(), "{replay_err}");
+    assert!(replay_err.contains("identical"), "{replay_err}");
+
+    // The full staircase (8 levels and a coast-down); a second start is
+    // refused with the running test's id.
+    let r = start(&c, None).await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let busy = start(&c, None).await;
+    assert_eq!(busy.status, 409);
+    assert_eq!(busy.json()["error"], "busy");
+    assert_eq!(busy.json()["running_test"], id.as_str());
+    let rigs = get(&c, "/v1/rigs").await;
+    assert_eq!(rigs["rigs"][0]["state"], "running");
+    assert_eq!(rigs["rigs"][0]["running_test"], id.as_str());
+
+    // Abort halfway through the plan.
+    let s = wait_test(&c, &id, |s| {
+        s["segment"]["index"].as_u64().unwrap_or(0) * 2
+            >= s["segment"]["total"].as_u64().unwrap_or(99)
+    })
+    .await;
+    assert!(s["eta_s"].as_f64().unwrap() > 0.0, "{s}");
+    assert!(s["values"]["current"].is_number(), "{s}");
+    let sent = Instant::now();
+    let r = c
+        .post(&format!("/v1/tests/{id}/abort"), None)
+        .await
+        .unwrap();
+    let round_trip = sent.elapsed();
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    let stop = &r.json()["stop"];
+    assert_eq!(stop["kind"], "operator_abort");
+    assert_eq!(stop["safe_state_ok"], true);
+
+    let s = wait_test(&c, &id, finished).await;
+    assert_eq!(s["outcome"], "aborted");
+    let stop = &s["stop"];
+    let requested = stop["requested_t_s"].as_f64().unwrap();
+    let first_safe = stop["first_safe_sample_t_s"]
+        .as_f64()
+        .expect("a sample after the safe state");
+    let period = 1.0 / 2000.0;
+
+    // What the record says: the abort event, the supervisor's account, and
+    // the first sample after the safe state with the armature open.
+    let rec = read_mcap(&records.join(format!("{id}.mcap"))).unwrap();
+    assert!(rec.recovery.is_none(), "the record was finished");
+    let abort = rec
+        .events
+        .iter()
+        .find(|(_, e)| e.level == EventLevel::Abort)
+        .expect("an abort event");
+    assert!(
+        abort.1.message.contains("operator abort"),
+        "{}",
+        abort.1.message
+    );
+    assert!(rec
+        .events
+        .iter()
+        .any(|(_, e)| e.message.starts_with("safety supervisor: operator abort")));
+    let mut samples: Vec<(f64, f64)> = rec
+        .segments
+        .iter()
+        .flat_map(|s| s.time.iter().copied().zip(s.current.iter().copied()))
+        .collect();
+    samples.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let at = |t: f64| {
+        samples
+            .iter()
+            .find(|(ts, _)| (ts - t).abs() < period / 10.0)
+            .unwrap_or_else(|| panic!("no sample at {t} s"))
+            .1
+    };
+    assert!(
+        at(first_safe).abs() < 0.02,
+        "current after the safe state: {}",
+        at(first_safe)
+    );
+    let last_driven = samples
+        .iter()
+        .rev()
+        .find(|(_, i)| i.abs() >= 0.02)
+        .expect("the motor was driven");
+    assert!(
+        last_driven.0 <= first_safe,
+        "no current after the safe state"
+    );
+    assert_eq!(record_entry(&c, &id).await["outcome"], "aborted");
+
+    println!(
+        "ABORT LATENCY: request received → safe-state command returned {:.3} ms (wall clock, daemon side); \
+         abort HTTP round trip {:.3} ms (client side); \
+         last sample before the request at {requested:.4} s, first sample read after the safe state at \
+         {first_safe:.4} s: {:.0} sample periods of {:.1} ms (test time); \
+         last sample with current ≥ 20 mA at {:.4} s",
+        stop["safe_after_s"].as_f64().unwrap() * 1e3,
+        round_trip.as_secs_f64() * 1e3,
+        (first_safe - requested) / period,
+        period * 1e3,
+        last_driven.0,
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigkill_mid_test_leaves_a_record_that_replays_and_is_marked_interrupted() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    let mut served = Served::start(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+    let r = start(&c, None).await;
+    assert_eq!(r.status, 201);
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    // Well past the first flushes (the recorder flushes at each segment
+    // marker and after each second of test time).
+    let s = wait_test(&c, &id, |s| s["t_s"].as_f64().unwrap_or(0.0) >= 2.5).await;
+    served.child.kill().unwrap(); // SIGKILL
+    let t_kill = s["t_s"].as_f64().unwrap();
+    served.child.wait().unwrap();
+
+    let mcap = records.join(format!("{id}.mcap"));
+    let rec = read_mcap(&mcap).unwrap();
+    let recovery = rec.recovery.as_ref().expect("a truncated file");
+    assert!(recovery.messages > 10_000, "{recovery:?}");
+    let last = rec
+        .segments
+        .iter()
+        .filter_map(|s| s.time.last().copied())
+        .fold(0.0, f64::max);
+    // At most the flush interval (1 s of test time) and the writer's queue
+    // are lost.
+    assert!(
+        last > 0.5 && last >= t_kill - 2.0,
+        "replays up to the last flushed chunk: {last} s of {t_kill} s"
+    );
+    let replay = common::motorbench(&["replay", mcap.to_str().unwrap()]);
+    let (_, err) = common::text(&replay);
+    assert!(
+        err.contains("damaged") && err.contains("recovered"),
+        "{err}"
+    );
+    println!(
+        "SIGKILL at test time {t_kill:.3} s (or a little later): replay recovered {} messages, samples up to {last:.3} s: {}",
+        recovery.messages,
+        err.lines().next().unwrap_or("")
+    );
+
+    // The next start marks it interrupted, with what was recovered.
+    let served = Served::start(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+    let entry = record_entry(&c, &id).await;
+    assert_eq!(entry["outcome"], "interrupted", "{entry}");
+    assert_eq!(
+        entry["recovered"]["messages"].as_u64(),
+        Some(recovery.messages),
+        "{entry}"
+    );
+    assert!(served.log().contains("interrupted"), "{}", served.log());
+    // And the rig is free for the next test.
+    assert_eq!(get(&c, "/v1/rigs").await["rigs"][0]["state"], "idle");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_stops_the_test_safely_finishes_the_mcap_and_exits_0() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    let mut served = Served::start(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+    let r = start(&c, None).await;
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    wait_test(&c, &id, |s| s["t_s"].as_f64().unwrap_or(0.0) >= 1.0).await;
+    let kill = Command::new("kill")
+        .args(["-TERM", &served.child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let status = served.child.wait().unwrap();
+    assert_eq!(status.code(), Some(0), "{}", served.log());
+
+    let bytes = std::fs::read(records.join(format!("{id}.mcap"))).unwrap();
+    let summary = mcap::Summary::read(&bytes)
+        .expect("a whole file")
+        .expect("with its summary");
+    assert!(summary.stats.unwrap().message_count > 1000);
+    let rec = read_mcap(&records.join(format!("{id}.mcap"))).unwrap();
+    assert!(rec.recovery.is_none());
+    assert!(rec.recorded_result.is_some(), "identified and recorded");
+    let abort = rec
+        .events
+        .iter()
+        .find(|(_, e)| e.level == EventLevel::Abort)
+        .unwrap();
+    assert!(
+        abort.1.message.contains("shutting down"),
+        "{}",
+        abort.1.message
+    );
+    let index: Value =
+        serde_json::from_str(&std::fs::read_to_string(records.join("index.json")).unwrap())
+            .unwrap();
+    assert_eq!(index["records"][0]["outcome"], "aborted");
+    assert!(served.log().contains("stopped"), "{}", served.log());
+}
+
+/// Every endpoint, with a method and a path that exists.
+const ENDPOINTS: [(&str, &str); 15] = [
+    ("GET", "/v1/health"),
+    ("GET", "/v1/rigs"),
+    ("GET", "/v1/rigs/rig"),
+    ("POST", "/v1/rigs/rig/tests"),
+    ("POST", "/v1/rigs/rig/estop"),
+    ("POST", "/v1/rigs/rig/reset"),
+    ("GET", "/v1/tests"),
+    ("GET", "/v1/tests/x"),
+    ("GET", "/v1/tests/x/events"),
+    ("POST", "/v1/tests/x/abort"),
+    ("GET", "/v1/records"),
+    ("GET", "/v1/records/x"),
+    ("GET", "/v1/records/x/report"),
+    ("GET", "/v1/records/x/mcap"),
+    ("GET", "/no/such/path"),
+];
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn off_loopback_no_endpoint_answers_without_the_token() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    std::fs::write(
+        dir.path().join("rig.toml"),
+        motorbench::config::DEFAULT_CONFIG,
+    )
+    .unwrap();
+
+    // No token file: refused at start.
+    let out = Command::new(BIN)
+        .args(["serve", "--listen", "0.0.0.0:0", "--config"])
+        .arg(dir.path().join("rig.toml"))
+        .arg("--records")
+        .arg(&records)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        common::text(&out).1.contains("--token-file"),
+        "{:?}",
+        common::text(&out)
+    );
+
+    // With one: bound to every interface, reached here on loopback only.
+    let token = "a1b2c3d4e5f60718293a4b5c6d7e8f90";
+    let token_file = dir.path().join("token");
+    std::fs::write(&token_file, format!("{token}\n")).unwrap();
+    let served = Served::start(
+        dir.path(),
+        &records,
+        &[
+            "--listen",
+            "0.0.0.0:0",
+            "--token-file",
+            token_file.to_str().unwrap(),
+        ],
+    );
+    assert!(served.url.starts_with("http://0.0.0.0:"), "{}", served.url);
+    for who in [
+        None,
+        Some("wrong-token-wrong-token-wrong-tok"),
+        Some(&token[1..]),
+    ] {
+        let c = served.client(who);
+        for (method, path) in ENDPOINTS {
+            let r = c
+                .request(method.parse().unwrap(), path, None)
+                .await
+                .unwrap();
+            assert_eq!(r.status, 401, "{method} {path} with {who:?}");
+            assert_eq!(r.json()["error"], "unauthorized");
+        }
+    }
+    // Nothing was started, stopped or latched by those requests.
+    let c = served.client(Some(token));
+    let rigs = get(&c, "/v1/rigs").await;
+    assert_eq!(rigs["rigs"][0]["state"], "idle");
+    assert_eq!(get(&c, "/v1/tests").await["tests"], json!([]));
+    // The token opens every endpoint (here: 200 or a 404 for the unknown ids).
+    for (method, path) in ENDPOINTS {
+        if method == "POST" {
+            continue;
+        }
+        let r = c
+            .request(method.parse().unwrap(), path, None)
+            .await
+            .unwrap();
+        assert!(
+            r.status == 200 || r.status == 404,
+            "{method} {path}: {}",
+            r.status
+        );
+    }
+    // ctl sends the token from its file.
+    let out = served.ctl(&["--token-file", token_file.to_str().unwrap(), "status"]);
+    assert!(out.status.success(), "{:?}", common::text(&out));
+    let out = served.ctl(&["status"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        common::text(&out).1.contains("401"),
+        "{:?}",
+        common::text(&out)
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn unix_socket_emergency_stop_latches_until_reset() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    let socket = dir.path().join("api.sock");
+    let served = Served::start(dir.path(), &records, &["--unix", socket.to_str().unwrap()]);
+    assert_eq!(served.url, format!("unix:{}", socket.display()));
+    let c = served.client(None);
+
+    let r = start(&c, None).await;
+    assert_eq!(r.status, 201);
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    wait_test(&c, &id, |s| s["t_s"].as_f64().unwrap_or(0.0) >= 0.5).await;
+    let out = served.ctl(&["estop"]);
+    assert!(out.status.success(), "{:?}", common::text(&out));
+    let s = wait_test(&c, &id, finished).await;
+    assert_eq!(s["outcome"], "aborted");
+    assert_eq!(s["stop"]["kind"], "emergency_stop");
+    assert_eq!(s["stop"]["safe_state_ok"], true);
+
+    // Latched: no new test until an operator resets the rig.
+    let rig = get(&c, "/v1/rigs/rig").await;
+    assert_eq!(rig["state"], "tripped");
+    let refused = start(&c, None).await;
+    assert_eq!(refused.status, 409);
+    assert_eq!(refused.json()["error"], "tripped");
+    let out = served.ctl(&["reset"]);
+    assert!(out.status.success(), "{:?}", common::text(&out));
+    assert_eq!(get(&c, "/v1/rigs/rig").await["state"], "idle");
+    let again = start(&c, Some(json!({"levels_V": [60, 100], "coastdown": false}))).await;
+    assert_eq!(
+        again.status,
+        201,
+        "{}",
+        String::from_utf8_lossy(&again.body)
+    );
+    let id = again.json()["id"].as_str().unwrap().to_string();
+    // A bad override is refused with the key named.
+    let bad = c
+        .post(
+            "/v1/rigs/rig/tests",
+            Some(&json!({"test": {"levels_V": [60, 900]}})),
+        )
+        .await
+        .unwrap();
+    assert!(bad.status == 400 || bad.status == 409, "{}", bad.status);
+    let out = served.ctl(&["follow", &id]);
+    assert!(out.status.success(), "{:?}", common::text(&out));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tells_systemd_it_is_ready_and_pets_the_watchdog() {
+    use std::os::unix::net::UnixDatagram;
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    std::fs::write(
+        dir.path().join("rig.toml"),
+        motorbench::config::DEFAULT_CONFIG,
+    )
+    .unwrap();
+    let notify = dir.path().join("notify.sock");
+    let socket = UnixDatagram::bind(&notify).unwrap();
+    socket
+        .set_read_timeout(Some(Duration::from_secs(30)))
+        .unwrap();
+    let child = Command::new(BIN)
+        .args(["serve", "--listen", "127.0.0.1:0", "--config"])
+        .arg(dir.path().join("rig.toml"))
+        .arg("--records")
+        .arg(&records)
+        .env("NOTIFY_SOCKET", &notify)
+        .env("WATCHDOG_USEC", "200000")
+        // Claims a journal on stderr; there is no journald here, so the
+        // daemon must fall back to plain text.
+        .env("JOURNAL_STREAM", "0:0")
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut messages = Vec::new();
+    let mut buf = [0u8; 512];
+    while messages
+        .iter()
+        .filter(|m: &&String| m.contains("WATCHDOG=1"))
+        .count()
+        < 3
+    {
+        let n = socket.recv(&mut buf).expect("a notification within 30 s");
+        messages.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+    }
+    assert!(messages[0].contains("READY=1"), "{messages:?}");
+    assert!(
+        messages[0].contains("STATUS=listening on http://127.0.0.1:"),
+        "{messages:?}"
+    );
+    Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("journald unavailable"), "{stderr}");
+    assert!(stderr.contains("listening on"), "plain-text logs: {stderr}");
+    let mut rest = Vec::new();
+    socket.set_nonblocking(true).unwrap();
+    while let Ok(n) = socket.recv(&mut buf) {
+        rest.push(String::from_utf8_lossy(&buf[..n]).into_owned());
+    }
+    assert!(rest.iter().any(|m| m.contains("STOPPING=1")), "{rest:?}");
+}
