@@ -13,7 +13,7 @@ use crate::model::DcParams;
 
 mod modbus;
 
-pub use modbus::{LinkSpec, ModbusDeviceLink, ModbusRig, SimulatedTransport};
+pub use modbus::{LinkSpec, ModbusDeviceLink, ModbusRig, SensorLink, SimulatedTransport};
 
 /// The embedded default configuration: the simulated rig with the seed
 /// paper's Table 4 motor.
@@ -231,7 +231,14 @@ impl Backend {
             ),
             Backend::Modbus { rig, .. } => format!(
                 "Modbus: {} and {}",
-                rig.power_stage.profile.name, rig.sensors.profile.name
+                rig.power_stage.profile.name,
+                match &rig.sensors {
+                    SensorLink::Modbus(l) => l.profile.name.clone(),
+                    SensorLink::Serial { port, framing } => format!(
+                        "{framing:?} records on {}",
+                        port.as_ref().map_or("a serial port", |p| p.path.as_str())
+                    ),
+                }
             ),
         }
     }
