@@ -144,7 +144,7 @@ async fn modbus_rig(
     let (sensors, modbus_sensors): (Box<dyn SensorStream>, _) = match &m.sensors {
         SensorLink::Modbus(link) => {
             // One task per link: a stage and sensors on one line share it.
-            let sensor_bus = if served.is_none() && same_link(&m.power_stage, link) {
+            let sensor_bus = if served.is_none() && same_link(&m.power_stage, link.as_ref()) {
                 stage_bus
             } else {
                 spawn_bus(client(

@@ -163,7 +163,7 @@ pub struct ModbusRig {
 #[derive(Debug, Clone, PartialEq)]
 pub enum SensorLink {
     /// Registers of a Modbus device, polled at the sample rate.
-    Modbus(ModbusDeviceLink),
+    Modbus(Box<ModbusDeviceLink>),
     /// Records streaming over a serial line.
     Serial {
         /// The port (`None`: served by the simulated rig).
@@ -299,7 +299,7 @@ impl RawModbusRig {
                     Some(_) => channels.push((quantity, register)),
                 }
             }
-            SensorLink::Modbus(link)
+            SensorLink::Modbus(Box::new(link))
         };
         for q in REQUIRED {
             if !channels.iter().any(|(c, _)| c == q) {
