@@ -18,6 +18,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::task::{Context, Poll, Waker};
 use std::time::Instant;
 
+use motorbench_drivers::can::{FrameStream, SignalMap};
 use motorbench_drivers::modbus::server::{
     lock_bank, serve_rtu, serve_tcp, BankService, ExceptionCode, RegisterBank, SharedBank,
     SimulatedDevice, WriteSpan,
@@ -280,6 +281,8 @@ pub struct ServedRig {
     daq_task: Option<JoinHandle<()>>,
     _pty_ends: Vec<SerialStream>,
     stage: SimPowerStage,
+    plant: SharedPlant,
+    encoder_task: Option<JoinHandle<()>>,
 }
 
 impl std::fmt::Debug for ServedRig {
@@ -363,7 +366,7 @@ impl ServedRig {
         let (daq_link, daq_task, daq_bank) = match daq {
             ServedDaq::Modbus(dp, du) => {
                 let daq_dev = DaqDevice {
-                    plant,
+                    plant: plant.clone(),
                     voltage: register(dp, "armature_voltage")?,
                     current: register(dp, "armature_current")?,
                     count: register(dp, "encoder_count")?,
@@ -377,7 +380,7 @@ impl ServedRig {
                 let pty = pty_pair().map_err(|e| ServeError::Io(e.to_string()))?;
                 let settings = SerialSettings::new_8n1(&pty.device_path, 921_600);
                 let period = std::time::Duration::from_secs_f64(1.0 / rate_hz);
-                let task = tokio::spawn(stream_daq(plant, pty.host, framing, period));
+                let task = tokio::spawn(stream_daq(plant.clone(), pty.host, framing, period));
                 pty_ends.push(pty.device_end);
                 (
                     ServedLink::Stream(settings),
@@ -395,7 +398,53 @@ impl ServedRig {
             daq_task: Some(daq_task),
             _pty_ends: pty_ends,
             stage,
+            plant,
+            encoder_task: None,
         })
+    }
+
+    /// Also simulate a CANopen encoder on `frames`: the message of `map`
+    /// that carries the signal `position` is sent at `rate_hz` with the
+    /// plant's encoder count (as an unsigned 32-bit position, wrapping),
+    /// other signals zero. Replaces an encoder started before.
+    pub fn start_can_encoder(
+        &mut self,
+        frames: Box<dyn FrameStream>,
+        map: SignalMap,
+        rate_hz: f64,
+    ) -> Result<(), ServeError> {
+        let (id, _) = map
+            .find("position")
+            .ok_or_else(|| ServeError::MissingRegister {
+                profile: "the encoder's DBC file".into(),
+                register: "position".into(),
+            })?;
+        let plant = self.plant.clone();
+        let period = std::time::Duration::from_secs_f64(1.0 / rate_hz);
+        let mut frames = frames;
+        let task = tokio::spawn(async move {
+            let mut tick = tokio::time::interval(period);
+            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+            loop {
+                tick.tick().await;
+                let count = {
+                    let mut p = lock(&plant);
+                    p.catch_up();
+                    p.reading(channel::ENCODER)
+                };
+                let position = count.rem_euclid(4_294_967_296.0);
+                let Some(frame) = map.encode(id, &[("position", position)]) else {
+                    return;
+                };
+                if frames.send(&frame).await.is_err() {
+                    return;
+                }
+            }
+        });
+        if let Some(old) = self.encoder_task.replace(task) {
+            old.abort();
+        }
+        Ok(())
     }
 
     /// Stop serving the sensors, as if their cable were pulled: the
@@ -433,5 +482,8 @@ impl Drop for ServedRig {
     fn drop(&mut self) {
         self.pull_sensor_cable();
         self.pull_stage_cable();
+        if let Some(t) = self.encoder_task.take() {
+            t.abort();
+        }
     }
 }
