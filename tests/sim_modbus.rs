@@ -274,3 +274,44 @@ async fn streaming_serial_daq_run_identifies_the_motor() {
         .collect();
     assert_eq!(sources.len(), 3);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pulled_stage_cable_is_reported_as_a_failed_safe_state() {
+    let _one_at_a_time = REALTIME.lock().await;
+    let cfg = config("sim-modbus-dc.toml");
+    let mut rig = build_rig(&cfg, false).await.unwrap();
+    let channels = record_channels(rig.sensors.channels(), rig.stage.id());
+    let mut sink = RecordSink::new(None, None, channels);
+    let steps = plan_steps(&cfg.plan);
+    let (_tx, rx) = tokio::sync::watch::channel(false);
+    let mut served = rig.served.take().expect("a served rig");
+    let outcome = {
+        let test = run_test(
+            &cfg,
+            &steps,
+            rig.stage.as_mut(),
+            rig.sensors.as_mut(),
+            rig.counts_per_rev,
+            &mut sink,
+            &NoProgress,
+            &rx,
+        );
+        tokio::pin!(test);
+        tokio::select! {
+            o = &mut test => panic!("the test ended before the cable was pulled: {o:?}"),
+            _ = tokio::time::sleep(std::time::Duration::from_millis(500)) => {
+                served.pull_stage_cable();
+                test.await.unwrap()
+            }
+        }
+    };
+    // The next set point cannot be delivered: the test stops, and the
+    // record says plainly that the safe state could not be commanded (the
+    // supply, which has no watchdog, keeps its last set point).
+    let Outcome::Aborted { reason } = outcome else {
+        panic!("the test went on without its power stage: {outcome:?}");
+    };
+    assert!(reason.contains("power stage fault"), "{reason}");
+    assert!(reason.contains("SAFE-STATE COMMAND FAILED"), "{reason}");
+    assert!(served.stage_output_enabled(), "nothing reached the supply");
+}
