@@ -76,7 +76,7 @@ fn modbus(c: &mut Criterion) {
     g.bench_function("client_poll_3_channels", |b| {
         b.to_async(&rt).iter(|| async {
             let mut client = client.lock().await;
-            read_registers(&mut client, &regs).await.unwrap()
+            read_registers(&mut client, &regs, 0).await.unwrap()
         })
     });
     let bus = rt.block_on(async { spawn_bus(ModbusClient::tcp("bench", addr, 1, policy())) });

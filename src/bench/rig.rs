@@ -182,7 +182,8 @@ async fn modbus_rig(
                 sensor_bus.clone(),
                 channels.clone(),
                 m.max_lost_polls,
-            );
+            )
+            .with_max_read_gap(link.profile.max_read_gap);
             (
                 Box::new(sensors) as Box<dyn SensorStream>,
                 Some(ModbusProbe {
