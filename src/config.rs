@@ -13,7 +13,7 @@ use crate::model::DcParams;
 
 mod modbus;
 
-pub use modbus::{LinkSpec, ModbusDeviceLink, ModbusRig, SimulatedTransport};
+pub use modbus::{LinkSpec, ModbusDeviceLink, ModbusRig, SensorLink, SimulatedTransport};
 mod retention;
 mod supervision;
 
@@ -253,7 +253,14 @@ impl Backend {
             ),
             Backend::Modbus { rig, .. } => format!(
                 "Modbus: {} and {}",
-                rig.power_stage.profile.name, rig.sensors.profile.name
+                rig.power_stage.profile.name,
+                match &rig.sensors {
+                    SensorLink::Modbus(l) => l.profile.name.clone(),
+                    SensorLink::Serial { port, framing } => format!(
+                        "{framing:?} records on {}",
+                        port.as_ref().map_or("a serial port", |p| p.path.as_str())
+                    ),
+                }
             ),
         }
     }

@@ -4,7 +4,8 @@
 //! and a pulled cable mid-test.
 //!
 //! These tests run on the wall clock (a served rig cannot run faster than
-//! real time): about 7 s each.
+//! real time): about 7 s each, one at a time (a shared lock), so that they
+//! do not compete for the CPU and disturb each other's sampling.
 
 mod common;
 
@@ -17,6 +18,9 @@ use motorbench::bench::{
 use motorbench::config::{Backend, Config};
 use motorbench::record::EventLevel;
 use motorbench::report::IdentificationReport;
+
+/// Held by every wall-clock test: they run one after the other.
+static REALTIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
 fn config(name: &str) -> Config {
     Config::load(
@@ -46,6 +50,7 @@ async fn run(cfg: &Config) -> (tempfile::TempDir, motorbench::bench::Commissione
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn modbus_tcp_run_matches_the_direct_simulated_rig_within_noise() {
+    let _one_at_a_time = REALTIME.lock().await;
     let cfg = config("sim-modbus-dc.toml");
     let sim = cfg.backend.simulated().unwrap().clone();
     let truth = sim.motor;
@@ -96,6 +101,7 @@ async fn modbus_tcp_run_matches_the_direct_simulated_rig_within_noise() {
 
 #[test]
 fn modbus_rtu_run_through_the_cli_identifies_the_motor() {
+    let _one_at_a_time = REALTIME.blocking_lock();
     let dir = tempfile::tempdir().unwrap();
     let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-modbus-rtu-dc.toml");
     let out = common::motorbench(&[
@@ -126,6 +132,7 @@ fn modbus_rtu_run_through_the_cli_identifies_the_motor() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_pulled_sensor_cable_ends_the_test_with_the_stage_commanded_safe() {
+    let _one_at_a_time = REALTIME.lock().await;
     let cfg = config("sim-modbus-dc.toml");
     let mut rig = build_rig(&cfg, false).await.unwrap();
     let channels = record_channels(rig.sensors.channels(), rig.stage.id());
@@ -197,6 +204,7 @@ async fn a_pulled_sensor_cable_ends_the_test_with_the_stage_commanded_safe() {
 
 #[test]
 fn probe_reads_every_channel_and_actuates_only_when_asked() {
+    let _one_at_a_time = REALTIME.blocking_lock();
     let cfg = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-modbus-dc.toml");
     let cfg = cfg.to_str().unwrap();
     let value = |stdout: &str, step: &str, quantity: &str| -> f64 {
@@ -237,4 +245,73 @@ fn probe_reads_every_channel_and_actuates_only_when_asked() {
         safe.abs() < 0.6,
         "the output is off after the probe: {safe}\n{stdout}"
     );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn streaming_serial_daq_run_identifies_the_motor() {
+    let _one_at_a_time = REALTIME.lock().await;
+    let cfg = config("sim-modbus-serial-dc.toml");
+    let truth = cfg.backend.simulated().unwrap().motor;
+    let (_dir, done) = run(&cfg).await;
+    assert_eq!(done.outcome, Outcome::Completed);
+    let r = &done.identification.report;
+    // Device timestamps: no host jitter in the intervals, so the steady
+    // state is as sharp as on the in-process rig.
+    for (key, t, tol) in [
+        ("K", truth.k, 0.005),
+        ("Ra", truth.ra, 0.02),
+        ("Tst", truth.tst, 0.01),
+        ("f", truth.f, 0.05),
+    ] {
+        let (v, _) = param(r, key);
+        assert!(((v - t) / t).abs() < tol, "{key}: {v}, truth {t}");
+    }
+    let sources: Vec<_> = done
+        .record
+        .events
+        .iter()
+        .filter(|(_, e)| e.message.starts_with("sampling statistics"))
+        .collect();
+    assert_eq!(sources.len(), 3);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pulled_stage_cable_is_reported_as_a_failed_safe_state() {
+    let _one_at_a_time = REALTIME.lock().await;
+    let cfg = config("sim-modbus-dc.toml");
+    let mut rig = build_rig(&cfg, false).await.unwrap();
+    let channels = record_channels(rig.sensors.channels(), rig.stage.id());
+    let mut sink = RecordSink::new(None, None, channels);
+    let steps = plan_steps(&cfg.plan);
+    let (_tx, rx) = tokio::sync::watch::channel(false);
+    let mut served = rig.served.take().expect("a served rig");
+    let outcome = {
+        let test = run_test(
+            &cfg,
+            &steps,
+            rig.stage.as_mut(),
+            rig.sensors.as_mut(),
+            rig.counts_per_rev,
+            &mut sink,
+            &NoProgress,
+            &rx,
+        );
+        tokio::pin!(test);
+        tokio::select! {
+            o = &mut test => panic!("the test ended before the cable was pulled: {o:?}"),
+            _ = tokio::time::sleep(std::time::Duration::from_millis(500)) => {
+                served.pull_stage_cable();
+                test.await.unwrap()
+            }
+        }
+    };
+    // The next set point cannot be delivered: the test stops, and the
+    // record says plainly that the safe state could not be commanded (the
+    // supply, which has no watchdog, keeps its last set point).
+    let Outcome::Aborted { reason } = outcome else {
+        panic!("the test went on without its power stage: {outcome:?}");
+    };
+    assert!(reason.contains("power stage fault"), "{reason}");
+    assert!(reason.contains("SAFE-STATE COMMAND FAILED"), "{reason}");
+    assert!(served.stage_output_enabled(), "nothing reached the supply");
 }

@@ -5,11 +5,13 @@
 use motorbench_drivers::modbus::{
     spawn_bus, BusHandle, CallPolicy, ModbusClient, ModbusPowerStage, ModbusSensors, PolledChannel,
 };
+use motorbench_drivers::serial::port::open_serial;
+use motorbench_drivers::serial::{SerialChannel, SerialSensors};
 use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
 
-use super::served::{ServeError, ServedLink, ServedRig};
+use super::served::{ServeError, ServedDaq, ServedLink, ServedRig};
 use super::sim_rig;
-use crate::config::{Backend, Config, LinkSpec, ModbusDeviceLink, ModbusRig};
+use crate::config::{Backend, Config, LinkSpec, ModbusDeviceLink, ModbusRig, SensorLink};
 use crate::model::DcParams;
 
 /// Plant rate of the simulated rig when it is served behind a protocol,
@@ -67,6 +69,9 @@ pub enum RigError {
     /// Serving the simulated rig failed.
     #[error(transparent)]
     Serve(#[from] ServeError),
+    /// A device could not be reached while setting up.
+    #[error(transparent)]
+    Driver(#[from] DriverError),
 }
 
 fn client(
@@ -80,7 +85,7 @@ fn client(
         (_, Some(ServedLink::Tcp(addr))) | (LinkSpec::Tcp(addr), None) => {
             ModbusClient::tcp(name, *addr, unit, policy)
         }
-        (_, Some(ServedLink::Rtu(s))) | (LinkSpec::Rtu(s), None) => {
+        (_, Some(ServedLink::Rtu(s) | ServedLink::Stream(s))) | (LinkSpec::Rtu(s), None) => {
             ModbusClient::rtu(name, s.clone(), unit, policy)
         }
         (LinkSpec::Simulated, None) => unreachable!("a simulated link is always served"),
@@ -101,16 +106,25 @@ async fn modbus_rig(
     sample_rate_hz: f64,
 ) -> Result<Rig, RigError> {
     let served = match (m.simulate, simulated) {
-        (Some(t), Some(sim)) => Some(
-            ServedRig::start(
-                sim,
-                SERVED_PLANT_RATE_HZ,
-                t,
-                (&m.power_stage.profile, m.power_stage.unit_id),
-                (&m.sensors.profile, m.sensors.unit_id),
+        (Some(t), Some(sim)) => {
+            let daq = match &m.sensors {
+                SensorLink::Modbus(l) => ServedDaq::Modbus(&l.profile, l.unit_id),
+                SensorLink::Serial { framing, .. } => ServedDaq::Stream {
+                    framing: *framing,
+                    rate_hz: sample_rate_hz,
+                },
+            };
+            Some(
+                ServedRig::start(
+                    sim,
+                    SERVED_PLANT_RATE_HZ,
+                    t,
+                    (&m.power_stage.profile, m.power_stage.unit_id),
+                    daq,
+                )
+                .await?,
             )
-            .await?,
-        ),
+        }
         _ => None,
     };
     let stage_bus = spawn_bus(client(
@@ -120,65 +134,104 @@ async fn modbus_rig(
         m.power_stage.unit_id,
         m.policy,
     ));
-    // One task per link: a stage and sensors on one line share it.
-    let sensor_bus = if served.is_none() && same_link(&m.power_stage, &m.sensors) {
-        stage_bus.clone()
-    } else {
-        spawn_bus(client(
-            "modbus-sensors",
-            &m.sensors.link,
-            served.as_ref().map(|s| &s.daq_link),
-            m.sensors.unit_id,
-            m.policy,
-        ))
-    };
     let stage_id = format!("modbus:{}", m.power_stage.profile.name);
     let stage = ModbusPowerStage::new(
         &stage_id,
-        stage_bus,
+        stage_bus.clone(),
         m.power_stage.unit_id,
         &m.power_stage.profile,
-    )
-    .map_err(|e| RigError::Simulated(e.to_string()))?;
-    let source = format!("modbus:{}", m.sensors.profile.name);
-    let channels: Vec<PolledChannel> = m
-        .channels
-        .iter()
-        .map(|(quantity, register)| {
-            let r = m
-                .sensors
-                .profile
-                .register(register)
-                .expect("checked when the configuration was loaded")
-                .clone();
-            PolledChannel {
-                unit: m.sensors.unit_id,
-                info: ChannelInfo {
-                    quantity: quantity.clone(),
-                    unit: r.unit.clone(),
-                    source: source.clone(),
-                    rate_hz: sample_rate_hz,
-                },
-                register: r,
-            }
-        })
-        .collect();
-    let sensors = ModbusSensors::new(
-        &source,
-        sensor_bus.clone(),
-        channels.clone(),
-        m.max_lost_polls,
-    );
+    )?;
+    let (sensors, modbus_sensors): (Box<dyn SensorStream>, _) = match &m.sensors {
+        SensorLink::Modbus(link) => {
+            // One task per link: a stage and sensors on one line share it.
+            let sensor_bus = if served.is_none() && same_link(&m.power_stage, link.as_ref()) {
+                stage_bus
+            } else {
+                spawn_bus(client(
+                    "modbus-sensors",
+                    &link.link,
+                    served.as_ref().map(|s| &s.daq_link),
+                    link.unit_id,
+                    m.policy,
+                ))
+            };
+            let source = format!("modbus:{}", link.profile.name);
+            let channels: Vec<PolledChannel> = m
+                .channels
+                .iter()
+                .map(|(quantity, register)| {
+                    let r = link
+                        .profile
+                        .register(register)
+                        .expect("checked when the configuration was loaded")
+                        .clone();
+                    PolledChannel {
+                        unit: link.unit_id,
+                        info: ChannelInfo {
+                            quantity: quantity.clone(),
+                            unit: r.unit.clone(),
+                            source: source.clone(),
+                            rate_hz: sample_rate_hz,
+                        },
+                        register: r,
+                    }
+                })
+                .collect();
+            let sensors = ModbusSensors::new(
+                &source,
+                sensor_bus.clone(),
+                channels.clone(),
+                m.max_lost_polls,
+            )
+            .with_max_read_gap(link.profile.max_read_gap);
+            (
+                Box::new(sensors) as Box<dyn SensorStream>,
+                Some(ModbusProbe {
+                    bus: sensor_bus,
+                    channels,
+                }),
+            )
+        }
+        SensorLink::Serial { port, framing } => {
+            let settings = match (port, served.as_ref().map(|s| &s.daq_link)) {
+                (_, Some(ServedLink::Stream(s))) | (Some(s), None) => s.clone(),
+                _ => unreachable!("a simulated stream is always served"),
+            };
+            let io = open_serial(&settings)?;
+            let source = format!("serial:{}", settings.path);
+            let channels = m
+                .channels
+                .iter()
+                .map(|(quantity, key)| SerialChannel {
+                    key: key.clone(),
+                    info: ChannelInfo {
+                        quantity: quantity.clone(),
+                        unit: match quantity.as_str() {
+                            "armature_voltage" => "V",
+                            "armature_current" => "A",
+                            "encoder_count" => "count",
+                            _ => "",
+                        }
+                        .into(),
+                        source: source.clone(),
+                        rate_hz: sample_rate_hz,
+                    },
+                })
+                .collect();
+            (
+                Box::new(SerialSensors::new(&source, io, *framing, channels))
+                    as Box<dyn SensorStream>,
+                None,
+            )
+        }
+    };
     Ok(Rig {
         stage: Box::new(stage),
-        sensors: Box::new(sensors),
+        sensors,
         counts_per_rev: 4.0 * f64::from(m.encoder_lines),
         truth: simulated.filter(|_| m.simulate.is_some()).map(|s| s.motor),
         served,
-        modbus_sensors: Some(ModbusProbe {
-            bus: sensor_bus,
-            channels,
-        }),
+        modbus_sensors,
     })
 }
 

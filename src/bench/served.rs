@@ -1,10 +1,12 @@
 //! The simulated rig behind the real protocols: the simulated supply
 //! served as a Modbus device with a shipped profile's register map (e.g.
-//! the Riden RD6006's), and the simulated sensors as a Modbus DAQ
-//! (`config/devices/sim-daq.toml`), each on its own Modbus TCP server on
-//! 127.0.0.1 (a port the OS picks) or its own RTU server on a
-//! pseudo-terminal pair. The bench then reaches them through the real
-//! driver code, exactly as it would reach hardware.
+//! the Riden RD6006's), each on its own Modbus TCP server on 127.0.0.1 (a
+//! port the OS picks) or its own RTU server on a pseudo-terminal pair; the
+//! simulated sensors either as a Modbus DAQ (`config/devices/sim-daq.toml`)
+//! or as a DAQ that streams records (ASCII or binary framing) over a
+//! pseudo-terminal at its sample rate, stamped with the plant's own time.
+//! The bench then reaches them through the real driver code, exactly as it
+//! would reach hardware.
 //!
 //! The plant runs on the wall clock: every request first advances it to
 //! "now" in steps of its own sample period, so a set point written at
@@ -16,13 +18,16 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::task::{Context, Poll, Waker};
 use std::time::Instant;
 
+use motorbench_drivers::can::{FrameStream, SignalMap};
 use motorbench_drivers::modbus::server::{
     lock_bank, serve_rtu, serve_tcp, BankService, ExceptionCode, RegisterBank, SharedBank,
     SimulatedDevice, WriteSpan,
 };
 use motorbench_drivers::modbus::{DeviceProfile, Register};
 use motorbench_drivers::serial::port::{pty_pair, SerialSettings, SerialStream};
+use motorbench_drivers::serial::{ascii, binary, SerialFraming, StreamRecord};
 use motorbench_drivers::{PowerStage, SampleBatch};
+use tokio::io::AsyncWriteExt;
 use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
@@ -190,6 +195,76 @@ pub enum ServedLink {
     Tcp(std::net::SocketAddr),
     /// Modbus RTU: open this pseudo-terminal path.
     Rtu(SerialSettings),
+    /// A streaming DAQ: open this pseudo-terminal path.
+    Stream(SerialSettings),
+}
+
+/// How the simulated sensors are served.
+#[derive(Debug, Clone, Copy)]
+pub enum ServedDaq<'a> {
+    /// As Modbus registers of this profile, on this unit.
+    Modbus(&'a DeviceProfile, u8),
+    /// As a stream of records at `rate_hz`, keys `armature_voltage`,
+    /// `armature_current`, `encoder_count` (ASCII) or `0`, `1`, `2`
+    /// (binary).
+    Stream {
+        /// The line protocol.
+        framing: SerialFraming,
+        /// Records per second.
+        rate_hz: f64,
+    },
+}
+
+/// Stream the plant's sensor readings as records, one per `period`.
+async fn stream_daq(
+    plant: SharedPlant,
+    mut io: SerialStream,
+    framing: SerialFraming,
+    period: std::time::Duration,
+) {
+    let mut tick = tokio::time::interval(period);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    if framing == SerialFraming::Binary && io.write_all(&[0]).await.is_err() {
+        return;
+    }
+    let mut seq = 0u32;
+    let mut last_step = None;
+    loop {
+        tick.tick().await;
+        let (step, t_us, values) = {
+            let mut p = lock(&plant);
+            p.catch_up();
+            let t_us = (p.steps as f64 * p.period_s * 1e6).round() as u64;
+            let values = [channel::VOLTAGE, channel::CURRENT, channel::ENCODER]
+                .iter()
+                .zip(["armature_voltage", "armature_current", "encoder_count"])
+                .enumerate()
+                .map(|(k, (&ch, name))| {
+                    let key = match framing {
+                        SerialFraming::Ascii => name.to_string(),
+                        SerialFraming::Binary => k.to_string(),
+                    };
+                    (key, p.reading(ch))
+                })
+                .collect();
+            (p.steps, t_us, values)
+        };
+        // One record per plant step at most: a late tick sends the
+        // newest sample, never a repeat.
+        if last_step == Some(step) {
+            continue;
+        }
+        last_step = Some(step);
+        seq = seq.wrapping_add(1);
+        let record = StreamRecord { seq, t_us, values };
+        let bytes = match framing {
+            SerialFraming::Ascii => ascii::encode(&record),
+            SerialFraming::Binary => binary::encode(&record),
+        };
+        if io.write_all(&bytes).await.is_err() {
+            return;
+        }
+    }
 }
 
 /// The simulated rig, served. Dropping it stops the servers.
@@ -200,12 +275,14 @@ pub struct ServedRig {
     pub daq_link: ServedLink,
     /// The supply's registers (for tests and diagnostics).
     pub stage_bank: SharedBank,
-    /// The DAQ's registers.
+    /// The DAQ's registers (empty for a streaming DAQ).
     pub daq_bank: SharedBank,
     stage_task: Option<JoinHandle<()>>,
     daq_task: Option<JoinHandle<()>>,
     _pty_ends: Vec<SerialStream>,
     stage: SimPowerStage,
+    plant: SharedPlant,
+    encoder_task: Option<JoinHandle<()>>,
 }
 
 impl std::fmt::Debug for ServedRig {
@@ -219,14 +296,14 @@ impl std::fmt::Debug for ServedRig {
 
 impl ServedRig {
     /// Serve `sim` (its plant stepped at `plant_rate_hz`): the supply with
-    /// `supply`'s register map on unit `supply_unit`, the sensors with
-    /// `daq`'s map on unit `daq_unit`.
+    /// `supply`'s register map on its unit, over `transport`; the sensors
+    /// as `daq` says.
     pub async fn start(
         sim: &SimulatedRig,
         plant_rate_hz: f64,
         transport: SimulatedTransport,
         supply: (&DeviceProfile, u8),
-        daq: (&DeviceProfile, u8),
+        daq: ServedDaq<'_>,
     ) -> Result<ServedRig, ServeError> {
         let (stage, sensors) =
             sim_rig(sim, plant_rate_hz, false).map_err(|e| ServeError::Motor(e.to_string()))?;
@@ -260,17 +337,8 @@ impl ServedRig {
             voltage_out: sp.register("voltage_out").cloned(),
             current_out: sp.register("current_out").cloned(),
         };
-        let (dp, du) = daq;
-        let daq_dev = DaqDevice {
-            plant,
-            voltage: register(dp, "armature_voltage")?,
-            current: register(dp, "armature_current")?,
-            count: register(dp, "encoder_count")?,
-        };
         let stage_bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(sp)));
-        let daq_bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(dp)));
         let stage_service = BankService::new(su, stage_bank.clone(), Arc::new(supply_dev));
-        let daq_service = BankService::new(du, daq_bank.clone(), Arc::new(daq_dev));
         let io = |e: std::io::Error| ServeError::Io(e.to_string());
         let mut pty_ends = Vec::new();
         let mut serve = |service: BankService,
@@ -295,7 +363,32 @@ impl ServedRig {
         };
         let baud = |p: &DeviceProfile| p.serial.map_or(115_200, |s| s.baud_rate);
         let (stage_link, stage_task) = serve(stage_service, baud(sp))?;
-        let (daq_link, daq_task) = serve(daq_service, baud(dp))?;
+        let (daq_link, daq_task, daq_bank) = match daq {
+            ServedDaq::Modbus(dp, du) => {
+                let daq_dev = DaqDevice {
+                    plant: plant.clone(),
+                    voltage: register(dp, "armature_voltage")?,
+                    current: register(dp, "armature_current")?,
+                    count: register(dp, "encoder_count")?,
+                };
+                let bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(dp)));
+                let service = BankService::new(du, bank.clone(), Arc::new(daq_dev));
+                let (link, task) = serve(service, baud(dp))?;
+                (link, task, bank)
+            }
+            ServedDaq::Stream { framing, rate_hz } => {
+                let pty = pty_pair().map_err(|e| ServeError::Io(e.to_string()))?;
+                let settings = SerialSettings::new_8n1(&pty.device_path, 921_600);
+                let period = std::time::Duration::from_secs_f64(1.0 / rate_hz);
+                let task = tokio::spawn(stream_daq(plant.clone(), pty.host, framing, period));
+                pty_ends.push(pty.device_end);
+                (
+                    ServedLink::Stream(settings),
+                    task,
+                    Arc::new(Mutex::new(RegisterBank::default())),
+                )
+            }
+        };
         Ok(ServedRig {
             stage_link,
             daq_link,
@@ -305,7 +398,53 @@ impl ServedRig {
             daq_task: Some(daq_task),
             _pty_ends: pty_ends,
             stage,
+            plant,
+            encoder_task: None,
         })
+    }
+
+    /// Also simulate a CANopen encoder on `frames`: the message of `map`
+    /// that carries the signal `position` is sent at `rate_hz` with the
+    /// plant's encoder count (as an unsigned 32-bit position, wrapping),
+    /// other signals zero. Replaces an encoder started before.
+    pub fn start_can_encoder(
+        &mut self,
+        frames: Box<dyn FrameStream>,
+        map: SignalMap,
+        rate_hz: f64,
+    ) -> Result<(), ServeError> {
+        let (id, _) = map
+            .find("position")
+            .ok_or_else(|| ServeError::MissingRegister {
+                profile: "the encoder's DBC file".into(),
+                register: "position".into(),
+            })?;
+        let plant = self.plant.clone();
+        let period = std::time::Duration::from_secs_f64(1.0 / rate_hz);
+        let mut frames = frames;
+        let task = tokio::spawn(async move {
+            let mut tick = tokio::time::interval(period);
+            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+            loop {
+                tick.tick().await;
+                let count = {
+                    let mut p = lock(&plant);
+                    p.catch_up();
+                    p.reading(channel::ENCODER)
+                };
+                let position = count.rem_euclid(4_294_967_296.0);
+                let Some(frame) = map.encode(id, &[("position", position)]) else {
+                    return;
+                };
+                if frames.send(&frame).await.is_err() {
+                    return;
+                }
+            }
+        });
+        if let Some(old) = self.encoder_task.replace(task) {
+            old.abort();
+        }
+        Ok(())
     }
 
     /// Stop serving the sensors, as if their cable were pulled: the
@@ -343,5 +482,8 @@ impl Drop for ServedRig {
     fn drop(&mut self) {
         self.pull_sensor_cable();
         self.pull_stage_cable();
+        if let Some(t) = self.encoder_task.take() {
+            t.abort();
+        }
     }
 }

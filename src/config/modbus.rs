@@ -1,7 +1,9 @@
-//! The `modbus` rig backend: a power stage and polled sensors reached over
-//! Modbus TCP or RTU, each described by a device profile
-//! (`config/devices/*.toml`), optionally with the simulated rig served
-//! behind those links so the whole test runs through the real driver code.
+//! The `modbus` rig backend: a power stage reached over Modbus TCP or RTU,
+//! described by a device profile (`config/devices/*.toml`), and sensors
+//! either polled over Modbus (a profile again) or streaming over a serial
+//! line (the ASCII or binary protocol of `motorbench_drivers::serial`);
+//! optionally with the simulated rig served behind those links so the
+//! whole test runs through the real driver code.
 //!
 //! ```toml
 //! [rig]
@@ -28,6 +30,18 @@
 //! encoder_lines = 2500
 //! channels = { armature_voltage = "armature_voltage", armature_current = "armature_current", encoder_count = "encoder_count" }
 //! ```
+//!
+//! Sensors that stream over a serial line instead:
+//!
+//! ```toml
+//! [rig.modbus.sensors]
+//! transport = "serial"
+//! framing = "binary"            # or "ascii"
+//! path = "/dev/ttyUSB1"         # leave out with rig.modbus.simulate
+//! baud_rate = 921600
+//! encoder_lines = 2500
+//! channels = { armature_voltage = "0", armature_current = "1", encoder_count = "2" }   # record keys
+//! ```
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -36,6 +50,7 @@ use std::time::Duration;
 
 use motorbench_drivers::modbus::{CallPolicy, DeviceProfile};
 use motorbench_drivers::serial::port::{Parity, SerialSettings};
+use motorbench_drivers::serial::SerialFraming;
 use serde::Deserialize;
 
 /// Raw `[rig.modbus]` table.
@@ -79,8 +94,15 @@ struct RawLink {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct RawSensors {
-    #[serde(flatten)]
-    link: RawLink,
+    profile: Option<String>,
+    unit_id: Option<u8>,
+    transport: Option<String>,
+    address: Option<String>,
+    path: Option<String>,
+    baud_rate: Option<u32>,
+    parity: Option<Parity>,
+    stop_bits: Option<u8>,
+    framing: Option<SerialFraming>,
     encoder_lines: u32,
     channels: BTreeMap<String, String>,
 }
@@ -129,12 +151,26 @@ pub struct ModbusRig {
     pub max_lost_polls: u32,
     /// The device that drives the motor.
     pub power_stage: ModbusDeviceLink,
-    /// The device whose registers are the sensor channels.
-    pub sensors: ModbusDeviceLink,
-    /// `(quantity, register name)` per sensor channel.
+    /// Where the sensor channels come from.
+    pub sensors: SensorLink,
+    /// `(quantity, register name or record key)` per sensor channel.
     pub channels: Vec<(String, String)>,
     /// Encoder lines per revolution (4 counts per line).
     pub encoder_lines: u32,
+}
+
+/// Where the sensor channels come from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SensorLink {
+    /// Registers of a Modbus device, polled at the sample rate.
+    Modbus(Box<ModbusDeviceLink>),
+    /// Records streaming over a serial line.
+    Serial {
+        /// The port (`None`: served by the simulated rig).
+        port: Option<SerialSettings>,
+        /// The line protocol.
+        framing: SerialFraming,
+    },
 }
 
 /// Quantities the DC bench needs from the sensors.
@@ -185,26 +221,86 @@ impl RawModbusRig {
                 ),
             ));
         }
-        let sensors = self
-            .sensors
-            .link
-            .validate("rig.modbus.sensors", dir, simulate.is_some())?;
+        let raw = self.sensors;
+        let serial = raw.transport.as_deref() == Some("serial") || raw.framing.is_some();
         let mut channels = Vec::new();
-        for (quantity, register) in self.sensors.channels {
-            let key = format!("rig.modbus.sensors.channels.{quantity}");
-            match sensors.profile.register(&register) {
-                None => {
+        let sensors = if serial {
+            let key = "rig.modbus.sensors";
+            if raw.profile.is_some() || raw.unit_id.is_some() || raw.address.is_some() {
+                return Err((
+                    key.into(),
+                    "a serial stream takes no profile, unit_id or address".into(),
+                ));
+            }
+            if raw.transport.as_deref() != Some("serial") {
+                return Err((
+                    format!("{key}.transport"),
+                    "framing is for transport = \"serial\"".into(),
+                ));
+            }
+            let framing = raw.framing.ok_or_else(|| {
+                (
+                    format!("{key}.framing"),
+                    "missing: \"ascii\" or \"binary\"".into(),
+                )
+            })?;
+            let port = match (simulate.is_some(), raw.path) {
+                (true, None) => None,
+                (true, Some(_)) => {
                     return Err((
-                        key,
-                        format!("{} has no register `{register}`", sensors.profile_path),
+                        format!("{key}.path"),
+                        "comes from rig.modbus.simulate here: leave it out".into(),
                     ))
                 }
-                Some(r) if r.access == motorbench_drivers::modbus::Access::Write => {
-                    return Err((key, format!("register `{register}` is write-only")))
+                (false, Some(path)) => Some(SerialSettings {
+                    path,
+                    baud_rate: raw
+                        .baud_rate
+                        .ok_or_else(|| (format!("{key}.baud_rate"), "missing".into()))?,
+                    parity: raw.parity.unwrap_or_default(),
+                    stop_bits: raw.stop_bits.unwrap_or(1),
+                }),
+                (false, None) => {
+                    return Err((format!("{key}.path"), "missing: the serial port".into()))
                 }
-                Some(_) => channels.push((quantity, register)),
+            };
+            channels.extend(raw.channels);
+            SensorLink::Serial { port, framing }
+        } else {
+            let profile = raw.profile.ok_or_else(|| {
+                (
+                    "rig.modbus.sensors.profile".to_string(),
+                    "missing: the device profile of the Modbus sensors".to_string(),
+                )
+            })?;
+            let link = RawLink {
+                profile,
+                unit_id: raw.unit_id,
+                transport: raw.transport,
+                address: raw.address,
+                path: raw.path,
+                baud_rate: raw.baud_rate,
+                parity: raw.parity,
+                stop_bits: raw.stop_bits,
             }
-        }
+            .validate("rig.modbus.sensors", dir, simulate.is_some())?;
+            for (quantity, register) in raw.channels {
+                let key = format!("rig.modbus.sensors.channels.{quantity}");
+                match link.profile.register(&register) {
+                    None => {
+                        return Err((
+                            key,
+                            format!("{} has no register `{register}`", link.profile_path),
+                        ))
+                    }
+                    Some(r) if r.access == motorbench_drivers::modbus::Access::Write => {
+                        return Err((key, format!("register `{register}` is write-only")))
+                    }
+                    Some(_) => channels.push((quantity, register)),
+                }
+            }
+            SensorLink::Modbus(Box::new(link))
+        };
         for q in REQUIRED {
             if !channels.iter().any(|(c, _)| c == q) {
                 return Err((
@@ -213,7 +309,7 @@ impl RawModbusRig {
                 ));
             }
         }
-        if self.sensors.encoder_lines == 0 {
+        if raw.encoder_lines == 0 {
             return Err((
                 "rig.modbus.sensors.encoder_lines".into(),
                 "must be > 0".into(),
@@ -226,7 +322,7 @@ impl RawModbusRig {
             power_stage,
             sensors,
             channels,
-            encoder_lines: self.sensors.encoder_lines,
+            encoder_lines: raw.encoder_lines,
         })
     }
 }

@@ -7,17 +7,20 @@
 //!   USB-CAN adapters, over any byte stream: a serial port, a PTY, a
 //!   duplex), [`SocketCanStream`] (the Linux kernel's SocketCAN) and
 //!   [`InProcessBus`] (a bus inside one process, for simulations and tests).
-//! - [`SignalMap`]: signals of a DBC file, decoded from frames.
+//! - [`SignalMap`]: signals of a DBC file, decoded from frames;
+//!   [`CanSignalSensors`]: such signals as a sensor stream.
 
 mod bus;
 mod dbc;
 mod frame;
+mod sensors;
 mod slcan;
 mod socketcan;
 
 pub use bus::{BusEndpoint, InProcessBus};
 pub use dbc::{DbcError, DecodedSignal, SignalMap, SignalSpec};
 pub use frame::{CanFrame, CanId, FrameError};
+pub use sensors::{CanChannel, CanSignalSensors};
 pub use slcan::{decode_line, encode_frame, SlcanBitrate, SlcanLine, SlcanOptions, SlcanStream};
 pub use socketcan::SocketCanStream;
 

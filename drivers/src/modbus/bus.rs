@@ -40,6 +40,7 @@ impl Reading {
 enum Job {
     Read {
         unit: u8,
+        max_gap: u16,
         registers: Vec<Register>,
         reply: oneshot::Sender<Result<Reading, DriverError>>,
     },
@@ -97,12 +98,13 @@ async fn run(client: &mut ModbusClient, job: Job) {
     match job {
         Job::Read {
             unit,
+            max_gap,
             registers,
             reply,
         } => {
             client.set_unit(unit);
             let sent = Instant::now();
-            let values = read_registers(client, &registers).await;
+            let values = read_registers(client, &registers, max_gap).await;
             let answered = Instant::now();
             let _ = reply.send(values.map(|values| Reading {
                 values,
@@ -126,11 +128,15 @@ async fn run(client: &mut ModbusClient, job: Job) {
     }
 }
 
-/// Read `registers` with as few requests as possible: registers of one
-/// table that fit in one span are read together.
+/// Read `registers` with few requests: registers of one table are read
+/// together when the addresses between them number at most `max_gap` and
+/// the span fits one request. With `max_gap` 0 only adjacent registers
+/// are merged: many devices refuse a read that touches an address they do
+/// not define.
 pub async fn read_registers(
     client: &mut ModbusClient,
     registers: &[Register],
+    max_gap: u16,
 ) -> Result<Vec<f64>, DriverError> {
     let mut values = vec![f64::NAN; registers.len()];
     for kind in [
@@ -151,7 +157,8 @@ pub async fn read_registers(
             while end + 1 < idx.len() {
                 let r = &registers[idx[end + 1]];
                 let e = u32::from(r.address) + u32::from(r.data_type.width());
-                if e.max(span_end) - u32::from(start) > MAX_READ_WORDS {
+                let gap = u32::from(r.address).saturating_sub(span_end);
+                if gap > u32::from(max_gap) || e.max(span_end) - u32::from(start) > MAX_READ_WORDS {
                     break;
                 }
                 span_end = span_end.max(e);
@@ -199,17 +206,30 @@ impl BusHandle {
         }
     }
 
-    /// Read `registers` of unit `unit`.
+    /// Read `registers` of unit `unit`, merging only adjacent ones.
     pub async fn read(
         &self,
         unit: u8,
         registers: Vec<Register>,
         p: Priority,
     ) -> Result<Reading, DriverError> {
+        self.read_spanning(unit, registers, 0, p).await
+    }
+
+    /// Read `registers` of unit `unit`, merging registers up to `max_gap`
+    /// addresses apart into one request (see [`read_registers`]).
+    pub async fn read_spanning(
+        &self,
+        unit: u8,
+        registers: Vec<Register>,
+        max_gap: u16,
+        p: Priority,
+    ) -> Result<Reading, DriverError> {
         let (reply, rx) = oneshot::channel();
         self.queue(p)
             .send(Job::Read {
                 unit,
+                max_gap,
                 registers,
                 reply,
             })

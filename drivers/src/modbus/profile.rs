@@ -14,6 +14,7 @@
 //! unit_id = 1
 //! word_order = "high_first"   # default of every register; or "low_first"
 //! byte_order = "big"          # or "little"
+//! max_read_gap = 0            # undefined addresses one read may span (0: adjacent only)
 //!
 //! [modbus.serial]             # RTU line defaults (optional)
 //! baud_rate = 115200
@@ -108,6 +109,8 @@ struct RawModbus {
     word_order: WordOrder,
     #[serde(default)]
     byte_order: ByteOrder,
+    #[serde(default)]
+    max_read_gap: u16,
     serial: Option<SerialDefaults>,
 }
 
@@ -204,6 +207,9 @@ pub struct DeviceProfile {
     pub unit_id: u8,
     /// RTU defaults, when the device has a serial port.
     pub serial: Option<SerialDefaults>,
+    /// Addresses a single read may span between two registers (0: only
+    /// adjacent registers share a request).
+    pub max_read_gap: u16,
     /// Registers by name.
     pub registers: BTreeMap<String, Register>,
     /// Power stage registers, when the device drives the rig.
@@ -360,6 +366,7 @@ impl DeviceProfile {
             verification: raw.device.verification,
             unit_id: raw.modbus.unit_id,
             serial: raw.modbus.serial,
+            max_read_gap: raw.modbus.max_read_gap,
             registers,
             power_stage,
         })

@@ -52,6 +52,7 @@ pub struct ModbusSensors {
     stats: Vec<IntervalStats>,
     warnings: Vec<String>,
     max_consecutive_failures: u32,
+    max_read_gap: u16,
 }
 
 impl ModbusSensors {
@@ -95,7 +96,16 @@ impl ModbusSensors {
             started,
             warnings: Vec::new(),
             max_consecutive_failures: max_consecutive_failures.max(1),
+            max_read_gap: 0,
         }
+    }
+
+    /// Let one request span up to `gap` undefined addresses between
+    /// channels (for devices that allow it; the profile's
+    /// `max_read_gap`).
+    pub fn with_max_read_gap(mut self, gap: u16) -> ModbusSensors {
+        self.max_read_gap = gap;
+        self
     }
 
     /// Read every channel once, now (for `probe`): values in channel order.
@@ -107,7 +117,10 @@ impl ModbusSensors {
                 .iter()
                 .map(|&k| self.registers[k].clone())
                 .collect();
-            let r = self.bus.read(g.unit, regs, Priority::Routine).await?;
+            let r = self
+                .bus
+                .read_spanning(g.unit, regs, self.max_read_gap, Priority::Routine)
+                .await?;
             for (v, &k) in r.values.iter().zip(&g.channels) {
                 out[k] = *v;
             }
@@ -141,7 +154,10 @@ impl SensorStream for ModbusSensors {
                 .iter()
                 .map(|&k| self.registers[k].clone())
                 .collect();
-            let result = self.bus.read(g.unit, regs, Priority::Routine).await;
+            let result = self
+                .bus
+                .read_spanning(g.unit, regs, self.max_read_gap, Priority::Routine)
+                .await;
             // Next slot: one period on; slots that passed meanwhile are lost.
             let now = Instant::now();
             let g = &mut self.groups[gi];

@@ -8,8 +8,8 @@
 //!   case accepted, upper case sent), as in NMEA 0183.
 //! - A line is at most [`MAX_LINE`] bytes; `\r` is optional before `\n`.
 //!
-//! Example: `$MB,17,1250000,armature_voltage=60.02,armature_current=0.113*4F\r\n`
-//! (checksum shown for illustration; [`encode`] computes it).
+//! Example: `$MB,17,1250000,u=60.02,i=0.113*HH\r\n` ([`encode`] computes
+//! `HH`).
 
 use super::{DecodeCounts, StreamRecord};
 
