@@ -7,12 +7,17 @@
 
 mod levels;
 mod nrmse;
+mod output_error;
 mod simulate;
 mod stats;
 mod steady_state;
 
 pub use levels::{is_coastdown, settled_level, SettledLevel};
 pub use nrmse::nrmse;
+pub use output_error::{
+    output_error, ChannelNoise, HeldOut, OutputErrorFit, OutputErrorOptions, SegmentStart,
+    SpeedReading, Uncertainty, PARAM_KEYS, PARAM_UNITS,
+};
 pub use simulate::simulate_segment;
 pub use steady_state::{SteadyStateEstimate, SteadyStateFit};
 
@@ -44,6 +49,8 @@ pub struct Identification {
     pub steady_state: Option<SteadyStateFit>,
     /// Model responses per segment, for plots.
     pub simulated: Vec<SimulatedSegment>,
+    /// The output-error fit, when it applied.
+    pub output_error: Option<OutputErrorFit>,
 }
 
 /// Identify a DC motor from a `dc_step` / `dc_coastdown` record.
@@ -78,7 +85,7 @@ pub fn identify_dc(record: &Record) -> Identification {
     }
 
     let fit = steady_state::fit(record, &levels);
-    let (method, steady_state, simulated) = match fit {
+    let (method, steady_state, mut simulated) = match fit {
         Ok(fit) => {
             report.warnings.extend(fit.warnings.iter().cloned());
             let simulated = fit.simulate(record);
@@ -86,14 +93,36 @@ pub fn identify_dc(record: &Record) -> Identification {
         }
         Err(reason) => (MethodReport::not_applicable(reason), None, Vec::new()),
     };
-    if method.applies {
-        report.best = Some("steady_state".into());
-    }
     report.methods.insert("steady_state".into(), method);
+
+    let oe = output_error(record, None, &OutputErrorOptions::default());
+    let (method, output_error) = match oe {
+        Ok(fit) => {
+            report.warnings.extend(fit.warnings.iter().cloned());
+            simulated.extend(fit.simulated.iter().cloned());
+            (fit.method_report(), Some(fit))
+        }
+        Err(reason) => (MethodReport::not_applicable(reason), None),
+    };
+    report.methods.insert("output_error".into(), method);
+
+    report.best = best_method(&report);
     Identification {
         report,
         levels,
         steady_state,
         simulated,
+        output_error,
     }
+}
+
+/// The applicable method with the lowest validation NRMSE; without any
+/// validation score, the first applicable one.
+fn best_method(report: &IdentificationReport) -> Option<String> {
+    let applicable = || report.methods.iter().filter(|(_, m)| m.applies);
+    applicable()
+        .filter_map(|(k, m)| m.validation_nrmse.map(|v| (k, v)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(k, _)| k.clone())
+        .or_else(|| applicable().next().map(|(k, _)| k.clone()))
 }
