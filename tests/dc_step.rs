@@ -47,6 +47,25 @@ async fn default_run_identifies_the_seed_motor_and_replays_identically() {
         assert!(lo <= t && t <= hi, "{key}: {t} outside [{lo}, {hi}]");
     }
 
+    // The output-error fit covers all six parameters, the truth inside
+    // each interval, and validates best on held-out segments.
+    let oe = r.methods["output_error"].params.as_ref().unwrap();
+    for (key, t) in [
+        ("Ra", truth.ra),
+        ("La", truth.la),
+        ("K", truth.k),
+        ("J", truth.j),
+        ("f", truth.f),
+        ("Tst", truth.tst),
+    ] {
+        let [lo, hi] = oe[key].ci95.unwrap();
+        assert!(
+            lo <= t && t <= hi,
+            "output_error {key}: {t} outside [{lo}, {hi}]"
+        );
+    }
+    assert_eq!(r.best.as_deref(), Some("output_error"));
+
     // Segments: every level of the staircase plus the coast-down.
     let kinds: Vec<_> = done.record.segments.iter().map(|s| s.kind).collect();
     assert_eq!(kinds.len(), 9);
@@ -140,10 +159,13 @@ fn cli_run_then_replay_prints_the_same_json_to_the_last_digit() {
     assert_eq!(run_json, replay_json);
     let v: serde_json::Value = serde_json::from_str(&run_json).unwrap();
     assert_eq!(v["schema_version"], "1");
-    // The seed motor has complex poles: Pasek does not apply, moments do
-    // and follow the transients the static model cannot.
-    assert_eq!(v["best"], "moments");
+    // The seed motor has complex poles: Pasek does not apply; the full
+    // model fitted to every step validates best.
     assert_eq!(v["methods"]["pasek"]["applies"], false);
+    assert_eq!(
+        v["best"], "output_error",
+        "the fit with the lowest validation NRMSE"
+    );
 }
 
 #[test]

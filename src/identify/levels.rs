@@ -66,7 +66,11 @@ pub fn settled_level(seg: &DcSegment) -> Option<SettledLevel> {
 /// Recognise a coast-down in a segment not marked as one (the contract
 /// allows a `dc_step` CSV to hold one): mean armature current magnitude
 /// under 5 % of its peak (or 1 mA) while the speed decays to under half
-/// its initial value.
+/// its initial value, and the armature voltage holds no level: it follows
+/// the falling back-EMF (at the end under half its median over the first
+/// quarter) or stays near zero. A step down of a fast motor also has a
+/// falling speed and a mean current far below its transient peak, but its
+/// voltage holds the new level.
 pub fn is_coastdown(seg: &DcSegment) -> bool {
     let n = seg.time.len();
     if n < 2 * MIN_TAIL {
@@ -76,7 +80,16 @@ pub fn is_coastdown(seg: &DcSegment) -> bool {
     let mean_abs = seg.current.iter().map(|v| v.abs()).sum::<f64>() / n as f64;
     let head = seg.speed[..MIN_TAIL].iter().sum::<f64>() / MIN_TAIL as f64;
     let tail = seg.speed[n - MIN_TAIL..].iter().sum::<f64>() / MIN_TAIL as f64;
-    mean_abs <= (0.05 * peak).max(1e-3) && head.abs() > 0.0 && tail.abs() < 0.5 * head.abs()
+    let mut early: Vec<f64> = seg.voltage[..n / 4].iter().map(|v| v.abs()).collect();
+    early.sort_by(f64::total_cmp);
+    let early = early[early.len() / 2];
+    let end = seg.voltage[n - MIN_TAIL..].iter().sum::<f64>().abs() / MIN_TAIL as f64;
+    let largest = seg.voltage.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let holds_no_level = end < 0.5 * early || early <= 0.05 * largest;
+    mean_abs <= (0.05 * peak).max(1e-3)
+        && head.abs() > 0.0
+        && tail.abs() < 0.5 * head.abs()
+        && holds_no_level
 }
 
 #[cfg(test)]
@@ -143,5 +156,23 @@ mod tests {
         assert!(is_coastdown(&coast));
         let step = segment(|t| (60.0, 0.113 + 0.1 * (-t / 0.02).exp(), 42.0), 2000);
         assert!(!is_coastdown(&step));
+        // A fast motor stepped down from 69 V to 17 V: a short braking
+        // current peak (its mean is under 5 % of it) and a falling speed,
+        // but the voltage holds the new level.
+        let down = segment(
+            |t| {
+                let u = if t == 0.0 { 69.0 } else { 17.0 };
+                (
+                    u,
+                    0.3 - 42.0 * (-t / 0.003).exp(),
+                    44.0 + 136.0 * (-t / 0.013).exp(),
+                )
+            },
+            1300,
+        );
+        let peak = down.current.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let mean_abs = down.current.iter().map(|v| v.abs()).sum::<f64>() / 1300.0;
+        assert!(mean_abs < 0.05 * peak, "the current test alone is fooled");
+        assert!(!is_coastdown(&down));
     }
 }

@@ -23,6 +23,7 @@ mod level_error;
 mod levels;
 mod moments;
 mod nrmse;
+mod output_error;
 mod pasek;
 mod simulate;
 mod stats;
@@ -53,6 +54,10 @@ pub use level_error::LevelError;
 pub use levels::{is_coastdown, settled_level, SettledLevel};
 pub use moments::{MomentsEstimate, TransferCoefficients};
 pub use nrmse::nrmse;
+pub use output_error::{
+    output_error, ChannelNoise, HeldOut, OutputErrorFit, OutputErrorOptions, SegmentStart,
+    SpeedReading, Uncertainty, PARAM_KEYS, PARAM_UNITS,
+};
 pub use pasek::{PasekEstimate, PasekReading};
 pub use simulate::simulate_segment;
 pub use steady_state::{PairEstimate, SteadyStateEstimate, SteadyStateFit};
@@ -96,6 +101,8 @@ pub struct Identification {
     pub transient: Vec<TransientFit>,
     /// The coast-down fit, when it applied.
     pub coastdown: Option<CoastdownFit>,
+    /// The output-error fit of the full model, when it applied.
+    pub output_error: Option<OutputErrorFit>,
 }
 
 /// The coast-down method's result.
@@ -365,6 +372,31 @@ pub fn identify_dc(record: &Record) -> Identification {
         }
     };
 
+    // The full model, fitted to every step at once, started from the
+    // transient method that validated best (moments or Pasek) when one
+    // applied, else from its own steady-state and transient estimates.
+    let score = |t: &TransientFit| t.validation_nrmse.unwrap_or(f64::INFINITY);
+    let start = transient
+        .iter()
+        .min_by(|a, b| score(a).total_cmp(&score(b)))
+        .map(|t| t.params);
+    let output_error = match output_error(record, start, &OutputErrorOptions::default()) {
+        Ok(fit) => {
+            report.warnings.extend(fit.warnings.iter().cloned());
+            simulated.extend(fit.simulated.iter().cloned());
+            report
+                .methods
+                .insert("output_error".into(), fit.method_report());
+            Some(fit)
+        }
+        Err(reason) => {
+            report
+                .methods
+                .insert("output_error".into(), MethodReport::not_applicable(reason));
+            None
+        }
+    };
+
     report.best = best_method(&report);
     Identification {
         report,
@@ -375,6 +407,7 @@ pub fn identify_dc(record: &Record) -> Identification {
         moments_steps,
         transient,
         coastdown,
+        output_error,
     }
 }
 

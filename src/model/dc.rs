@@ -213,6 +213,13 @@ impl DcMotor {
         self.dt
     }
 
+    /// The exact discretisation of the driven motor: state `[i, ω, θ]`,
+    /// inputs `[U, Tst·dir]`, for loops that simulate many samples and
+    /// cannot afford [`DcMotor::step`]'s generality.
+    pub fn driven_zoh(&self) -> &Zoh<3, 2> {
+        &self.driven
+    }
+
     /// Advance one step of `dt` with the terminal held as given.
     pub fn step(&self, x: &DcState, terminal: Terminal) -> DcState {
         if self.effects.is_empty() {

@@ -81,6 +81,11 @@ pub fn render_text(id: &Identification, truth: Option<&DcParams>) -> String {
                 let _ = writeln!(out);
             }
         }
+        if name == "output_error" {
+            if let Some(fit) = &id.output_error {
+                out.push_str(&fit.render_details());
+            }
+        }
         match m.validation_nrmse {
             Some(v) => {
                 let _ = writeln!(out, "  validation NRMSE on held-out segments: {v:.4}");

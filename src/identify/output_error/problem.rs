@@ -1,0 +1,473 @@
+//! The output-error fit as a least-squares problem for the
+//! `levenberg-marquardt` crate: noise-weighted residuals of current and
+//! speed over every fitted segment, in log-parameters, with a
+//! finite-difference Jacobian.
+//!
+//! Parameters are `x = ln(p / p_ref)` for `p` = (Ra, La, K, J, f, Tst) and
+//! a reference `p_ref` (the start): positivity holds by construction, a
+//! step in `x` is a relative change, and the Jacobian columns are
+//! sensitivities to relative changes, so they are comparable in size.
+//!
+//! The Jacobian is taken by forward differences of the simulation
+//! (6 extra simulations). Sensitivity equations would be exact, but for
+//! this 2-state model they mean a 14-state recursion per sample (more
+//! arithmetic than the 6 simulations), and differences differentiate
+//! exactly what is simulated, stiction and friction direction included.
+//! The step, 1e-8 in `ln p`, balances truncation (step × curvature) against
+//! rounding (about 1e-13 of residuals up to some 10³ noise levels, over
+//! the step): both near 1e-5 of a noise level per residual, and the
+//! optimiser's convergence test then sees no spurious gradient.
+
+use std::cell::RefCell;
+use std::rc::Rc;
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
+use nalgebra::{DVector, Dyn, OMatrix, Owned, SMatrix, SVector, Vector6, U6, U7};
+
+use super::simulation::{simulate, SegmentInput, SpeedReading};
+use crate::model::DcParams;
+
+/// Number of fitted parameters.
+pub const NP: usize = 6;
+
+/// Residual of a parameter set the model refuses: large enough that the
+/// optimiser always rejects the step that led there.
+pub const REFUSED: f64 = 1e30;
+
+/// Largest distance from the reference, in `ln` units (a factor e^25).
+const MAX_LN: f64 = 25.0;
+
+/// Relative reduction of the sum of squares below which the optimiser
+/// stops: with some 10⁴ residuals at the noise level, a change of the sum
+/// far below 1 (one standard error of a parameter moves it by 1).
+const FTOL: f64 = 1e-9;
+
+/// Forward-difference step in `ln` units.
+const FD_STEP: f64 = 1e-8;
+
+/// `p` as an array in fit order (Ra, La, K, J, f, Tst).
+pub fn to_array(p: &DcParams) -> [f64; NP] {
+    [p.ra, p.la, p.k, p.j, p.f, p.tst]
+}
+
+/// The inverse of [`to_array`].
+pub fn from_array(a: [f64; NP]) -> DcParams {
+    DcParams {
+        ra: a[0],
+        la: a[1],
+        k: a[2],
+        j: a[3],
+        f: a[4],
+        tst: a[5],
+    }
+}
+
+/// The segments fitted, the noise weights and what the speed reads.
+#[derive(Debug, Clone)]
+pub struct FitData<'a> {
+    /// Segments in the fit.
+    pub segments: Vec<SegmentInput<'a>>,
+    /// Noise standard deviation of current (A) and speed (rad/s).
+    pub sigma: [f64; 2],
+    /// What the speed channel reads.
+    pub reading: SpeedReading,
+}
+
+impl FitData<'_> {
+    /// Residuals: two per sample (current, then speed), each
+    /// `(simulated − measured)/σ`.
+    pub fn len(&self) -> usize {
+        2 * self.segments.iter().map(SegmentInput::len).sum::<usize>()
+    }
+
+    /// Weighted residuals of `params` into `r` (of length [`Self::len`]);
+    /// `false` when the model refuses the parameters.
+    pub fn residuals_into(&self, params: &DcParams, r: &mut [f64]) -> bool {
+        let (wi, ww) = (1.0 / self.sigma[0], 1.0 / self.sigma[1]);
+        let mut at = 0;
+        for input in &self.segments {
+            let (y_i, y_w) = (&input.seg.current, &input.seg.speed);
+            let chunk = &mut r[at..at + 2 * input.len()];
+            let mut rows = chunk.chunks_exact_mut(2).zip(y_i.iter().zip(y_w));
+            let ok = simulate(params, input, self.reading, |i, w| {
+                if let Some((row, (yi, yw))) = rows.next() {
+                    row[0] = (i - yi) * wi;
+                    row[1] = (w - yw) * ww;
+                }
+            });
+            if ok.is_err() {
+                return false;
+            }
+            at += 2 * input.len();
+        }
+        r.iter().all(|v| v.is_finite())
+    }
+}
+
+/// The linearisation of the residuals at one point, in full and reduced.
+///
+/// The optimiser needs `JᵀJ`, `Jᵀr` and `‖r‖` only, so it is handed the
+/// problem reduced to 7 rows: `J' = [R; 0]` with `R'R = JᵀJ`, and
+/// `r' = [R⁻ᵀ·Jᵀr; ‖r − projection‖]`, which has `‖r'‖ = ‖r‖` and
+/// `J'ᵀr' = Jᵀr`. Its iterates are those of the full problem, without the
+/// crate factorising a Jacobian of tens of thousands of rows at every
+/// step. The price: every residual evaluation also takes the Jacobian.
+#[derive(Debug, Clone)]
+pub struct Linearisation {
+    /// Where.
+    pub x: Vector6<f64>,
+    /// Weighted residuals (all [`REFUSED`] when the model refuses `x`).
+    pub r: DVector<f64>,
+    /// Their Jacobian with respect to `x` (empty when refused).
+    pub jac: OMatrix<f64, Dyn, U6>,
+    reduced_r: SVector<f64, 7>,
+    reduced_j: SMatrix<f64, 7, 6>,
+}
+
+impl Linearisation {
+    /// Whether the model refuses the parameters.
+    pub fn refused(&self) -> bool {
+        self.jac.nrows() == 0
+    }
+}
+
+/// The problem the optimiser sees.
+pub struct OutputErrorProblem<'d, 'a> {
+    data: &'d FitData<'a>,
+    reference: [f64; NP],
+    x: Vector6<f64>,
+    /// The linearisation at the last point asked for: the optimiser asks
+    /// for residuals and then the Jacobian at one point.
+    last: RefCell<Option<Rc<Linearisation>>>,
+}
+
+impl<'d, 'a> OutputErrorProblem<'d, 'a> {
+    /// A problem over `data`, starting at (and measured from) `reference`,
+    /// whose six values must be > 0.
+    pub fn new(data: &'d FitData<'a>, reference: &DcParams) -> Self {
+        OutputErrorProblem {
+            data,
+            reference: to_array(reference),
+            x: Vector6::zeros(),
+            last: RefCell::new(None),
+        }
+    }
+
+    /// The parameters at `x`.
+    pub fn params_at(&self, x: &Vector6<f64>) -> DcParams {
+        from_array(std::array::from_fn(|n| self.reference[n] * x[n].exp()))
+    }
+
+    /// The weighted residuals at `x`, all [`REFUSED`] where the model
+    /// refuses the parameters.
+    #[cfg(test)]
+    pub fn compute(&self, x: &Vector6<f64>) -> DVector<f64> {
+        let mut r = DVector::zeros(self.data.len());
+        self.compute_into(x, r.as_mut_slice());
+        r
+    }
+
+    /// [`Self::compute`] into `r`; `false` when refused.
+    fn compute_into(&self, x: &Vector6<f64>, r: &mut [f64]) -> bool {
+        let inside = x.iter().all(|v| v.abs() <= MAX_LN);
+        let ok = inside && self.data.residuals_into(&self.params_at(x), r);
+        if !ok {
+            r.fill(REFUSED);
+        }
+        ok
+    }
+
+    /// The Jacobian of the residuals `r` at `x` by forward differences
+    /// (backward at the edge of what the model accepts; a zero column
+    /// where it accepts neither).
+    #[cfg(test)]
+    pub fn jacobian_from(&self, x: &Vector6<f64>, r: &DVector<f64>) -> OMatrix<f64, Dyn, U6> {
+        let mut jac = OMatrix::<f64, Dyn, U6>::zeros(r.len());
+        self.jacobian_into(x, r, &mut jac);
+        jac
+    }
+
+    fn jacobian_into(&self, x: &Vector6<f64>, r: &DVector<f64>, jac: &mut OMatrix<f64, Dyn, U6>) {
+        let m = r.len();
+        for n in 0..NP {
+            // Column-major storage: column n is one slice.
+            let column = &mut jac.as_mut_slice()[n * m..(n + 1) * m];
+            let mut xp = *x;
+            let mut h = FD_STEP;
+            xp[n] += h;
+            if !self.compute_into(&xp, column) {
+                h = -FD_STEP;
+                xp[n] = x[n] + h;
+                if !self.compute_into(&xp, column) {
+                    column.fill(0.0);
+                    continue;
+                }
+            }
+            let inv_h = 1.0 / h;
+            for (c, b) in column.iter_mut().zip(r.iter()) {
+                *c = (*c - b) * inv_h;
+            }
+        }
+    }
+
+    /// The linearisation at `x`.
+    pub fn linearise(&self, x: &Vector6<f64>) -> Rc<Linearisation> {
+        if let Some(l) = self.last.borrow().as_ref() {
+            if l.x == *x {
+                return Rc::clone(l);
+            }
+        }
+        // Reuse the previous linearisation's storage when nobody holds it:
+        // tens of thousands of rows, allocated anew at every evaluation.
+        let m = self.data.len();
+        let recycled = self
+            .last
+            .borrow_mut()
+            .take()
+            .and_then(|old| Rc::try_unwrap(old).ok())
+            .filter(|old| old.r.len() == m && old.jac.nrows() == m);
+        let (mut r, mut jac) = match recycled {
+            Some(old) => (old.r, old.jac),
+            None => (DVector::zeros(m), OMatrix::<f64, Dyn, U6>::zeros(m)),
+        };
+        let l = if self.compute_into(x, r.as_mut_slice()) {
+            self.jacobian_into(x, &r, &mut jac);
+            let (reduced_r, reduced_j) = reduce(&jac, &r);
+            Linearisation {
+                x: *x,
+                r,
+                jac,
+                reduced_r,
+                reduced_j,
+            }
+        } else {
+            let mut reduced_r = SVector::<f64, 7>::zeros();
+            reduced_r[6] = REFUSED * (m as f64).sqrt();
+            Linearisation {
+                x: *x,
+                r,
+                jac: OMatrix::<f64, Dyn, U6>::zeros(0),
+                reduced_r,
+                reduced_j: SMatrix::zeros(),
+            }
+        };
+        let l = Rc::new(l);
+        *self.last.borrow_mut() = Some(Rc::clone(&l));
+        l
+    }
+}
+
+/// The 7-row problem equivalent to `(jac, r)` (see [`Linearisation`]),
+/// from the eigen-decomposition `JᵀJ = V·Λ·Vᵀ`: `R = Λ^½·Vᵀ`; directions
+/// with no weight in `JᵀJ` get zero rows.
+fn reduce(jac: &OMatrix<f64, Dyn, U6>, r: &DVector<f64>) -> (SVector<f64, 7>, SMatrix<f64, 7, 6>) {
+    let g = jac.tr_mul(r);
+    let eig = jac.tr_mul(jac).symmetric_eigen();
+    let largest = eig.eigenvalues.max();
+    let mut reduced_r = SVector::<f64, 7>::zeros();
+    let mut reduced_j = SMatrix::<f64, 7, 6>::zeros();
+    let mut explained = 0.0;
+    for i in 0..NP {
+        let l = eig.eigenvalues[i];
+        if l > 1e-14 * largest && l > 0.0 {
+            let v = eig.eigenvectors.column(i);
+            let root = l.sqrt();
+            reduced_j.row_mut(i).copy_from(&(v.transpose() * root));
+            reduced_r[i] = v.dot(&g) / root;
+            explained += reduced_r[i] * reduced_r[i];
+        }
+    }
+    reduced_r[6] = (r.norm_squared() - explained).max(0.0).sqrt();
+    (reduced_r, reduced_j)
+}
+
+impl LeastSquaresProblem<f64, U7, U6> for OutputErrorProblem<'_, '_> {
+    type ResidualStorage = Owned<f64, U7>;
+    type JacobianStorage = Owned<f64, U7, U6>;
+    type ParameterStorage = Owned<f64, U6>;
+
+    fn set_params(&mut self, x: &Vector6<f64>) {
+        self.x = *x;
+    }
+
+    fn params(&self) -> Vector6<f64> {
+        self.x
+    }
+
+    fn residuals(&self) -> Option<SVector<f64, 7>> {
+        Some(self.linearise(&self.x).reduced_r)
+    }
+
+    fn jacobian(&self) -> Option<SMatrix<f64, 7, 6>> {
+        Some(self.linearise(&self.x).reduced_j)
+    }
+}
+
+/// The result of one minimisation.
+#[derive(Debug, Clone)]
+pub struct Minimum {
+    /// Parameters at the minimum.
+    pub params: DcParams,
+    /// The reference the log-parameters are measured from.
+    pub reference: DcParams,
+    /// The residuals and their Jacobian at the minimum.
+    pub at: Rc<Linearisation>,
+    /// Whether the optimiser reports convergence.
+    pub converged: bool,
+    /// Why it stopped, for messages.
+    pub termination: String,
+    /// Residual evaluations used (each with its Jacobian).
+    pub evaluations: usize,
+}
+
+/// Minimise over `data` from `start` (all six values > 0).
+pub fn minimise(data: &FitData, start: &DcParams) -> Minimum {
+    let problem = OutputErrorProblem::new(data, start);
+    let lm = LevenbergMarquardt::new()
+        .with_ftol(FTOL)
+        .with_xtol(1e-10)
+        .with_gtol(1e-10)
+        .with_patience(40);
+    let (problem, report) = lm.minimize(problem);
+    let converged = report.termination.was_successful()
+        || matches!(
+            report.termination,
+            TerminationReason::NoImprovementPossible(_)
+        );
+    Minimum {
+        params: problem.params_at(&problem.x),
+        reference: *start,
+        at: problem.linearise(&problem.x),
+        converged,
+        termination: format!("{:?}", report.termination),
+        evaluations: report.number_of_evaluations,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::simulation::{simulate_series, SegmentStart};
+    use super::*;
+    use crate::record::DcSegment;
+
+    /// A staircase simulated exactly with `p`, without noise.
+    fn staircase(p: &DcParams, dt: f64) -> Vec<DcSegment> {
+        let levels = [60.0, 248.0, 107.0, 201.0];
+        let mut out = Vec::new();
+        let mut previous = 0.0;
+        for (n, &level) in levels.iter().enumerate() {
+            let voltage: Vec<f64> = (0..1500)
+                .map(|k| if k == 0 && n > 0 { previous } else { level })
+                .collect();
+            let mut seg = DcSegment {
+                index: n as u32,
+                time: (0..1500).map(|k| k as f64 * dt).collect(),
+                voltage,
+                ..Default::default()
+            };
+            let start = if n == 0 {
+                SegmentStart::FromRest
+            } else {
+                SegmentStart::Settled(previous)
+            };
+            let input = SegmentInput::new(&seg, start);
+            let (i, w) = simulate_series(p, &input, SpeedReading::IntervalMean).unwrap();
+            (seg.current, seg.speed) = (i, w);
+            out.push(seg);
+            previous = level;
+        }
+        out
+    }
+
+    fn data(segs: &[DcSegment]) -> FitData<'_> {
+        FitData {
+            segments: segs
+                .iter()
+                .enumerate()
+                .map(|(n, s)| {
+                    let start = if n == 0 {
+                        SegmentStart::FromRest
+                    } else {
+                        SegmentStart::Settled(s.voltage[0])
+                    };
+                    SegmentInput::new(s, start)
+                })
+                .collect(),
+            sigma: [0.002, 0.5],
+            reading: SpeedReading::IntervalMean,
+        }
+    }
+
+    #[test]
+    fn noise_free_data_is_fitted_exactly_from_a_distant_start() {
+        let truth = DcParams::SEED_TABLE4_MOMENTS;
+        let segs = staircase(&truth, 5e-4);
+        let d = data(&segs);
+        let start = DcParams {
+            ra: truth.ra * 1.3,
+            la: truth.la * 0.5,
+            k: truth.k * 0.95,
+            j: truth.j * 2.0,
+            f: truth.f * 3.0,
+            tst: truth.tst * 0.6,
+        };
+        let m = minimise(&d, &start);
+        assert!(m.converged, "{}", m.termination);
+        assert!(m.evaluations < 30, "{} evaluations", m.evaluations);
+        let (got, want) = (to_array(&m.params), to_array(&truth));
+        for n in 0..NP {
+            assert!(
+                ((got[n] - want[n]) / want[n]).abs() < 1e-6,
+                "parameter {n}: {} vs {}",
+                got[n],
+                want[n]
+            );
+        }
+        assert!(m.at.r.norm() < 1e-4);
+    }
+
+    #[test]
+    fn jacobian_matches_a_central_difference() {
+        let truth = DcParams::SEED_TABLE4_MOMENTS;
+        let segs = staircase(&truth, 5e-4);
+        let d = data(&segs);
+        let p = OutputErrorProblem::new(&d, &truth);
+        let x = Vector6::new(0.01, -0.02, 0.003, 0.05, -0.1, 0.02);
+        let jac = p.jacobian_from(&x, &p.compute(&x));
+        for n in 0..NP {
+            let h = 1e-5;
+            let (mut a, mut b) = (x, x);
+            a[n] += h;
+            b[n] -= h;
+            let central = (p.compute(&a) - p.compute(&b)) / (2.0 * h);
+            let err = (jac.column(n) - &central).norm() / central.norm();
+            assert!(err < 1e-4, "column {n}: relative error {err}");
+        }
+    }
+
+    #[test]
+    fn the_reduced_problem_has_the_normal_equations_and_norm_of_the_full_one() {
+        let jac = OMatrix::<f64, Dyn, U6>::from_fn(50, |r, c| {
+            ((r * 7 + c * 13) % 11) as f64 - 5.0 + c as f64 * 0.1 * r as f64
+        });
+        let r = DVector::from_fn(50, |k, _| ((k * 5) % 9) as f64 - 4.0);
+        let (rr, rj) = reduce(&jac, &r);
+        let jtj = jac.tr_mul(&jac);
+        let jtr = jac.tr_mul(&r);
+        assert!((rj.tr_mul(&rj) - jtj).norm() < 1e-9 * jtj.norm());
+        assert!((rj.tr_mul(&rr) - jtr).norm() < 1e-9 * jtr.norm());
+        assert!((rr.norm() - r.norm()).abs() < 1e-9 * r.norm());
+    }
+
+    #[test]
+    fn refused_parameters_give_a_large_finite_residual() {
+        let truth = DcParams::SEED_TABLE4_MOMENTS;
+        let segs = staircase(&truth, 5e-4);
+        let d = data(&segs);
+        let p = OutputErrorProblem::new(&d, &truth);
+        let far = Vector6::new(0.0, -30.0, 0.0, 0.0, 0.0, 0.0);
+        let r = p.compute(&far);
+        assert!(r.iter().all(|v| *v == REFUSED));
+        assert!(r.norm().is_finite());
+    }
+}

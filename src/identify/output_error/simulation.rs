@@ -1,0 +1,312 @@
+//! The output-error fit's inner loop: the DC model simulated exactly (zero-
+//! order hold) on one recorded step segment, with the measured voltage as
+//! input, as fast as the fit needs.
+//!
+//! [`DcMotor::step`] handles effects, open terminals and RK4; the fit calls
+//! the simulation some hundred times per record, so this loop takes the
+//! motor's own discretisation ([`DcMotor::driven_zoh`]) and repeats only
+//! the driven branch of its exact step in scalars (friction direction,
+//! stiction, stop on a sign change). A unit test holds the two equal.
+
+use crate::model::{DcMotor, DcParams, ParamError};
+use crate::record::DcSegment;
+
+/// What the speed channel of a record reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SpeedReading {
+    /// The mean speed over the preceding sample interval: differentiated
+    /// encoder counts, which is what the bench records.
+    #[default]
+    IntervalMean,
+    /// The speed at the sampling instant (a tachometer, an observer).
+    Instantaneous,
+}
+
+/// The state a step segment starts from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SegmentStart {
+    /// Settled at the given voltage, V: the level before the segment
+    /// (whose last sample is the segment's first), which had settled. The
+    /// mean over that level's settled tail is far less noisy than the one
+    /// boundary reading, and the whole step response scales with it.
+    Settled(f64),
+    /// At rest without current before the first sample; the first voltage
+    /// reading is the first voltage applied (a start from a disabled
+    /// supply or after a coast-down).
+    FromRest,
+}
+
+/// A step segment ready to simulate.
+#[derive(Debug, Clone, Copy)]
+pub struct SegmentInput<'a> {
+    /// The recorded segment.
+    pub seg: &'a DcSegment,
+    /// Sample interval, s (the segment's mean).
+    pub dt: f64,
+    /// How it starts.
+    pub start: SegmentStart,
+    /// For a settled start at the mean voltage over the settled tail of
+    /// the record's previous segment: that segment's index and the number
+    /// of its last samples averaged. The noise of those readings reaches
+    /// this segment through its start.
+    pub level_before: Option<(u32, usize)>,
+}
+
+impl<'a> SegmentInput<'a> {
+    /// Prepare `seg` (at least 2 samples) starting as `start` says.
+    pub fn new(seg: &'a DcSegment, start: SegmentStart) -> SegmentInput<'a> {
+        let n = seg.time.len();
+        let dt = (seg.time[n - 1] - seg.time[0]) / (n - 1).max(1) as f64;
+        SegmentInput {
+            seg,
+            dt,
+            start,
+            level_before: None,
+        }
+    }
+
+    /// Samples in the segment.
+    pub fn len(&self) -> usize {
+        self.seg.time.len()
+    }
+}
+
+/// One exact step of the driven motor in scalars: the coefficients of
+/// [`DcMotor::driven_zoh`] and what the stiction branch needs.
+pub struct DrivenStep {
+    /// Columns `i`, `ω` of the state transition, rows `i`, `ω`, `θ`.
+    pub a: [[f64; 2]; 3],
+    /// Input matrix: columns `U`, `Tst·dir`; rows `i`, `ω`, `θ`.
+    pub b: [[f64; 2]; 3],
+    k: f64,
+    ra: f64,
+    tst: f64,
+    decay: f64,
+}
+
+impl DrivenStep {
+    /// The step of `params` over `dt`.
+    pub fn new(params: &DcParams, dt: f64) -> Result<DrivenStep, ParamError> {
+        let motor = DcMotor::new(*params, dt)?;
+        let z = motor.driven_zoh();
+        Ok(DrivenStep {
+            a: std::array::from_fn(|r| [z.ad[(r, 0)], z.ad[(r, 1)]]),
+            b: std::array::from_fn(|r| [z.bd[(r, 0)], z.bd[(r, 1)]]),
+            k: params.k,
+            ra: params.ra,
+            tst: params.tst,
+            decay: (-dt / params.tau_e()).exp(),
+        })
+    }
+
+    /// `(i, ω, Δθ)` after one step from `(i, ω)` under voltage `u`.
+    #[inline]
+    fn step(&self, i: f64, w: f64, u: f64) -> (f64, f64, f64) {
+        let dir = if w != 0.0 {
+            w.signum()
+        } else if self.tst == 0.0 {
+            1.0
+        } else if (self.k * i).abs() > self.tst {
+            (self.k * i).signum()
+        } else {
+            // Held by the static torque: only the circuit moves.
+            let i_ss = u / self.ra;
+            return (i_ss + (i - i_ss) * self.decay, 0.0, 0.0);
+        };
+        let t = self.tst * dir;
+        let (a, b) = (&self.a, &self.b);
+        let ni = a[0][0] * i + a[0][1] * w + b[0][0] * u + b[0][1] * t;
+        let nw = a[1][0] * i + a[1][1] * w + b[1][0] * u + b[1][1] * t;
+        let dth = a[2][0] * i + a[2][1] * w + b[2][0] * u + b[2][1] * t;
+        (ni, if nw * dir < 0.0 { 0.0 } else { nw }, dth)
+    }
+}
+
+/// Simulate `params` on `input`; `out(current, speed reading)` for every
+/// sample of the segment, in order.
+///
+/// The voltage reading at `t[k]` is the voltage applied over
+/// `(t[k−1], t[k]]`, as the bench records it.
+pub fn simulate(
+    params: &DcParams,
+    input: &SegmentInput,
+    reading: SpeedReading,
+    mut out: impl FnMut(f64, f64),
+) -> Result<(), ParamError> {
+    let step = DrivenStep::new(params, input.dt)?;
+    let u = &input.seg.voltage;
+    let inv_dt = 1.0 / input.dt;
+    let interval = reading == SpeedReading::IntervalMean;
+    let (mut i, mut w) = match input.start {
+        SegmentStart::Settled(u0) => {
+            let s = params.steady_state(u0);
+            out(s.current, s.speed);
+            (s.current, s.speed)
+        }
+        SegmentStart::FromRest => {
+            let (i, w, dth) = step.step(0.0, 0.0, u[0]);
+            out(i, if interval { dth * inv_dt } else { w });
+            (i, w)
+        }
+    };
+    for &uk in &u[1..] {
+        let (ni, nw, dth) = step.step(i, w, uk);
+        (i, w) = (ni, nw);
+        out(i, if interval { dth * inv_dt } else { w });
+    }
+    Ok(())
+}
+
+/// Output variance per unit variance of a white error in the voltage
+/// reading: the sums of squares of the impulse responses from the voltage
+/// to the current and to the speed reading, in A²/V² and (rad/s)²/V².
+/// For the turning motor (friction direction fixed), which is linear.
+pub fn voltage_noise_gain(
+    params: &DcParams,
+    dt: f64,
+    reading: SpeedReading,
+) -> Result<[f64; 2], ParamError> {
+    let step = DrivenStep::new(params, dt)?;
+    let (a, b) = (&step.a, &step.b);
+    // The response at sample 0 to a unit voltage error over that sample.
+    let mut s = [b[0][0], b[1][0]];
+    let mut sum = [s[0] * s[0], speed_of(reading, s[1], b[2][0], dt).powi(2)];
+    // Until a block of samples adds a negligible fraction.
+    let mut block = 0.0;
+    for k in 1..100_000_000usize {
+        let dth = a[2][0] * s[0] + a[2][1] * s[1];
+        s = [
+            a[0][0] * s[0] + a[0][1] * s[1],
+            a[1][0] * s[0] + a[1][1] * s[1],
+        ];
+        let add = [s[0] * s[0], speed_of(reading, s[1], dth, dt).powi(2)];
+        for c in 0..2 {
+            sum[c] += add[c];
+            block += add[c] / sum[c].max(f64::MIN_POSITIVE);
+        }
+        if k % 256 == 0 {
+            if block < 1e-13 {
+                break;
+            }
+            block = 0.0;
+        }
+    }
+    Ok(sum)
+}
+
+#[inline]
+fn speed_of(reading: SpeedReading, w: f64, dth: f64, dt: f64) -> f64 {
+    match reading {
+        SpeedReading::IntervalMean => dth / dt,
+        SpeedReading::Instantaneous => w,
+    }
+}
+
+/// [`simulate`] collected into current and speed series.
+pub fn simulate_series(
+    params: &DcParams,
+    input: &SegmentInput,
+    reading: SpeedReading,
+) -> Result<(Vec<f64>, Vec<f64>), ParamError> {
+    let n = input.len();
+    let (mut current, mut speed) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    simulate(params, input, reading, |i, w| {
+        current.push(i);
+        speed.push(w);
+    })?;
+    Ok((current, speed))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{DcState, Terminal};
+    use crate::record::SegmentKind;
+
+    /// A segment recorded from `DcMotor::step` itself, and the mean speed
+    /// over each step (from the angle), for voltages `u`: settled at
+    /// `u[0]`, or from rest with `u[0]` the first voltage applied.
+    fn reference(p: &DcParams, from_rest: bool, u: &[f64], dt: f64) -> (DcSegment, Vec<f64>) {
+        let motor = DcMotor::new(*p, dt).unwrap();
+        let mut seg = DcSegment {
+            kind: Some(SegmentKind::DcStep),
+            ..Default::default()
+        };
+        let mut mean_speed = Vec::new();
+        let mut x = if from_rest {
+            DcState::default()
+        } else {
+            p.steady_state(u[0])
+        };
+        for (k, &uk) in u.iter().enumerate() {
+            if k == 0 && !from_rest {
+                mean_speed.push(x.speed);
+            } else {
+                let before = x.angle;
+                x = motor.step(&x, Terminal::Driven(uk));
+                mean_speed.push((x.angle - before) / dt);
+            }
+            seg.time.push(k as f64 * dt);
+            seg.voltage.push(uk);
+            seg.current.push(x.current);
+            seg.speed.push(x.speed);
+        }
+        (seg, mean_speed)
+    }
+
+    #[test]
+    fn matches_the_motor_step_from_a_settled_level() {
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let dt = 5e-4;
+        let u: Vec<f64> = (0..3000)
+            .map(|k| if k == 0 { 248.0 } else { 60.0 })
+            .collect();
+        let (seg, mean_speed) = reference(&p, false, &u, dt);
+        let input = SegmentInput::new(&seg, SegmentStart::Settled(248.0));
+        let (i, w) = simulate_series(&p, &input, SpeedReading::Instantaneous).unwrap();
+        let (_, wm) = simulate_series(&p, &input, SpeedReading::IntervalMean).unwrap();
+        for k in 0..u.len() {
+            assert!((i[k] - seg.current[k]).abs() < 1e-12, "current at {k}");
+            assert!((w[k] - seg.speed[k]).abs() < 1e-9, "speed at {k}");
+            assert!((wm[k] - mean_speed[k]).abs() < 1e-6, "mean speed at {k}");
+        }
+        // The interval mean lags the instantaneous speed while it falls.
+        assert!(wm[10] > w[10] && w[10] > w[11]);
+    }
+
+    #[test]
+    fn matches_the_motor_step_from_rest_through_breakaway() {
+        // A slow voltage ramp from rest: the rotor is held by Tst until
+        // K·i exceeds it, then turns.
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let dt = 5e-4;
+        let u: Vec<f64> = (0..4000).map(|k| (k as f64 * 0.01).min(20.0)).collect();
+        let (seg, mean_speed) = reference(&p, true, &u, dt);
+        let input = SegmentInput::new(&seg, SegmentStart::FromRest);
+        let (i, wm) = simulate_series(&p, &input, SpeedReading::IntervalMean).unwrap();
+        let held = seg.speed.iter().take_while(|w| **w == 0.0).count();
+        assert!(held > 100 && held < 3000, "breakaway at sample {held}");
+        for k in 0..u.len() {
+            assert!((i[k] - seg.current[k]).abs() < 1e-12, "current at {k}");
+            assert!((wm[k] - mean_speed[k]).abs() < 1e-6, "mean speed at {k}");
+        }
+    }
+
+    #[test]
+    fn invalid_parameters_are_an_error() {
+        let seg = DcSegment {
+            time: vec![0.0, 1e-3],
+            voltage: vec![1.0, 1.0],
+            current: vec![0.0, 0.0],
+            speed: vec![0.0, 0.0],
+            ..Default::default()
+        };
+        let p = DcParams {
+            j: 0.0,
+            ..DcParams::SEED_TABLE4_MOMENTS
+        };
+        let input = SegmentInput::new(&seg, SegmentStart::Settled(248.0));
+        let err = simulate_series(&p, &input, SpeedReading::IntervalMean).unwrap_err();
+        assert_eq!(err.name, "J");
+    }
+}
