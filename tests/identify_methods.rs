@@ -121,7 +121,11 @@ async fn seed_motor_complex_poles_moments_apply_pasek_does_not() {
     }
     let v = r.methods["moments"].validation_nrmse.unwrap();
     assert!(v < 0.2, "moments validation NRMSE {v}");
-    assert_eq!(r.best.as_deref(), Some("moments"));
+    // `best` is the method with the lowest validation NRMSE: the full
+    // model fitted to every step beats the one-step moments estimate.
+    let oe = r.methods["output_error"].validation_nrmse.unwrap();
+    assert!(oe <= v, "output error {oe} vs moments {v}");
+    assert_eq!(r.best.as_deref(), Some("output_error"));
     // The coast-down sees the static torque as Coulomb friction.
     assert!(rel(&r, "coastdown", "J", p.j) < 0.02);
     assert!(rel(&r, "coastdown", "Tc", p.tst) < 0.03);
