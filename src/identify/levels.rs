@@ -57,7 +57,12 @@ pub fn settled_level(seg: &DcSegment) -> Option<SettledLevel> {
         label: seg.label.clone(),
         voltage: mean(v),
         current: mean(i),
-        speed: mean(w),
+        // The slope of the angle over the tail, not the mean of the speed
+        // samples: for an encoder-derived speed the mean is the count change
+        // between the tail's two end readings only, so the timestamp jitter
+        // of a polled bus (a few ms) and the quantisation at those two
+        // instants would set its error; the slope averages every reading.
+        speed: super::step::counter_speed(&seg.time[start..], w),
         samples: n - start,
         settled: half_agree(v) && half_agree(i) && half_agree(w),
     })
