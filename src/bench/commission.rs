@@ -76,8 +76,10 @@ pub enum CommissionError {
     Plot(#[from] PlotError),
 }
 
-/// A file stem from the motor id and the start time, unique in `dir`.
-pub(super) fn unique_stem(dir: &Path, motor_id: &str, started: &str) -> String {
+/// A record name from the motor id (unsafe characters replaced) and the
+/// start time (punctuation dropped), with `-2`, `-3`, … appended until
+/// `taken` says the name is free.
+pub fn record_name(motor_id: &str, started: &str, taken: impl Fn(&str) -> bool) -> String {
     let id: String = motor_id
         .chars()
         .map(|c| {
@@ -101,8 +103,15 @@ pub(super) fn unique_stem(dir: &Path, motor_id: &str, started: &str) -> String {
                 format!("{base}-{n}")
             }
         })
-        .find(|s| !dir.join(format!("{s}.mcap")).exists())
+        .find(|name| !taken(name))
         .expect("an unused name exists")
+}
+
+/// A file stem from the motor id and the start time, unique in `dir`.
+pub(super) fn unique_stem(dir: &Path, motor_id: &str, started: &str) -> String {
+    record_name(motor_id, started, |s| {
+        dir.join(format!("{s}.mcap")).exists()
+    })
 }
 
 /// Run `cfg`'s test on its rig, record it to MCAP, identify the motor and

@@ -24,7 +24,7 @@ mod sim_rig;
 mod supervisor;
 mod thermal;
 
-pub use commission::{commission, CommissionError, CommissionOptions, Commissioned};
+pub use commission::{commission, record_name, CommissionError, CommissionOptions, Commissioned};
 pub use encoder::SpeedFromEncoder;
 pub use im_commission::{commission_im, ImCommissioned};
 pub use im_config::{im_model_of_config, is_im_sweep_config, ImRunConfig};

@@ -132,34 +132,8 @@ pub fn read_dc_csv(
     };
     let mut previous_time: Option<(f64, usize)> = None;
     for (no, line) in lines {
-        let fields: Vec<&str> = line.split(',').collect();
-        if fields.len() != header.len() {
-            let column = header.get(fields.len()).copied();
-            return Err(err(
-                no,
-                column,
-                format!(
-                    "the row has {} fields, the header has {}",
-                    fields.len(),
-                    header.len()
-                ),
-            ));
-        }
-        let number = |col: usize| -> Result<f64, RecordError> {
-            let name = header[col];
-            let raw = unquote(fields[col]);
-            let v: f64 = raw
-                .parse()
-                .map_err(|_| err(no, Some(name), format!("{raw:?} is not a number")))?;
-            if !v.is_finite() {
-                return Err(err(
-                    no,
-                    Some(name),
-                    format!("{raw:?} is not a finite number"),
-                ));
-            }
-            Ok(v)
-        };
+        let row = CsvRow::split(path, &header, no, line)?;
+        let number = |col: usize| row.number(col);
         let t = number(time_col)?;
         if let Some((prev, prev_no)) = previous_time {
             if t <= prev {
@@ -240,6 +214,62 @@ fn split_word(s: &str) -> (&str, &str) {
 }
 
 /// Trims blanks and one pair of surrounding quotes.
+/// One data row, split into fields and checked against the header.
+pub(super) struct CsvRow<'a> {
+    path: &'a Path,
+    header: &'a [&'a str],
+    no: usize,
+    fields: Vec<&'a str>,
+}
+
+impl<'a> CsvRow<'a> {
+    /// Split line `no` of `path`; refuse a field count other than the
+    /// header's (naming the first missing column, if any).
+    pub(super) fn split(
+        path: &'a Path,
+        header: &'a [&'a str],
+        no: usize,
+        line: &'a str,
+    ) -> Result<CsvRow<'a>, RecordError> {
+        let fields: Vec<&str> = line.split(',').collect();
+        if fields.len() != header.len() {
+            let column = header.get(fields.len()).copied();
+            let reason = format!(
+                "the row has {} fields, the header has {}",
+                fields.len(),
+                header.len()
+            );
+            return Err(RecordError::csv(path, no, column, reason));
+        }
+        Ok(CsvRow {
+            path,
+            header,
+            no,
+            fields,
+        })
+    }
+
+    /// Field `col` as a finite number; the error names file, line, column.
+    pub(super) fn number(&self, col: usize) -> Result<f64, RecordError> {
+        let name = self.header[col];
+        let raw = unquote(self.fields[col]);
+        let bad = |what: &str| {
+            RecordError::csv(
+                self.path,
+                self.no,
+                Some(name),
+                format!("{raw:?} is not {what}"),
+            )
+        };
+        let v: f64 = raw.parse().map_err(|_| bad("a number"))?;
+        if v.is_finite() {
+            Ok(v)
+        } else {
+            Err(bad("a finite number"))
+        }
+    }
+}
+
 pub(super) fn unquote(s: &str) -> &str {
     let s = s.trim();
     for q in ['"', '\''] {

@@ -14,7 +14,7 @@
 
 use std::path::Path;
 
-use super::csv::{declaration_text, parse_declaration, unquote, Declaration};
+use super::csv::{declaration_text, parse_declaration, unquote, CsvRow, Declaration};
 use super::error::RecordError;
 use super::types::{OperatingPoint, SegmentKind};
 
@@ -107,34 +107,8 @@ pub fn read_im_csv(
     let index = decl.index.unwrap_or(default_index);
     let mut points = Vec::new();
     for (no, line) in lines {
-        let fields: Vec<&str> = line.split(',').collect();
-        if fields.len() != header.len() {
-            let column = header.get(fields.len()).copied();
-            return Err(err(
-                no,
-                column,
-                format!(
-                    "the row has {} fields, the header has {}",
-                    fields.len(),
-                    header.len()
-                ),
-            ));
-        }
-        let number = |col: usize| -> Result<f64, RecordError> {
-            let name = header[col];
-            let raw = unquote(fields[col]);
-            let v: f64 = raw
-                .parse()
-                .map_err(|_| err(no, Some(name), format!("{raw:?} is not a number")))?;
-            if !v.is_finite() {
-                return Err(err(
-                    no,
-                    Some(name),
-                    format!("{raw:?} is not a finite number"),
-                ));
-            }
-            Ok(v)
-        };
+        let row = CsvRow::split(path, &header, no, line)?;
+        let number = |col: usize| row.number(col);
         let slip = number(slip_col)?;
         if !(0.0..=1.0).contains(&slip) {
             return Err(err(

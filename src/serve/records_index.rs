@@ -247,36 +247,12 @@ impl RecordsIndex {
     /// A record name from the motor id and the start time, used by no
     /// entry and no file.
     pub fn new_name(&self, motor_id: &str, started_at: &str) -> String {
-        let id: String = motor_id
-            .chars()
-            .map(|c| {
-                if c.is_ascii_alphanumeric() || "-_.".contains(c) {
-                    c
-                } else {
-                    '_'
-                }
-            })
-            .collect();
-        let stamp: String = started_at
-            .chars()
-            .filter(|c| c.is_ascii_alphanumeric())
-            .collect();
-        let base = format!("{id}-{stamp}");
-        (1..)
-            .map(|n| {
-                if n == 1 {
-                    base.clone()
-                } else {
-                    format!("{base}-{n}")
-                }
-            })
-            .find(|s| {
-                self.get(s).is_none()
-                    && !["mcap", "report.json", "svg"]
-                        .iter()
-                        .any(|x| self.dir.join(format!("{s}.{x}")).exists())
-            })
-            .expect("an unused name exists")
+        crate::bench::record_name(motor_id, started_at, |s| {
+            self.get(s).is_some()
+                || ["mcap", "report.json", "svg"]
+                    .iter()
+                    .any(|x| self.dir.join(format!("{s}.{x}")).exists())
+        })
     }
 
     /// Add an entry and save.
