@@ -9,9 +9,8 @@
 //! MCAP finished; the token off loopback; the Unix socket; emergency stop
 //! and reset.
 //!
-//! Not covered here: the simulated rig behind Modbus (the drivers are
-//! built on another branch) and an induction-machine sweep (no IM bench
-//! yet).
+//! The simulated rig behind Modbus (and the abort timed at the supply's
+//! registers) is in `tests/daemon_modbus.rs`.
 
 mod common;
 

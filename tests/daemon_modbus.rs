@@ -1,0 +1,378 @@
+//! End to end: the `motorbench serve` binary on the simulated rig behind
+//! Modbus TCP, driven through its HTTP API and `motorbench ctl`.
+//!
+//! Two ways of serving the rig:
+//! - `config/sim-modbus-dc.toml` as shipped: the daemon serves the
+//!   simulated supply and DAQ itself (`rig.modbus.simulate = "tcp"`) and
+//!   reaches them through the real Modbus client; a short DC test runs to
+//!   completion through `ctl start --follow`.
+//! - The same rig served by this test process, and the daemon given a
+//!   configuration with their TCP addresses (as for hardware): the daemon
+//!   cannot tell it from a real supply. This is where an abort halfway is
+//!   timed from the API call to the moment the served supply's registers
+//!   show the output off (the Modbus write has arrived), on the test
+//!   process's clock. The figure is printed, not asserted (run with
+//!   `--nocapture`).
+
+mod common;
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use motorbench::bench::{build_rig, ServedLink};
+use motorbench::config::{Backend, Config};
+use motorbench::record::{read_mcap, EventLevel};
+use motorbench::serve::client::{Client, Endpoint};
+use motorbench_drivers::modbus::server::lock_bank;
+use serde_json::Value;
+
+const BIN: &str = env!("CARGO_BIN_EXE_motorbench");
+
+/// Longest any wait below may take before the test fails (a bound on
+/// loops, not a timing requirement).
+const PATIENCE: Duration = Duration::from_secs(180);
+
+/// Held by every wall-clock test of this file: they run one after the
+/// other so that they do not disturb each other's sampling.
+static REALTIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+fn shipped(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(name)
+}
+
+/// A running daemon; killed when dropped.
+struct Served {
+    child: Child,
+    url: String,
+    log: PathBuf,
+}
+
+impl Served {
+    fn start(config: &Path, dir: &Path) -> Served {
+        let log = dir.join("serve.log");
+        let mut child = Command::new(BIN)
+            .arg("serve")
+            .arg("--config")
+            .arg(config)
+            .arg("--records")
+            .arg(dir.join("records"))
+            .args(["--listen", "127.0.0.1:0"])
+            .stdout(Stdio::piped())
+            .stderr(std::fs::File::create(&log).unwrap())
+            .spawn()
+            .expect("motorbench serve starts");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let url = line
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap_or_else(|| {
+                panic!(
+                    "no address announced: {line:?}\n{}",
+                    std::fs::read_to_string(&log).unwrap_or_default()
+                )
+            })
+            .to_string();
+        Served { child, url, log }
+    }
+
+    fn client(&self) -> Client {
+        Client::new(Endpoint::parse(&self.url).unwrap(), None)
+    }
+
+    fn ctl(&self, args: &[&str]) -> Output {
+        Command::new(BIN)
+            .arg("ctl")
+            .arg("--url")
+            .arg(&self.url)
+            .args(args)
+            .output()
+            .unwrap()
+    }
+
+    fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+async fn get(c: &Client, path: &str) -> Value {
+    let r = c.get(path).await.unwrap();
+    assert!(
+        r.ok(),
+        "GET {path}: {} {}",
+        r.status,
+        String::from_utf8_lossy(&r.body)
+    );
+    r.json()
+}
+
+/// Poll the test until `until` holds.
+async fn wait_test(c: &Client, id: &str, until: impl Fn(&Value) -> bool) -> Value {
+    let t0 = Instant::now();
+    loop {
+        let s = get(c, &format!("/v1/tests/{id}")).await;
+        if until(&s) {
+            return s;
+        }
+        assert!(t0.elapsed() < PATIENCE, "waited too long; last status {s}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn shipped_modbus_config_runs_a_dc_test_through_the_api() {
+    let _one_at_a_time = REALTIME.lock().await;
+    let dir = tempfile::tempdir().unwrap();
+    let served = Served::start(&shipped("sim-modbus-dc.toml"), dir.path());
+    let c = served.client();
+
+    let rigs = get(&c, "/v1/rigs").await;
+    assert_eq!(rigs["rigs"][0]["state"], "idle", "{rigs}");
+
+    let out = served.ctl(&[
+        "start",
+        "--test-json",
+        r#"{"levels_V": [10, 55], "coastdown": false}"#,
+        "--follow",
+    ]);
+    let (stdout, stderr) = common::text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}\n{}", served.log());
+    let id = stdout.lines().next().unwrap().trim().to_string();
+    assert!(stdout.contains(&format!("{id}: completed")), "{stdout}");
+    assert!(
+        stdout.contains("segment 2/2"),
+        "progress was shown: {stdout}"
+    );
+
+    let entry = get(&c, &format!("/v1/records/{id}")).await;
+    assert_eq!(entry["outcome"], "completed");
+    assert_eq!(entry["motor_id"], "seed-table4-dc");
+    let ra = entry["key_results"]["params"]["Ra"].as_f64().unwrap();
+    assert!((ra / 30.9 - 1.0).abs() < 0.10, "Ra {ra}");
+
+    // The record replays to the recorded result.
+    let mcap = dir.path().join("records").join(format!("{id}.mcap"));
+    let replay = common::motorbench(&["replay", mcap.to_str().unwrap(), "--check"]);
+    let (_, replay_err) = common::text(&replay);
+    assert!(replay.status.success(), "{replay_err}");
+    assert!(replay_err.contains("identical"), "{replay_err}");
+}
+
+/// `config/sim-modbus-dc.toml` rewritten for a rig reached at `stage` and
+/// `daq` (no `simulate`, no `[rig.simulated]`: to the daemon it is
+/// hardware), with the profiles' paths made absolute.
+fn hardware_config(stage: &ServedLink, daq: &ServedLink) -> String {
+    let addr = |l: &ServedLink| match l {
+        ServedLink::Tcp(a) => a.to_string(),
+        other => panic!("served over TCP, not {other:?}"),
+    };
+    let text = std::fs::read_to_string(shipped("sim-modbus-dc.toml")).unwrap();
+    let devices = shipped("devices");
+    let cut = text.find("[rig.simulated.motor]").unwrap();
+    let limits = text.find("[limits]").unwrap();
+    let text = format!("{}{}", &text[..cut], &text[limits..]);
+    let mut out = String::new();
+    let mut section = "";
+    for line in text.lines() {
+        let trimmed = line.trim_start();
+        if trimmed.starts_with('[') {
+            section = if trimmed.starts_with("[rig.modbus.power_stage]") {
+                "stage"
+            } else if trimmed.starts_with("[rig.modbus.sensors]") {
+                "daq"
+            } else {
+                ""
+            };
+        }
+        if trimmed.starts_with("simulate =") {
+            continue;
+        }
+        if let Some(rest) = trimmed.strip_prefix("profile = \"devices/") {
+            let file = rest.split('"').next().unwrap();
+            out.push_str(&format!(
+                "profile = {:?}\n",
+                devices.join(file).to_str().unwrap()
+            ));
+            let link = if section == "stage" { stage } else { daq };
+            out.push_str(&format!(
+                "transport = \"tcp\"\naddress = \"{}\"\n",
+                addr(link)
+            ));
+            continue;
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn abort_halfway_behind_modbus_makes_the_supply_safe_and_is_timed() {
+    let _one_at_a_time = REALTIME.lock().await;
+    // Serve the simulated rig from this process (its Modbus TCP servers on
+    // loopback), keeping only the servers.
+    let shipped_cfg = Config::load(&shipped("sim-modbus-dc.toml")).unwrap();
+    let profile = match &shipped_cfg.backend {
+        Backend::Modbus { rig, .. } => rig.power_stage.profile.clone(),
+        _ => unreachable!("the shipped configuration is a Modbus rig"),
+    };
+    let rig = build_rig(&shipped_cfg, false).await.unwrap();
+    let mut rig = rig;
+    let rig_served = rig.served.take().expect("a served rig");
+    drop(rig);
+    let output_enable = profile.register("output_enable").unwrap().clone();
+    let voltage_set = profile.register("voltage_set").unwrap().clone();
+
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("rig.toml");
+    std::fs::write(
+        &config,
+        hardware_config(&rig_served.stage_link, &rig_served.daq_link),
+    )
+    .unwrap();
+    let daemon_view = Config::load(&config).unwrap();
+    assert!(daemon_view.backend.simulated().is_none(), "hardware to it");
+    let served = Served::start(&config, dir.path());
+    let c = served.client();
+
+    // The full staircase; abort it halfway.
+    let r = c.post("/v1/rigs/rig/tests", None).await.unwrap();
+    assert_eq!(
+        r.status,
+        201,
+        "{}\n{}",
+        String::from_utf8_lossy(&r.body),
+        served.log()
+    );
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let s = wait_test(&c, &id, |s| {
+        s["segment"]["index"].as_u64().unwrap_or(0) * 2
+            >= s["segment"]["total"].as_u64().unwrap_or(99)
+    })
+    .await;
+    assert!(s["values"]["current"].is_number(), "{s}");
+    {
+        let bank = lock_bank(&rig_served.stage_bank);
+        assert_eq!(bank.get(&output_enable), 1.0, "the output is on mid-test");
+        assert!(bank.get(&voltage_set) > 0.0, "a level is set mid-test");
+    }
+
+    // Watch the supply's registers on a thread of its own while the abort
+    // goes out: the instants its output-enable and set-point registers are
+    // written to zero, on the same clock as the request.
+    let bank = rig_served.stage_bank.clone();
+    let armed = Arc::new(AtomicBool::new(true));
+    let watching = armed.clone();
+    let watcher = std::thread::spawn(move || {
+        let (mut off, mut zero) = (None, None);
+        let t0 = Instant::now();
+        while watching.load(Ordering::Relaxed) && (off.is_none() || zero.is_none()) {
+            {
+                let b = lock_bank(&bank);
+                if off.is_none() && b.get(&output_enable) == 0.0 {
+                    off = Some(Instant::now());
+                }
+                if zero.is_none() && b.get(&voltage_set) == 0.0 {
+                    zero = Some(Instant::now());
+                }
+            }
+            if t0.elapsed() > PATIENCE {
+                break;
+            }
+            std::thread::sleep(Duration::from_micros(20));
+        }
+        (off, zero)
+    });
+    let sent = Instant::now();
+    let r = c
+        .post(&format!("/v1/tests/{id}/abort"), None)
+        .await
+        .unwrap();
+    let answered = Instant::now();
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    let stop = r.json()["stop"].clone();
+    assert_eq!(stop["kind"], "operator_abort");
+    assert_eq!(stop["safe_state_ok"], true);
+    // The daemon answers after it has commanded the safe state, so the
+    // registers are already written; the watcher only has to notice.
+    let watched = tokio::task::spawn_blocking(move || {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while !watcher.is_finished() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        armed.store(false, Ordering::Relaxed);
+        watcher.join().unwrap()
+    })
+    .await
+    .unwrap();
+    let (Some(off), Some(zero)) = watched else {
+        panic!("the supply's registers never showed it safe: {watched:?}");
+    };
+    assert!(
+        off >= sent && zero >= sent,
+        "it was on when the abort went out"
+    );
+
+    let s = wait_test(&c, &id, |s| s["state"] == "finished").await;
+    assert_eq!(s["outcome"], "aborted");
+    let stop = &s["stop"];
+    let requested = stop["requested_t_s"].as_f64().unwrap();
+    let first_safe = stop["first_safe_sample_t_s"]
+        .as_f64()
+        .expect("a sample after the safe state");
+    let period = 1.0 / 200.0;
+
+    // The supply stays safe, and the record tells the story.
+    {
+        let b = lock_bank(&rig_served.stage_bank);
+        let p = &profile;
+        assert_eq!(b.get(p.register("output_enable").unwrap()), 0.0);
+        assert_eq!(b.get(p.register("voltage_set").unwrap()), 0.0);
+    }
+    assert!(!rig_served.stage_output_enabled());
+    let rec = read_mcap(&dir.path().join("records").join(format!("{id}.mcap"))).unwrap();
+    assert!(rec.recovery.is_none(), "the record was finished");
+    let abort = rec
+        .events
+        .iter()
+        .find(|(_, e)| e.level == EventLevel::Abort)
+        .expect("an abort event");
+    assert!(
+        abort.1.message.contains("operator abort"),
+        "{}",
+        abort.1.message
+    );
+    let entry = get(&c, &format!("/v1/records/{id}")).await;
+    assert_eq!(entry["outcome"], "aborted");
+
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    println!(
+        "ABORT LATENCY BEHIND MODBUS TCP: API call → supply output-enable register off {:.3} ms, \
+         → voltage set point register 0 {:.3} ms (test-process clock, includes the HTTP request, \
+         the daemon and the Modbus write round trip); abort HTTP round trip {:.3} ms; \
+         daemon side: request received → safe-state command returned {:.3} ms; \
+         sample period {:.1} ms; last sample before the request at {requested:.4} s, \
+         first sample read after the safe state at {first_safe:.4} s ({:.1} sample periods)",
+        ms(off - sent),
+        ms(zero - sent),
+        ms(answered - sent),
+        stop["safe_after_s"].as_f64().unwrap() * 1e3,
+        period * 1e3,
+        (first_safe - requested) / period,
+    );
+}
