@@ -171,6 +171,19 @@ async fn shipped_modbus_config_runs_a_dc_test_through_the_api() {
     let (_, replay_err) = common::text(&replay);
     assert!(replay.status.success(), "{replay_err}");
     assert!(replay_err.contains("identical"), "{replay_err}");
+
+    // The supervisor relays the Modbus poller's statistics: the record
+    // holds one sampling-statistics event per polled channel.
+    let rec = read_mcap(&mcap).unwrap();
+    let stats: Vec<&str> = rec
+        .events
+        .iter()
+        .filter(|(_, e)| e.message.starts_with("sampling statistics"))
+        .map(|(_, e)| e.message.as_str())
+        .collect();
+    for q in ["armature_voltage", "armature_current", "encoder_count"] {
+        assert!(stats.iter().any(|m| m.contains(q)), "{q}: {stats:?}");
+    }
 }
 
 /// `config/sim-modbus-dc.toml` rewritten for a rig reached at `stage` and

@@ -25,7 +25,8 @@ use std::time::Duration;
 
 use async_trait::async_trait;
 use motorbench_drivers::{
-    ChannelInfo, DriverError, PowerStage, SampleBatch, SensorStream, StageCapabilities,
+    ChannelInfo, ChannelStats, DriverError, PowerStage, SampleBatch, SensorStream,
+    StageCapabilities,
 };
 use tokio::sync::{mpsc, oneshot, watch, Mutex};
 use tokio::time::Instant;
@@ -256,6 +257,16 @@ pub struct SupervisedSensors {
     id: String,
     channels: Vec<ChannelInfo>,
     rx: mpsc::Receiver<Result<SampleBatch, DriverError>>,
+    telemetry: Arc<StdMutex<Telemetry>>,
+}
+
+/// The supervised stream's own sampling statistics and warnings, relayed
+/// from the supervisor task (which owns the stream) to the sequencer, so
+/// a supervised record keeps them like an unsupervised one.
+#[derive(Default)]
+struct Telemetry {
+    stats: Vec<ChannelStats>,
+    warnings: Vec<String>,
 }
 
 #[async_trait]
@@ -276,6 +287,18 @@ impl SensorStream for SupervisedSensors {
             }),
         }
     }
+
+    fn sampling_stats(&self) -> Vec<ChannelStats> {
+        lock_telemetry(&self.telemetry).stats.clone()
+    }
+
+    fn take_warnings(&mut self) -> Vec<String> {
+        std::mem::take(&mut lock_telemetry(&self.telemetry).warnings)
+    }
+}
+
+fn lock_telemetry(t: &StdMutex<Telemetry>) -> std::sync::MutexGuard<'_, Telemetry> {
+    t.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// A rig under supervision. See the module docs.
@@ -318,9 +341,16 @@ type ReadResult = (
 fn read_next(
     mut sensors: Box<dyn SensorStream>,
     bus_loss: Duration,
+    telemetry: Arc<StdMutex<Telemetry>>,
 ) -> std::pin::Pin<Box<dyn std::future::Future<Output = ReadResult> + Send>> {
     Box::pin(async move {
         let r = tokio::time::timeout(bus_loss, sensors.next_batch()).await;
+        let warnings = sensors.take_warnings();
+        let stats = sensors.sampling_stats();
+        let mut t = lock_telemetry(&telemetry);
+        t.warnings.extend(warnings);
+        t.stats = stats;
+        drop(t);
         (sensors, r)
     })
 }
@@ -352,10 +382,12 @@ pub fn supervise(
     let (batch_tx, batch_rx) = mpsc::channel(timing.queue);
     let (cmd_tx, cmd_rx) = mpsc::channel(8);
     let (readings_tx, readings_rx) = watch::channel(monitor.readings());
+    let telemetry = Arc::new(StdMutex::new(Telemetry::default()));
     let sensors_out = SupervisedSensors {
         id: sensors.id().to_string(),
         channels: sensors.channels().to_vec(),
         rx: batch_rx,
+        telemetry: telemetry.clone(),
     };
     let task = Task {
         stage: stage.clone(),
@@ -371,6 +403,7 @@ pub fn supervise(
         batches: 0,
         stop_delivered: false,
         read_after_safe: false,
+        telemetry,
     };
     let task = tokio::spawn(task.run(sensors, cmd_rx));
     Supervised {
@@ -408,6 +441,8 @@ struct Task {
     stop_delivered: bool,
     /// The read in flight began after the safe-state command returned.
     read_after_safe: bool,
+    /// Where the stream's statistics and warnings go for the sequencer.
+    telemetry: Arc<StdMutex<Telemetry>>,
 }
 
 impl Task {
@@ -417,7 +452,7 @@ impl Task {
         mut commands: mpsc::Receiver<Command>,
     ) -> SupervisorSummary {
         self.shared.touch();
-        let mut read = read_next(sensors, self.timing.bus_loss);
+        let mut read = read_next(sensors, self.timing.bus_loss, self.telemetry.clone());
         let mut tick = tokio::time::interval(self.loop_period);
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
         let mut reading = true;
@@ -486,7 +521,7 @@ impl Task {
                             }
                         }
                     }
-                    read = read_next(sensors, self.timing.bus_loss);
+                    read = read_next(sensors, self.timing.bus_loss, self.telemetry.clone());
                     self.read_after_safe = self.shared.stopped.load(Ordering::SeqCst);
                 },
             }
