@@ -108,19 +108,7 @@ impl ImSweepPlan {
 /// derived from the encoder, then the supply-voltage and dynamometer-speed
 /// commands.
 pub fn sweep_channels(sensors: &[ChannelInfo], vfd_id: &str, dyno_id: &str) -> Vec<ChannelSpec> {
-    let mut out: Vec<ChannelSpec> = sensors
-        .iter()
-        .map(|c| ChannelSpec::sensor(&c.quantity, &c.unit, &c.source))
-        .collect();
-    let encoder = sensors
-        .iter()
-        .find(|c| c.quantity == "encoder_count")
-        .map_or("encoder", |c| c.source.as_str());
-    out.push(ChannelSpec::sensor(
-        "speed",
-        "rad/s",
-        &format!("{encoder}/derived"),
-    ));
+    let mut out = super::runner::sensor_channels_with_speed(sensors);
     out.push(ChannelSpec::command("line_voltage", "V", vfd_id));
     out.push(ChannelSpec::command("dyno_speed", "rad/s", dyno_id));
     out

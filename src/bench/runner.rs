@@ -90,9 +90,9 @@ impl RecordSink {
     }
 }
 
-/// Channels recorded for a DC test: every sensor channel in order, then
-/// the derived speed, then the armature-voltage command.
-pub fn record_channels(sensors: &[ChannelInfo], stage_id: &str) -> Vec<ChannelSpec> {
+/// Every sensor channel in order, then the speed derived from the encoder
+/// count (the channels every test records before its commands).
+pub fn sensor_channels_with_speed(sensors: &[ChannelInfo]) -> Vec<ChannelSpec> {
     let mut out: Vec<ChannelSpec> = sensors
         .iter()
         .map(|c| ChannelSpec::sensor(&c.quantity, &c.unit, &c.source))
@@ -106,6 +106,13 @@ pub fn record_channels(sensors: &[ChannelInfo], stage_id: &str) -> Vec<ChannelSp
         "rad/s",
         &format!("{encoder}/derived"),
     ));
+    out
+}
+
+/// Channels recorded for a DC test: every sensor channel in order, then
+/// the derived speed, then the armature-voltage command.
+pub fn record_channels(sensors: &[ChannelInfo], stage_id: &str) -> Vec<ChannelSpec> {
+    let mut out = sensor_channels_with_speed(sensors);
     out.push(ChannelSpec::command("armature_voltage", "V", stage_id));
     out
 }
