@@ -57,30 +57,13 @@ pub fn read_dc_csv(
     default_kind: SegmentKind,
     default_index: u32,
 ) -> Result<DcSegment, RecordError> {
-    let text = std::fs::read_to_string(path).map_err(|e| RecordError::io(path, e))?;
-    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    let text = read_text(path)?;
+    let csv = CsvLines::split(path, &text)?;
     let err = |line: usize, column: Option<&str>, reason: String| {
         RecordError::csv(path, line, column, reason)
     };
 
-    let mut lines = text
-        .split('\n')
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
-        .filter(|(_, l)| !l.trim().is_empty())
-        .peekable();
-
-    // The declaration, if the first non-blank line is one.
-    let mut decl = Declaration::default();
-    if let Some(&(no, line)) = lines.peek() {
-        if let Some(rest) = declaration_text(line) {
-            decl = parse_declaration(rest).map_err(|r| err(no, None, r))?;
-            lines.next();
-        }
-    }
-    let mut lines = lines.filter(|(_, l)| !l.trim_start().starts_with('#'));
-
-    let kind = decl.kind.unwrap_or(default_kind);
+    let kind = csv.decl.kind.unwrap_or(default_kind);
     if kind == SegmentKind::ImSlipSweep {
         return Err(RecordError::Unsupported {
             path: path.to_path_buf(),
@@ -88,19 +71,10 @@ pub fn read_dc_csv(
         });
     }
 
-    let Some((header_no, header_line)) = lines.next() else {
-        let last = text.lines().count().max(1);
-        return Err(err(last, None, "no header row (the file is empty)".into()));
-    };
-    let header: Vec<&str> = header_line.split(',').map(unquote).collect();
-    let find = |name: &str| -> Result<Option<usize>, RecordError> {
-        let mut hits = header.iter().enumerate().filter(|(_, h)| **h == name);
-        let first = hits.next().map(|(i, _)| i);
-        if hits.next().is_some() {
-            return Err(err(header_no, Some(name), "column appears twice".into()));
-        }
-        Ok(first)
-    };
+    let (header, lines) = csv.header(path)?;
+    let find = |name: &str| header.find(path, name);
+    let header_no = header.no;
+    let header = &header.names;
     let missing = |name: &str, extra: &str| {
         err(
             header_no,
@@ -121,18 +95,14 @@ pub fn read_dc_csv(
     };
 
     let mut seg = DcSegment {
-        index: decl.index.unwrap_or(default_index),
+        index: csv.decl.index.unwrap_or(default_index),
         kind: Some(kind),
-        label: decl.label.unwrap_or_else(|| {
-            path.file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default()
-        }),
+        label: csv.label(path),
         ..DcSegment::default()
     };
     let mut previous_time: Option<(f64, usize)> = None;
-    for (no, line) in lines {
-        let row = CsvRow::split(path, &header, no, line)?;
+    for &(no, line) in lines {
+        let row = CsvRow::split(path, header, no, line)?;
         let number = |col: usize| row.number(col);
         let t = number(time_col)?;
         if let Some((prev, prev_no)) = previous_time {
@@ -162,6 +132,107 @@ pub fn read_dc_csv(
         return Err(err(header_no, None, "no data rows after the header".into()));
     }
     Ok(seg)
+}
+
+/// The file's text, without a leading byte-order mark.
+pub(super) fn read_text(path: &Path) -> Result<String, RecordError> {
+    let text = std::fs::read_to_string(path).map_err(|e| RecordError::io(path, e))?;
+    Ok(match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    })
+}
+
+/// A CSV file split the contract's way: the optional declaration on the
+/// first non-blank line, then the header and data lines, blank and `#`
+/// comment lines skipped.
+pub(super) struct CsvLines<'a> {
+    /// The declaration (empty when the file has none).
+    pub decl: Declaration,
+    /// The line of the declaration, when the file has one.
+    pub decl_line: Option<usize>,
+    lines: Vec<NumberedLine<'a>>,
+    last_line: usize,
+}
+
+/// A 1-based line number and the line's text.
+pub(super) type NumberedLine<'a> = (usize, &'a str);
+
+/// The header row: its line number and column names.
+pub(super) struct CsvHeader<'a> {
+    /// 1-based line number.
+    pub no: usize,
+    /// Column names, quotes removed.
+    pub names: Vec<&'a str>,
+}
+
+impl<'a> CsvLines<'a> {
+    /// Split `text` (of `path`); a malformed declaration is an error.
+    pub(super) fn split(path: &Path, text: &'a str) -> Result<CsvLines<'a>, RecordError> {
+        let mut lines = text
+            .split('\n')
+            .enumerate()
+            .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
+            .filter(|(_, l)| !l.trim().is_empty())
+            .peekable();
+        let mut decl = Declaration::default();
+        let mut decl_line = None;
+        if let Some(&(no, line)) = lines.peek() {
+            if let Some(rest) = declaration_text(line) {
+                decl = parse_declaration(rest).map_err(|r| RecordError::csv(path, no, None, r))?;
+                decl_line = Some(no);
+                lines.next();
+            }
+        }
+        Ok(CsvLines {
+            decl,
+            decl_line,
+            lines: lines
+                .filter(|(_, l)| !l.trim_start().starts_with('#'))
+                .collect(),
+            last_line: text.lines().count().max(1),
+        })
+    }
+
+    /// The header row and the data lines after it.
+    pub(super) fn header(
+        &self,
+        path: &Path,
+    ) -> Result<(CsvHeader<'a>, &[NumberedLine<'a>]), RecordError> {
+        let Some((&(no, line), rows)) = self.lines.split_first() else {
+            let reason = "no header row (the file is empty)";
+            return Err(RecordError::csv(path, self.last_line, None, reason));
+        };
+        let names = line.split(',').map(unquote).collect();
+        Ok((CsvHeader { no, names }, rows))
+    }
+
+    /// The declared label, or the file name.
+    pub(super) fn label(&self, path: &Path) -> String {
+        self.decl.label.clone().unwrap_or_else(|| {
+            path.file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default()
+        })
+    }
+}
+
+impl CsvHeader<'_> {
+    /// The index of column `name`, if present; a column named twice is an
+    /// error naming it.
+    pub(super) fn find(&self, path: &Path, name: &str) -> Result<Option<usize>, RecordError> {
+        let mut hits = self.names.iter().enumerate().filter(|(_, h)| **h == name);
+        let first = hits.next().map(|(i, _)| i);
+        if hits.next().is_some() {
+            return Err(RecordError::csv(
+                path,
+                self.no,
+                Some(name),
+                "column appears twice",
+            ));
+        }
+        Ok(first)
+    }
 }
 
 /// The text after `# motorbench segment`, if `line` is a declaration.

@@ -14,7 +14,7 @@
 
 use std::path::Path;
 
-use super::csv::{declaration_text, parse_declaration, unquote, CsvRow, Declaration};
+use super::csv::{read_text, CsvLines, CsvRow};
 use super::error::RecordError;
 use super::types::{OperatingPoint, SegmentKind};
 
@@ -50,45 +50,24 @@ pub fn read_im_csv(
     frequency: Option<f64>,
     pole_pairs: Option<u32>,
 ) -> Result<ImCsvSegment, RecordError> {
-    let text = std::fs::read_to_string(path).map_err(|e| RecordError::io(path, e))?;
-    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
+    let text = read_text(path)?;
+    let csv = CsvLines::split(path, &text)?;
     let err = |line: usize, column: Option<&str>, reason: String| {
         RecordError::csv(path, line, column, reason)
     };
-    let mut lines = text
-        .split('\n')
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.strip_suffix('\r').unwrap_or(l)))
-        .filter(|(_, l)| !l.trim().is_empty())
-        .peekable();
-    let mut decl = Declaration::default();
-    if let Some(&(no, line)) = lines.peek() {
-        if let Some(rest) = declaration_text(line) {
-            decl = parse_declaration(rest).map_err(|r| err(no, None, r))?;
-            if let Some(kind) = decl.kind.filter(|k| *k != SegmentKind::ImSlipSweep) {
-                return Err(err(
-                    no,
-                    None,
-                    format!("the file declares kind {kind}, not im_slip_sweep"),
-                ));
-            }
-            lines.next();
+    if let (Some(no), Some(kind)) = (csv.decl_line, csv.decl.kind) {
+        if kind != SegmentKind::ImSlipSweep {
+            return Err(err(
+                no,
+                None,
+                format!("the file declares kind {kind}, not im_slip_sweep"),
+            ));
         }
     }
-    let mut lines = lines.filter(|(_, l)| !l.trim_start().starts_with('#'));
-    let Some((header_no, header_line)) = lines.next() else {
-        let last = text.lines().count().max(1);
-        return Err(err(last, None, "no header row (the file is empty)".into()));
-    };
-    let header: Vec<&str> = header_line.split(',').map(unquote).collect();
-    let find = |name: &str| -> Result<Option<usize>, RecordError> {
-        let mut hits = header.iter().enumerate().filter(|(_, h)| **h == name);
-        let first = hits.next().map(|(i, _)| i);
-        if hits.next().is_some() {
-            return Err(err(header_no, Some(name), "column appears twice".into()));
-        }
-        Ok(first)
-    };
+    let (header, lines) = csv.header(path)?;
+    let find = |name: &str| header.find(path, name);
+    let header_no = header.no;
+    let header = &header.names;
     let required = |name: &str| -> Result<usize, RecordError> {
         find(name)?.ok_or_else(|| {
             err(
@@ -104,10 +83,10 @@ pub fn read_im_csv(
     let p_col = required(COL_INPUT_POWER)?;
     let t_col = find(COL_TORQUE)?;
     let f_col = find(COL_FREQUENCY)?;
-    let index = decl.index.unwrap_or(default_index);
+    let index = csv.decl.index.unwrap_or(default_index);
     let mut points = Vec::new();
-    for (no, line) in lines {
-        let row = CsvRow::split(path, &header, no, line)?;
+    for &(no, line) in lines {
+        let row = CsvRow::split(path, header, no, line)?;
         let number = |col: usize| row.number(col);
         let slip = number(slip_col)?;
         if !(0.0..=1.0).contains(&slip) {
@@ -152,11 +131,7 @@ pub fn read_im_csv(
     }
     Ok(ImCsvSegment {
         index,
-        label: decl.label.unwrap_or_else(|| {
-            path.file_name()
-                .map(|n| n.to_string_lossy().into_owned())
-                .unwrap_or_default()
-        }),
+        label: csv.label(path),
         points,
     })
 }
