@@ -19,6 +19,7 @@
 
 pub mod bench;
 pub mod config;
+pub mod diagnose;
 pub mod identify;
 pub mod model;
 pub mod record;

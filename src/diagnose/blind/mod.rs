@@ -1,0 +1,49 @@
+//! The blind benchmark: records simulated with one withheld effect (or
+//! none) at random magnitudes, noise and quantisation levels, with the
+//! truth kept apart from the record so that the diagnosis never sees it.
+//!
+//! - `dc_case` / `im_case`: simulate one record of each machine.
+//! - [`CaseTruth`]: what was withheld; written to a separate truth file.
+
+mod dc_case;
+mod im_case;
+
+pub use dc_case::simulate_dc_case;
+pub use im_case::simulate_im_case;
+
+use std::collections::BTreeMap;
+
+use serde::{Deserialize, Serialize};
+
+use crate::record::Record;
+
+/// What a blind case really holds. Never read by the diagnosis.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CaseTruth {
+    /// The withheld effect's vocabulary name, or `none`.
+    pub effect: String,
+    /// The effect's parameters (physical units), empty for `none`.
+    pub effect_params: BTreeMap<String, f64>,
+    /// The nominal parameters the record was simulated with, by contract key.
+    pub nominal: BTreeMap<String, f64>,
+    /// Standard deviation of the white noise added per channel.
+    pub noise: BTreeMap<String, f64>,
+    /// Quantisation step per channel (0 for none).
+    pub quantisation: BTreeMap<String, f64>,
+    /// The NRMSE a perfect model would reach: measured against the
+    /// noise-free truth, averaged over channels as the contract defines a
+    /// record's NRMSE, over all segments (or points).
+    pub noise_floor: f64,
+    /// Region labels (the contract's gap-region labels) where the effect
+    /// should show most; empty for `none`.
+    pub regions: Vec<String>,
+}
+
+/// One simulated case: the record (all the diagnosis may read) and its truth.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlindRecord {
+    /// The record.
+    pub record: Record,
+    /// The truth behind it.
+    pub truth: CaseTruth,
+}

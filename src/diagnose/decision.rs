@@ -1,0 +1,195 @@
+//! The statistics that turn held-out residuals into a verdict: a paired
+//! one-sided test of "the candidate shrinks the held-out gap", corrected
+//! for the number of candidates tried, a penalised ranking score, and a
+//! noise-level estimate for the noise floor.
+//!
+//! Why a paired block test: the held-out residuals of the nominal and the
+//! augmented model are computed on the same samples, so their difference
+//! per block cancels the noise both share. Blocks (a few tens of
+//! milliseconds of a DC record, or one operating point of a sweep) make
+//! the differences close to independent even when the noise is coloured,
+//! so the test's false-alarm rate holds without a noise model. The
+//! Bonferroni correction over candidates keeps the family-wise false-alarm
+//! rate of a diagnosis at [`FALSE_ALARM_RATE`].
+
+use statrs::distribution::{ContinuousCDF, StudentsT};
+
+/// Family-wise false-alarm rate of one diagnosis: the probability of
+/// naming an effect on data that has none. A false alarm costs an
+/// engineer a day, so 1 %.
+pub const FALSE_ALARM_RATE: f64 = 0.01;
+
+/// The result of comparing a candidate with the nominal model on held-out
+/// data.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeldOutTest {
+    /// Mean gain per block (nominal minus candidate squared residual).
+    pub mean_gain: f64,
+    /// Blocks compared.
+    pub blocks: usize,
+    /// One-sided p-value of "no gain", Bonferroni-corrected for the
+    /// candidates tried, at most 1.
+    pub p_value: f64,
+}
+
+impl HeldOutTest {
+    /// Whether the gain is significant at [`FALSE_ALARM_RATE`].
+    pub fn significant(&self) -> bool {
+        self.p_value < FALSE_ALARM_RATE
+    }
+}
+
+/// Paired one-sided t-test on per-block squared held-out residuals of the
+/// nominal model and a candidate (same blocks, same order), corrected for
+/// `candidates_tried` candidates.
+///
+/// Fewer than three blocks, or blocks that do not differ at all, give
+/// p = 1: no evidence.
+pub fn held_out_test(nominal: &[f64], candidate: &[f64], candidates_tried: usize) -> HeldOutTest {
+    let n = nominal.len().min(candidate.len());
+    let gains: Vec<f64> = (0..n).map(|b| nominal[b] - candidate[b]).collect();
+    let mean = if n > 0 {
+        gains.iter().sum::<f64>() / n as f64
+    } else {
+        0.0
+    };
+    let mut test = HeldOutTest {
+        mean_gain: mean,
+        blocks: n,
+        p_value: 1.0,
+    };
+    if n < 3 {
+        return test;
+    }
+    let var = gains.iter().map(|g| (g - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    let se = (var / n as f64).sqrt();
+    if se.is_nan() || se <= 0.0 || !mean.is_finite() {
+        return test;
+    }
+    let t = mean / se;
+    let dist = StudentsT::new(0.0, 1.0, (n - 1) as f64).expect("n ≥ 3 gives a valid t");
+    let p = 1.0 - dist.cdf(t);
+    test.p_value = (p * candidates_tried.max(1) as f64).min(1.0);
+    test
+}
+
+/// Sums of `squared` over consecutive blocks of `block` samples (the last
+/// block may be shorter; it is kept when it has at least half a block).
+pub fn block_sums(squared: &[f64], block: usize) -> Vec<f64> {
+    let block = block.max(1);
+    squared
+        .chunks(block)
+        .filter(|c| 2 * c.len() >= block)
+        .map(|c| c.iter().sum())
+        .collect()
+}
+
+/// Ranking score of a candidate on held-out data: the held-out BIC
+/// difference, `n/2·ln(SSE_nominal/SSE_candidate) − k/2·ln(n)`, with `n`
+/// held-out (effective) samples and `k` extra parameters. Positive when
+/// the gain outweighs the parameters.
+pub fn penalised_score(sse_nominal: f64, sse_candidate: f64, n: f64, extra_params: usize) -> f64 {
+    if !(sse_nominal > 0.0 && sse_candidate > 0.0 && n > 1.0) {
+        return f64::NEG_INFINITY;
+    }
+    0.5 * n * (sse_nominal / sse_candidate).ln() - 0.5 * extra_params as f64 * n.ln()
+}
+
+/// Effective number of independent samples in a residual series with
+/// lag-one autocorrelation ρ: `n·(1−ρ)/(1+ρ)` (ρ clamped to [0, 0.99]).
+pub fn effective_samples(residual: &[f64]) -> f64 {
+    let n = residual.len();
+    if n < 3 {
+        return n as f64;
+    }
+    let mean = residual.iter().sum::<f64>() / n as f64;
+    let var: f64 = residual.iter().map(|r| (r - mean).powi(2)).sum();
+    if var <= 0.0 {
+        return n as f64;
+    }
+    let cov: f64 = residual
+        .windows(2)
+        .map(|w| (w[0] - mean) * (w[1] - mean))
+        .sum();
+    let rho = (cov / var).clamp(0.0, 0.99);
+    n as f64 * (1.0 - rho) / (1.0 + rho)
+}
+
+/// Standard deviation of white measurement noise on a smooth signal, from
+/// the median absolute first difference (robust to steps and outliers):
+/// `median|Δy| / (√2 · 0.6745)`.
+pub fn noise_sigma(y: &[f64]) -> f64 {
+    let mut d: Vec<f64> = y.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    let mid = d.len() / 2;
+    let (_, median, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
+    *median / (std::f64::consts::SQRT_2 * 0.674_489_75)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{rngs::StdRng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
+
+    fn noise(seed: u64, n: usize) -> Vec<f64> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let d = Normal::new(0.0, 1.0).unwrap();
+        (0..n).map(|_| d.sample(&mut rng)).collect()
+    }
+
+    #[test]
+    fn pure_noise_gains_are_rarely_significant() {
+        // Two independent noise draws stand in for two models that are
+        // equally wrong: the test must alarm at about its nominal rate.
+        let trials = 400;
+        let alarms = (0..trials)
+            .filter(|&s| {
+                let a: Vec<f64> = noise(2 * s, 40).iter().map(|x| x * x).collect();
+                let b: Vec<f64> = noise(2 * s + 1, 40).iter().map(|x| x * x).collect();
+                held_out_test(&a, &b, 1).significant()
+            })
+            .count();
+        // 1 % nominal: 4 of 400 expected; 12 would be p < 0.001 binomially.
+        assert!(alarms <= 12, "{alarms} false alarms in {trials}");
+    }
+
+    #[test]
+    fn a_real_gain_is_significant_and_bonferroni_weakens_it() {
+        let nominal: Vec<f64> = noise(7, 60).iter().map(|x| 2.0 + x * x).collect();
+        let candidate: Vec<f64> = noise(7, 60).iter().map(|x| x * x).collect();
+        let one = held_out_test(&nominal, &candidate, 1);
+        assert!(one.significant());
+        assert!((one.mean_gain - 2.0).abs() < 1e-12);
+        let weak_n: Vec<f64> = noise(9, 8).iter().map(|x| 0.3 + x * x).collect();
+        let weak_c: Vec<f64> = noise(10, 8).iter().map(|x| x * x).collect();
+        let single = held_out_test(&weak_n, &weak_c, 1);
+        let many = held_out_test(&weak_n, &weak_c, 7);
+        assert!(many.p_value >= single.p_value);
+        assert!(held_out_test(&[1.0, 2.0], &[0.0, 0.0], 1).p_value == 1.0);
+    }
+
+    #[test]
+    fn score_penalises_parameters() {
+        assert!(penalised_score(2.0, 1.0, 100.0, 1) > 0.0);
+        assert!(penalised_score(1.0, 1.0, 100.0, 1) < 0.0);
+        assert!(penalised_score(2.0, 1.0, 100.0, 1) > penalised_score(2.0, 1.0, 100.0, 3));
+    }
+
+    #[test]
+    fn noise_sigma_ignores_steps_and_effective_samples_see_colour() {
+        let mut y = noise(3, 4000);
+        for (k, v) in y.iter_mut().enumerate() {
+            *v = 0.1 * *v + if k > 2000 { 5.0 } else { 0.0 } + k as f64 * 1e-5;
+        }
+        let s = noise_sigma(&y);
+        assert!((s - 0.1).abs() < 0.01, "sigma {s}");
+        let white = noise(4, 4000);
+        assert!(effective_samples(&white) > 3500.0);
+        let coloured: Vec<f64> = white.windows(8).map(|w| w.iter().sum()).collect();
+        assert!(effective_samples(&coloured) < 1000.0);
+        assert_eq!(block_sums(&[1.0; 10], 4), vec![4.0, 4.0, 2.0]);
+    }
+}

@@ -1,0 +1,57 @@
+//! Sim-to-real gap diagnosis: where the identified ("sim") model misfits
+//! the record ("real"), which unmodelled effect of the contract's
+//! vocabulary causes it, and how far the gap shrinks once that effect is
+//! modelled — every comparison on held-out data.
+//!
+//! - [`report`]: the diagnosis JSON of the data contract.
+//! - [`decision`]: the paired held-out test, the penalised score, noise
+//!   estimates; shared by both machines.
+//! - [`plot`]: residuals before and after per region, as SVG.
+//! - `dc*`: the DC motor (leave-one-segment-out on a staircase).
+//! - `im*`: the induction machine (leave-one-voltage-out, or interleaved
+//!   points on a single sweep).
+
+pub mod blind;
+pub mod decision;
+mod plot;
+pub mod report;
+
+mod dc;
+mod im;
+
+pub use dc::diagnose_dc;
+pub use im::diagnose_im;
+pub use plot::{write_residual_svg, ResidualPanel, ResidualPlot};
+pub use report::{
+    Candidate, Diagnosis, Gap, GapRegion, LookAlike, NominalFit, ParamCorrection, RegionAxis,
+    ResidualEvidence, Verdict,
+};
+
+use crate::model::Connection;
+
+/// What a diagnosis needs beside the record.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct DiagnoseOptions {
+    /// Induction machine: winding connection (overrides the record's nameplate).
+    pub connection: Option<Connection>,
+}
+
+/// A diagnosis and the residual series behind its plot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DiagnosisRun {
+    /// The contract's report.
+    pub report: Diagnosis,
+    /// Residuals before and after the verdict's effect, per region.
+    pub plot: ResidualPlot,
+}
+
+/// Why a record cannot be diagnosed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum DiagnoseError {
+    /// Too little data for held-out validation (e.g. one DC segment).
+    #[error("not enough data to diagnose: {0}")]
+    NotEnoughData(String),
+    /// The nominal model could not be fitted.
+    #[error("the nominal model could not be fitted: {0}")]
+    NominalFit(String),
+}
