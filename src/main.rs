@@ -21,7 +21,7 @@ use motorbench::bench::{
 use motorbench::config::load_or_default;
 use motorbench::identify::{identify_dc, identify_im, Identification, ImIdentification};
 use motorbench::model::{Connection, ImModel};
-use motorbench::record::{read_dc_csv, read_im_csv, read_mcap, Record, SegmentKind, TestMeta};
+use motorbench::record::{load_record_files, read_mcap, Record, SegmentKind};
 use motorbench::report::{
     render_im_text, render_text, segment_plots, write_im_svg, write_segments_svg,
 };
@@ -112,6 +112,13 @@ enum Command {
         #[arg(long)]
         frequency: Option<f64>,
     },
+    /// Diagnose the sim-to-real gap: where the identified model misfits the
+    /// record, which unmodelled effect causes it, how far the gap shrinks
+    /// once it is modelled (all on held-out segments).
+    Diagnose(motorbench::diagnose::cli::DiagnoseArgs),
+    /// The blind benchmark of the diagnosis: generate a suite of simulated
+    /// records with withheld effects, or score the diagnosis on one.
+    Blind(motorbench::diagnose::cli::BlindArgs),
     /// Run the daemon: control API, one test at a time per rig, safety
     /// supervisor, records index (SIGTERM stops tests safely and exits 0).
     Serve(motorbench::serve::cli::ServeArgs),
@@ -500,81 +507,7 @@ fn load_record(
     nameplate: Option<&Path>,
     frequency: Option<f64>,
 ) -> Result<Record, Failure> {
-    let mut plate = None;
-    if let Some(path) = nameplate {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| bad_input(format!("{}: {e}", path.display())))?;
-        let v: serde_json::Value = serde_json::from_str(&text)
-            .map_err(|e| bad_input(format!("{}:{}: {e}", path.display(), e.line())))?;
-        if !v.is_object() {
-            return Err(bad_input(format!(
-                "{}: a nameplate must be a JSON object",
-                path.display()
-            )));
-        }
-        plate = Some(v);
-    }
-    let is_mcap = |p: &PathBuf| {
-        p.extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
-    };
-    match files.iter().filter(|p| is_mcap(p)).count() {
-        0 => {}
-        1 if files.len() == 1 => return read_mcap(&files[0]).map_err(bad_input),
-        _ => {
-            return Err(bad_input(
-                "give either one MCAP file or any number of CSV files",
-            ))
-        }
-    }
-    let mut record = Record::default();
-    if kind == SegmentKind::ImSlipSweep {
-        let number = |key: &str| {
-            plate
-                .as_ref()
-                .and_then(|p| p.get(key))
-                .and_then(|v| v.as_f64())
-        };
-        let frequency = frequency.or_else(|| number("frequency_Hz"));
-        let pole_pairs = number("poles").map(|p| (p / 2.0).round() as u32);
-        let mut seen: Vec<(u32, &PathBuf)> = Vec::new();
-        for (n, path) in files.iter().enumerate() {
-            let seg = read_im_csv(path, n as u32, frequency, pole_pairs).map_err(bad_input)?;
-            if let Some((_, other)) = seen.iter().find(|(i, _)| *i == seg.index) {
-                return Err(bad_input(format!(
-                    "{}: segment index {} is already used by {}",
-                    path.display(),
-                    seg.index,
-                    other.display()
-                )));
-            }
-            seen.push((seg.index, path));
-            record.operating_points.extend(seg.points);
-        }
-        record.meta = plate.map(|nameplate| TestMeta {
-            schema_version: motorbench::record::SCHEMA_VERSION.to_string(),
-            kind,
-            motor_id: String::new(),
-            started_at: String::new(),
-            nameplate,
-            config: String::new(),
-        });
-        return Ok(record);
-    }
-    for (n, path) in files.iter().enumerate() {
-        let seg = read_dc_csv(path, kind, n as u32).map_err(bad_input)?;
-        if let Some(other) = record.segments.iter().position(|s| s.index == seg.index) {
-            return Err(bad_input(format!(
-                "{}: segment index {} is already used by {}",
-                path.display(),
-                seg.index,
-                files[other].display()
-            )));
-        }
-        record.segments.push(seg);
-    }
-    record.segments.sort_by_key(|s| s.index);
-    Ok(record)
+    load_record_files(kind, files, nameplate, frequency).map_err(bad_input)
 }
 
 /// Options of induction-machine identification from the command line.
@@ -682,6 +615,10 @@ fn main() -> ExitCode {
                 frequency,
             },
         ),
+        Command::Diagnose(args) => {
+            return ExitCode::from(motorbench::diagnose::cli::run_diagnose(args))
+        }
+        Command::Blind(args) => return ExitCode::from(motorbench::diagnose::cli::run_blind(args)),
         Command::Serve(args) => {
             return block_on(motorbench::serve::cli::run_serve(
                 args,

@@ -12,9 +12,11 @@
 //!   points on a single sweep).
 
 pub mod blind;
+pub mod cli;
 pub mod decision;
 mod plot;
 pub mod report;
+mod text;
 
 mod dc;
 mod im;
@@ -26,8 +28,23 @@ pub use report::{
     Candidate, Diagnosis, Gap, GapRegion, LookAlike, NominalFit, ParamCorrection, RegionAxis,
     ResidualEvidence, Verdict,
 };
+pub use text::render_diagnosis_text;
 
 use crate::model::Connection;
+use crate::record::{Record, SegmentKind};
+
+/// Diagnose `record` as a test of `kind` (`dc_step` and `dc_coastdown`
+/// records go to the DC diagnosis, `im_slip_sweep` to the IM one).
+pub fn diagnose(
+    record: &Record,
+    kind: SegmentKind,
+    options: &DiagnoseOptions,
+) -> Result<DiagnosisRun, DiagnoseError> {
+    match kind {
+        SegmentKind::ImSlipSweep => diagnose_im(record, options),
+        SegmentKind::DcStep | SegmentKind::DcCoastdown => diagnose_dc(record, options),
+    }
+}
 
 /// What a diagnosis needs beside the record.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -4,12 +4,20 @@
 //!
 //! - `dc_case` / `im_case`: simulate one record of each machine.
 //! - [`CaseTruth`]: what was withheld; written to a separate truth file.
+//! - `suite`: the case plan, the suite directory, the truth file.
+//! - `score`: diagnose every case from its files, then compare with the truth.
 
 mod dc_case;
+mod files;
 mod im_case;
+mod score;
+mod suite;
 
 pub use dc_case::simulate_dc_case;
+pub use files::write_case_files;
 pub use im_case::simulate_im_case;
+pub use score::{score_suite, CaseScore, SuiteScore};
+pub use suite::{case_plan, generate_suite, CaseEntry, Manifest, TruthFile, DEFAULT_SEED};
 
 use std::collections::BTreeMap;
 

@@ -1,0 +1,183 @@
+//! Command-line arguments and entry points of `motorbench diagnose` and
+//! `motorbench blind` (the blind benchmark); the binary's `main` only
+//! dispatches here.
+
+use std::path::{Path, PathBuf};
+
+use clap::{Args, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use super::blind::{generate_suite, score_suite, DEFAULT_SEED};
+use super::{diagnose, render_diagnosis_text, write_residual_svg, DiagnoseOptions};
+use crate::model::Connection;
+use crate::record::{load_record_files, SegmentKind};
+
+/// `motorbench diagnose`.
+#[derive(Debug, Args)]
+pub struct DiagnoseArgs {
+    /// Test kind of the data: `dc_step` or `im_slip_sweep`.
+    #[arg(long, value_parser = parse_kind)]
+    pub kind: SegmentKind,
+    /// CSV files (one segment each), or one MCAP file.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// Nameplate (JSON object with the contract's keys).
+    #[arg(long)]
+    pub nameplate: Option<PathBuf>,
+    /// Print the contract's diagnosis JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Also write the residuals before and after, per region, here (SVG).
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
+    /// Induction machine: winding connection, `star` or `delta` (overrides the nameplate's).
+    #[arg(long, value_parser = parse_connection)]
+    pub connection: Option<Connection>,
+    /// Induction machine, CSV: supply frequency in Hz where the files have
+    /// no frequency_Hz column (overrides the nameplate's).
+    #[arg(long)]
+    pub frequency: Option<f64>,
+}
+
+fn parse_kind(s: &str) -> Result<SegmentKind, String> {
+    SegmentKind::parse(&s.replace('-', "_"))
+        .ok_or_else(|| format!("unknown kind {s:?}: use dc_step, dc_coastdown or im_slip_sweep"))
+}
+
+fn parse_connection(s: &str) -> Result<Connection, String> {
+    Connection::parse(s).ok_or_else(|| format!("unknown connection {s:?}: use star or delta"))
+}
+
+/// Run `diagnose`; the exit code (0 done, 1 output failed, 2 bad input,
+/// 4 the data cannot be diagnosed).
+pub fn run_diagnose(args: DiagnoseArgs) -> u8 {
+    let record = match load_record_files(
+        args.kind,
+        &args.files,
+        args.nameplate.as_deref(),
+        args.frequency,
+    ) {
+        Ok(r) => r,
+        Err(e) => return fail(2, &e),
+    };
+    let options = DiagnoseOptions {
+        connection: args.connection,
+    };
+    let run = match diagnose(&record, args.kind, &options) {
+        Ok(run) => run,
+        Err(e) => return fail(4, &e.to_string()),
+    };
+    if args.json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&run.report).expect("a diagnosis serialises")
+        );
+    } else {
+        print!("{}", render_diagnosis_text(&run.report));
+    }
+    if let Some(path) = &args.svg {
+        if let Err(e) = write_residual_svg(&run.plot, path) {
+            return fail(1, &e);
+        }
+    }
+    0
+}
+
+/// `motorbench blind`.
+#[derive(Debug, Args)]
+pub struct BlindArgs {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: BlindCommand,
+}
+
+/// The blind benchmark's subcommands.
+#[derive(Debug, Subcommand)]
+pub enum BlindCommand {
+    /// Simulate a suite of records, each with one withheld effect (or
+    /// none), into a new directory; the truth goes to its own file.
+    Generate {
+        /// The suite's directory (must not exist).
+        #[arg(long)]
+        out: PathBuf,
+        /// Seed of the random draws; the default is the one CI scores.
+        #[arg(long, default_value_t = DEFAULT_SEED)]
+        seed: u64,
+    },
+    /// Diagnose every case of a suite from its files, then score the
+    /// verdicts against the truth file.
+    Score {
+        /// The suite's directory.
+        dir: PathBuf,
+        /// Print the per-case scores as JSON instead of the summary.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Run `blind`; the exit code (0 done, 2 bad input or output failure).
+pub fn run_blind(args: BlindArgs) -> u8 {
+    match args.command {
+        BlindCommand::Generate { out, seed } => {
+            let bar = bar("simulating");
+            let tick = |n: usize, total: usize| {
+                bar.set_length(total as u64);
+                bar.set_position(n as u64);
+            };
+            match generate_suite(&out, seed, &tick) {
+                Ok(m) => {
+                    bar.finish_and_clear();
+                    println!(
+                        "{} cases written to {} (seed {seed}); truth in {}",
+                        m.cases.len(),
+                        out.display(),
+                        out.join("truth.json").display()
+                    );
+                    0
+                }
+                Err(e) => fail(2, &e),
+            }
+        }
+        BlindCommand::Score { dir, json } => score(&dir, json),
+    }
+}
+
+fn score(dir: &Path, json: bool) -> u8 {
+    let bar = bar("diagnosing");
+    let tick = |n: usize, total: usize| {
+        bar.set_length(total as u64);
+        bar.set_position(n as u64);
+    };
+    match score_suite(dir, &tick) {
+        Ok(score) => {
+            bar.finish_and_clear();
+            if json {
+                println!(
+                    "{}",
+                    serde_json::to_string_pretty(&score).expect("a score serialises")
+                );
+            } else {
+                print!("{score}");
+            }
+            0
+        }
+        Err(e) => fail(2, &e),
+    }
+}
+
+fn bar(what: &str) -> ProgressBar {
+    let bar = ProgressBar::new(0);
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} {msg} case {pos}/{len} {bar:24} [{elapsed_precise}]",
+        )
+        .expect("valid template"),
+    );
+    bar.set_message(what.to_string());
+    bar
+}
+
+fn fail(code: u8, message: &str) -> u8 {
+    eprintln!("motorbench: {message}");
+    code
+}

@@ -1,0 +1,103 @@
+//! The diagnosis as text for people at a shell.
+
+use std::fmt::Write as _;
+
+use super::Diagnosis;
+
+/// Render `d` as a short text report: where the gap lies, the verdict and
+/// how far it shrinks, the candidates, corrected parameters, look-alikes.
+pub fn render_diagnosis_text(d: &Diagnosis) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "sim-to-real diagnosis ({}; {})", d.kind, d.validation);
+    let _ = writeln!(
+        s,
+        "  nominal model {}: fit NRMSE {:.4}, held-out NRMSE {:.4} (noise floor {:.4})",
+        d.nominal.model, d.nominal.fit_nrmse, d.nominal.validation_nrmse, d.gap.noise_floor
+    );
+    if !d.gap.regions.is_empty() {
+        let _ = writeln!(
+            s,
+            "  where the gap lies (share of the squared held-out residual):"
+        );
+        for r in d.gap.regions.iter().take(6) {
+            let place = match (r.segment, r.voltage) {
+                (Some(seg), _) => format!(" segment {seg}"),
+                (None, Some(v)) => format!(" at {v:.0} V"),
+                _ => String::new(),
+            };
+            let _ = writeln!(
+                s,
+                "    {:>5.1} %  {:<18} {:<12}{place}, {:?} {:.4}–{:.4}",
+                100.0 * r.share,
+                r.channel,
+                r.label,
+                r.axis,
+                r.from,
+                r.to
+            );
+        }
+    }
+    let v = &d.verdict;
+    if v.effect == "none" {
+        let _ = writeln!(
+            s,
+            "  verdict: none — no candidate shrinks the held-out gap beyond what noise gives (confidence {:.3})",
+            v.confidence
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "  verdict: {} — held-out gap {:.4} → {:.4} (shrink {:.1} %, confidence {:.3})",
+            v.effect,
+            v.gap_before,
+            v.gap_after,
+            100.0 * v.shrink,
+            v.confidence
+        );
+    }
+    if let Some(best) = d.candidates.iter().find(|c| c.effect == v.effect) {
+        for (key, p) in &best.params {
+            let ci = p
+                .ci95
+                .map(|[a, b]| format!(" [{a:.4e}, {b:.4e}]"))
+                .unwrap_or_default();
+            let _ = writeln!(s, "    {key} = {:.4e} {}{ci}", p.value, p.unit);
+        }
+    }
+    if !v.corrected_params.is_empty() {
+        let _ = writeln!(s, "  nominal parameters once the effect is modelled:");
+        for (key, c) in &v.corrected_params {
+            let _ = writeln!(
+                s,
+                "    {key:<4} {:.5e} → {:.5e} {} (nominal fit biased {:+.2} %)",
+                c.nominal,
+                c.corrected,
+                c.unit,
+                100.0 * c.bias
+            );
+        }
+    }
+    for l in &v.look_alikes {
+        let _ = writeln!(
+            s,
+            "  cannot tell apart from {} (held-out NRMSE {:.4}): {}",
+            l.effect, l.validation_nrmse, l.plan
+        );
+    }
+    let _ = writeln!(s, "  candidates (held-out NRMSE, shrink, score, p):");
+    for c in &d.candidates {
+        let _ = writeln!(
+            s,
+            "    {:<24} {:.4}  {:>6.1} %  {:>10.1}  {:.2e}",
+            c.effect,
+            c.validation_nrmse,
+            100.0 * c.shrink,
+            c.score,
+            c.p_value
+        );
+    }
+    for w in &d.warnings {
+        let _ = writeln!(s, "  warning: {w}");
+    }
+    s
+}
