@@ -1,0 +1,137 @@
+//! `motorbench diagnose` end to end: CSV files written from simulated
+//! records with a known withheld effect, the contract's diagnosis JSON,
+//! the residual SVG, and clear errors on data that cannot be diagnosed.
+
+mod common;
+
+use common::{motorbench, text};
+use motorbench::diagnose::blind::{simulate_dc_case, simulate_im_case, write_case_files};
+use motorbench::model::Effect;
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use serde_json::Value;
+
+fn args_of(files: &[std::path::PathBuf], nameplate: Option<&std::path::Path>) -> Vec<String> {
+    let mut args: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
+    if let Some(p) = nameplate {
+        args.push("--nameplate".into());
+        args.push(p.display().to_string());
+    }
+    args
+}
+
+/// Check the contract's keys and the arithmetic between them.
+fn check_contract(d: &Value) {
+    let num = |v: &Value| v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"));
+    for key in ["model", "params", "fit_nrmse", "validation_nrmse"] {
+        assert!(d["nominal"].get(key).is_some(), "nominal.{key} missing");
+    }
+    let regions = d["gap"]["regions"].as_array().expect("gap.regions");
+    assert!(!regions.is_empty());
+    let mut total = 0.0;
+    for r in regions {
+        for key in ["channel", "axis", "from", "to", "label", "share"] {
+            assert!(r.get(key).is_some(), "region.{key} missing in {r}");
+        }
+        assert!(["time", "slip"].contains(&r["axis"].as_str().unwrap()));
+        total += num(&r["share"]);
+    }
+    assert!(total <= 1.0 + 1e-9, "region shares sum to {total}");
+    let candidates = d["candidates"].as_array().expect("candidates");
+    assert!(!candidates.is_empty());
+    for c in candidates {
+        for key in ["effect", "params", "validation_nrmse", "shrink", "score"] {
+            assert!(c.get(key).is_some(), "candidate.{key} missing in {c}");
+        }
+    }
+    let v = &d["verdict"];
+    let (before, after, shrink) = (
+        num(&v["gap_before"]),
+        num(&v["gap_after"]),
+        num(&v["shrink"]),
+    );
+    assert!((shrink - (1.0 - after / before)).abs() < 1e-9);
+    assert!((before - num(&d["nominal"]["validation_nrmse"])).abs() < 1e-12);
+    let confidence = num(&v["confidence"]);
+    assert!((0.0..=1.0).contains(&confidence));
+}
+
+#[test]
+fn dc_record_with_brush_drop_is_diagnosed_from_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let case = simulate_dc_case(Some(Effect::BrushDrop), &mut StdRng::seed_from_u64(11));
+    let (files, plate) = write_case_files(&case.record, dir.path()).unwrap();
+    let svg = dir.path().join("residuals.svg");
+    let mut args = vec![
+        "diagnose".to_string(),
+        "--kind".into(),
+        "dc_step".into(),
+        "--json".into(),
+    ];
+    args.extend(["--svg".into(), svg.display().to_string()]);
+    args.extend(args_of(&files, plate.as_deref()));
+    let out = motorbench(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let d: Value = serde_json::from_str(&stdout).unwrap();
+    check_contract(&d);
+    assert_eq!(d["kind"], "dc_step");
+    assert_eq!(d["verdict"]["effect"], "brush_drop", "{stdout}");
+    assert!(std::fs::read_to_string(&svg).unwrap().contains("<svg"));
+
+    // The text form says the same.
+    args.retain(|a| a != "--json");
+    let out = motorbench(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let (stdout, _) = text(&out);
+    assert!(stdout.contains("verdict: brush_drop"), "{stdout}");
+}
+
+#[test]
+fn im_record_with_iron_loss_is_diagnosed_from_csv() {
+    let dir = tempfile::tempdir().unwrap();
+    let case = simulate_im_case(Some(Effect::IronLoss), &mut StdRng::seed_from_u64(12));
+    let (files, plate) = write_case_files(&case.record, dir.path()).unwrap();
+    let mut args = vec![
+        "diagnose".to_string(),
+        "--kind".into(),
+        "im_slip_sweep".into(),
+        "--json".into(),
+    ];
+    args.extend(args_of(&files, plate.as_deref()));
+    let out = motorbench(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let d: Value = serde_json::from_str(&stdout).unwrap();
+    check_contract(&d);
+    assert_eq!(d["verdict"]["effect"], "iron_loss", "{stdout}");
+}
+
+#[test]
+fn data_that_cannot_be_diagnosed_gets_a_clear_error() {
+    let dir = tempfile::tempdir().unwrap();
+    // One segment: nothing to hold out.
+    let case = simulate_dc_case(None, &mut StdRng::seed_from_u64(13));
+    let (files, _) = write_case_files(&case.record, dir.path()).unwrap();
+    let one = files[0].display().to_string();
+    let out = motorbench(&["diagnose", "--kind", "dc_step", &one]);
+    let (_, stderr) = text(&out);
+    assert_eq!(out.status.code(), Some(4), "{stderr}");
+    assert!(stderr.contains("not enough data"), "{stderr}");
+
+    // A malformed file: named with its line and column, exit 2.
+    let bad = dir.path().join("bad.csv");
+    std::fs::write(
+        &bad,
+        "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,1,x,0\n",
+    )
+    .unwrap();
+    let out = motorbench(&["diagnose", "--kind", "dc_step", bad.to_str().unwrap(), &one]);
+    let (_, stderr) = text(&out);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        stderr.contains("bad.csv")
+            && stderr.contains(":2")
+            && stderr.contains("armature_current_A"),
+        "{stderr}"
+    );
+}
