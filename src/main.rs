@@ -19,6 +19,7 @@ use motorbench::bench::{
     CommissionOptions, ImRunConfig, Outcome, Progress,
 };
 use motorbench::config::load_or_default;
+use motorbench::diagnose::{attach_diagnosis, render_diagnosis_text, write_residual_svg};
 use motorbench::identify::{identify_dc, identify_im, Identification, ImIdentification};
 use motorbench::model::{Connection, ImModel};
 use motorbench::record::{load_record_files, read_mcap, Record, SegmentKind};
@@ -57,6 +58,9 @@ enum Command {
         /// No progress bar.
         #[arg(long, short)]
         quiet: bool,
+        /// Skip the sim-to-real diagnosis after identification.
+        #[arg(long)]
+        no_diagnose: bool,
     },
     /// Check a rig's wiring: read every sensor channel once; with --actuate,
     /// also drive the power stage at a harmless set point (5 % of the
@@ -83,6 +87,13 @@ enum Command {
         /// Exit with code 5 when the result differs from the recorded one.
         #[arg(long)]
         check: bool,
+        /// Skip the sim-to-real diagnosis (the comparison with the recorded
+        /// result then leaves its diagnosis out).
+        #[arg(long)]
+        no_diagnose: bool,
+        /// Also write the diagnosis' held-out residuals, before and after, here (SVG).
+        #[arg(long)]
+        residuals_svg: Option<PathBuf>,
     },
     /// Identify a motor from CSV files (one segment each) or one MCAP record.
     Identify {
@@ -264,6 +275,14 @@ fn print_identification(
         println!("{}", id.report.to_json_pretty());
     } else {
         print!("{}", render_text(id, truth));
+        print_diagnosis_text(&id.report);
+    }
+}
+
+/// The diagnosis of a report, as text, after a blank line.
+fn print_diagnosis_text(report: &motorbench::report::IdentificationReport) {
+    if let Some(d) = &report.diagnosis {
+        print!("\n{}", render_diagnosis_text(d));
     }
 }
 
@@ -278,18 +297,30 @@ fn identified_or_code(id: &Identification) -> Result<(), Failure> {
     }
 }
 
-async fn run(
+/// What `run` was asked for on the command line.
+struct RunArgs {
     config: Option<PathBuf>,
     out: PathBuf,
     realtime: bool,
     json: bool,
     quiet: bool,
-) -> Result<(), Failure> {
+    diagnose: bool,
+}
+
+async fn run(args: RunArgs) -> Result<(), Failure> {
+    let RunArgs {
+        config,
+        out,
+        realtime,
+        json,
+        quiet,
+        diagnose,
+    } = args;
     if let Some(path) = &config {
         let text = std::fs::read_to_string(path)
             .map_err(|e| bad_input(format!("{}: {e}", path.display())))?;
         if is_im_sweep_config(&text) {
-            return run_im(path, out, json, quiet).await;
+            return run_im(path, out, json, quiet, diagnose).await;
         }
     }
     let cfg = load_or_default(config.as_ref()).map_err(bad_input)?;
@@ -302,6 +333,7 @@ async fn run(
     let opts = CommissionOptions {
         out_dir: out,
         realtime,
+        diagnose,
     };
     if !json && !quiet {
         eprintln!(
@@ -323,6 +355,9 @@ async fn run(
         );
         println!("report: {}", done.report_path.display());
         println!("plot:   {}", done.svg_path.display());
+        if let Some(path) = &done.residuals_svg_path {
+            println!("gap:    {}", path.display());
+        }
     }
     if let Outcome::Aborted { reason } = &done.outcome {
         return Err(Failure {
@@ -334,7 +369,13 @@ async fn run(
 }
 
 /// `run` with an induction-machine slip-sweep configuration.
-async fn run_im(path: &Path, out: PathBuf, json: bool, quiet: bool) -> Result<(), Failure> {
+async fn run_im(
+    path: &Path,
+    out: PathBuf,
+    json: bool,
+    quiet: bool,
+    diagnose: bool,
+) -> Result<(), Failure> {
     let cfg = ImRunConfig::load(path).map_err(bad_input)?;
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     tokio::spawn(async move {
@@ -350,6 +391,7 @@ async fn run_im(path: &Path, out: PathBuf, json: bool, quiet: bool) -> Result<()
     let opts = CommissionOptions {
         out_dir: out,
         realtime: false,
+        diagnose,
     };
     let done = commission_im(&cfg, &opts, &stop_rx)
         .await
@@ -444,7 +486,15 @@ fn write_svg(path: Option<&Path>, record: &Record, id: &Identification) -> Resul
     Ok(())
 }
 
-fn replay(log: &Path, json: bool, svg: Option<&Path>, check: bool) -> Result<(), Failure> {
+/// `replay`; `diagnose` is None with --no-diagnose, else where to write
+/// the residual plot, if anywhere.
+fn replay(
+    log: &Path,
+    json: bool,
+    svg: Option<&Path>,
+    check: bool,
+    diagnose: Option<Option<&Path>>,
+) -> Result<(), Failure> {
     let record = read_mcap(log).map_err(bad_input)?;
     if let Some(r) = &record.recovery {
         eprintln!(
@@ -462,18 +512,38 @@ fn replay(log: &Path, json: bool, svg: Option<&Path>, check: bool) -> Result<(),
             .as_ref()
             .and_then(|m| im_model_of_config(&m.config))
             .unwrap_or(ImModel::SingleFe);
-        let id = identify_im(&record, None, model);
+        let mut id = identify_im(&record, None, model);
+        diagnose_replay(&mut id.report, &record, SegmentKind::ImSlipSweep, diagnose)?;
         let identified = print_im(&id, json, svg);
         let now = serde_json::to_value(&id.report).expect("a report always serialises");
         compare_with_recorded(&record, &now, check)?;
         return identified;
     }
-    let id = identify_dc(&record);
+    let mut id = identify_dc(&record);
+    diagnose_replay(&mut id.report, &record, SegmentKind::DcStep, diagnose)?;
     print_identification(&id, json, None);
     write_svg(svg, &record, &id)?;
     let now = serde_json::to_value(&id.report).expect("a report always serialises");
     compare_with_recorded(&record, &now, check)?;
     identified_or_code(&id)
+}
+
+/// Diagnose a replayed record into its report (unless `diagnose` is None)
+/// and write the residual plot where asked.
+fn diagnose_replay(
+    report: &mut motorbench::report::IdentificationReport,
+    record: &Record,
+    kind: SegmentKind,
+    diagnose: Option<Option<&Path>>,
+) -> Result<(), Failure> {
+    let Some(svg) = diagnose else {
+        return Ok(());
+    };
+    let plot = attach_diagnosis(report, record, kind);
+    if let (Some(path), Some(plot)) = (svg, plot) {
+        write_residual_svg(&plot, path).map_err(runtime)?;
+    }
+    Ok(())
 }
 
 /// Say whether the replayed report equals the recorded `/bench/result`;
@@ -483,8 +553,16 @@ fn compare_with_recorded(
     now: &serde_json::Value,
     check: bool,
 ) -> Result<(), Failure> {
+    // A record made with --no-diagnose (or before the diagnosis existed)
+    // holds no diagnosis: compare the identification alone.
+    let mut now = now.clone();
+    if let (Some(recorded), Some(obj)) = (&record.recorded_result, now.as_object_mut()) {
+        if recorded.get("diagnosis").is_none() {
+            obj.remove("diagnosis");
+        }
+    }
     match &record.recorded_result {
-        Some(recorded) if recorded == now => {
+        Some(recorded) if *recorded == now => {
             eprintln!("replay: identical to the recorded /bench/result")
         }
         Some(_) => {
@@ -522,6 +600,7 @@ fn print_im(id: &ImIdentification, json: bool, svg: Option<&Path>) -> Result<(),
         println!("{}", id.report.to_json_pretty());
     } else {
         print!("{}", render_im_text(id));
+        print_diagnosis_text(&id.report);
     }
     if let Some(path) = svg {
         write_im_svg(path, id).map_err(runtime)?;
@@ -578,11 +657,21 @@ fn main() -> ExitCode {
             realtime,
             json,
             quiet,
+            no_diagnose,
         } => tokio::runtime::Builder::new_multi_thread()
             .enable_all()
             .build()
             .map_err(runtime)
-            .and_then(|rt| rt.block_on(run(config, out, realtime, json, quiet))),
+            .and_then(|rt| {
+                rt.block_on(run(RunArgs {
+                    config,
+                    out,
+                    realtime,
+                    json,
+                    quiet,
+                    diagnose: !no_diagnose,
+                }))
+            }),
         Command::Probe { config, actuate } => tokio::runtime::Builder::new_multi_thread()
             .enable_all()
             .build()
@@ -593,7 +682,15 @@ fn main() -> ExitCode {
             json,
             svg,
             check,
-        } => replay(&log, json, svg.as_deref(), check),
+            no_diagnose,
+            residuals_svg,
+        } => replay(
+            &log,
+            json,
+            svg.as_deref(),
+            check,
+            (!no_diagnose).then_some(residuals_svg.as_deref()),
+        ),
         Command::Identify {
             kind,
             files,

@@ -14,6 +14,7 @@ async fn coastdown_plan_runs_up_then_decays_to_rest_with_no_current() {
     let opts = CommissionOptions {
         out_dir: dir.path().to_path_buf(),
         realtime: false,
+        diagnose: false,
     };
     let done = commission(&cfg, &opts, &NoProgress, &rx).await.unwrap();
     assert_eq!(done.outcome, Outcome::Completed);

@@ -23,6 +23,7 @@ async fn default_run_identifies_the_seed_motor_and_replays_identically() {
     let opts = CommissionOptions {
         out_dir: dir.path().to_path_buf(),
         realtime: false,
+        diagnose: false,
     };
     let done = commission(&cfg, &opts, &NoProgress, &rx).await.unwrap();
     assert_eq!(done.outcome, Outcome::Completed);

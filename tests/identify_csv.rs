@@ -15,6 +15,7 @@ async fn csv_files_identify_like_the_mcap_they_came_from() {
     let opts = CommissionOptions {
         out_dir: dir.path().to_path_buf(),
         realtime: false,
+        diagnose: false,
     };
     let done = commission(&Config::embedded_default(), &opts, &NoProgress, &rx)
         .await

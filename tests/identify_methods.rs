@@ -66,6 +66,7 @@ async fn identify_record(cfg: &Config) -> (IdentificationReport, Record) {
     let opts = CommissionOptions {
         out_dir: dir.path().to_path_buf(),
         realtime: false,
+        diagnose: false,
     };
     let done = commission(cfg, &opts, &NoProgress, &rx).await.unwrap();
     assert_eq!(done.outcome, Outcome::Completed);

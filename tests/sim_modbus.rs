@@ -43,6 +43,7 @@ async fn run(cfg: &Config) -> (tempfile::TempDir, motorbench::bench::Commissione
     let opts = CommissionOptions {
         out_dir: dir.path().to_path_buf(),
         realtime: false,
+        diagnose: false,
     };
     let done = commission(cfg, &opts, &NoProgress, &rx).await.unwrap();
     (dir, done)

@@ -11,6 +11,7 @@ use super::{
     build_rig, plan_steps, record_channels, run_test, BenchError, Outcome, Progress, RecordSink,
 };
 use crate::config::{Config, Plan};
+use crate::diagnose::{attach_diagnosis, write_residual_svg};
 use crate::identify::{identify_dc, Identification};
 use crate::model::DcParams;
 use crate::record::{
@@ -28,6 +29,9 @@ pub struct CommissionOptions {
     pub out_dir: PathBuf,
     /// Pace the simulated rig at wall-clock time.
     pub realtime: bool,
+    /// Diagnose the sim-to-real gap after identification (the report's
+    /// `diagnosis`, and a residual plot beside the record).
+    pub diagnose: bool,
 }
 
 /// What a commissioning run produced.
@@ -41,6 +45,8 @@ pub struct Commissioned {
     pub report_path: PathBuf,
     /// Measured against simulated current and speed, per segment.
     pub svg_path: PathBuf,
+    /// Held-out residuals before and after the diagnosis' effect, when diagnosed.
+    pub residuals_svg_path: Option<PathBuf>,
     /// What the recorder wrote.
     pub stats: RecorderStats,
     /// The identification.
@@ -74,6 +80,9 @@ pub enum CommissionError {
     /// The plot could not be written.
     #[error(transparent)]
     Plot(#[from] PlotError),
+    /// The diagnosis' residual plot could not be written.
+    #[error("residual plot: {0}")]
+    ResidualPlot(String),
 }
 
 /// A record name from the motor id (unsafe characters replaced) and the
@@ -168,10 +177,16 @@ pub async fn commission(
     let recorder = recorder.expect("commissioning always records");
 
     // Identification is CPU work: keep it off the reactor.
-    let (identification, record) =
-        tokio::task::spawn_blocking(move || (identify_dc(&record), record))
-            .await
-            .map_err(|e| CommissionError::Rig(format!("identification task failed: {e}")))?;
+    let diagnose = opts.diagnose;
+    let (identification, record, residuals) = tokio::task::spawn_blocking(move || {
+        let mut identification = identify_dc(&record);
+        let residuals = diagnose
+            .then(|| attach_diagnosis(&mut identification.report, &record, SegmentKind::DcStep))
+            .flatten();
+        (identification, record, residuals)
+    })
+    .await
+    .map_err(|e| CommissionError::Rig(format!("identification task failed: {e}")))?;
     let report_value =
         serde_json::to_value(&identification.report).expect("a report always serialises");
     recorder
@@ -187,6 +202,14 @@ pub async fn commission(
         .map_err(io(&report_path))?;
     let svg_path = opts.out_dir.join(format!("{stem}.svg"));
     write_segments_svg(&svg_path, &segment_plots(&record, &identification))?;
+    let residuals_svg_path = match residuals {
+        Some(plot) => {
+            let path = opts.out_dir.join(format!("{stem}.residuals.svg"));
+            write_residual_svg(&plot, &path).map_err(CommissionError::ResidualPlot)?;
+            Some(path)
+        }
+        None => None,
+    };
     progress.done(match &outcome {
         Outcome::Completed => "test complete",
         Outcome::Aborted { .. } => "test aborted",
@@ -196,6 +219,7 @@ pub async fn commission(
         mcap_path,
         report_path,
         svg_path,
+        residuals_svg_path,
         stats,
         identification,
         record,

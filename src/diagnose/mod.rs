@@ -32,6 +32,27 @@ pub use text::render_diagnosis_text;
 
 use crate::model::Connection;
 use crate::record::{Record, SegmentKind};
+use crate::report::IdentificationReport;
+
+/// Diagnose `record` and attach the diagnosis to `report` (as `run` and
+/// `replay` do); a record that cannot be diagnosed leaves a warning
+/// instead. Returns the residual plot when there is a diagnosis.
+pub fn attach_diagnosis(
+    report: &mut IdentificationReport,
+    record: &Record,
+    kind: SegmentKind,
+) -> Option<ResidualPlot> {
+    match diagnose(record, kind, &DiagnoseOptions::default()) {
+        Ok(run) => {
+            report.diagnosis = Some(Box::new(run.report));
+            Some(run.plot)
+        }
+        Err(e) => {
+            report.warnings.push(format!("diagnosis: {e}"));
+            None
+        }
+    }
+}
 
 /// Diagnose `record` as a test of `kind` (`dc_step` and `dc_coastdown`
 /// records go to the DC diagnosis, `im_slip_sweep` to the IM one).

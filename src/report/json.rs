@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::diagnose::Diagnosis;
 use crate::record::SCHEMA_VERSION;
 
 /// One identified parameter.
@@ -63,6 +64,11 @@ pub struct IdentificationReport {
     pub best: Option<String>,
     /// Things a user should know about the data or the fit.
     pub warnings: Vec<String>,
+    /// The sim-to-real diagnosis, when one was run (`run`, `replay`; not
+    /// `identify`). The contract's `/bench/result` is "the identification
+    /// (and diagnosis) report".
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub diagnosis: Option<Box<Diagnosis>>,
 }
 
 impl IdentificationReport {
@@ -74,6 +80,7 @@ impl IdentificationReport {
             methods: BTreeMap::new(),
             best: None,
             warnings: Vec::new(),
+            diagnosis: None,
         }
     }
 
