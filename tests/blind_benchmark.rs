@@ -8,7 +8,7 @@
 
 mod common;
 
-use common::{motorbench, text};
+use common::{motorbench_release as motorbench, text};
 use motorbench::diagnose::blind::{Manifest, SuiteScore};
 
 #[test]

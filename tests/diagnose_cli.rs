@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::{motorbench, text};
+use common::{motorbench_release as motorbench, text};
 use motorbench::diagnose::blind::{simulate_dc_case, simulate_im_case, write_case_files};
 use motorbench::model::Effect;
 use rand::rngs::StdRng;

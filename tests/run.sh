@@ -24,6 +24,8 @@ echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy (warnings are errors)"
 cargo clippy --workspace --all-targets --locked -- -D warnings
+echo "== cargo build --release (the diagnosis tests run the optimised binary)"
+cargo build --release --locked --bin motorbench
 echo "== cargo test"
 cargo test --workspace --locked
 
