@@ -140,6 +140,10 @@ impl<F: FrameStream> SensorStream for CanSignalSensors<F> {
     fn take_warnings(&mut self) -> Vec<String> {
         std::mem::take(&mut self.warnings)
     }
+
+    fn epoch(&self) -> Option<Instant> {
+        Some(self.started)
+    }
 }
 
 #[cfg(test)]
