@@ -113,7 +113,11 @@ impl MergedSensors {
             let offset = channels.len();
             offsets.push(offset);
             channels.extend(source.channels().iter().cloned());
-            let shift_ns = source.epoch().unwrap_or(now).duration_since(epoch).as_nanos() as u64;
+            let shift_ns = source
+                .epoch()
+                .unwrap_or(now)
+                .duration_since(epoch)
+                .as_nanos() as u64;
             let state = Arc::new(Mutex::new(SourceState::default()));
             states.push(state.clone());
             let tx = tx.clone();
@@ -427,7 +431,11 @@ mod tests {
         assert_eq!((second.t_ns, second.samples[0].channel), (2 * MS, 1));
 
         let a = scripted("a", t0, vec![(MS, MS, 1.0), (10 * MS, 10 * MS, 2.0)]);
-        let b = scripted("b", t0, vec![(40 * MS, 5 * MS, 10.0), (50 * MS, 50 * MS, 11.0)]);
+        let b = scripted(
+            "b",
+            t0,
+            vec![(40 * MS, 5 * MS, 10.0), (50 * MS, 50 * MS, 11.0)],
+        );
         let mut m = MergedSensors::new("merged", vec![a, b], Duration::from_millis(5));
         assert_eq!(m.next_batch().await.unwrap().t_ns, MS);
         assert_eq!(m.next_batch().await.unwrap().t_ns, 10 * MS);
