@@ -180,6 +180,17 @@ struct Latest {
 }
 
 impl Latest {
+    /// Every watched quantity has a reading at or after `t_ns`.
+    fn all_since(&self, t_ns: u64) -> bool {
+        [
+            self.voltage.map(|v| v.0),
+            self.current.map(|v| v.0),
+            self.encoder_t_ns,
+        ]
+        .iter()
+        .all(|t| t.is_some_and(|t| t >= t_ns))
+    }
+
     /// The first watched quantity with no reading for longer than
     /// `stale` at `t_ns` (data time).
     fn silent(&self, t_ns: u64, stale: Duration) -> Option<(&'static str, u64)> {
@@ -320,6 +331,7 @@ impl Bench<'_> {
         let mut settle = SettleDetector::new(window, st.tolerance, 2);
         let start = self.t_ns;
         let mut settled_at = None;
+        let mut hold_done = None;
         loop {
             let r = match self.read().await? {
                 Ok(r) => r,
@@ -334,7 +346,15 @@ impl Bench<'_> {
             }
             if let Some(ts) = settled_at {
                 if (self.t_ns - ts) as f64 * 1e-9 >= st.hold_s {
-                    return Ok(Ok(()));
+                    // End on a reading of every watched channel taken after
+                    // the hold, so that none is held over from earlier (a
+                    // channel polled slower than the others would otherwise
+                    // leave the segment's last instants to be interpolated
+                    // towards the next level's readings).
+                    let done_at = *hold_done.get_or_insert(self.t_ns);
+                    if self.latest.all_since(done_at) {
+                        return Ok(Ok(()));
+                    }
                 }
             }
             if elapsed >= st.timeout_s {

@@ -193,3 +193,157 @@ impl RawCanLink {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::config::{Backend, CanTransport, Config, ConfigError};
+
+    fn shipped() -> (String, String) {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-modbus-can-dc.toml");
+        (path.to_string(), std::fs::read_to_string(path).unwrap())
+    }
+
+    fn with(replace: &str, by: &str) -> Result<Config, ConfigError> {
+        let (path, text) = shipped();
+        assert!(text.contains(replace), "{replace}");
+        Config::parse(&path, &text.replace(replace, by))
+    }
+
+    fn key_of(e: ConfigError) -> String {
+        match e {
+            ConfigError::Invalid { key, .. } => key,
+            other => panic!("not an invalid value: {other}"),
+        }
+    }
+
+    const CHANNELS: &str =
+        "channels = { encoder_count = { signal = \"position\", rate_Hz = 500 } }";
+
+    #[test]
+    fn the_shipped_config_merges_the_can_encoder() {
+        let (path, text) = shipped();
+        let cfg = Config::parse(&path, &text).unwrap();
+        let Backend::Modbus { rig, .. } = &cfg.backend else {
+            panic!("modbus")
+        };
+        let can = rig.can.as_ref().unwrap();
+        assert!(matches!(
+            can.transport,
+            CanTransport::Slcan { port: None, .. }
+        ));
+        assert_eq!(rig.rate_of("encoder_count"), Some(500.0));
+        assert_eq!(rig.rate_of("armature_current"), Some(1000.0));
+        assert_eq!(rig.merge_window.as_millis(), 10);
+    }
+
+    #[test]
+    fn bad_can_sections_name_their_key() {
+        let cases = [
+            (
+                CHANNELS,
+                "channels = { encoder_count = { signal = \"angle\" } }",
+                "rig.modbus.can.channels.encoder_count",
+            ),
+            (
+                CHANNELS,
+                "channels = { encoder_count = { signal = \"position\", rate_Hz = -1 } }",
+                "rig.modbus.can.channels.encoder_count.rate_Hz",
+            ),
+            (
+                CHANNELS,
+                "channels = { armature_current = \"position\", encoder_count = \"position\" }",
+                "rig.modbus.can.channels.armature_current",
+            ),
+            (
+                "bitrate = 500000",
+                "bitrate = 300000",
+                "rig.modbus.can.bitrate",
+            ),
+            (
+                "transport = \"slcan\"",
+                "transport = \"socketcan\"",
+                "rig.modbus.can.transport",
+            ),
+            (
+                "transport = \"slcan\"",
+                "transport = \"slcan\"\npath = \"/dev/ttyACM0\"",
+                "rig.modbus.can",
+            ),
+            (
+                "dbc = \"devices/cia406-encoder.dbc\"",
+                "dbc = \"devices/no-such.dbc\"",
+                "rig.modbus.can.dbc",
+            ),
+            (
+                "channels = { armature_voltage = \"0\", armature_current = \"1\" }",
+                "channels = { armature_voltage = \"0\", armature_current = { key = \"1\", rate_Hz = 500 } }",
+                "rig.modbus.sensors.channels.armature_current.rate_Hz",
+            ),
+            (
+                "merge_window_ms = 10 ",
+                "merge_window_ms = 5000 ",
+                "rig.modbus.merge_window_ms",
+            ),
+        ];
+        for (from, to, key) in cases {
+            let e = with(from, to).expect_err(to);
+            let text = e.to_string();
+            assert!(text.contains("sim-modbus-can-dc.toml"), "{text}");
+            assert_eq!(key_of(e), key, "{to}");
+        }
+        // Without the CAN section nothing gives the encoder count.
+        let (path, text) = shipped();
+        let cut = text.find("[rig.modbus.can]").unwrap();
+        let end = text[cut..].find("\n\n").unwrap() + cut;
+        let e = Config::parse(&path, &format!("{}{}", &text[..cut], &text[end..])).unwrap_err();
+        assert_eq!(key_of(e), "rig.modbus.sensors.channels");
+    }
+
+    #[test]
+    fn a_real_rig_names_its_adapter_or_interface() {
+        let (path, text) = shipped();
+        let real = text
+            .replace("simulate = \"tcp\"", "")
+            .replace(
+                "unit_id = 1\n\n[rig.modbus.sensors]",
+                "unit_id = 1\ntransport = \"tcp\"\naddress = \"192.168.0.20:502\"\n\n[rig.modbus.sensors]",
+            )
+            .replace(
+                "framing = \"binary\"",
+                "framing = \"binary\"\npath = \"/dev/ttyUSB1\"\nbaud_rate = 921600",
+            );
+        let e = Config::parse(&path, &real).unwrap_err();
+        assert_eq!(key_of(e), "rig.modbus.can.path");
+        let slcan = real.replace(
+            "transport = \"slcan\"",
+            "transport = \"slcan\"\npath = \"/dev/ttyACM0\"",
+        );
+        let cfg = Config::parse(&path, &slcan).unwrap();
+        let Backend::Modbus { rig, .. } = &cfg.backend else {
+            panic!("modbus")
+        };
+        match &rig.can.as_ref().unwrap().transport {
+            CanTransport::Slcan {
+                port: Some(p),
+                bitrate: Some(_),
+            } => assert_eq!((p.path.as_str(), p.baud_rate), ("/dev/ttyACM0", 115_200)),
+            other => panic!("{other:?}"),
+        }
+        let socketcan = real
+            .replace(
+                "transport = \"slcan\"",
+                "transport = \"socketcan\"\ninterface = \"can0\"",
+            )
+            .replace("bitrate = 500000", "");
+        let cfg = Config::parse(&path, &socketcan).unwrap();
+        let Backend::Modbus { rig, .. } = &cfg.backend else {
+            panic!("modbus")
+        };
+        assert_eq!(
+            rig.can.as_ref().unwrap().transport,
+            CanTransport::SocketCan {
+                interface: "can0".into()
+            }
+        );
+    }
+}

@@ -155,7 +155,7 @@ pub const MAX_RATE_HZ: f64 = 100_000.0;
 mod tests {
     use super::*;
 
-    #[derive(Deserialize)]
+    #[derive(Debug, Deserialize)]
     struct T {
         c: RawChannel,
     }
