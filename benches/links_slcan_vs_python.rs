@@ -23,7 +23,9 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use motorbench_drivers::can::{encode_frame, CanFrame, CanId, FrameStream, SlcanOptions, SlcanStream};
+use motorbench_drivers::can::{
+    encode_frame, CanFrame, CanId, FrameStream, SlcanOptions, SlcanStream,
+};
 use motorbench_drivers::serial::port::{open_serial, pty_pair, SerialSettings};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
@@ -213,8 +215,14 @@ fn main() {
     }
     let [or, pr, os, ps] = [best(&r[0]), best(&r[1]), best(&r[2]), best(&r[3])];
     println!("SLCAN on a pseudo-terminal, {N} eight-byte standard frames, best of {RUNS}:");
-    println!("  receive: ours {or:.0} frames/s, python-can {pr:.0} frames/s, ratio {:.1}", or / pr);
-    println!("  send:    ours {os:.0} frames/s, python-can {ps:.0} frames/s, ratio {:.1}", os / ps);
+    println!(
+        "  receive: ours {or:.0} frames/s, python-can {pr:.0} frames/s, ratio {:.1}",
+        or / pr
+    );
+    println!(
+        "  send:    ours {os:.0} frames/s, python-can {ps:.0} frames/s, ratio {:.1}",
+        os / ps
+    );
     println!("  all runs (frames/s): ours recv {:?}, python-can recv {:?}, ours send {:?}, python-can send {:?}",
         r[0].iter().map(|x| x.round()).collect::<Vec<_>>(),
         r[1].iter().map(|x| x.round()).collect::<Vec<_>>(),

@@ -389,7 +389,7 @@ impl Bench<'_> {
             };
             // Only encoder readings count (other channels may come between).
             match r.speed {
-                Some(w) if w == 0.0 => still += 1,
+                Some(0.0) => still += 1,
                 Some(_) => still = 0,
                 None => {}
             }
