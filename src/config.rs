@@ -11,9 +11,13 @@ use thiserror::Error;
 
 use crate::model::DcParams;
 
+mod can;
 mod modbus;
+mod sensor_channels;
 
+pub use can::{CanLink, CanTransport};
 pub use modbus::{LinkSpec, ModbusDeviceLink, ModbusRig, SensorLink, SimulatedTransport};
+pub use sensor_channels::{SensorChannel, MAX_RATE_HZ};
 mod retention;
 mod supervision;
 
@@ -433,7 +437,7 @@ impl Config {
                 }
                 let dir = Path::new(source).parent().unwrap_or(Path::new("."));
                 let rig = m
-                    .validate(dir, raw.rig.simulated.is_some())
+                    .validate(dir, raw.rig.simulated.is_some(), raw.rig.sample_rate_hz)
                     .map_err(|(key, reason)| invalid(&key, reason))?;
                 let simulated = if rig.simulate.is_some() {
                     raw.rig.simulated
@@ -538,10 +542,16 @@ impl Config {
                 format!("{} must be ≥ 0", st.min_hold_s),
             ));
         }
-        if st.window_s * raw.rig.sample_rate_hz < 10.0 {
+        // Settling is judged on the encoder's readings.
+        let encoder_rate = match &backend {
+            Backend::Modbus { rig, .. } => rig.rate_of("encoder_count"),
+            Backend::Simulated(_) => None,
+        }
+        .unwrap_or(raw.rig.sample_rate_hz);
+        if st.window_s * encoder_rate < 10.0 {
             return Err(invalid(
                 "test.settle.window_s",
-                "must span at least 10 samples".into(),
+                format!("must span at least 10 encoder readings ({encoder_rate} Hz)"),
             ));
         }
 

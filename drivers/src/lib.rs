@@ -26,9 +26,12 @@
 //! - [`serial`]: ASCII and binary line protocols for streaming sensors,
 //!   serial ports and pseudo-terminals.
 //! - [`ChannelStats`]: jitter and loss per channel, kept by the streams.
+//! - [`MergedSensors`]: several streams (each in its own task) as one, on
+//!   one time base and in time order.
 
 pub mod can;
 mod error;
+mod merged;
 pub mod modbus;
 mod power_stage;
 mod sensor;
@@ -36,6 +39,7 @@ pub mod serial;
 mod stats;
 
 pub use error::DriverError;
+pub use merged::{MergedSensors, DEFAULT_REORDER};
 pub use power_stage::{PowerStage, StageCapabilities};
 pub use sensor::{ChannelInfo, Sample, SampleBatch, SensorStream};
 pub use stats::{ChannelStats, IntervalStats};

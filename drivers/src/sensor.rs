@@ -62,4 +62,12 @@ pub trait SensorStream: Send {
     fn take_warnings(&mut self) -> Vec<String> {
         Vec::new()
     }
+
+    /// The host instant `t_ns = 0` stands for, when the stream's times are
+    /// host times (so that streams can be put on one time base: see
+    /// [`crate::MergedSensors`]). Streams on a virtual clock return `None`
+    /// (the default).
+    fn epoch(&self) -> Option<tokio::time::Instant> {
+        None
+    }
 }

@@ -1,17 +1,25 @@
 //! Build the rig a configuration names: the simulated rig in process, or a
 //! power stage and sensors over Modbus (with the simulated rig served
-//! behind the links when the configuration asks for it).
+//! behind the links when the configuration asks for it). Sensors on more
+//! than one link (a Modbus DAQ or a serial stream, plus CAN signals) are
+//! merged into one stream ([`MergedSensors`]), each link read by its own
+//! task.
 
+use motorbench_drivers::can::{
+    CanChannel, CanSignalSensors, SlcanOptions, SlcanStream, SocketCanStream,
+};
 use motorbench_drivers::modbus::{
     spawn_bus, BusHandle, CallPolicy, ModbusClient, ModbusPowerStage, ModbusSensors, PolledChannel,
 };
 use motorbench_drivers::serial::port::open_serial;
 use motorbench_drivers::serial::{SerialChannel, SerialSensors};
-use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
+use motorbench_drivers::{ChannelInfo, DriverError, MergedSensors, PowerStage, SensorStream};
 
 use super::served::{ServeError, ServedDaq, ServedLink, ServedRig};
 use super::sim_rig;
-use crate::config::{Backend, Config, LinkSpec, ModbusDeviceLink, ModbusRig, SensorLink};
+use crate::config::{
+    Backend, CanLink, CanTransport, Config, LinkSpec, ModbusDeviceLink, ModbusRig, SensorLink,
+};
 use crate::model::DcParams;
 
 /// Plant rate of the simulated rig when it is served behind a protocol,
@@ -159,19 +167,19 @@ async fn modbus_rig(
             let channels: Vec<PolledChannel> = m
                 .channels
                 .iter()
-                .map(|(quantity, register)| {
+                .map(|c| {
                     let r = link
                         .profile
-                        .register(register)
+                        .register(&c.name)
                         .expect("checked when the configuration was loaded")
                         .clone();
                     PolledChannel {
                         unit: link.unit_id,
                         info: ChannelInfo {
-                            quantity: quantity.clone(),
+                            quantity: c.quantity.clone(),
                             unit: r.unit.clone(),
                             source: source.clone(),
-                            rate_hz: sample_rate_hz,
+                            rate_hz: c.rate_hz,
                         },
                         register: r,
                     }
@@ -202,11 +210,11 @@ async fn modbus_rig(
             let channels = m
                 .channels
                 .iter()
-                .map(|(quantity, key)| SerialChannel {
-                    key: key.clone(),
+                .map(|c| SerialChannel {
+                    key: c.name.clone(),
                     info: ChannelInfo {
-                        quantity: quantity.clone(),
-                        unit: match quantity.as_str() {
+                        quantity: c.quantity.clone(),
+                        unit: match c.quantity.as_str() {
                             "armature_voltage" => "V",
                             "armature_current" => "A",
                             "encoder_count" => "count",
@@ -214,7 +222,7 @@ async fn modbus_rig(
                         }
                         .into(),
                         source: source.clone(),
-                        rate_hz: sample_rate_hz,
+                        rate_hz: c.rate_hz,
                     },
                 })
                 .collect();
@@ -225,6 +233,18 @@ async fn modbus_rig(
             )
         }
     };
+    let mut served = served;
+    let sensors = match &m.can {
+        None => sensors,
+        Some(can) => {
+            let can_sensors = can_sensors(can, served.as_mut()).await?;
+            Box::new(MergedSensors::new(
+                "merged",
+                vec![sensors, can_sensors],
+                m.merge_window,
+            )) as Box<dyn SensorStream>
+        }
+    };
     Ok(Rig {
         stage: Box::new(stage),
         sensors,
@@ -233,6 +253,71 @@ async fn modbus_rig(
         served,
         modbus_sensors,
     })
+}
+
+/// The CAN signals of `can` as a sensor stream: over the simulated encoder
+/// when `served`, else over the configured adapter or interface.
+async fn can_sensors(
+    can: &CanLink,
+    served: Option<&mut ServedRig>,
+) -> Result<Box<dyn SensorStream>, RigError> {
+    let name = std::path::Path::new(&can.dbc_path)
+        .file_stem()
+        .map_or_else(|| "dbc".into(), |s| s.to_string_lossy().into_owned());
+    let channels = |source: &str| -> Vec<CanChannel> {
+        can.channels
+            .iter()
+            .map(|c| CanChannel {
+                signal: c.name.clone(),
+                info: ChannelInfo {
+                    quantity: c.quantity.clone(),
+                    unit: can
+                        .map
+                        .find(&c.name)
+                        .map_or_else(String::new, |(_, s)| s.unit.clone()),
+                    source: source.to_string(),
+                    rate_hz: c.rate_hz,
+                },
+            })
+            .collect()
+    };
+    let (port, bitrate, ack_timeout) = match (&can.transport, served) {
+        (CanTransport::Slcan { bitrate, .. }, Some(served)) => {
+            // The simulated encoder sends at the rate of its first channel
+            // (one message carries them all).
+            let rate = can.channels.first().map_or(100.0, |c| c.rate_hz);
+            let settings = served
+                .serve_can_encoder_on_pty(can.map.clone(), rate)
+                .await?;
+            (settings, *bitrate, None)
+        }
+        (
+            CanTransport::Slcan {
+                port: Some(p),
+                bitrate,
+            },
+            None,
+        ) => (p.clone(), *bitrate, SlcanOptions::default().ack_timeout),
+        (CanTransport::Slcan { port: None, .. }, None) => {
+            unreachable!("an SLCAN port is given unless the encoder is served")
+        }
+        (CanTransport::SocketCan { interface }, _) => {
+            let source = format!("socketcan:{interface}:{name}");
+            let frames = SocketCanStream::open(interface)?;
+            let s = CanSignalSensors::new(&source, frames, can.map.clone(), channels(&source))?;
+            return Ok(Box::new(s));
+        }
+    };
+    let source = format!("slcan:{}:{name}", port.path);
+    let io = open_serial(&port)?;
+    let opts = SlcanOptions {
+        bitrate,
+        listen_only: false,
+        ack_timeout,
+    };
+    let frames = SlcanStream::open(io, &source, opts).await?;
+    let s = CanSignalSensors::new(&source, frames, can.map.clone(), channels(&source))?;
+    Ok(Box::new(s))
 }
 
 /// Build `cfg`'s rig. `realtime` paces the in-process simulated rig at

@@ -123,6 +123,8 @@ struct Channels {
     encoder: usize,
     speed_rec: usize,
     command_rec: usize,
+    /// The encoder's rate, Hz: settling is judged on its readings.
+    encoder_rate_hz: f64,
 }
 
 impl Channels {
@@ -133,12 +135,14 @@ impl Channels {
                 .position(|c| c.quantity == q)
                 .ok_or(BenchError::MissingChannel(q))
         };
+        let encoder = find("encoder_count")?;
         Ok(Channels {
             voltage: find("armature_voltage")?,
             current: find("armature_current")?,
-            encoder: find("encoder_count")?,
+            encoder,
             speed_rec: sensors.len(),
             command_rec: sensors.len() + 1,
+            encoder_rate_hz: sensors[encoder].rate_hz,
         })
     }
 }
@@ -160,6 +164,47 @@ struct Bench<'a> {
     t_ns: u64,
     stale: Duration,
     sampling: SamplingEvents,
+    /// Latest armature voltage and current, and when each was read (a
+    /// batch carries the channels read at its instant, which need not be
+    /// all of them when channels have their own rates or links).
+    latest: Latest,
+}
+
+/// The latest reading of each quantity the plan watches.
+#[derive(Debug, Default)]
+struct Latest {
+    first_t_ns: Option<u64>,
+    voltage: Option<(u64, f64)>,
+    current: Option<(u64, f64)>,
+    encoder_t_ns: Option<u64>,
+}
+
+impl Latest {
+    /// Every watched quantity has a reading at or after `t_ns`.
+    fn all_since(&self, t_ns: u64) -> bool {
+        [
+            self.voltage.map(|v| v.0),
+            self.current.map(|v| v.0),
+            self.encoder_t_ns,
+        ]
+        .iter()
+        .all(|t| t.is_some_and(|t| t >= t_ns))
+    }
+
+    /// The first watched quantity with no reading for longer than
+    /// `stale` at `t_ns` (data time).
+    fn silent(&self, t_ns: u64, stale: Duration) -> Option<(&'static str, u64)> {
+        let since =
+            |last: Option<u64>| t_ns.saturating_sub(last.or(self.first_t_ns).unwrap_or(t_ns));
+        [
+            ("armature_voltage", self.voltage.map(|v| v.0)),
+            ("armature_current", self.current.map(|v| v.0)),
+            ("encoder_count", self.encoder_t_ns),
+        ]
+        .into_iter()
+        .map(|(q, last)| (q, since(last)))
+        .find(|&(_, silent)| silent > stale.as_nanos() as u64)
+    }
 }
 
 /// One reading of the quantities the plan watches.
@@ -224,16 +269,19 @@ impl Bench<'_> {
                 .find(|s| s.channel == c)
                 .map(|s| s.value)
         };
-        let (Some(voltage), Some(current), Some(count)) = (
-            get(self.ch.voltage),
-            get(self.ch.current),
-            get(self.ch.encoder),
-        ) else {
-            return Ok(Err(Stop::Fault(
-                "a sensor batch lacked voltage, current or encoder".into(),
-            )));
-        };
-        let speed = self.encoder.update(batch.t_ns, count);
+        let t = batch.t_ns;
+        self.latest.first_t_ns.get_or_insert(t);
+        if let Some(v) = get(self.ch.voltage) {
+            self.latest.voltage = Some((t, v));
+        }
+        if let Some(i) = get(self.ch.current) {
+            self.latest.current = Some((t, i));
+        }
+        let count = get(self.ch.encoder);
+        if count.is_some() {
+            self.latest.encoder_t_ns = Some(t);
+        }
+        let speed = count.and_then(|c| self.encoder.update(t, c));
         if let Some(w) = speed {
             values.push((self.ch.speed_rec, w));
         }
@@ -247,8 +295,16 @@ impl Bench<'_> {
         for message in self.sampling.admit(self.sensors.take_warnings()) {
             self.event(EventLevel::Warn, message).await?;
         }
+        let voltage = self.latest.voltage.map_or(0.0, |v| v.1);
+        let current = self.latest.current.map_or(0.0, |v| v.1);
         if let Some(trip) = check_limits(&self.cfg.limits, voltage, current, speed) {
             return Ok(Err(Stop::Fault(format!("limit tripped: {trip}"))));
+        }
+        if let Some((quantity, silent_ns)) = self.latest.silent(t, self.stale) {
+            return Ok(Err(Stop::Fault(format!(
+                "sensor fault: no {quantity} reading for {} ms",
+                silent_ns / 1_000_000
+            ))));
         }
         Ok(Ok(Reading { current, speed }))
     }
@@ -271,10 +327,11 @@ impl Bench<'_> {
             return Ok(Err(stop));
         }
         let st = self.cfg.settle;
-        let window = (st.window_s * self.cfg.sample_rate_hz).round() as usize;
+        let window = (st.window_s * self.ch.encoder_rate_hz).round() as usize;
         let mut settle = SettleDetector::new(window, st.tolerance, 2);
         let start = self.t_ns;
         let mut settled_at = None;
+        let mut hold_done = None;
         loop {
             let r = match self.read().await? {
                 Ok(r) => r,
@@ -289,7 +346,15 @@ impl Bench<'_> {
             }
             if let Some(ts) = settled_at {
                 if (self.t_ns - ts) as f64 * 1e-9 >= st.hold_s {
-                    return Ok(Ok(()));
+                    // End on a reading of every watched channel taken after
+                    // the hold, so that none is held over from earlier (a
+                    // channel polled slower than the others would otherwise
+                    // leave the segment's last instants to be interpolated
+                    // towards the next level's readings).
+                    let done_at = *hold_done.get_or_insert(self.t_ns);
+                    if self.latest.all_since(done_at) {
+                        return Ok(Ok(()));
+                    }
                 }
             }
             if elapsed >= st.timeout_s {
@@ -314,7 +379,7 @@ impl Bench<'_> {
             "armature opened for the coast-down".into(),
         )
         .await?;
-        let window = (self.cfg.settle.window_s * self.cfg.sample_rate_hz).round() as usize;
+        let window = (self.cfg.settle.window_s * self.ch.encoder_rate_hz).round() as usize;
         let start = self.t_ns;
         let mut still = 0usize;
         loop {
@@ -322,7 +387,12 @@ impl Bench<'_> {
                 Ok(r) => r,
                 Err(stop) => return Ok(Err(stop)),
             };
-            still = if r.speed == Some(0.0) { still + 1 } else { 0 };
+            // Only encoder readings count (other channels may come between).
+            match r.speed {
+                Some(0.0) => still += 1,
+                Some(_) => still = 0,
+                None => {}
+            }
             if still >= window {
                 return Ok(Ok(()));
             }
@@ -442,7 +512,14 @@ pub async fn run_test(
             return Err(e);
         }
     };
-    let stale = Duration::from_secs_f64((50.0 / cfg.sample_rate_hz).max(0.5));
+    // Fifty periods of the slowest channel, at least half a second.
+    let slowest_hz = sensors
+        .channels()
+        .iter()
+        .map(|c| c.rate_hz)
+        .filter(|r| r.is_finite() && *r > 0.0)
+        .fold(cfg.sample_rate_hz, f64::min);
+    let stale = Duration::from_secs_f64((50.0 / slowest_hz).max(0.5));
     let mut bench = Bench {
         cfg,
         stage,
@@ -455,6 +532,7 @@ pub async fn run_test(
         t_ns: 0,
         stale,
         sampling: SamplingEvents::new(),
+        latest: Latest::default(),
     };
     match bench.run(steps).await {
         Ok(outcome) => Ok(outcome),

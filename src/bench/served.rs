@@ -18,7 +18,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::task::{Context, Poll, Waker};
 use std::time::Instant;
 
-use motorbench_drivers::can::{FrameStream, SignalMap};
+use motorbench_drivers::can::{FrameStream, SignalMap, SlcanOptions, SlcanStream};
 use motorbench_drivers::modbus::server::{
     lock_bank, serve_rtu, serve_tcp, BankService, ExceptionCode, RegisterBank, SharedBank,
     SimulatedDevice, WriteSpan,
@@ -70,14 +70,49 @@ struct RealtimePlant {
     period_s: f64,
     steps: u64,
     last: Option<SampleBatch>,
+    /// The sensor readings of the latest steps, `(step, batch)`, oldest
+    /// first: for devices that sample on their own clock while the host is
+    /// late to run them (a streaming DAQ, the CAN encoder's event timer).
+    history: std::collections::VecDeque<(u64, SampleBatch)>,
 }
+
+/// Plant steps kept for late senders (half a second at 2 kHz).
+const HISTORY: usize = 1024;
 
 impl RealtimePlant {
     fn catch_up(&mut self) {
         let due = (self.start.elapsed().as_secs_f64() / self.period_s) as u64;
         while self.steps < due {
-            self.last = Some(self.sensors.sample());
+            let b = self.sensors.sample();
+            if self.history.len() == HISTORY {
+                self.history.pop_front();
+            }
+            self.history.push_back((self.steps, b.clone()));
+            self.last = Some(b);
             self.steps += 1;
+        }
+    }
+
+    /// The readings at the plant instant `at`: the step taken there and
+    /// its values of `channels` (the latest step not after `at`, as far
+    /// back as the history goes).
+    fn readings_at(&mut self, at: Instant, channels: &[usize]) -> (u64, Vec<f64>) {
+        self.catch_up();
+        let step = (at.saturating_duration_since(self.start).as_secs_f64() / self.period_s) as u64;
+        let i = self.history.partition_point(|(s, _)| *s <= step);
+        let found = match i {
+            0 => self.history.front(),
+            i => self.history.get(i - 1),
+        };
+        let value = |b: &SampleBatch, ch: usize| {
+            b.samples
+                .iter()
+                .find(|s| s.channel == ch)
+                .map_or(0.0, |s| s.value)
+        };
+        match found {
+            Some((s, b)) => (*s, channels.iter().map(|&c| value(b, c)).collect()),
+            None => (0, vec![0.0; channels.len()]),
         }
     }
 
@@ -215,7 +250,10 @@ pub enum ServedDaq<'a> {
     },
 }
 
-/// Stream the plant's sensor readings as records, one per `period`.
+/// Stream the plant's sensor readings as records, one per `period` on the
+/// DAQ's own clock: a slot the host runs late still sends the readings of
+/// its own instant (the frames of missed slots then go out together, as
+/// from a DAQ's buffer).
 async fn stream_daq(
     plant: SharedPlant,
     mut io: SerialStream,
@@ -223,31 +261,32 @@ async fn stream_daq(
     period: std::time::Duration,
 ) {
     let mut tick = tokio::time::interval(period);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
     if framing == SerialFraming::Binary && io.write_all(&[0]).await.is_err() {
         return;
     }
     let mut seq = 0u32;
     let mut last_step = None;
+    let channels = [channel::VOLTAGE, channel::CURRENT, channel::ENCODER];
     loop {
-        tick.tick().await;
+        let slot = tick.tick().await.into_std();
         let (step, t_us, values) = {
             let mut p = lock(&plant);
-            p.catch_up();
-            let t_us = (p.steps as f64 * p.period_s * 1e6).round() as u64;
-            let values = [channel::VOLTAGE, channel::CURRENT, channel::ENCODER]
-                .iter()
+            let (step, readings) = p.readings_at(slot, &channels);
+            let t_us = (step as f64 * p.period_s * 1e6).round() as u64;
+            let values = readings
+                .into_iter()
                 .zip(["armature_voltage", "armature_current", "encoder_count"])
                 .enumerate()
-                .map(|(k, (&ch, name))| {
+                .map(|(k, (value, name))| {
                     let key = match framing {
                         SerialFraming::Ascii => name.to_string(),
                         SerialFraming::Binary => k.to_string(),
                     };
-                    (key, p.reading(ch))
+                    (key, value)
                 })
                 .collect();
-            (p.steps, t_us, values)
+            (step, t_us, values)
         };
         // One record per plant step at most: a late tick sends the
         // newest sample, never a repeat.
@@ -314,6 +353,7 @@ impl ServedRig {
             period_s: 1.0 / plant_rate_hz,
             steps: 0,
             last: None,
+            history: std::collections::VecDeque::with_capacity(HISTORY),
         }));
         let (sp, su) = supply;
         let map = sp
@@ -406,7 +446,10 @@ impl ServedRig {
     /// Also simulate a CANopen encoder on `frames`: the message of `map`
     /// that carries the signal `position` is sent at `rate_hz` with the
     /// plant's encoder count (as an unsigned 32-bit position, wrapping),
-    /// other signals zero. Replaces an encoder started before.
+    /// other signals zero. Like a real encoder's event timer, every slot is
+    /// sent with the position at the slot's own time, also when the host
+    /// runs the sender late (then the frames of the missed slots go out
+    /// together). Replaces an encoder started before.
     pub fn start_can_encoder(
         &mut self,
         frames: Box<dyn FrameStream>,
@@ -424,14 +467,10 @@ impl ServedRig {
         let mut frames = frames;
         let task = tokio::spawn(async move {
             let mut tick = tokio::time::interval(period);
-            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+            tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
             loop {
-                tick.tick().await;
-                let count = {
-                    let mut p = lock(&plant);
-                    p.catch_up();
-                    p.reading(channel::ENCODER)
-                };
+                let slot = tick.tick().await.into_std();
+                let count = lock(&plant).readings_at(slot, &[channel::ENCODER]).1[0];
                 let position = count.rem_euclid(4_294_967_296.0);
                 let Some(frame) = map.encode(id, &[("position", position)]) else {
                     return;
@@ -445,6 +484,38 @@ impl ServedRig {
             old.abort();
         }
         Ok(())
+    }
+
+    /// Serve the simulated CANopen encoder (see [`Self::start_can_encoder`])
+    /// over SLCAN on a new pseudo-terminal pair, as a USB-CAN adapter would
+    /// present it: the settings of the end the bench opens. The encoder's
+    /// end sends no answers to setup commands: open the bench's end with
+    /// `ack_timeout: None`.
+    pub async fn serve_can_encoder_on_pty(
+        &mut self,
+        map: SignalMap,
+        rate_hz: f64,
+    ) -> Result<SerialSettings, ServeError> {
+        let pty = pty_pair().map_err(|e| ServeError::Io(e.to_string()))?;
+        let opts = SlcanOptions {
+            bitrate: None,
+            listen_only: false,
+            ack_timeout: None,
+        };
+        let encoder_side = SlcanStream::open(pty.host, "sim-cia406-encoder", opts)
+            .await
+            .map_err(|e| ServeError::Io(e.to_string()))?;
+        self.start_can_encoder(Box::new(encoder_side), map, rate_hz)?;
+        let settings = SerialSettings::new_8n1(&pty.device_path, 115_200);
+        self._pty_ends.push(pty.device_end);
+        Ok(settings)
+    }
+
+    /// Stop the simulated CAN encoder, as if its cable were pulled.
+    pub fn pull_can_cable(&mut self) {
+        if let Some(t) = self.encoder_task.take() {
+            t.abort();
+        }
     }
 
     /// Stop serving the sensors, as if their cable were pulled: the

@@ -53,6 +53,9 @@ use motorbench_drivers::serial::port::{Parity, SerialSettings};
 use motorbench_drivers::serial::SerialFraming;
 use serde::Deserialize;
 
+use super::can::{CanLink, RawCanLink};
+use super::sensor_channels::{ChannelField, RawChannel, SensorChannel};
+
 /// Raw `[rig.modbus]` table.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -66,6 +69,9 @@ pub(super) struct RawModbusRig {
     max_lost_polls: u32,
     power_stage: RawLink,
     sensors: RawSensors,
+    can: Option<RawCanLink>,
+    #[serde(default = "default_reorder")]
+    merge_window_ms: u64,
 }
 
 fn default_timeout() -> u64 {
@@ -76,6 +82,9 @@ fn default_retries() -> u32 {
 }
 fn default_lost() -> u32 {
     5
+}
+fn default_reorder() -> u64 {
+    motorbench_drivers::DEFAULT_REORDER.as_millis() as u64
 }
 
 #[derive(Debug, Deserialize)]
@@ -104,7 +113,7 @@ struct RawSensors {
     stop_bits: Option<u8>,
     framing: Option<SerialFraming>,
     encoder_lines: u32,
-    channels: BTreeMap<String, String>,
+    channels: BTreeMap<String, RawChannel>,
 }
 
 /// Where a Modbus device is reached.
@@ -153,10 +162,32 @@ pub struct ModbusRig {
     pub power_stage: ModbusDeviceLink,
     /// Where the sensor channels come from.
     pub sensors: SensorLink,
-    /// `(quantity, register name or record key)` per sensor channel.
-    pub channels: Vec<(String, String)>,
+    /// The channels of `sensors` (`name`: register name or record key),
+    /// each with its rate.
+    pub channels: Vec<SensorChannel>,
     /// Encoder lines per revolution (4 counts per line).
     pub encoder_lines: u32,
+    /// Further channels over CAN (`[rig.modbus.can]`).
+    pub can: Option<CanLink>,
+    /// How long the merged sensor stream holds a batch to put the sources'
+    /// batches in time order (`rig.modbus.merge_window_ms`).
+    pub merge_window: Duration,
+}
+
+impl ModbusRig {
+    /// Every sensor channel, wherever it comes from.
+    pub fn all_channels(&self) -> impl Iterator<Item = &SensorChannel> {
+        self.channels
+            .iter()
+            .chain(self.can.iter().flat_map(|c| c.channels.iter()))
+    }
+
+    /// The rate of the channel carrying `quantity`, Hz.
+    pub fn rate_of(&self, quantity: &str) -> Option<f64> {
+        self.all_channels()
+            .find(|c| c.quantity == quantity)
+            .map(|c| c.rate_hz)
+    }
 }
 
 /// Where the sensor channels come from.
@@ -177,12 +208,14 @@ pub enum SensorLink {
 const REQUIRED: [&str; 3] = ["armature_voltage", "armature_current", "encoder_count"];
 
 impl RawModbusRig {
-    /// Validate; `dir` resolves relative profile paths; errors are
-    /// `(key, reason)`.
+    /// Validate; `dir` resolves relative profile paths; `default_rate`
+    /// (`rig.sample_rate_Hz`) is the rate of channels that name none;
+    /// errors are `(key, reason)`.
     pub(super) fn validate(
         self,
         dir: &Path,
         simulated_present: bool,
+        default_rate: f64,
     ) -> Result<ModbusRig, (String, String)> {
         let simulate = match self.simulate.as_deref() {
             None => None,
@@ -264,7 +297,16 @@ impl RawModbusRig {
                     return Err((format!("{key}.path"), "missing: the serial port".into()))
                 }
             };
-            channels.extend(raw.channels);
+            for (quantity, c) in raw.channels {
+                let key = format!("{key}.channels.{quantity}");
+                channels.push(c.validate(
+                    &quantity,
+                    &key,
+                    ChannelField::Key,
+                    default_rate,
+                    Err("a streaming device sends at its own rate: set rig.sample_rate_Hz to it"),
+                )?);
+            }
             SensorLink::Serial { port, framing }
         } else {
             let profile = raw.profile.ok_or_else(|| {
@@ -284,9 +326,17 @@ impl RawModbusRig {
                 stop_bits: raw.stop_bits,
             }
             .validate("rig.modbus.sensors", dir, simulate.is_some())?;
-            for (quantity, register) in raw.channels {
+            for (quantity, raw_channel) in raw.channels {
                 let key = format!("rig.modbus.sensors.channels.{quantity}");
-                match link.profile.register(&register) {
+                let c = raw_channel.validate(
+                    &quantity,
+                    &key,
+                    ChannelField::Register,
+                    default_rate,
+                    Ok(()),
+                )?;
+                let register = &c.name;
+                match link.profile.register(register) {
                     None => {
                         return Err((
                             key,
@@ -296,13 +346,29 @@ impl RawModbusRig {
                     Some(r) if r.access == motorbench_drivers::modbus::Access::Write => {
                         return Err((key, format!("register `{register}` is write-only")))
                     }
-                    Some(_) => channels.push((quantity, register)),
+                    Some(_) => channels.push(c),
                 }
             }
             SensorLink::Modbus(Box::new(link))
         };
+        let can = match self.can {
+            None => None,
+            Some(c) => Some(c.validate(dir, simulate.is_some(), default_rate)?),
+        };
+        if let Some(can) = &can {
+            for c in &can.channels {
+                if channels.iter().any(|s| s.quantity == c.quantity) {
+                    return Err((
+                        format!("rig.modbus.can.channels.{}", c.quantity),
+                        "also comes from rig.modbus.sensors.channels: give each quantity one source"
+                            .into(),
+                    ));
+                }
+            }
+        }
         for q in REQUIRED {
-            if !channels.iter().any(|(c, _)| c == q) {
+            let mut everywhere = channels.iter().chain(can.iter().flat_map(|c| &c.channels));
+            if !everywhere.any(|c| c.quantity == q) {
                 return Err((
                     "rig.modbus.sensors.channels".into(),
                     format!("missing `{q}`: a DC test needs armature voltage, current and the encoder count"),
@@ -315,6 +381,15 @@ impl RawModbusRig {
                 "must be > 0".into(),
             ));
         }
+        if self.merge_window_ms > 1000 {
+            return Err((
+                "rig.modbus.merge_window_ms".into(),
+                format!(
+                    "{} ms would delay every reading (and every limit check) that long: at most 1000",
+                    self.merge_window_ms
+                ),
+            ));
+        }
         Ok(ModbusRig {
             simulate,
             policy,
@@ -323,6 +398,8 @@ impl RawModbusRig {
             sensors,
             channels,
             encoder_lines: raw.encoder_lines,
+            can,
+            merge_window: Duration::from_millis(self.merge_window_ms),
         })
     }
 }

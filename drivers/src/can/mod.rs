@@ -16,13 +16,15 @@ mod frame;
 mod sensors;
 mod slcan;
 mod socketcan;
+mod stamp;
 
 pub use bus::{BusEndpoint, InProcessBus};
 pub use dbc::{DbcError, DecodedSignal, SignalMap, SignalSpec};
 pub use frame::{CanFrame, CanId, FrameError};
-pub use sensors::{CanChannel, CanSignalSensors};
+pub use sensors::{CanChannel, CanSignalSensors, RESYNC_SILENCE_S};
 pub use slcan::{decode_line, encode_frame, SlcanBitrate, SlcanLine, SlcanOptions, SlcanStream};
 pub use socketcan::SocketCanStream;
+pub use stamp::{PeriodicStamp, Stamped};
 
 use async_trait::async_trait;
 

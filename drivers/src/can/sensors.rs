@@ -1,15 +1,23 @@
 //! [`CanSignalSensors`]: signals of a DBC file, received over any
 //! [`FrameStream`], as a [`SensorStream`].
 //!
-//! Each received frame that carries configured signals becomes one batch,
-//! stamped with its arrival time on the host (CAN frames carry no time of
-//! their own). A CANopen PDO carries no sequence number either, so lost
-//! frames are estimated from gaps: an interval of n nominal periods (n ≥ 2,
-//! rounded) counts n − 1 frames lost.
+//! Each received frame that carries configured signals becomes one batch.
+//! CAN frames carry no time of their own and reach the host in bursts, so
+//! a configured message is taken as periodic (at its channel's rate, as a
+//! CANopen TPDO on its event timer) and stamped with its estimated send
+//! time ([`PeriodicStamp`]): on the message's send grid, never after its
+//! arrival. A CANopen PDO carries no sequence number either, so frames are
+//! taken as delivered in order and none lost unless the message falls
+//! silent for longer than [`RESYNC_SILENCE_S`] (and ten periods): a host
+//! that stalls for a few periods (seen here: 21 ms on a loaded machine)
+//! then receives the waiting frames in one burst, and they must count as
+//! late, not lost, or the speed derived from them would jump. The
+//! jitter statistics are those of the arrivals (what the link did).
 
 use async_trait::async_trait;
 use tokio::time::Instant;
 
+use super::stamp::PeriodicStamp;
 use super::{CanId, FrameStream, SignalMap};
 use crate::stats::IntervalStats;
 use crate::{ChannelInfo, ChannelStats, DriverError, Sample, SampleBatch, SensorStream};
@@ -33,9 +41,13 @@ pub struct CanSignalSensors<F> {
     wiring: Vec<(CanId, String)>,
     started: Instant,
     stats: Vec<IntervalStats>,
-    last_t: Vec<Option<u64>>,
+    stamps: Vec<PeriodicStamp>,
     warnings: Vec<String>,
 }
+
+/// A silence of a message longer than this (and than ten of its periods)
+/// counts as lost frames; shorter ones as a late delivery, s.
+pub const RESYNC_SILENCE_S: f64 = 0.25;
 
 impl<F> std::fmt::Debug for CanSignalSensors<F> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -74,7 +86,15 @@ impl<F: FrameStream> CanSignalSensors<F> {
                 .enumerate()
                 .map(|(k, c)| IntervalStats::new(k, c.info.rate_hz))
                 .collect(),
-            last_t: vec![None; channels.len()],
+            stamps: channels
+                .iter()
+                .map(|c| {
+                    PeriodicStamp::new(
+                        c.info.rate_hz,
+                        (RESYNC_SILENCE_S * c.info.rate_hz).max(10.0),
+                    )
+                })
+                .collect(),
             channels: channels.into_iter().map(|c| c.info).collect(),
             wiring,
             started: Instant::now(),
@@ -96,38 +116,35 @@ impl<F: FrameStream> SensorStream for CanSignalSensors<F> {
     async fn next_batch(&mut self) -> Result<SampleBatch, DriverError> {
         loop {
             let frame = self.frames.recv().await?;
-            let t_ns = self.started.elapsed().as_nanos() as u64;
+            let arrival_ns = self.started.elapsed().as_nanos() as u64;
             let Some(decoded) = self.map.decode(&frame) else {
                 continue;
             };
             let mut samples = Vec::new();
+            let mut t_ns = None;
             for (k, (id, signal)) in self.wiring.iter().enumerate() {
                 if *id != frame.id() {
                     continue;
                 }
                 if let Some(s) = decoded.iter().find(|s| &s.name == signal) {
-                    if let Some(last) = self.last_t[k] {
-                        let periods = (t_ns - last) as f64 * 1e-9 * self.channels[k].rate_hz;
-                        let missing = periods.round() as u64;
-                        if missing >= 2 {
-                            self.stats[k].lost(missing - 1);
-                            self.warnings.push(format!(
-                                "{}: {} frame(s) of {signal} missing (a gap of {:.1} ms)",
-                                self.name,
-                                missing - 1,
-                                (t_ns - last) as f64 * 1e-6
-                            ));
-                        }
+                    let stamped = self.stamps[k].arrived(arrival_ns);
+                    if stamped.lost > 0 {
+                        self.stats[k].lost(stamped.lost);
+                        self.warnings.push(format!(
+                            "{}: {} frame(s) of {signal} missing (silent for more than {RESYNC_SILENCE_S} s)",
+                            self.name, stamped.lost
+                        ));
                     }
-                    self.last_t[k] = Some(t_ns);
-                    self.stats[k].received(t_ns);
+                    // One instant per frame: its first channel's estimate.
+                    t_ns.get_or_insert(stamped.t_ns);
+                    self.stats[k].received(arrival_ns);
                     samples.push(Sample {
                         channel: k,
                         value: s.value,
                     });
                 }
             }
-            if !samples.is_empty() {
+            if let (false, Some(t_ns)) = (samples.is_empty(), t_ns) {
                 return Ok(SampleBatch { t_ns, samples });
             }
         }
@@ -139,6 +156,10 @@ impl<F: FrameStream> SensorStream for CanSignalSensors<F> {
 
     fn take_warnings(&mut self) -> Vec<String> {
         std::mem::take(&mut self.warnings)
+    }
+
+    fn epoch(&self) -> Option<Instant> {
+        Some(self.started)
     }
 }
 

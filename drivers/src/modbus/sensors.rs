@@ -221,4 +221,8 @@ impl SensorStream for ModbusSensors {
     fn take_warnings(&mut self) -> Vec<String> {
         std::mem::take(&mut self.warnings)
     }
+
+    fn epoch(&self) -> Option<Instant> {
+        Some(self.started)
+    }
 }

@@ -207,6 +207,10 @@ impl<T: AsyncRead + Unpin + Send> SensorStream for SerialSensors<T> {
     fn take_warnings(&mut self) -> Vec<String> {
         std::mem::take(&mut self.warnings)
     }
+
+    fn epoch(&self) -> Option<Instant> {
+        Some(self.started)
+    }
 }
 
 #[cfg(test)]

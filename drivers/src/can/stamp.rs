@@ -1,0 +1,168 @@
+//! [`PeriodicStamp`]: send times of a periodic CAN message, estimated from
+//! its arrival times on the host.
+//!
+//! A CAN frame carries no time of its own, and an adapter behind USB or a
+//! serial line hands frames over in bursts: two frames sent 2 ms apart may
+//! reach the host 10 µs apart. Stamping each on arrival would make a speed
+//! derived from consecutive positions jump by orders of magnitude. A
+//! periodic message (a CANopen TPDO on its event timer) is sent on a grid
+//! `t = phase + n · period`; its arrival is never earlier than its send, so
+//! the least-delayed arrivals pin the grid's phase (a minimum filter), and
+//! every frame is stamped on the grid, never later than its own arrival:
+//!
+//! - The next frame is the next slot (`n + 1`) unless it comes more than
+//!   `resync_periods` after the previous stamp: then frames were lost, and
+//!   the index jumps to the slot nearest its arrival.
+//! - The phase creeps later by `period / 1000` per frame, so the grid
+//!   follows a device clock up to 0.1 % slower than nominal (a faster
+//!   one pulls the phase earlier by itself) and recovers from a loss taken
+//!   for a delay.
+//!
+//! Losses shorter than `resync_periods` periods are taken for delays (CAN
+//! itself retransmits; on a healthy bus a late frame is far more common
+//! than a lost one); the stamps then run one period early until the creep
+//! catches up.
+
+/// Estimates send times of one periodic message. See the module docs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PeriodicStamp {
+    period_ns: f64,
+    resync_periods: f64,
+    phase_ns: f64,
+    last: Option<(i64, f64)>,
+}
+
+/// What [`PeriodicStamp::arrived`] decided for one frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stamped {
+    /// Estimated send time, ns (never after the arrival).
+    pub t_ns: u64,
+    /// Frames taken as lost before this one.
+    pub lost: u64,
+}
+
+impl PeriodicStamp {
+    /// A message sent every `1 / rate_hz` s; a silence longer than
+    /// `resync_periods` periods is taken as lost frames.
+    pub fn new(rate_hz: f64, resync_periods: f64) -> PeriodicStamp {
+        PeriodicStamp {
+            period_ns: 1e9 / rate_hz,
+            resync_periods,
+            phase_ns: 0.0,
+            last: None,
+        }
+    }
+
+    /// A frame arrived at `arrival_ns`.
+    pub fn arrived(&mut self, arrival_ns: u64) -> Stamped {
+        let a = arrival_ns as f64;
+        let p = self.period_ns;
+        let (n, lost) = match self.last {
+            None => {
+                self.phase_ns = a;
+                (0, 0)
+            }
+            Some((n_last, t_last)) => {
+                self.phase_ns += p * 1e-3;
+                if a - t_last > self.resync_periods * p {
+                    let n = (((a - self.phase_ns) / p).round() as i64).max(n_last + 1);
+                    (n, (n - n_last - 1) as u64)
+                } else {
+                    (n_last + 1, 0)
+                }
+            }
+        };
+        let mut t = self.phase_ns + n as f64 * p;
+        if t > a {
+            // Sent no later than it arrived: this frame is the least
+            // delayed so far, and pins the phase.
+            self.phase_ns = a - n as f64 * p;
+            t = a;
+        }
+        if let Some((_, t_last)) = self.last {
+            t = t.max(t_last);
+        }
+        self.last = Some((n, t));
+        Stamped {
+            t_ns: t.max(0.0).round() as u64,
+            lost,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    const MS: u64 = 1_000_000;
+
+    #[test]
+    fn a_burst_after_a_delay_is_spread_back_onto_the_grid() {
+        let mut s = PeriodicStamp::new(500.0, 10.0);
+        // Sent at 0, 2, 4, 6, 8 ms; the frames of 2 and 4 ms are held
+        // until 4.9 ms and arrive together.
+        let arrivals = [0, 4_900_000, 4_910_000, 6 * MS, 8 * MS];
+        let t: Vec<u64> = arrivals.iter().map(|&a| s.arrived(a).t_ns).collect();
+        // On the grid, within the phase's creep (period / 1000 per frame).
+        for (k, (&t, sent)) in t
+            .iter()
+            .zip([0, 2 * MS, 4 * MS, 6 * MS, 8 * MS])
+            .enumerate()
+        {
+            assert!(
+                t.abs_diff(sent) <= k as u64 * 2_000,
+                "frame {k}: {t} ns, sent {sent} ns"
+            );
+        }
+    }
+
+    #[test]
+    fn a_long_silence_counts_lost_frames() {
+        let mut s = PeriodicStamp::new(1000.0, 10.0);
+        assert_eq!(s.arrived(0).lost, 0);
+        assert_eq!(s.arrived(MS).lost, 0);
+        let after = s.arrived(31 * MS);
+        assert_eq!(after.lost, 29);
+        assert!(after.t_ns <= 31 * MS && after.t_ns >= 30 * MS, "{after:?}");
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, rng_seed: proptest::test_runner::RngSeed::Fixed(406), ..ProptestConfig::default() })]
+        /// Stamps never pass the arrival, never go back, and after delays
+        /// of up to 2.5 periods stay within the least recent delay (plus
+        /// the phase's creep) of the true send times.
+        #[test]
+        fn stamps_follow_the_send_grid(delays in proptest::collection::vec(0u64..5_000_000, 200)) {
+            let period = 2 * MS;
+            let creep = period / 1000;
+            let window = 100usize;
+            let mut s = PeriodicStamp::new(500.0, 10.0);
+            let mut last_t = 0;
+            let mut last_arrival = 0;
+            let mut effective = Vec::new();
+            for (k, d) in delays.iter().enumerate() {
+                let sent = 1_000 * MS + k as u64 * period;
+                // Arrivals keep their order (one link).
+                let arrival = (sent + d).max(last_arrival);
+                last_arrival = arrival;
+                effective.push(arrival - sent);
+                let st = s.arrived(arrival);
+                prop_assert!(st.t_ns <= arrival);
+                prop_assert!(st.t_ns >= last_t);
+                prop_assert_eq!(st.lost, 0);
+                last_t = st.t_ns;
+                if k >= window {
+                    // The phase sits no later than the least delay of the
+                    // last `window` frames plus its creep since.
+                    let least = effective[k - window..=k].iter().min().copied().unwrap_or(0);
+                    let bound = least + window as u64 * creep + 1_000;
+                    prop_assert!(
+                        st.t_ns.abs_diff(sent) <= bound,
+                        "frame {}: error {} ns, bound {} ns", k, st.t_ns.abs_diff(sent), bound
+                    );
+                }
+            }
+        }
+    }
+}
