@@ -17,6 +17,10 @@ pub use modbus::{LinkSpec, ModbusDeviceLink, ModbusRig, SensorLink, SimulatedTra
 mod retention;
 mod supervision;
 
+pub(crate) use modbus::RawLink;
+pub(crate) use retention::RawRetention;
+pub(crate) use supervision::RawSupervisor;
+
 pub use retention::{Retention, DEFAULT_MAX_TOTAL_GIB};
 pub use supervision::{
     Supervision, ThermalModel, DEFAULT_AMBIENT_C, DEFAULT_BUS_LOSS_TIMEOUT_S,

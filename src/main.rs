@@ -282,7 +282,7 @@ async fn run(
         let text = std::fs::read_to_string(path)
             .map_err(|e| bad_input(format!("{}: {e}", path.display())))?;
         if is_im_sweep_config(&text) {
-            return run_im(path, out, json, quiet).await;
+            return run_im(path, out, realtime, json, quiet).await;
         }
     }
     let cfg = load_or_default(config.as_ref()).map_err(bad_input)?;
@@ -327,7 +327,13 @@ async fn run(
 }
 
 /// `run` with an induction-machine slip-sweep configuration.
-async fn run_im(path: &Path, out: PathBuf, json: bool, quiet: bool) -> Result<(), Failure> {
+async fn run_im(
+    path: &Path,
+    out: PathBuf,
+    realtime: bool,
+    json: bool,
+    quiet: bool,
+) -> Result<(), Failure> {
     let cfg = ImRunConfig::load(path).map_err(bad_input)?;
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
     tokio::spawn(async move {
@@ -336,13 +342,15 @@ async fn run_im(path: &Path, out: PathBuf, json: bool, quiet: bool) -> Result<()
     });
     if !json && !quiet {
         eprintln!(
-            "motorbench: {} slip sweep on the simulated rig ({})",
-            cfg.motor_id, cfg.source
+            "motorbench: {} slip sweep on {} ({})",
+            cfg.motor_id,
+            cfg.describe_rig(),
+            cfg.source
         );
     }
     let opts = CommissionOptions {
         out_dir: out,
-        realtime: false,
+        realtime,
     };
     let done = commission_im(&cfg, &opts, &stop_rx)
         .await
