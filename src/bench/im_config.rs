@@ -194,17 +194,28 @@ impl ImRunConfig {
         ImRunConfig::parse(&path.display().to_string(), &text)
     }
 
-    /// Parse and validate `text`; `source` names it in errors.
+    /// Parse and validate `text`; `source` names it in errors, and its
+    /// directory resolves relative profile paths.
     pub fn parse(source: &str, text: &str) -> Result<ImRunConfig, String> {
+        let dir = std::path::Path::new(source)
+            .parent()
+            .unwrap_or(std::path::Path::new("."));
+        ImRunConfig::parse_in(source, dir, text)
+    }
+
+    /// Parse and validate `text`; `source` names it in errors; relative
+    /// profile paths are resolved in `dir`.
+    pub fn parse_in(
+        source: &str,
+        dir: &std::path::Path,
+        text: &str,
+    ) -> Result<ImRunConfig, String> {
         let raw: Raw = toml::from_str(text).map_err(|e| {
             let start = e.span().map(|s| s.start).unwrap_or(0).min(text.len());
             let line = text[..start].matches('\n').count() + 1;
             format!("{source}:{line}: {}", e.message())
         })?;
         let bad = |what: String| format!("{source}: {what}");
-        let dir = std::path::Path::new(source)
-            .parent()
-            .unwrap_or(std::path::Path::new("."));
         let modbus = match (raw.rig.backend.as_str(), raw.rig.modbus) {
             ("simulated", None) => None,
             ("simulated", Some(_)) => {

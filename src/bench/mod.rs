@@ -39,8 +39,8 @@ pub use im_sensors::MergedSensors;
 pub use im_stages::{VfdDyno, VfdSupply};
 pub use im_sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
 pub use interlock::{
-    supervise, InterlockedStage, StopReport, Supervised, SupervisedSensors, SupervisorHandle,
-    SupervisorSummary, SupervisorTiming,
+    supervise, supervise_stages, InterlockedStage, StopReport, Supervised, SupervisedSensors,
+    SupervisedStages, SupervisorHandle, SupervisorSummary, SupervisorTiming,
 };
 pub use limits::{check_limits, Trip};
 pub use plan::{plan_steps, PlanStep};

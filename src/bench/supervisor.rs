@@ -207,7 +207,20 @@ impl SafetyMonitor {
             quantities: channels.iter().map(|c| c.quantity.clone()).collect(),
             last_seen: vec![None; roles.len()],
             roles,
-            encoder: counts_per_rev.map(SpeedFromEncoder::new),
+            // Over at least four encoder periods: polled counts carry their
+            // poll's timestamp jitter, a large part of one period.
+            encoder: counts_per_rev.map(|c| {
+                let rate = channels
+                    .iter()
+                    .find(|ch| ch.quantity == "encoder_count")
+                    .map_or(f64::INFINITY, |ch| ch.rate_hz);
+                let baseline_ns = if rate.is_finite() && rate > 0.0 {
+                    (4e9 / rate) as u64
+                } else {
+                    0
+                };
+                SpeedFromEncoder::with_baseline(c, baseline_ns)
+            }),
             first_t: None,
             last_t: None,
             readings: Readings::default(),
@@ -275,12 +288,16 @@ impl SafetyMonitor {
         if let Some(i) = self.readings.current {
             self.winding.update(i, dt_s);
         }
+        // A batch may carry some channels only (instruments polled
+        // separately): the display holds the latest value of the others;
+        // the checks below look at this batch's values.
+        let held = self.readings;
         self.readings = Readings {
             t_s: t as f64 * 1e-9,
-            voltage,
-            current,
-            speed,
-            power,
+            voltage: voltage.or(held.voltage),
+            current: current.or(held.current),
+            speed: speed.or(held.speed),
+            power: power.or(held.power),
             winding_c: self.winding.celsius(),
         };
         if current.is_some_and(|i| !i.is_finite()) {
@@ -373,9 +390,12 @@ mod tests {
     fn in_limits_passes_and_each_limit_trips() {
         let mut m = monitor(|_| {});
         assert_eq!(m.check(&all(0, 100.0, 1.0, 0.0)), Ok(()));
+        // Speed over at least four encoder periods (4 ms at 1 kHz): none yet.
         assert_eq!(m.check(&all(1, 100.0, 1.0, 10.0)), Ok(()));
+        assert_eq!(m.readings().speed, None);
+        assert_eq!(m.check(&all(4, 100.0, 1.0, 40.0)), Ok(()));
         let r = m.readings();
-        // 10 counts of 1000 per turn in 1 ms: 20π rad/s.
+        // 40 counts of 1000 per turn in 4 ms: 20π rad/s.
         assert!((r.speed.unwrap() - 20.0 * std::f64::consts::PI).abs() < 1e-9);
         assert_eq!(r.power, Some(100.0));
 
@@ -397,8 +417,8 @@ mod tests {
         );
         let mut m = monitor(|_| {});
         m.check(&all(0, 0.0, 0.0, 0.0)).unwrap();
-        // 40 counts in 1 ms: 251 rad/s > 230.
-        assert_eq!(kind(&mut m, all(1, 0.0, 0.0, 40.0)), "speed");
+        // 160 counts in 4 ms: 251 rad/s > 230.
+        assert_eq!(kind(&mut m, all(4, 0.0, 0.0, 160.0)), "speed");
         let mut m = monitor(|c| c.supervision.max_power = 500.0);
         assert_eq!(kind(&mut m, all(0, 250.0, 2.5, 0.0)), "power");
     }
