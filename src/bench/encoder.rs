@@ -16,6 +16,7 @@ pub struct SpeedFromEncoder {
     last: Option<(u64, f64)>,
     baseline_ns: u64,
     estimate: Option<f64>,
+    fresh: u64,
 }
 
 impl SpeedFromEncoder {
@@ -26,6 +27,7 @@ impl SpeedFromEncoder {
             last: None,
             baseline_ns: 0,
             estimate: None,
+            fresh: 0,
         }
     }
 
@@ -54,7 +56,13 @@ impl SpeedFromEncoder {
         self.last = Some((t_ns, count));
         let w = (count - c0) * self.rad_per_count / ((t_ns - t0) as f64 * 1e-9);
         self.estimate = Some(w);
+        self.fresh += 1;
         Some(w)
+    }
+
+    /// How many new estimates (not repeats within the baseline) were made.
+    pub fn estimates(&self) -> u64 {
+        self.fresh
     }
 }
 
