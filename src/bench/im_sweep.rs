@@ -21,7 +21,7 @@ use tokio::sync::watch;
 use super::{
     BenchError, Outcome, Progress, RecordSink, SamplingEvents, SettleDetector, SpeedFromEncoder,
 };
-use crate::identify::{counter_speed, slip_grid};
+use crate::identify::slip_grid;
 use crate::record::{
     ChannelSpec, Entry, Event, EventLevel, OperatingPoint, RecordError, SegmentKind, SegmentMarker,
     SegmentPhase,
@@ -104,6 +104,54 @@ impl ImSweepPlan {
     pub fn synchronous_speed(&self) -> f64 {
         std::f64::consts::TAU * self.frequency / f64::from(self.pole_pairs.max(1))
     }
+}
+
+/// The mean speed over a window of encoder speed readings `(time, speed)`
+/// (each the count change since the previous reading over its interval):
+/// the least-squares slope of the angle they add up to against time, fitted
+/// again without the readings more than four robust standard deviations
+/// (1.4826 × the median absolute residual) off the first line. The angle
+/// is the count itself, so the slope averages its quantisation; a polled
+/// count whose timestamp a stall threw off (a host busy for milliseconds)
+/// is one outlier in the angle, where in the plain fit it tilts the line.
+fn angle_slope(time: &[f64], speed: &[f64]) -> f64 {
+    let n = time.len().min(speed.len());
+    if n < 3 {
+        return speed[..n].iter().sum::<f64>() / n.max(1) as f64;
+    }
+    let mut angle = Vec::with_capacity(n);
+    let mut acc = 0.0;
+    angle.push(0.0);
+    for k in 1..n {
+        acc += speed[k] * (time[k] - time[k - 1]);
+        angle.push(acc);
+    }
+    let fit = |keep: &dyn Fn(usize) -> bool| {
+        let idx: Vec<usize> = (0..n).filter(|&k| keep(k)).collect();
+        let m = idx.len() as f64;
+        let tm = idx.iter().map(|&k| time[k]).sum::<f64>() / m;
+        let am = idx.iter().map(|&k| angle[k]).sum::<f64>() / m;
+        let (mut sxy, mut sxx) = (0.0, 0.0);
+        for &k in &idx {
+            sxy += (time[k] - tm) * (angle[k] - am);
+            sxx += (time[k] - tm).powi(2);
+        }
+        let slope = sxy / sxx;
+        (slope, am - slope * tm)
+    };
+    let (w, a0) = fit(&|_| true);
+    let residual = |k: usize| angle[k] - (a0 + w * time[k]);
+    let mut abs: Vec<f64> = (0..n).map(|k| residual(k).abs()).collect();
+    abs.sort_by(f64::total_cmp);
+    let sigma = 1.4826 * abs[n / 2];
+    if !(sigma > 0.0) {
+        return w;
+    }
+    let kept = (0..n).filter(|&k| residual(k).abs() <= 4.0 * sigma).count();
+    if kept < 3 || kept == n {
+        return w;
+    }
+    fit(&|k| residual(k).abs() <= 4.0 * sigma).0
 }
 
 /// Channels recorded for a sweep: every sensor channel, then the speed
@@ -343,9 +391,9 @@ impl Sweep<'_> {
         };
         let n = window.len() as f64;
         let mean = |f: &dyn Fn(&Reading) -> f64| window.iter().map(f).sum::<f64>() / n;
-        // The speed over the window: the least-squares slope of the angle
-        // the encoder readings add up to (robust to the jitter of polled
-        // timestamps, which the mean of the differentiated speeds is not).
+        // The speed over the window: the slope of the angle the encoder
+        // readings add up to against time (least squares, then again
+        // without the readings whose timestamps a stall threw off).
         let t0 = window.first().map_or(0, |r| r.t_ns);
         let (times, speeds): (Vec<f64>, Vec<f64>) = self
             .speeds
@@ -356,7 +404,7 @@ impl Sweep<'_> {
         let speed = if speeds.is_empty() {
             window.last().and_then(|r| r.speed).unwrap_or(f64::NAN)
         } else {
-            counter_speed(&times, &speeds)
+            angle_slope(&times, &speeds)
         };
         let torques: Vec<f64> = window.iter().filter_map(|r| r.torque).collect();
         let point = OperatingPoint {
@@ -518,4 +566,56 @@ pub async fn run_im_sweep(
         }
     }
     Ok(outcome)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Encoder speed readings of a shaft at `w` rad/s, 4096 counts a turn,
+    /// polled every 5 ms; `late` readings carry a timestamp `by` s late.
+    fn readings(w: f64, late: &[usize], by: f64) -> (Vec<f64>, Vec<f64>) {
+        let per_rad = 4096.0 / std::f64::consts::TAU;
+        let mut enc = SpeedFromEncoder::new(4096.0);
+        let (mut time, mut speed) = (Vec::new(), Vec::new());
+        for k in 0..101 {
+            let t_true = k as f64 * 0.005;
+            let count = (w * t_true * per_rad).floor();
+            let t = t_true + if late.contains(&k) { by } else { 0.0 };
+            if let Some(s) = enc.update((t * 1e9) as u64, count) {
+                time.push(t);
+                speed.push(s);
+            }
+        }
+        (time, speed)
+    }
+
+    #[test]
+    fn the_slope_averages_the_quantisation() {
+        let (t, s) = readings(156.0, &[], 0.0);
+        assert!((angle_slope(&t, &s) / 156.0 - 1.0).abs() < 2e-5);
+    }
+
+    #[test]
+    fn a_stalled_reading_does_not_tilt_the_slope() {
+        // Two readings stamped 3 ms late (a busy host), near the window's
+        // end where they weigh most in a plain least-squares slope.
+        let (t, s) = readings(156.0, &[90, 95], 0.003);
+        let robust = angle_slope(&t, &s);
+        let n = t.len();
+        let mut angle = vec![0.0];
+        for k in 1..n {
+            angle.push(angle[k - 1] + s[k] * (t[k] - t[k - 1]));
+        }
+        let tm = t.iter().sum::<f64>() / n as f64;
+        let am = angle.iter().sum::<f64>() / n as f64;
+        let plain = t
+            .iter()
+            .zip(&angle)
+            .map(|(x, y)| (x - tm) * (y - am))
+            .sum::<f64>()
+            / t.iter().map(|x| (x - tm).powi(2)).sum::<f64>();
+        assert!((plain / 156.0 - 1.0).abs() > 2e-4, "{plain}");
+        assert!((robust / 156.0 - 1.0).abs() < 2e-5, "{robust}");
+    }
 }

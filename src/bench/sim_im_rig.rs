@@ -451,3 +451,44 @@ impl SensorStream for SimImSensors {
         Ok(batch)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{Connection, ImModel};
+
+    fn rig() -> SimImRigConfig {
+        let circuit = ImCircuit::from_values(
+            ImModel::Double,
+            &[0.8659, 3.4224, 119.6437, 1.9282, 0.7346, 0.2346, 3.2332],
+        )
+        .unwrap();
+        let supply = ImSupply {
+            line_voltage: 440.0,
+            frequency: 50.0,
+            connection: Connection::Star,
+            pole_pairs: 2,
+        };
+        SimImRigConfig::new(circuit, supply)
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn paced_batches_come_at_the_wall_clock_unpaced_at_once() {
+        // 500 Hz: 100 batches are 0.2 s of data.
+        let (_, _, sensors) = sim_im_rig(rig()).unwrap();
+        let mut paced = sensors.paced();
+        let t0 = tokio::time::Instant::now();
+        for _ in 0..100 {
+            paced.next_batch().await.unwrap();
+        }
+        let waited = t0.elapsed().as_secs_f64();
+        assert!((waited - 0.2).abs() < 1e-3, "{waited}");
+
+        let (_, _, mut free) = sim_im_rig(rig()).unwrap();
+        let t0 = tokio::time::Instant::now();
+        for _ in 0..100 {
+            free.next_batch().await.unwrap();
+        }
+        assert_eq!(t0.elapsed().as_secs_f64(), 0.0);
+    }
+}

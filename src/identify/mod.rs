@@ -61,7 +61,7 @@ pub use output_error::{
 pub use pasek::{PasekEstimate, PasekReading};
 pub use simulate::simulate_segment;
 pub use steady_state::{PairEstimate, SteadyStateEstimate, SteadyStateFit};
-pub use step::{counter_speed, VoltageStep};
+pub use step::VoltageStep;
 pub use transient::TransientFit;
 
 use crate::model::DcParams;
