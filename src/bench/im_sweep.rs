@@ -144,7 +144,7 @@ fn angle_slope(time: &[f64], speed: &[f64]) -> f64 {
     let mut abs: Vec<f64> = (0..n).map(|k| residual(k).abs()).collect();
     abs.sort_by(f64::total_cmp);
     let sigma = 1.4826 * abs[n / 2];
-    if !(sigma > 0.0) {
+    if sigma.is_nan() || sigma <= 0.0 {
         return w;
     }
     let kept = (0..n).filter(|&k| residual(k).abs() <= 4.0 * sigma).count();
