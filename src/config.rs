@@ -21,6 +21,10 @@ pub use sensor_channels::{SensorChannel, MAX_RATE_HZ};
 mod retention;
 mod supervision;
 
+pub(crate) use modbus::RawLink;
+pub(crate) use retention::RawRetention;
+pub(crate) use supervision::RawSupervisor;
+
 pub use retention::{Retention, DEFAULT_MAX_TOTAL_GIB};
 pub use supervision::{
     Supervision, ThermalModel, DEFAULT_AMBIENT_C, DEFAULT_BUS_LOSS_TIMEOUT_S,

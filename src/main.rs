@@ -320,7 +320,7 @@ async fn run(args: RunArgs) -> Result<(), Failure> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| bad_input(format!("{}: {e}", path.display())))?;
         if is_im_sweep_config(&text) {
-            return run_im(path, out, json, quiet, diagnose).await;
+            return run_im(path, out, realtime, json, quiet, diagnose).await;
         }
     }
     let cfg = load_or_default(config.as_ref()).map_err(bad_input)?;
@@ -372,6 +372,7 @@ async fn run(args: RunArgs) -> Result<(), Failure> {
 async fn run_im(
     path: &Path,
     out: PathBuf,
+    realtime: bool,
     json: bool,
     quiet: bool,
     diagnose: bool,
@@ -384,13 +385,15 @@ async fn run_im(
     });
     if !json && !quiet {
         eprintln!(
-            "motorbench: {} slip sweep on the simulated rig ({})",
-            cfg.motor_id, cfg.source
+            "motorbench: {} slip sweep on {} ({})",
+            cfg.motor_id,
+            cfg.describe_rig(),
+            cfg.source
         );
     }
     let opts = CommissionOptions {
         out_dir: out,
-        realtime: false,
+        realtime,
         diagnose,
     };
     let done = commission_im(&cfg, &opts, &stop_rx)
@@ -405,6 +408,9 @@ async fn run_im(
         );
         println!("report: {}", done.report_path.display());
         println!("plot:   {}", done.svg_path.display());
+        if let Some(path) = &done.residuals_svg_path {
+            println!("gap:    {}", path.display());
+        }
     }
     if let Outcome::Aborted { reason } = &done.outcome {
         return Err(Failure {

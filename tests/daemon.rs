@@ -14,135 +14,29 @@
 
 mod common;
 
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::path::Path;
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use motorbench::record::{read_mcap, EventLevel};
-use motorbench::serve::client::{Client, Endpoint, Reply};
+use motorbench::serve::client::{Client, Reply};
 use serde_json::{json, Value};
 
-const BIN: &str = env!("CARGO_BIN_EXE_motorbench");
+use common::daemon::{finished, get, wait_test, Served, BIN};
 
-/// Longest any wait below may take before the test fails (a bound on
-/// loops, not a timing requirement).
-const PATIENCE: Duration = Duration::from_secs(180);
-
-/// A running daemon; killed when dropped.
-struct Served {
-    child: Child,
-    url: String,
-    log: PathBuf,
-}
-
-impl Served {
-    fn start(dir: &Path, records: &Path, extra: &[&str]) -> Served {
-        let config = dir.join("rig.toml");
-        if !config.exists() {
-            std::fs::write(&config, motorbench::config::DEFAULT_CONFIG).unwrap();
-        }
-        let log = dir.join(format!(
-            "serve-{}.log",
-            std::process::id() as u128 + rand_suffix()
-        ));
-        let mut child = Command::new(BIN)
-            .arg("serve")
-            .arg("--config")
-            .arg(&config)
-            .arg("--records")
-            .arg(records)
-            .args(extra)
-            .stdout(Stdio::piped())
-            .stderr(std::fs::File::create(&log).unwrap())
-            .spawn()
-            .expect("motorbench serve starts");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let url = line
-            .trim()
-            .strip_prefix("listening on ")
-            .unwrap_or_else(|| {
-                panic!(
-                    "no address announced: {line:?}\n{}",
-                    std::fs::read_to_string(&log).unwrap_or_default()
-                )
-            })
-            .to_string();
-        Served { child, url, log }
+/// Start the daemon on the embedded default configuration (written to
+/// `dir/rig.toml` unless a test put its own there).
+fn start_daemon(dir: &Path, records: &Path, extra: &[&str]) -> Served {
+    let config = dir.join("rig.toml");
+    if !config.exists() {
+        std::fs::write(&config, motorbench::config::DEFAULT_CONFIG).unwrap();
     }
-
-    /// A client on the loopback address of the bound port.
-    fn client(&self, token: Option<&str>) -> Client {
-        let endpoint = match Endpoint::parse(&self.url).unwrap() {
-            Endpoint::Tcp(a) => Endpoint::Tcp(a.replace("0.0.0.0", "127.0.0.1")),
-            unix => unix,
-        };
-        Client::new(endpoint, token.map(str::to_string))
-    }
-
-    fn ctl(&self, args: &[&str]) -> Output {
-        Command::new(BIN)
-            .arg("ctl")
-            .arg("--url")
-            .arg(&self.url)
-            .args(args)
-            .output()
-            .unwrap()
-    }
-
-    fn log(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
-    }
-}
-
-impl Drop for Served {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-fn rand_suffix() -> u128 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .unwrap()
-        .as_nanos()
-}
-
-async fn get(c: &Client, path: &str) -> Value {
-    let r = c.get(path).await.unwrap();
-    assert!(
-        r.ok(),
-        "GET {path}: {} {}",
-        r.status,
-        String::from_utf8_lossy(&r.body)
-    );
-    r.json()
+    Served::start(&config, records, dir, extra)
 }
 
 async fn start(c: &Client, test: Option<Value>) -> Reply {
     let body = test.map(|t| json!({ "test": t }));
     c.post("/v1/rigs/rig/tests", body.as_ref()).await.unwrap()
-}
-
-/// Poll the test until `until` holds.
-async fn wait_test(c: &Client, id: &str, until: impl Fn(&Value) -> bool) -> Value {
-    let t0 = Instant::now();
-    loop {
-        let s = get(c, &format!("/v1/tests/{id}")).await;
-        if until(&s) {
-            return s;
-        }
-        assert!(t0.elapsed() < PATIENCE, "waited too long; last status {s}");
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
-}
-
-fn finished(s: &Value) -> bool {
-    s["state"] == "finished"
 }
 
 async fn record_entry(c: &Client, name: &str) -> Value {
@@ -153,7 +47,7 @@ async fn record_entry(c: &Client, name: &str) -> Value {
 async fn dc_test_through_the_api_one_at_a_time_and_abort_halfway() {
     let dir = tempfile::tempdir().unwrap();
     let records = dir.path().join("records");
-    let served = Served::start(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
     let c = served.client(None);
 
     // A short DC staircase through `ctl start --follow`.
@@ -301,7 +195,7 @@ async fn dc_test_through_the_api_one_at_a_time_and_abort_halfway() {
 async fn sigkill_mid_test_leaves_a_record_that_replays_and_is_marked_interrupted() {
     let dir = tempfile::tempdir().unwrap();
     let records = dir.path().join("records");
-    let mut served = Served::start(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let mut served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
     let c = served.client(None);
     let r = start(&c, None).await;
     assert_eq!(r.status, 201);
@@ -341,7 +235,7 @@ async fn sigkill_mid_test_leaves_a_record_that_replays_and_is_marked_interrupted
     );
 
     // The next start marks it interrupted, with what was recovered.
-    let served = Served::start(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
     let c = served.client(None);
     let entry = record_entry(&c, &id).await;
     assert_eq!(entry["outcome"], "interrupted", "{entry}");
@@ -359,7 +253,7 @@ async fn sigkill_mid_test_leaves_a_record_that_replays_and_is_marked_interrupted
 async fn sigterm_stops_the_test_safely_finishes_the_mcap_and_exits_0() {
     let dir = tempfile::tempdir().unwrap();
     let records = dir.path().join("records");
-    let mut served = Served::start(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let mut served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
     let c = served.client(None);
     let r = start(&c, None).await;
     let id = r.json()["id"].as_str().unwrap().to_string();
@@ -445,7 +339,7 @@ async fn off_loopback_no_endpoint_answers_without_the_token() {
     let token = "a1b2c3d4e5f60718293a4b5c6d7e8f90";
     let token_file = dir.path().join("token");
     std::fs::write(&token_file, format!("{token}\n")).unwrap();
-    let served = Served::start(
+    let served = start_daemon(
         dir.path(),
         &records,
         &[
@@ -508,7 +402,7 @@ async fn unix_socket_emergency_stop_latches_until_reset() {
     let dir = tempfile::tempdir().unwrap();
     let records = dir.path().join("records");
     let socket = dir.path().join("api.sock");
-    let served = Served::start(dir.path(), &records, &["--unix", socket.to_str().unwrap()]);
+    let served = start_daemon(dir.path(), &records, &["--unix", socket.to_str().unwrap()]);
     assert_eq!(served.url, format!("unix:{}", socket.display()));
     let c = served.client(None);
 

@@ -13,133 +13,51 @@
 //!   show the output off (the Modbus write has arrived), on the test
 //!   process's clock. The figure is printed, not asserted (run with
 //!   `--nocapture`).
+//!
+//! And one daemon with two rigs behind Modbus: the DC rig of
+//! `config/sim-modbus-dc.toml` (served by the daemon) and the induction-
+//! machine rig of `config/sim-modbus-im.toml` served by this test process
+//! (supply VFD, dynamometer VFD, meter, encoder counter, each its own
+//! Modbus TCP server). A DC test runs to completion through `ctl` while an
+//! IM slip sweep runs through the API with its progress on the live feed;
+//! the sweep is aborted halfway and both stages are seen safe at their
+//! registers (supply: run off, frequency 0; dynamometer: stop, frequency
+//! 0), timed from the API call.
 
 mod common;
 
-use std::io::{BufRead, BufReader};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use motorbench::bench::{build_rig, ServedLink};
+use motorbench::bench::{build_im_rig, build_rig, ImRunConfig, ServedLink};
 use motorbench::config::{Backend, Config};
 use motorbench::record::{read_mcap, EventLevel};
-use motorbench::serve::client::{Client, Endpoint};
 use motorbench_drivers::modbus::server::lock_bank;
-use serde_json::Value;
 
-const BIN: &str = env!("CARGO_BIN_EXE_motorbench");
-
-/// Longest any wait below may take before the test fails (a bound on
-/// loops, not a timing requirement).
-const PATIENCE: Duration = Duration::from_secs(180);
+use common::daemon::{get, shipped, wait_test, Served, PATIENCE};
 
 /// Held by every wall-clock test of this file: they run one after the
 /// other so that they do not disturb each other's sampling.
 static REALTIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
-fn shipped(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("config")
-        .join(name)
-}
-
-/// A running daemon; killed when dropped.
-struct Served {
-    child: Child,
-    url: String,
-    log: PathBuf,
-}
-
-impl Served {
-    fn start(config: &Path, dir: &Path) -> Served {
-        let log = dir.join("serve.log");
-        let mut child = Command::new(BIN)
-            .arg("serve")
-            .arg("--config")
-            .arg(config)
-            .arg("--records")
-            .arg(dir.join("records"))
-            .args(["--listen", "127.0.0.1:0"])
-            .stdout(Stdio::piped())
-            .stderr(std::fs::File::create(&log).unwrap())
-            .spawn()
-            .expect("motorbench serve starts");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let url = line
-            .trim()
-            .strip_prefix("listening on ")
-            .unwrap_or_else(|| {
-                panic!(
-                    "no address announced: {line:?}\n{}",
-                    std::fs::read_to_string(&log).unwrap_or_default()
-                )
-            })
-            .to_string();
-        Served { child, url, log }
-    }
-
-    fn client(&self) -> Client {
-        Client::new(Endpoint::parse(&self.url).unwrap(), None)
-    }
-
-    fn ctl(&self, args: &[&str]) -> Output {
-        Command::new(BIN)
-            .arg("ctl")
-            .arg("--url")
-            .arg(&self.url)
-            .args(args)
-            .output()
-            .unwrap()
-    }
-
-    fn log(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
-    }
-}
-
-impl Drop for Served {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-async fn get(c: &Client, path: &str) -> Value {
-    let r = c.get(path).await.unwrap();
-    assert!(
-        r.ok(),
-        "GET {path}: {} {}",
-        r.status,
-        String::from_utf8_lossy(&r.body)
-    );
-    r.json()
-}
-
-/// Poll the test until `until` holds.
-async fn wait_test(c: &Client, id: &str, until: impl Fn(&Value) -> bool) -> Value {
-    let t0 = Instant::now();
-    loop {
-        let s = get(c, &format!("/v1/tests/{id}")).await;
-        if until(&s) {
-            return s;
-        }
-        assert!(t0.elapsed() < PATIENCE, "waited too long; last status {s}");
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+/// Start the daemon on `config`, records and log in `dir`.
+fn start_daemon(config: &Path, dir: &Path) -> Served {
+    Served::start(
+        config,
+        &dir.join("records"),
+        dir,
+        &["--listen", "127.0.0.1:0"],
+    )
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn shipped_modbus_config_runs_a_dc_test_through_the_api() {
     let _one_at_a_time = REALTIME.lock().await;
     let dir = tempfile::tempdir().unwrap();
-    let served = Served::start(&shipped("sim-modbus-dc.toml"), dir.path());
-    let c = served.client();
+    let served = start_daemon(&shipped("sim-modbus-dc.toml"), dir.path());
+    let c = served.client(None);
 
     let rigs = get(&c, "/v1/rigs").await;
     assert_eq!(rigs["rigs"][0]["state"], "idle", "{rigs}");
@@ -260,8 +178,8 @@ async fn abort_halfway_behind_modbus_makes_the_supply_safe_and_is_timed() {
     .unwrap();
     let daemon_view = Config::load(&config).unwrap();
     assert!(daemon_view.backend.simulated().is_none(), "hardware to it");
-    let served = Served::start(&config, dir.path());
-    let c = served.client();
+    let served = start_daemon(&config, dir.path());
+    let c = served.client(None);
 
     // The full staircase; abort it halfway.
     let r = c.post("/v1/rigs/rig/tests", None).await.unwrap();
@@ -387,5 +305,275 @@ async fn abort_halfway_behind_modbus_makes_the_supply_safe_and_is_timed() {
         stop["safe_after_s"].as_f64().unwrap() * 1e3,
         period * 1e3,
         (first_safe - requested) / period,
+    );
+}
+
+/// `config/sim-modbus-im.toml` rewritten for a rig reached at the served
+/// IM rig's addresses (no `simulate`, no `[rig.simulated]`: hardware to
+/// the daemon), with the profiles' paths made absolute.
+fn im_hardware_config(served: &motorbench::bench::ServedImRig) -> String {
+    let addr = |l: &ServedLink| match l {
+        ServedLink::Tcp(a) => a.to_string(),
+        other => panic!("served over TCP, not {other:?}"),
+    };
+    let text = std::fs::read_to_string(shipped("sim-modbus-im.toml")).unwrap();
+    let devices = shipped("devices");
+    let cut = text.find("[rig.simulated.motor]").unwrap();
+    let limits = text.find("[limits]").unwrap();
+    let text = format!("{}{}", &text[..cut], &text[limits..]);
+    let mut out = String::new();
+    let mut link = None;
+    for line in text.lines() {
+        let trimmed = line.trim_start();
+        if trimmed.starts_with('[') {
+            link = match trimmed {
+                t if t.starts_with("[rig.modbus.supply]") => Some(&served.supply.link),
+                t if t.starts_with("[rig.modbus.dynamometer]") => Some(&served.dynamometer.link),
+                t if t.starts_with("[rig.modbus.meter]") => Some(&served.meter_link),
+                t if t.starts_with("[rig.modbus.encoder]") => Some(&served.encoder_link),
+                _ => None,
+            };
+        }
+        if trimmed.starts_with("simulate =") {
+            continue;
+        }
+        if let Some(rest) = trimmed.strip_prefix("profile = \"devices/") {
+            let file = rest.split('"').next().unwrap();
+            out.push_str(&format!(
+                "profile = {:?}\n",
+                devices.join(file).to_str().unwrap()
+            ));
+            out.push_str(&format!(
+                "transport = \"tcp\"\naddress = \"{}\"\n",
+                addr(link.expect("a device section"))
+            ));
+            continue;
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    out
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn one_daemon_runs_a_dc_test_and_an_im_sweep_and_aborts_the_sweep_with_both_stages_safe() {
+    let _one_at_a_time = REALTIME.lock().await;
+    // The IM rig served from this process, keeping only its servers.
+    let shipped_im = ImRunConfig::load(&shipped("sim-modbus-im.toml")).unwrap();
+    let vfd = shipped_im.modbus.as_ref().unwrap().supply.profile.clone();
+    let control = vfd.register("control_word").unwrap().clone();
+    let frequency = vfd.register("frequency_set").unwrap().clone();
+    let mut rig = build_im_rig(&shipped_im, false).await.unwrap();
+    let im = rig.served.take().expect("a served rig");
+    drop(rig);
+
+    let dir = tempfile::tempdir().unwrap();
+    let im_config = dir.path().join("im-rig.toml");
+    std::fs::write(&im_config, im_hardware_config(&im)).unwrap();
+    let daemon_view = ImRunConfig::load(&im_config).unwrap();
+    assert!(daemon_view.simulated.is_none(), "hardware to it");
+    let served = Served::start(
+        &shipped("sim-modbus-dc.toml"),
+        &dir.path().join("records"),
+        dir.path(),
+        &[
+            "--listen",
+            "127.0.0.1:0",
+            "--config",
+            im_config.to_str().unwrap(),
+        ],
+    );
+    let c = served.client(None);
+    let rigs = get(&c, "/v1/rigs").await;
+    let rig_of = |name: &str| {
+        rigs["rigs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["name"] == name)
+            .unwrap_or_else(|| panic!("rig {name} in {rigs}"))
+            .clone()
+    };
+    let im_rig = rig_of("im-rig");
+    assert_eq!(im_rig["machine"], "induction");
+    assert_eq!(
+        im_rig["stages"],
+        serde_json::json!(["supply", "dynamometer"])
+    );
+    assert_eq!(rig_of("sim-modbus-dc")["machine"], "dc");
+
+    // The full sweep on the IM rig, through the API.
+    let r = c.post("/v1/rigs/im-rig/tests", None).await.unwrap();
+    assert_eq!(
+        r.status,
+        201,
+        "{}\n{}",
+        String::from_utf8_lossy(&r.body),
+        served.log()
+    );
+    let sweep = r.json()["id"].as_str().unwrap().to_string();
+
+    // Meanwhile a short DC test on the other rig, through `ctl`.
+    let out = served.ctl(&[
+        "start",
+        "--rig",
+        "sim-modbus-dc",
+        "--test-json",
+        r#"{"levels_V": [10, 55], "coastdown": false}"#,
+        "--follow",
+    ]);
+    let (stdout, stderr) = common::text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}\n{}", served.log());
+    let dc = stdout.lines().next().unwrap().trim().to_string();
+    assert!(stdout.contains(&format!("{dc}: completed")), "{stdout}");
+    let entry = get(&c, &format!("/v1/records/{dc}")).await;
+    assert_eq!(entry["outcome"], "completed");
+    let ra = entry["key_results"]["params"]["Ra"].as_f64().unwrap();
+    assert!((ra / 30.9 - 1.0).abs() < 0.10, "Ra {ra}");
+
+    // The sweep's live feed: its segment, and the meter's readings.
+    let s = wait_test(&c, &sweep, |s| {
+        s["t_s"].as_f64().unwrap_or(0.0) > 12.0
+            && s["values"]["current"].as_f64().unwrap_or(0.0) > 0.0
+    })
+    .await;
+    assert_eq!(s["state"], "running", "{s}");
+    assert_eq!(s["segment"]["kind"], "im_slip_sweep", "{s}");
+    assert!(
+        s["plan"]
+            .as_str()
+            .unwrap()
+            .starts_with("im_slip_sweep 400 V"),
+        "{s}"
+    );
+    assert!(
+        s["values"]["speed"].is_number(),
+        "the encoder's speed is shown: {s}"
+    );
+    // Wait for a point with the supply on (not a cool-down), then abort.
+    let s = wait_test(&c, &sweep, |s| {
+        s["values"]["voltage"].as_f64().unwrap_or(0.0) > 300.0
+    })
+    .await;
+    assert_eq!(s["state"], "running", "{s}");
+    {
+        let b = lock_bank(&im.supply.bank);
+        assert_eq!(b.get(&control), 1.0, "the supply runs mid-sweep");
+        assert_eq!(b.get(&frequency), 50.0);
+        assert!(im.supply_output_enabled());
+    }
+
+    // Watch both drives' registers on a thread of their own while the
+    // abort goes out.
+    let (supply_bank, dyno_bank) = (im.supply.bank.clone(), im.dynamometer.bank.clone());
+    let (ctl_reg, freq_reg) = (control.clone(), frequency.clone());
+    let armed = Arc::new(AtomicBool::new(true));
+    let watching = armed.clone();
+    let watcher = std::thread::spawn(move || {
+        let (mut supply_off, mut dyno_stop) = (None, None);
+        let t0 = Instant::now();
+        while watching.load(Ordering::Relaxed) && (supply_off.is_none() || dyno_stop.is_none()) {
+            if supply_off.is_none() && lock_bank(&supply_bank).get(&ctl_reg) == 0.0 {
+                supply_off = Some(Instant::now());
+            }
+            if dyno_stop.is_none() {
+                let b = lock_bank(&dyno_bank);
+                if b.get(&ctl_reg) == 0.0 && b.get(&freq_reg) == 0.0 {
+                    dyno_stop = Some(Instant::now());
+                }
+            }
+            if t0.elapsed() > PATIENCE {
+                break;
+            }
+            std::thread::sleep(Duration::from_micros(20));
+        }
+        (supply_off, dyno_stop)
+    });
+    let sent = Instant::now();
+    let r = c
+        .post(&format!("/v1/tests/{sweep}/abort"), None)
+        .await
+        .unwrap();
+    let answered = Instant::now();
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    let stop = r.json()["stop"].clone();
+    assert_eq!(stop["kind"], "operator_abort");
+    assert_eq!(stop["safe_state_ok"], true, "{stop}");
+    let watched = tokio::task::spawn_blocking(move || {
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while !watcher.is_finished() && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+        armed.store(false, Ordering::Relaxed);
+        watcher.join().unwrap()
+    })
+    .await
+    .unwrap();
+    let (Some(supply_off), Some(dyno_stop)) = watched else {
+        panic!("the drives' registers never showed both stages safe: {watched:?}");
+    };
+    assert!(supply_off >= sent && dyno_stop >= sent);
+
+    let s = wait_test(&c, &sweep, |s| s["state"] == "finished").await;
+    assert_eq!(s["outcome"], "aborted", "{s}");
+    let requested = s["stop"]["requested_t_s"].as_f64().unwrap();
+    let first_safe = s["stop"]["first_safe_sample_t_s"].as_f64();
+
+    // Both stages stay safe: the supply off, the dynamometer braking the
+    // shaft to rest.
+    {
+        let b = lock_bank(&im.supply.bank);
+        assert_eq!((b.get(&control), b.get(&frequency)), (0.0, 0.0));
+        let b = lock_bank(&im.dynamometer.bank);
+        assert_eq!((b.get(&control), b.get(&frequency)), (0.0, 0.0));
+    }
+    assert!(!im.supply_output_enabled());
+    assert_eq!(im.dyno_command(), (0.0, true));
+
+    // The record: the supervisor's stop, the sweep's abort, the points
+    // measured before it; the index says aborted; the rig is idle again
+    // (an operator abort does not latch).
+    let rec = read_mcap(&dir.path().join("records").join(format!("{sweep}.mcap"))).unwrap();
+    assert!(rec.recovery.is_none(), "the record was finished");
+    assert!(
+        rec.events
+            .iter()
+            .any(|(_, e)| e.level == EventLevel::Abort && e.message.contains("operator abort")),
+        "{:?}",
+        rec.events
+    );
+    assert!(
+        rec.events
+            .iter()
+            .any(|(_, e)| e.message.starts_with("safety supervisor: operator abort")),
+        "{:?}",
+        rec.events
+    );
+    assert!(!rec.operating_points.is_empty(), "points before the abort");
+    let entry = get(&c, &format!("/v1/records/{sweep}")).await;
+    assert_eq!(entry["outcome"], "aborted");
+    assert_eq!(entry["kind"], "im_slip_sweep");
+    let rigs = get(&c, "/v1/rigs").await;
+    assert!(
+        rigs["rigs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .all(|r| r["state"] == "idle"),
+        "{rigs}"
+    );
+
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    println!(
+        "IM ABORT LATENCY BEHIND MODBUS TCP: API call → supply VFD run bit off {:.3} ms, \
+         → dynamometer VFD stopped (control word and frequency 0) {:.3} ms (test-process clock); \
+         abort HTTP round trip {:.3} ms; daemon side: request → both safe-state commands returned \
+         {:.3} ms; poll period 5 ms; last sample before the request at {requested:.4} s, first \
+         sample after the safe state at {first_safe:?} s; {} operating points before the abort",
+        ms(supply_off - sent),
+        ms(dyno_stop - sent),
+        ms(answered - sent),
+        stop["safe_after_s"].as_f64().unwrap() * 1e3,
+        rec.operating_points.len(),
     );
 }

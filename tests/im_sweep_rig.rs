@@ -3,7 +3,8 @@
 //! the limits that stop it.
 
 use motorbench::bench::{
-    run_im_sweep, sim_im_rig, sweep_channels, ImSweepPlan, Outcome, RecordSink, SimImRigConfig,
+    run_im_sweep, sim_im_rig, sweep_channels, ImSweepPlan, NoProgress, Outcome, RecordSink,
+    SimImRigConfig,
 };
 use motorbench::identify::identify_im;
 use motorbench::model::{
@@ -66,9 +67,17 @@ async fn sweep_records_operating_points_that_identify_the_machine() {
     let recorder = Recorder::start(&path, &meta(), &channels, 1024).unwrap();
     let mut sink = RecordSink::new(Some(recorder), Some(meta()), channels);
     let (_stop_tx, stop) = tokio::sync::watch::channel(false);
-    let outcome = run_im_sweep(&plan, &mut vfd, &mut dyno, &mut sensors, &mut sink, &stop)
-        .await
-        .unwrap();
+    let outcome = run_im_sweep(
+        &plan,
+        &mut vfd,
+        &mut dyno,
+        &mut sensors,
+        &mut sink,
+        &NoProgress,
+        &stop,
+    )
+    .await
+    .unwrap();
     assert_eq!(outcome, Outcome::Completed);
     let (recorder, live) = sink.into_parts();
     recorder.unwrap().finish().await.unwrap();
@@ -135,9 +144,17 @@ async fn over_current_stops_the_sweep_with_both_stages_safe() {
     let channels = sweep_channels(sensors.channels(), vfd.id(), dyno.id());
     let mut sink = RecordSink::new(None, None, channels);
     let (_stop_tx, stop) = tokio::sync::watch::channel(false);
-    let outcome = run_im_sweep(&plan, &mut vfd, &mut dyno, &mut sensors, &mut sink, &stop)
-        .await
-        .unwrap();
+    let outcome = run_im_sweep(
+        &plan,
+        &mut vfd,
+        &mut dyno,
+        &mut sensors,
+        &mut sink,
+        &NoProgress,
+        &stop,
+    )
+    .await
+    .unwrap();
     let Outcome::Aborted { reason } = outcome else {
         panic!("not aborted")
     };
@@ -169,9 +186,17 @@ async fn heating_budget_stops_a_sweep_without_cool_down() {
     let channels = sweep_channels(sensors.channels(), vfd.id(), dyno.id());
     let mut sink = RecordSink::new(None, None, channels);
     let (_stop_tx, stop) = tokio::sync::watch::channel(false);
-    let outcome = run_im_sweep(&plan, &mut vfd, &mut dyno, &mut sensors, &mut sink, &stop)
-        .await
-        .unwrap();
+    let outcome = run_im_sweep(
+        &plan,
+        &mut vfd,
+        &mut dyno,
+        &mut sensors,
+        &mut sink,
+        &NoProgress,
+        &stop,
+    )
+    .await
+    .unwrap();
     let Outcome::Aborted { reason } = outcome else {
         panic!("not aborted")
     };
@@ -187,9 +212,17 @@ async fn operator_stop_ends_the_sweep() {
     let channels = sweep_channels(sensors.channels(), vfd.id(), dyno.id());
     let mut sink = RecordSink::new(None, None, channels);
     let (_stop_tx, stop) = tokio::sync::watch::channel(true);
-    let outcome = run_im_sweep(&plan, &mut vfd, &mut dyno, &mut sensors, &mut sink, &stop)
-        .await
-        .unwrap();
+    let outcome = run_im_sweep(
+        &plan,
+        &mut vfd,
+        &mut dyno,
+        &mut sensors,
+        &mut sink,
+        &NoProgress,
+        &stop,
+    )
+    .await
+    .unwrap();
     assert_eq!(
         outcome,
         Outcome::Aborted {

@@ -33,6 +33,7 @@ async fn run(cfg: &Config) -> (tempfile::TempDir, Commissioned) {
     let opts = CommissionOptions {
         out_dir: dir.path().to_path_buf(),
         realtime: false,
+        diagnose: false,
     };
     let done = commission(cfg, &opts, &NoProgress, &rx).await.unwrap();
     (dir, done)

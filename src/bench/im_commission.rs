@@ -1,19 +1,19 @@
 //! Commissioning an induction machine: run the `im_slip_sweep` plan of an
-//! [`ImRunConfig`] on the simulated rig, record it to MCAP, identify the
+//! [`ImRunConfig`] on its rig (simulated, or behind Modbus), record it to MCAP, identify the
 //! machine (the paper's recursive estimator and LM), and write the report
 //! and the sweep plot. `motorbench run --config config/sim-im.toml` goes
 //! through [`commission_im`].
 
 use std::path::{Path, PathBuf};
 
-use motorbench_drivers::{PowerStage, SensorStream};
 use tokio::sync::watch;
 
 use super::commission::unique_stem;
 use super::{
-    run_im_sweep, sim_im_rig, sweep_channels, CommissionError, CommissionOptions, ImRunConfig,
-    Outcome, RecordSink,
+    build_im_rig, run_im_sweep, sweep_channels, CommissionError, CommissionOptions, ImRunConfig,
+    NoProgress, Outcome, RecordSink,
 };
+use crate::diagnose::{attach_diagnosis, write_residual_svg};
 use crate::identify::{identify_im, ImIdentification};
 use crate::model::ImCircuit;
 use crate::record::{
@@ -36,20 +36,23 @@ pub struct ImCommissioned {
     pub report_path: PathBuf,
     /// Current and power against slip, measured and fitted.
     pub svg_path: PathBuf,
+    /// Held-out residuals before and after the diagnosis' effect, when diagnosed.
+    pub residuals_svg_path: Option<PathBuf>,
     /// What the recorder wrote.
     pub stats: RecorderStats,
     /// The identification.
     pub identification: ImIdentification,
     /// The data identification ran on.
     pub record: Record,
-    /// The simulated machine's circuit.
-    pub truth: ImCircuit,
+    /// The simulated machine's circuit (simulated rigs only).
+    pub truth: Option<ImCircuit>,
 }
 
 /// Run `cfg`'s sweep, record it, identify the machine, write the files.
 /// An aborted sweep still yields its record and whatever identification
-/// its points allow. The simulated rig runs on its virtual clock (as fast
-/// as the CPU allows; `opts.realtime` does not apply to it yet).
+/// its points allow. The in-process simulated rig runs on its virtual
+/// clock (as fast as the CPU allows) unless `opts.realtime` paces it at the
+/// wall clock; a rig behind Modbus always runs on the wall clock.
 pub async fn commission_im(
     cfg: &ImRunConfig,
     opts: &CommissionOptions,
@@ -60,8 +63,16 @@ pub async fn commission_im(
         move |source| CommissionError::Io { path, source }
     };
     std::fs::create_dir_all(&opts.out_dir).map_err(io(&opts.out_dir))?;
-    let (mut vfd, mut dyno, mut sensors) =
-        sim_im_rig(cfg.rig.clone()).map_err(CommissionError::Rig)?;
+    let rig = build_im_rig(cfg, opts.realtime)
+        .await
+        .map_err(|e| CommissionError::Rig(e.to_string()))?;
+    let (mut vfd, mut dyno, mut sensors, truth, _served) = (
+        rig.supply,
+        rig.dynamometer,
+        rig.sensors,
+        rig.truth,
+        rig.served,
+    );
     let channels = sweep_channels(sensors.channels(), vfd.id(), dyno.id());
     let started_at = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
     let stem = unique_stem(&opts.out_dir, &cfg.motor_id, &started_at);
@@ -78,10 +89,11 @@ pub async fn commission_im(
     let mut sink = RecordSink::new(Some(recorder), Some(meta), channels);
     let outcome = run_im_sweep(
         &cfg.plan,
-        &mut vfd,
-        &mut dyno,
-        &mut sensors,
+        vfd.as_mut(),
+        dyno.as_mut(),
+        sensors.as_mut(),
         &mut sink,
+        &NoProgress,
         shutdown,
     )
     .await?;
@@ -89,10 +101,18 @@ pub async fn commission_im(
     let (recorder, record) = sink.into_parts();
     let recorder = recorder.expect("commissioning always records");
     let model = cfg.model;
-    let (identification, record) =
-        tokio::task::spawn_blocking(move || (identify_im(&record, None, model), record))
-            .await
-            .map_err(|e| CommissionError::Rig(format!("identification task failed: {e}")))?;
+    let diagnose = opts.diagnose;
+    let (identification, record, residuals) = tokio::task::spawn_blocking(move || {
+        let mut identification = identify_im(&record, None, model);
+        let residuals = diagnose
+            .then(|| {
+                attach_diagnosis(&mut identification.report, &record, SegmentKind::ImSlipSweep)
+            })
+            .flatten();
+        (identification, record, residuals)
+    })
+    .await
+    .map_err(|e| CommissionError::Rig(format!("identification task failed: {e}")))?;
     let report = serde_json::to_value(&identification.report).expect("a report always serialises");
     recorder
         .send(Entry::Result {
@@ -111,14 +131,23 @@ pub async fn commission_im(
             reason,
         })
     })?;
+    let residuals_svg_path = match residuals {
+        Some(plot) => {
+            let path = opts.out_dir.join(format!("{stem}.residuals.svg"));
+            write_residual_svg(&plot, &path).map_err(CommissionError::ResidualPlot)?;
+            Some(path)
+        }
+        None => None,
+    };
     Ok(ImCommissioned {
         outcome,
         mcap_path,
         report_path,
         svg_path,
+        residuals_svg_path,
         stats,
         identification,
         record,
-        truth: cfg.rig.circuit,
+        truth,
     })
 }

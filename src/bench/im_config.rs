@@ -1,14 +1,19 @@
-//! Configuration of an `im_slip_sweep` run on the simulated
-//! induction-machine rig (TOML, `config/sim-im.toml`), validated.
+//! Configuration of an `im_slip_sweep` run (TOML, `config/sim-im.toml`
+//! on the simulated induction-machine rig, `config/sim-modbus-im.toml`
+//! behind Modbus), validated.
 //!
 //! The file has the DC configuration's layout (`[motor]`, `[rig]`,
-//! `[limits]`, `[test]`) with the induction machine's keys; a file whose
+//! `[limits]`, `[test]`, and for the daemon the optional `[supervisor]`
+//! and `[records]`) with the induction machine's keys; a file whose
 //! `test.plan` is `"im_slip_sweep"` is one of these ([`is_im_sweep_config`]).
-//! Unknown keys are refused; every error names the file and the line.
+//! `rig.backend` is `"simulated"` or `"modbus"` (see
+//! [`super::ImModbusRig`]). Unknown keys are refused; every error names the
+//! file and the line or the key.
 
 use serde::Deserialize;
 
-use super::{ImSweepPlan, SimImRigConfig};
+use super::{ImModbusRig, ImSweepPlan, SimImRigConfig};
+use crate::config::{Limits, RawRetention, RawSupervisor, Retention, Supervision};
 use crate::identify::slip_grid;
 use crate::model::{Connection, ImCircuit, ImModel, ImParam, ImSupply};
 
@@ -43,8 +48,20 @@ pub struct ImRunConfig {
     pub motor_id: String,
     /// Nameplate (JSON object).
     pub nameplate: serde_json::Value,
-    /// The simulated rig.
-    pub rig: SimImRigConfig,
+    /// The simulated rig (with `backend = "simulated"`, or served behind
+    /// the Modbus links).
+    pub simulated: Option<SimImRigConfig>,
+    /// The Modbus devices (with `backend = "modbus"`).
+    pub modbus: Option<ImModbusRig>,
+    /// Sample rate of the sensors (poll rate behind Modbus), Hz.
+    pub sample_rate_hz: f64,
+    /// Limits the daemon's safety supervisor enforces: line voltage, line
+    /// current, shaft speed.
+    pub limits: Limits,
+    /// The daemon's safety supervisor beyond `limits` (`[supervisor]`).
+    pub supervision: Supervision,
+    /// How long the daemon keeps this rig's records (`[records]`).
+    pub retention: Retention,
     /// The test plan.
     pub plan: ImSweepPlan,
     /// The circuit identification fits.
@@ -58,6 +75,10 @@ struct Raw {
     rig: RawRig,
     limits: RawLimits,
     test: RawTest,
+    #[serde(default)]
+    supervisor: RawSupervisor,
+    #[serde(default)]
+    records: RawRetention,
 }
 
 #[derive(Debug, Deserialize)]
@@ -73,7 +94,8 @@ struct RawRig {
     backend: String,
     #[serde(rename = "sample_rate_Hz")]
     sample_rate_hz: f64,
-    simulated: RawSim,
+    simulated: Option<RawSim>,
+    modbus: Option<toml::Table>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -124,6 +146,10 @@ struct RawThermal {
 struct RawLimits {
     #[serde(rename = "max_current_A")]
     max_current: f64,
+    #[serde(rename = "max_voltage_V")]
+    max_voltage: Option<f64>,
+    #[serde(rename = "max_speed_rad_s")]
+    max_speed: Option<f64>,
     max_i2t_s: f64,
     i2t_time_constant_s: f64,
 }
@@ -168,19 +194,53 @@ impl ImRunConfig {
         ImRunConfig::parse(&path.display().to_string(), &text)
     }
 
-    /// Parse and validate `text`; `source` names it in errors.
+    /// Parse and validate `text`; `source` names it in errors, and its
+    /// directory resolves relative profile paths.
     pub fn parse(source: &str, text: &str) -> Result<ImRunConfig, String> {
+        let dir = std::path::Path::new(source)
+            .parent()
+            .unwrap_or(std::path::Path::new("."));
+        ImRunConfig::parse_in(source, dir, text)
+    }
+
+    /// Parse and validate `text`; `source` names it in errors; relative
+    /// profile paths are resolved in `dir`.
+    pub fn parse_in(
+        source: &str,
+        dir: &std::path::Path,
+        text: &str,
+    ) -> Result<ImRunConfig, String> {
         let raw: Raw = toml::from_str(text).map_err(|e| {
             let start = e.span().map(|s| s.start).unwrap_or(0).min(text.len());
             let line = text[..start].matches('\n').count() + 1;
             format!("{source}:{line}: {}", e.message())
         })?;
         let bad = |what: String| format!("{source}: {what}");
-        if raw.rig.backend != "simulated" {
-            return Err(bad(format!(
-                "rig.backend {:?}: only \"simulated\" is available",
-                raw.rig.backend
-            )));
+        let modbus = match (raw.rig.backend.as_str(), raw.rig.modbus) {
+            ("simulated", None) => None,
+            ("simulated", Some(_)) => {
+                return Err(bad("rig.modbus is for rig.backend = \"modbus\"".into()))
+            }
+            ("modbus", Some(m)) => Some(
+                ImModbusRig::parse(m, dir, raw.rig.simulated.is_some())
+                    .map_err(|(key, reason)| bad(format!("{key}: {reason}")))?,
+            ),
+            ("modbus", None) => return Err(bad("rig.modbus: missing".into())),
+            (other, _) => {
+                return Err(bad(format!(
+                    "rig.backend {other:?}: want \"simulated\" or \"modbus\""
+                )))
+            }
+        };
+        let served = modbus.as_ref().is_some_and(|m| m.simulate.is_some());
+        if (modbus.is_none() || served) && raw.rig.simulated.is_none() {
+            return Err(bad("rig.simulated: missing".into()));
+        }
+        if !(modbus.is_none() || served) && raw.rig.simulated.is_some() {
+            return Err(bad(
+                "rig.simulated is only used with rig.modbus.simulate: leave it out on a real rig"
+                    .into(),
+            ));
         }
         if raw.test.plan != "im_slip_sweep" {
             return Err(bad(format!(
@@ -217,32 +277,6 @@ impl ImRunConfig {
                 "motor.nameplate.poles = {poles} must be an even number ≥ 2"
             )));
         }
-        // The circuit: the model's keys, Ω per phase.
-        let m = &raw.rig.simulated.motor;
-        let truth_model = ImModel::parse(m.get("model").and_then(|v| v.as_str()).unwrap_or(""))
-            .ok_or_else(|| {
-                bad(
-                    "rig.simulated.motor.model must be single, single-fe, double or double-fe"
-                        .into(),
-                )
-            })?;
-        for key in m.keys() {
-            if key != "model" && !truth_model.params().iter().any(|p| p.key() == key) {
-                return Err(bad(format!(
-                    "rig.simulated.motor.{key} is not a {truth_model} parameter"
-                )));
-            }
-        }
-        let values: Result<Vec<f64>, String> = truth_model
-            .params()
-            .iter()
-            .map(|p: &ImParam| {
-                number(m, p.key())
-                    .ok_or_else(|| bad(format!("rig.simulated.motor.{p} (ohm) is missing")))
-            })
-            .collect();
-        let circuit = ImCircuit::from_values(truth_model, &values?)
-            .map_err(|e| bad(format!("rig.simulated.motor: {e}")))?;
         let positive = |name: &str, v: f64| {
             if v.is_finite() && v > 0.0 {
                 Ok(v)
@@ -276,30 +310,84 @@ impl ImRunConfig {
             connection,
             pole_pairs: (poles / 2.0) as u32,
         };
-        let s = &raw.rig.simulated;
-        let rig = SimImRigConfig {
-            circuit,
-            supply,
-            sample_rate_hz: raw.rig.sample_rate_hz,
-            dyno_time_constant_s: positive(
-                "rig.simulated.dynamometer.time_constant_s",
-                s.dynamometer.time_constant_s,
+        let simulated = match &raw.rig.simulated {
+            None => None,
+            Some(s) => {
+                // The circuit: the model's keys, Ω per phase.
+                let m = &s.motor;
+                let truth_model =
+                    ImModel::parse(m.get("model").and_then(|v| v.as_str()).unwrap_or(""))
+                        .ok_or_else(|| {
+                            bad(
+                        "rig.simulated.motor.model must be single, single-fe, double or double-fe"
+                            .into(),
+                    )
+                        })?;
+                for key in m.keys() {
+                    if key != "model" && !truth_model.params().iter().any(|p| p.key() == key) {
+                        return Err(bad(format!(
+                            "rig.simulated.motor.{key} is not a {truth_model} parameter"
+                        )));
+                    }
+                }
+                let values: Result<Vec<f64>, String> = truth_model
+                    .params()
+                    .iter()
+                    .map(|p: &ImParam| {
+                        number(m, p.key())
+                            .ok_or_else(|| bad(format!("rig.simulated.motor.{p} (ohm) is missing")))
+                    })
+                    .collect();
+                let circuit = ImCircuit::from_values(truth_model, &values?)
+                    .map_err(|e| bad(format!("rig.simulated.motor: {e}")))?;
+                Some(SimImRigConfig {
+                    circuit,
+                    supply,
+                    sample_rate_hz: raw.rig.sample_rate_hz,
+                    dyno_time_constant_s: positive(
+                        "rig.simulated.dynamometer.time_constant_s",
+                        s.dynamometer.time_constant_s,
+                    )?,
+                    dyno_max_accel: positive(
+                        "rig.simulated.dynamometer.max_accel_rad_s2",
+                        s.dynamometer.max_accel_rad_s2,
+                    )?,
+                    vfd_slew_v_per_s: positive("rig.simulated.supply.slew_V_per_s", s.supply.slew)?,
+                    noise_relative: s.sensors.noise_relative.max(0.0),
+                    encoder_lines: s.sensors.encoder_lines.max(1),
+                    torque_sensor: s.sensors.torque_sensor,
+                    thermal_resistance_k_per_w: s.thermal.resistance.max(0.0),
+                    thermal_time_constant_s: positive(
+                        "rig.simulated.thermal.time_constant_s",
+                        s.thermal.time_constant_s,
+                    )?,
+                    ambient_c: s.thermal.ambient,
+                    seed: s.sensors.seed,
+                })
+            }
+        };
+        let encoder_lines = match (&modbus, &simulated) {
+            (Some(m), Some(sim)) if m.encoder_lines != sim.encoder_lines => {
+                return Err(bad(format!(
+                    "rig.modbus.encoder.encoder_lines = {} must equal rig.simulated.sensors.encoder_lines = {}: the served counter counts the simulated encoder",
+                    m.encoder_lines, sim.encoder_lines
+                )))
+            }
+            (Some(m), _) => m.encoder_lines,
+            (None, Some(sim)) => sim.encoder_lines,
+            (None, None) => unreachable!("checked above: a simulated backend has rig.simulated"),
+        };
+        let synchronous = std::f64::consts::TAU * frequency / f64::from(supply.pole_pairs);
+        let limits = Limits {
+            max_voltage: positive(
+                "limits.max_voltage_V",
+                raw.limits.max_voltage.unwrap_or(supply.line_voltage),
             )?,
-            dyno_max_accel: positive(
-                "rig.simulated.dynamometer.max_accel_rad_s2",
-                s.dynamometer.max_accel_rad_s2,
+            max_current: raw.limits.max_current,
+            max_speed: positive(
+                "limits.max_speed_rad_s",
+                raw.limits.max_speed.unwrap_or(1.2 * synchronous),
             )?,
-            vfd_slew_v_per_s: positive("rig.simulated.supply.slew_V_per_s", s.supply.slew)?,
-            noise_relative: s.sensors.noise_relative.max(0.0),
-            encoder_lines: s.sensors.encoder_lines.max(1),
-            torque_sensor: s.sensors.torque_sensor,
-            thermal_resistance_k_per_w: s.thermal.resistance.max(0.0),
-            thermal_time_constant_s: positive(
-                "rig.simulated.thermal.time_constant_s",
-                s.thermal.time_constant_s,
-            )?,
-            ambient_c: s.thermal.ambient,
-            seed: s.sensors.seed,
         };
         let st = &raw.test.settle;
         let plan = ImSweepPlan {
@@ -321,19 +409,37 @@ impl ImRunConfig {
                 "limits.i2t_time_constant_s",
                 raw.limits.i2t_time_constant_s,
             )?,
-            encoder_counts_per_rev: 4.0 * f64::from(rig.encoder_lines),
+            encoder_counts_per_rev: 4.0 * f64::from(encoder_lines),
         };
         let nameplate =
             serde_json::to_value(plate).map_err(|e| bad(format!("motor.nameplate: {e}")))?;
+        let supervision = raw
+            .supervisor
+            .validate(source, &limits, &nameplate)
+            .map_err(|e| e.to_string())?;
+        let retention = raw.records.validate(source).map_err(|e| e.to_string())?;
         Ok(ImRunConfig {
             source: source.into(),
             text: text.into(),
             motor_id: raw.motor.id,
             nameplate,
-            rig,
+            simulated,
+            modbus,
+            sample_rate_hz: raw.rig.sample_rate_hz,
+            limits,
+            supervision,
+            retention,
             plan,
             model,
         })
+    }
+
+    /// The rig, for a person.
+    pub fn describe_rig(&self) -> String {
+        match &self.modbus {
+            Some(m) => m.describe(),
+            None => "the simulated induction-machine rig".into(),
+        }
     }
 }
 
@@ -348,12 +454,90 @@ mod tests {
         assert!(is_im_sweep_config(SIM_IM));
         assert_eq!(im_model_of_config(SIM_IM), Some(ImModel::Double));
         let c = ImRunConfig::parse("sim-im.toml", SIM_IM).unwrap();
-        assert_eq!(c.rig.circuit.model(), ImModel::Double);
+        assert_eq!(
+            c.simulated.as_ref().unwrap().circuit.model(),
+            ImModel::Double
+        );
+        assert!(c.modbus.is_none());
+        // Defaults for the daemon's supervisor: the supply's and the dynamometer's ranges.
+        assert!((c.limits.max_voltage - 440.0).abs() < 1e-9);
+        assert!((c.limits.max_speed - 1.2 * std::f64::consts::PI * 50.0).abs() < 1e-9);
         assert_eq!(c.plan.pole_pairs, 2);
         assert_eq!(c.nameplate["connection"], "star");
         assert!(!is_im_sweep_config(include_str!(
             "../../config/sim-dc.toml"
         )));
+    }
+
+    const SIM_MODBUS_IM: &str = include_str!("../../config/sim-modbus-im.toml");
+
+    fn modbus_source() -> String {
+        concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-modbus-im.toml").to_string()
+    }
+
+    #[test]
+    fn shipped_modbus_config_parses() {
+        let c = ImRunConfig::parse(&modbus_source(), SIM_MODBUS_IM).unwrap();
+        let m = c.modbus.as_ref().unwrap();
+        assert_eq!(m.simulate, Some(crate::config::SimulatedTransport::Tcp));
+        assert_eq!((m.supply.unit_id, m.dynamometer.unit_id), (1, 2));
+        assert_eq!(m.supply.profile.name, "Invertek Optidrive E3");
+        assert_eq!(m.meter.profile.name, "Eastron SDM630");
+        assert_eq!(m.dyno_pole_pairs, 2);
+        assert_eq!(c.plan.encoder_counts_per_rev, 4.0 * 4096.0);
+        assert!(c.simulated.is_some());
+        assert!(
+            c.describe_rig().contains("Modbus TCP"),
+            "{}",
+            c.describe_rig()
+        );
+        assert_eq!(c.supervision.max_power, 40000.0);
+    }
+
+    #[test]
+    fn modbus_errors_name_the_key() {
+        let bad = |from: &str, to: &str| {
+            ImRunConfig::parse(&modbus_source(), &SIM_MODBUS_IM.replace(from, to)).unwrap_err()
+        };
+        let e = bad("\"motor_rated_voltage\"", "\"volts\"");
+        assert!(
+            e.contains("rig.modbus.supply.voltage_register") && e.contains("volts"),
+            "{e}"
+        );
+        let e = bad("\"motor_rated_voltage\"", "\"output_current\"");
+        assert!(e.contains("read-only"), "{e}");
+        let e = bad("line_voltage = \"line12_voltage\", ", "");
+        assert!(
+            e.contains("rig.modbus.meter.channels") && e.contains("line_voltage"),
+            "{e}"
+        );
+        let e = bad("total_power", "total_powr");
+        assert!(e.contains("rig.modbus.meter.channels.input_power"), "{e}");
+        let e = bad(
+            "encoder_lines = 4096       # quadrature",
+            "encoder_lines = 1024 # q",
+        );
+        assert!(
+            e.contains("must equal rig.simulated.sensors.encoder_lines"),
+            "{e}"
+        );
+        let e = bad("pole_pairs = 2 ", "pole_pairs = 0 ");
+        assert!(e.contains("rig.modbus.dynamometer.pole_pairs"), "{e}");
+        let e = bad("simulate = \"tcp\"", "simulate = \"udp\"");
+        assert!(e.contains("rig.modbus.simulate"), "{e}");
+        let e = bad("[rig.modbus.encoder]", "[rig.modbus.counter]");
+        assert!(e.contains("rig.modbus.encoder"), "{e}");
+        let e = bad("unit_id = 3", "unit_id = 3\nbaud = 9600");
+        assert!(e.contains("rig.modbus.meter") && e.contains("baud"), "{e}");
+        // Served devices take no address.
+        let e = bad("unit_id = 4", "unit_id = 4\ntransport = \"tcp\"");
+        assert!(e.contains("rig.modbus.encoder"), "{e}");
+        // A real rig has no simulated section.
+        let e = bad("simulate = \"tcp\"", "");
+        assert!(
+            e.contains("rig.modbus.supply.transport") || e.contains("rig.simulated"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -18,7 +18,9 @@
 use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
 use tokio::sync::watch;
 
-use super::{BenchError, Outcome, RecordSink, SettleDetector, SpeedFromEncoder};
+use super::{
+    BenchError, Outcome, Progress, RecordSink, SamplingEvents, SettleDetector, SpeedFromEncoder,
+};
 use crate::identify::slip_grid;
 use crate::record::{
     ChannelSpec, Entry, Event, EventLevel, OperatingPoint, RecordError, SegmentKind, SegmentMarker,
@@ -104,6 +106,54 @@ impl ImSweepPlan {
     }
 }
 
+/// The mean speed over a window of encoder speed readings `(time, speed)`
+/// (each the count change since the previous reading over its interval):
+/// the least-squares slope of the angle they add up to against time, fitted
+/// again without the readings more than four robust standard deviations
+/// (1.4826 × the median absolute residual) off the first line. The angle
+/// is the count itself, so the slope averages its quantisation; a polled
+/// count whose timestamp a stall threw off (a host busy for milliseconds)
+/// is one outlier in the angle, where in the plain fit it tilts the line.
+fn angle_slope(time: &[f64], speed: &[f64]) -> f64 {
+    let n = time.len().min(speed.len());
+    if n < 3 {
+        return speed[..n].iter().sum::<f64>() / n.max(1) as f64;
+    }
+    let mut angle = Vec::with_capacity(n);
+    let mut acc = 0.0;
+    angle.push(0.0);
+    for k in 1..n {
+        acc += speed[k] * (time[k] - time[k - 1]);
+        angle.push(acc);
+    }
+    let fit = |keep: &dyn Fn(usize) -> bool| {
+        let idx: Vec<usize> = (0..n).filter(|&k| keep(k)).collect();
+        let m = idx.len() as f64;
+        let tm = idx.iter().map(|&k| time[k]).sum::<f64>() / m;
+        let am = idx.iter().map(|&k| angle[k]).sum::<f64>() / m;
+        let (mut sxy, mut sxx) = (0.0, 0.0);
+        for &k in &idx {
+            sxy += (time[k] - tm) * (angle[k] - am);
+            sxx += (time[k] - tm).powi(2);
+        }
+        let slope = sxy / sxx;
+        (slope, am - slope * tm)
+    };
+    let (w, a0) = fit(&|_| true);
+    let residual = |k: usize| angle[k] - (a0 + w * time[k]);
+    let mut abs: Vec<f64> = (0..n).map(|k| residual(k).abs()).collect();
+    abs.sort_by(f64::total_cmp);
+    let sigma = 1.4826 * abs[n / 2];
+    if sigma.is_nan() || sigma <= 0.0 {
+        return w;
+    }
+    let kept = (0..n).filter(|&k| residual(k).abs() <= 4.0 * sigma).count();
+    if kept < 3 || kept == n {
+        return w;
+    }
+    fit(&|k| residual(k).abs() <= 4.0 * sigma).0
+}
+
 /// Channels recorded for a sweep: every sensor channel, then the speed
 /// derived from the encoder, then the supply-voltage and dynamometer-speed
 /// commands.
@@ -117,6 +167,8 @@ pub fn sweep_channels(sensors: &[ChannelInfo], vfd_id: &str, dyno_id: &str) -> V
 /// One reading of the quantities the sweep watches.
 #[derive(Debug, Clone, Copy)]
 struct Reading {
+    /// Data time of the batch that completed it, ns.
+    t_ns: u64,
     voltage: f64,
     current: f64,
     power: f64,
@@ -159,10 +211,18 @@ struct Sweep<'a> {
     sensors: &'a mut dyn SensorStream,
     sink: &'a mut RecordSink,
     shutdown: &'a watch::Receiver<bool>,
+    progress: &'a dyn Progress,
     ix: Indices,
     encoder: SpeedFromEncoder,
     t_ns: u64,
     i2t: f64,
+    /// The latest value of each watched quantity: streams that poll
+    /// devices separately deliver batches with some channels only.
+    held: Reading,
+    /// `(data time, speed)` of every encoder reading of the current point.
+    speeds: Vec<(u64, f64)>,
+    /// The sensors' sampling warnings admitted to the record.
+    sampling: SamplingEvents,
 }
 
 impl Sweep<'_> {
@@ -184,55 +244,77 @@ impl Sweep<'_> {
             .await
     }
 
-    /// Next batch: recorded, checked against the limits.
+    /// Next reading: batches are recorded as they come; a reading is
+    /// made of the latest value of each quantity when a batch brings a
+    /// new line current (with a rig whose meter and encoder are polled
+    /// separately, batches carrying only the encoder update the speed),
+    /// and checked against the limits.
     async fn read(&mut self) -> Result<Reading, Fault> {
-        if *self.shutdown.borrow() {
-            return Err(Fault::Stop("stopped by the operator".into()));
+        loop {
+            if *self.shutdown.borrow() {
+                return Err(Fault::Stop("stopped by the operator".into()));
+            }
+            let batch = self.sensors.next_batch().await?;
+            for message in self.sampling.admit(self.sensors.take_warnings()) {
+                self.event(EventLevel::Warn, message).await?;
+            }
+            let dt = batch.t_ns.saturating_sub(self.t_ns) as f64 * 1e-9;
+            self.t_ns = self.t_ns.max(batch.t_ns);
+            self.progress.tick(self.t_ns as f64 * 1e-9);
+            let mut values: Vec<(usize, f64)> =
+                batch.samples.iter().map(|s| (s.channel, s.value)).collect();
+            let get = |c: usize| {
+                batch
+                    .samples
+                    .iter()
+                    .find(|s| s.channel == c)
+                    .map(|s| s.value)
+            };
+            if let Some(w) =
+                get(self.ix.encoder).and_then(|count| self.encoder.update(batch.t_ns, count))
+            {
+                values.push((self.ix.speed_rec, w));
+                self.held.speed = Some(w);
+                self.speeds.push((batch.t_ns, w));
+            }
+            self.sink
+                .push(Entry::Samples {
+                    t_ns: batch.t_ns,
+                    values,
+                })
+                .await?;
+            let h = &mut self.held;
+            if let Some(v) = get(self.ix.voltage) {
+                h.voltage = v;
+            }
+            if let Some(p) = get(self.ix.power) {
+                h.power = p;
+            }
+            if let Some(t) = self.ix.torque.and_then(get) {
+                h.torque = Some(t);
+            }
+            let Some(current) = get(self.ix.current) else {
+                continue;
+            };
+            h.current = current;
+            h.t_ns = batch.t_ns;
+            let r = *h;
+            if !(r.current.is_finite() && r.current <= self.plan.max_current) {
+                return Err(Fault::Stop(format!(
+                    "line_current {:.3} A beyond the limit {} A",
+                    r.current, self.plan.max_current
+                )));
+            }
+            let excess = ((r.current / self.plan.rated_current).powi(2) - 1.0).max(0.0);
+            self.i2t += (excess - self.i2t / self.plan.i2t_time_constant_s.max(1e-9)) * dt;
+            if self.i2t > self.plan.max_i2t_s {
+                return Err(Fault::Stop(format!(
+                    "winding heating budget spent: I²t {:.1} s beyond {} s (rated current {} A)",
+                    self.i2t, self.plan.max_i2t_s, self.plan.rated_current
+                )));
+            }
+            return Ok(r);
         }
-        let batch = self.sensors.next_batch().await?;
-        let dt = batch.t_ns.saturating_sub(self.t_ns) as f64 * 1e-9;
-        self.t_ns = batch.t_ns;
-        let mut values: Vec<(usize, f64)> =
-            batch.samples.iter().map(|s| (s.channel, s.value)).collect();
-        let get = |c: usize| {
-            batch
-                .samples
-                .iter()
-                .find(|s| s.channel == c)
-                .map(|s| s.value)
-        };
-        let speed = get(self.ix.encoder).and_then(|count| self.encoder.update(batch.t_ns, count));
-        if let Some(w) = speed {
-            values.push((self.ix.speed_rec, w));
-        }
-        self.sink
-            .push(Entry::Samples {
-                t_ns: batch.t_ns,
-                values,
-            })
-            .await?;
-        let r = Reading {
-            voltage: get(self.ix.voltage).unwrap_or(f64::NAN),
-            current: get(self.ix.current).unwrap_or(f64::NAN),
-            power: get(self.ix.power).unwrap_or(f64::NAN),
-            speed,
-            torque: self.ix.torque.and_then(get),
-        };
-        if !(r.current.is_finite() && r.current <= self.plan.max_current) {
-            return Err(Fault::Stop(format!(
-                "line_current {:.3} A beyond the limit {} A",
-                r.current, self.plan.max_current
-            )));
-        }
-        let excess = ((r.current / self.plan.rated_current).powi(2) - 1.0).max(0.0);
-        self.i2t += (excess - self.i2t / self.plan.i2t_time_constant_s.max(1e-9)) * dt;
-        if self.i2t > self.plan.max_i2t_s {
-            return Err(Fault::Stop(format!(
-                "winding heating budget spent: I²t {:.1} s beyond {} s (rated current {} A)",
-                self.i2t, self.plan.max_i2t_s, self.plan.rated_current
-            )));
-        }
-        Ok(r)
     }
 
     /// Hold the current point until it settles, then average it; `None`
@@ -249,6 +331,7 @@ impl Sweep<'_> {
         // Line current, input power and speed.
         let mut detector =
             SettleDetector::new(self.plan.settle_window, self.plan.settle_tolerance, 3);
+        self.speeds.clear();
         let start = self.t_ns;
         let mut recent: Vec<Reading> = Vec::new();
         let mut hot = false;
@@ -308,8 +391,21 @@ impl Sweep<'_> {
         };
         let n = window.len() as f64;
         let mean = |f: &dyn Fn(&Reading) -> f64| window.iter().map(f).sum::<f64>() / n;
-        let speeds: Vec<f64> = window.iter().filter_map(|r| r.speed).collect();
-        let speed = speeds.iter().sum::<f64>() / speeds.len().max(1) as f64;
+        // The speed over the window: the slope of the angle the encoder
+        // readings add up to against time (least squares, then again
+        // without the readings whose timestamps a stall threw off).
+        let t0 = window.first().map_or(0, |r| r.t_ns);
+        let (times, speeds): (Vec<f64>, Vec<f64>) = self
+            .speeds
+            .iter()
+            .filter(|(t, _)| *t >= t0)
+            .map(|&(t, w)| (t as f64 * 1e-9, w))
+            .unzip();
+        let speed = if speeds.is_empty() {
+            window.last().and_then(|r| r.speed).unwrap_or(f64::NAN)
+        } else {
+            angle_slope(&times, &speeds)
+        };
         let torques: Vec<f64> = window.iter().filter_map(|r| r.torque).collect();
         let point = OperatingPoint {
             segment,
@@ -358,6 +454,7 @@ impl Sweep<'_> {
                     marker: marker(SegmentPhase::Start),
                 })
                 .await?;
+            self.progress.segment(k, plan.voltages.len(), &label);
             self.vfd.set_setpoint(v).await?;
             self.vfd.set_output_enabled(true).await?;
             self.dyno.set_output_enabled(true).await?;
@@ -386,14 +483,16 @@ impl Sweep<'_> {
     }
 }
 
-/// Run `plan` on the rig; every reading goes to `sink`. The stages are
-/// left in their safe state however the test ends.
+/// Run `plan` on the rig; every reading goes to `sink`, progress
+/// (segments, test time) to `progress`. The stages are left in their safe
+/// state however the test ends.
 pub async fn run_im_sweep(
     plan: &ImSweepPlan,
     vfd: &mut dyn PowerStage,
     dyno: &mut dyn PowerStage,
     sensors: &mut dyn SensorStream,
     sink: &mut RecordSink,
+    progress: &dyn Progress,
     shutdown: &watch::Receiver<bool>,
 ) -> Result<Outcome, BenchError> {
     let channels = sensors.channels().to_vec();
@@ -421,15 +520,26 @@ pub async fn run_im_sweep(
         sensors,
         sink,
         shutdown,
+        progress,
         ix,
         encoder: SpeedFromEncoder::new(plan.encoder_counts_per_rev),
         t_ns: 0,
         i2t: 0.0,
+        speeds: Vec::new(),
+        sampling: SamplingEvents::new(),
+        held: Reading {
+            t_ns: 0,
+            voltage: f64::NAN,
+            current: f64::NAN,
+            power: f64::NAN,
+            speed: None,
+            torque: None,
+        },
     };
     let result = sweep.run().await;
-    // Safe state first, whatever happened.
-    let vfd_safe = sweep.vfd.safe_state().await;
-    let dyno_safe = sweep.dyno.safe_state().await;
+    // Safe state first, whatever happened: both stages at once.
+    let (vfd_safe, dyno_safe) =
+        futures_util::join!(sweep.vfd.safe_state(), sweep.dyno.safe_state());
     let outcome = match result {
         Ok(()) => Outcome::Completed,
         Err(Fault::Record(e)) => return Err(BenchError::Record(e)),
@@ -443,6 +553,11 @@ pub async fn run_im_sweep(
             Outcome::Aborted { reason }
         }
     };
+    let stats = sweep.sensors.sampling_stats();
+    let channels = sweep.sensors.channels().to_vec();
+    for (level, message) in sweep.sampling.summary(&stats, &channels) {
+        sweep.event(level, message).await?;
+    }
     for (name, r) in [("supply", vfd_safe), ("dynamometer", dyno_safe)] {
         if let Err(e) = r {
             sweep
@@ -451,4 +566,56 @@ pub async fn run_im_sweep(
         }
     }
     Ok(outcome)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Encoder speed readings of a shaft at `w` rad/s, 4096 counts a turn,
+    /// polled every 5 ms; `late` readings carry a timestamp `by` s late.
+    fn readings(w: f64, late: &[usize], by: f64) -> (Vec<f64>, Vec<f64>) {
+        let per_rad = 4096.0 / std::f64::consts::TAU;
+        let mut enc = SpeedFromEncoder::new(4096.0);
+        let (mut time, mut speed) = (Vec::new(), Vec::new());
+        for k in 0..101 {
+            let t_true = k as f64 * 0.005;
+            let count = (w * t_true * per_rad).floor();
+            let t = t_true + if late.contains(&k) { by } else { 0.0 };
+            if let Some(s) = enc.update((t * 1e9) as u64, count) {
+                time.push(t);
+                speed.push(s);
+            }
+        }
+        (time, speed)
+    }
+
+    #[test]
+    fn the_slope_averages_the_quantisation() {
+        let (t, s) = readings(156.0, &[], 0.0);
+        assert!((angle_slope(&t, &s) / 156.0 - 1.0).abs() < 2e-5);
+    }
+
+    #[test]
+    fn a_stalled_reading_does_not_tilt_the_slope() {
+        // Two readings stamped 3 ms late (a busy host), near the window's
+        // end where they weigh most in a plain least-squares slope.
+        let (t, s) = readings(156.0, &[90, 95], 0.003);
+        let robust = angle_slope(&t, &s);
+        let n = t.len();
+        let mut angle = vec![0.0];
+        for k in 1..n {
+            angle.push(angle[k - 1] + s[k] * (t[k] - t[k - 1]));
+        }
+        let tm = t.iter().sum::<f64>() / n as f64;
+        let am = angle.iter().sum::<f64>() / n as f64;
+        let plain = t
+            .iter()
+            .zip(&angle)
+            .map(|(x, y)| (x - tm) * (y - am))
+            .sum::<f64>()
+            / t.iter().map(|x| (x - tm).powi(2)).sum::<f64>();
+        assert!((plain / 156.0 - 1.0).abs() > 2e-4, "{plain}");
+        assert!((robust / 156.0 - 1.0).abs() < 2e-5, "{robust}");
+    }
 }

@@ -4,11 +4,14 @@
 //! stop commands the safe state *first*, then records the cause, then
 //! hands the sequencer an error so the test ends as aborted.
 //!
-//! [`supervise`] splits a rig into:
+//! [`supervise`] splits a rig into (and [`supervise_stages`], for a rig with
+//! several stages such as the induction-machine rig's supply VFD and
+//! dynamometer):
 //!
-//! - an [`InterlockedStage`] for the sequencer: it forwards commands to the
-//!   power stage until the supervisor stops the test, then refuses all but
-//!   the safe state (and set points beyond the limit, always);
+//! - an [`InterlockedStage`] per stage for the sequencer: it forwards
+//!   commands to the stage until the supervisor stops the test, then
+//!   refuses all but the safe state (and set points beyond the limit,
+//!   always);
 //! - [`SupervisedSensors`] for the sequencer: the batches the supervisor
 //!   has checked, then, after a stop, one more batch read after the safe
 //!   state took effect (so the record shows it) and an error
@@ -17,7 +20,10 @@
 //!   health, the latest readings.
 //!
 //! Operator stops ([`SupervisorHandle::stop`]) take the same path as
-//! trips; the reply comes once the safe-state command has returned.
+//! trips; the reply comes once the safe-state command has returned. With
+//! several stages every stage is commanded to its safe state at once (the
+//! commands go out in the order the stages were given: the supply first),
+//! and the stop is recorded once all have returned.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex as StdMutex};
@@ -365,6 +371,37 @@ pub fn supervise(
     timing: SupervisorTiming,
     max_setpoint: f64,
 ) -> Supervised {
+    let s = supervise_stages(vec![(stage, max_setpoint)], sensors, monitor, timing);
+    Supervised {
+        stage: s.stages.into_iter().next().expect("one stage in, one out"),
+        sensors: s.sensors,
+        handle: s.handle,
+        task: s.task,
+    }
+}
+
+/// A rig of several stages under supervision. See the module docs.
+pub struct SupervisedStages {
+    /// For the sequencer, in the order given.
+    pub stages: Vec<InterlockedStage>,
+    /// For the sequencer.
+    pub sensors: SupervisedSensors,
+    /// For the daemon.
+    pub handle: SupervisorHandle,
+    /// The task; its result once [`SupervisorHandle::finish`] was called.
+    pub task: tokio::task::JoinHandle<SupervisorSummary>,
+}
+
+/// Put several stages (each with the bound of its set points) and one
+/// sensor stream under supervision and start the supervisor task. A stop
+/// commands every stage to its safe state at once, in the order given
+/// (put the stage that feeds the machine first).
+pub fn supervise_stages(
+    stages: Vec<(Box<dyn PowerStage>, f64)>,
+    sensors: Box<dyn SensorStream>,
+    monitor: SafetyMonitor,
+    timing: SupervisorTiming,
+) -> SupervisedStages {
     let shared = Arc::new(Shared {
         stopped: AtomicBool::new(false),
         stop: StdMutex::new(None),
@@ -372,13 +409,29 @@ pub fn supervise(
         alive_ms: AtomicU64::new(0),
         epoch: Instant::now(),
     });
-    let heartbeat = stage.heartbeat_timeout().map(|t| t / 4);
+    let heartbeat = stages
+        .iter()
+        .filter_map(|(s, _)| s.heartbeat_timeout())
+        .min()
+        .map(|t| t / 4);
     let loop_period = heartbeat
         .unwrap_or(Duration::from_millis(100))
         .min(Duration::from_millis(100));
-    let id = stage.id().to_string();
-    let capabilities = stage.capabilities();
-    let stage: SharedStage = Arc::new(Mutex::new(stage));
+    let mut interlocked = Vec::new();
+    let mut shared_stages = Vec::new();
+    for (stage, max_setpoint) in stages {
+        let id = stage.id().to_string();
+        let capabilities = stage.capabilities();
+        let stage: SharedStage = Arc::new(Mutex::new(stage));
+        shared_stages.push(stage.clone());
+        interlocked.push(InterlockedStage {
+            id,
+            capabilities,
+            stage,
+            shared: shared.clone(),
+            max_setpoint,
+        });
+    }
     let (batch_tx, batch_rx) = mpsc::channel(timing.queue);
     let (cmd_tx, cmd_rx) = mpsc::channel(8);
     let (readings_tx, readings_rx) = watch::channel(monitor.readings());
@@ -390,7 +443,7 @@ pub fn supervise(
         telemetry: telemetry.clone(),
     };
     let task = Task {
-        stage: stage.clone(),
+        stages: shared_stages,
         shared: shared.clone(),
         monitor,
         batch_tx,
@@ -406,14 +459,8 @@ pub fn supervise(
         telemetry,
     };
     let task = tokio::spawn(task.run(sensors, cmd_rx));
-    Supervised {
-        stage: InterlockedStage {
-            id,
-            capabilities,
-            stage,
-            shared: shared.clone(),
-            max_setpoint,
-        },
+    SupervisedStages {
+        stages: interlocked,
         sensors: sensors_out,
         handle: SupervisorHandle {
             commands: cmd_tx,
@@ -426,7 +473,7 @@ pub fn supervise(
 }
 
 struct Task {
-    stage: SharedStage,
+    stages: Vec<SharedStage>,
     shared: Arc<Shared>,
     monitor: SafetyMonitor,
     batch_tx: mpsc::Sender<Result<SampleBatch, DriverError>>,
@@ -540,12 +587,21 @@ impl Task {
         if self.heartbeat.is_none() || self.shared.safe_state_failed.load(Ordering::Relaxed) {
             return;
         }
-        let result = self.stage.lock().await.heartbeat().await;
-        match result {
-            Ok(()) => self.heartbeats += 1,
-            Err(e) => {
-                let cause = StopCause::DeviceFault(format!("power stage heartbeat: {e}"));
-                self.stop(cause, Instant::now()).await;
+        for stage in self.stages.clone() {
+            let mut stage = stage.lock().await;
+            if stage.heartbeat_timeout().is_none() {
+                continue;
+            }
+            let result = stage.heartbeat().await;
+            let id = stage.id().to_string();
+            drop(stage);
+            match result {
+                Ok(()) => self.heartbeats += 1,
+                Err(e) => {
+                    let cause = StopCause::DeviceFault(format!("{id} heartbeat: {e}"));
+                    self.stop(cause, Instant::now()).await;
+                    return;
+                }
             }
         }
     }
@@ -594,9 +650,26 @@ impl Task {
             return first;
         }
         self.shared.stopped.store(true, Ordering::SeqCst);
-        let safe_state = {
-            let mut stage = self.stage.lock().await;
-            stage.safe_state().await.map_err(|e| e.to_string())
+        // Every stage at once; each under its lock, so no command of the
+        // sequencer's gets past it.
+        let results = futures_util::future::join_all(self.stages.iter().map(|stage| async move {
+            let mut stage = stage.lock().await;
+            let r = stage.safe_state().await;
+            (stage.id().to_string(), r)
+        }))
+        .await;
+        let failures: Vec<(String, String)> = results
+            .into_iter()
+            .filter_map(|(id, r)| r.err().map(|e| (id, e.to_string())))
+            .collect();
+        let safe_state = match failures.as_slice() {
+            [] => Ok(()),
+            [(_, e)] if self.stages.len() == 1 => Err(e.clone()),
+            many => Err(many
+                .iter()
+                .map(|(id, e)| format!("{id}: {e}"))
+                .collect::<Vec<_>>()
+                .join("; ")),
         };
         let safe_after = requested.elapsed();
         if safe_state.is_err() {

@@ -8,6 +8,10 @@ mod commission;
 mod encoder;
 mod im_commission;
 mod im_config;
+mod im_modbus_config;
+mod im_rig;
+mod im_sensors;
+mod im_stages;
 mod im_sweep;
 mod interlock;
 mod limits;
@@ -18,6 +22,7 @@ mod rig;
 mod runner;
 mod sampling;
 mod served;
+mod served_im;
 mod settle;
 mod sim_im_rig;
 mod sim_rig;
@@ -28,10 +33,14 @@ pub use commission::{commission, record_name, CommissionError, CommissionOptions
 pub use encoder::SpeedFromEncoder;
 pub use im_commission::{commission_im, ImCommissioned};
 pub use im_config::{im_model_of_config, is_im_sweep_config, ImRunConfig};
+pub use im_modbus_config::ImModbusRig;
+pub use im_rig::{build_im_rig, ImRig, SERVED_IM_PLANT_RATE_HZ};
+pub use im_sensors::MergedSensors;
+pub use im_stages::{VfdDyno, VfdSupply};
 pub use im_sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
 pub use interlock::{
-    supervise, InterlockedStage, StopReport, Supervised, SupervisedSensors, SupervisorHandle,
-    SupervisorSummary, SupervisorTiming,
+    supervise, supervise_stages, InterlockedStage, StopReport, Supervised, SupervisedSensors,
+    SupervisedStages, SupervisorHandle, SupervisorSummary, SupervisorTiming,
 };
 pub use limits::{check_limits, Trip};
 pub use plan::{plan_steps, PlanStep};
@@ -43,6 +52,7 @@ pub use runner::{
 };
 pub use sampling::SamplingEvents;
 pub use served::{ServeError, ServedLink, ServedRig};
+pub use served_im::{ServedImRig, ServedVfd};
 pub use settle::SettleDetector;
 pub use sim_im_rig::{sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd, COPPER_ALPHA};
 pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};

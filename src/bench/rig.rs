@@ -82,7 +82,7 @@ pub enum RigError {
     Driver(#[from] DriverError),
 }
 
-fn client(
+pub(super) fn client(
     name: &str,
     link: &LinkSpec,
     served: Option<&ServedLink>,
@@ -100,7 +100,7 @@ fn client(
     }
 }
 
-fn same_link(a: &ModbusDeviceLink, b: &ModbusDeviceLink) -> bool {
+pub(super) fn same_link(a: &ModbusDeviceLink, b: &ModbusDeviceLink) -> bool {
     match (&a.link, &b.link) {
         (LinkSpec::Tcp(x), LinkSpec::Tcp(y)) => x == y,
         (LinkSpec::Rtu(x), LinkSpec::Rtu(y)) => x.path == y.path,

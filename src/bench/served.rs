@@ -54,7 +54,7 @@ pub enum ServeError {
 
 /// Run a future that never waits (the simulated stage's methods only lock
 /// a mutex) to completion, here and now.
-fn ready_now<F: Future>(f: F) -> F::Output {
+pub(super) fn ready_now<F: Future>(f: F) -> F::Output {
     let mut f = pin!(f);
     match f.as_mut().poll(&mut Context::from_waker(Waker::noop())) {
         Poll::Ready(v) => v,
@@ -130,7 +130,7 @@ fn lock(p: &SharedPlant) -> MutexGuard<'_, RealtimePlant> {
     p.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-fn register(profile: &DeviceProfile, name: &str) -> Result<Register, ServeError> {
+pub(super) fn register(profile: &DeviceProfile, name: &str) -> Result<Register, ServeError> {
     profile
         .register(name)
         .cloned()
@@ -140,7 +140,7 @@ fn register(profile: &DeviceProfile, name: &str) -> Result<Register, ServeError>
         })
 }
 
-fn touches(span: &WriteSpan, r: &Register) -> bool {
+pub(super) fn touches(span: &WriteSpan, r: &Register) -> bool {
     span.kind == r.kind
         && span.address < r.address + r.data_type.width()
         && r.address < span.address + span.count

@@ -12,7 +12,8 @@
 //! machine's losses and raises `Rs` with the copper's temperature
 //! coefficient (the `thermal_drift` effect; zero heating turns it off).
 //! Each [`SensorStream::next_batch`] advances the plant by one sample
-//! period on a virtual clock.
+//! period on a virtual clock, as fast as the CPU allows, or paced at the
+//! wall clock ([`SimImSensors::paced`]) as a real rig would be.
 
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -208,6 +209,8 @@ pub struct SimImSensors {
     rng: StdRng,
     noise: Option<Normal<f64>>,
     counts_per_rad: f64,
+    paced: bool,
+    realtime_start: Option<tokio::time::Instant>,
 }
 
 /// The rig: supply, dynamometer, sensors, sharing one plant.
@@ -267,6 +270,8 @@ pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors)
             rng,
             noise,
             counts_per_rad,
+            paced: false,
+            realtime_start: None,
         },
     ))
 }
@@ -275,6 +280,70 @@ impl SimImSensors {
     /// Winding temperature now, °C (the simulator's truth, for tests).
     pub fn winding_temperature(&self) -> f64 {
         lock(&self.plant).winding_c
+    }
+
+    /// Pace the stream at the wall clock: each batch is delivered when the
+    /// wall-clock time since the first read reaches its data time, as on a
+    /// real rig (the daemon and `run --realtime` use this).
+    pub fn paced(mut self) -> SimImSensors {
+        self.paced = true;
+        self
+    }
+
+    /// Advance the plant by one sample period and read the sensors,
+    /// without any pacing (for simulated devices that run the plant on
+    /// their own clock).
+    pub fn sample(&mut self) -> SampleBatch {
+        let (snap, t_ns) = {
+            let mut p = lock(&self.plant);
+            let snap = p.advance();
+            (snap, (p.step as f64 * p.dt * 1e9).round() as u64)
+        };
+        let mut read = |v: f64| match &self.noise {
+            Some(n) => v * (1.0 + n.sample(&mut self.rng)),
+            None => v,
+        };
+        let mut samples = vec![
+            Sample {
+                channel: channel::LINE_VOLTAGE,
+                value: read(snap.line_voltage),
+            },
+            Sample {
+                channel: channel::LINE_CURRENT,
+                value: read(snap.line_current),
+            },
+            Sample {
+                channel: channel::INPUT_POWER,
+                value: read(snap.input_power),
+            },
+            Sample {
+                channel: channel::ENCODER,
+                value: (snap.angle * self.counts_per_rad).floor(),
+            },
+        ];
+        if self.channels.len() > channel::TORQUE {
+            samples.push(Sample {
+                channel: channel::TORQUE,
+                value: read(snap.torque),
+            });
+        }
+        SampleBatch { t_ns, samples }
+    }
+}
+
+impl SimVfd {
+    /// Whether the supply's output is on (the simulator's truth, for tests).
+    pub fn output_enabled(&self) -> bool {
+        lock(&self.plant).vfd_enabled
+    }
+}
+
+impl SimDyno {
+    /// The speed set point, rad/s, and whether the dynamometer holds it
+    /// (the simulator's truth, for tests).
+    pub fn command(&self) -> (f64, bool) {
+        let p = lock(&self.plant);
+        (p.dyno_setpoint, p.dyno_enabled)
     }
 }
 
@@ -369,39 +438,57 @@ impl SensorStream for SimImSensors {
     }
 
     async fn next_batch(&mut self) -> Result<SampleBatch, DriverError> {
-        let (snap, t_ns) = {
-            let mut p = lock(&self.plant);
-            let snap = p.advance();
-            (snap, (p.step as f64 * p.dt * 1e9).round() as u64)
-        };
-        let mut read = |v: f64| match &self.noise {
-            Some(n) => v * (1.0 + n.sample(&mut self.rng)),
-            None => v,
-        };
-        let mut samples = vec![
-            Sample {
-                channel: channel::LINE_VOLTAGE,
-                value: read(snap.line_voltage),
-            },
-            Sample {
-                channel: channel::LINE_CURRENT,
-                value: read(snap.line_current),
-            },
-            Sample {
-                channel: channel::INPUT_POWER,
-                value: read(snap.input_power),
-            },
-            Sample {
-                channel: channel::ENCODER,
-                value: (snap.angle * self.counts_per_rad).floor(),
-            },
-        ];
-        if self.channels.len() > channel::TORQUE {
-            samples.push(Sample {
-                channel: channel::TORQUE,
-                value: read(snap.torque),
-            });
+        if self.paced && self.realtime_start.is_none() {
+            self.realtime_start = Some(tokio::time::Instant::now());
         }
-        Ok(SampleBatch { t_ns, samples })
+        let batch = self.sample();
+        if let Some(start) = self.realtime_start {
+            tokio::time::sleep_until(start + std::time::Duration::from_nanos(batch.t_ns)).await;
+        } else if lock(&self.plant).step % 1024 == 0 {
+            // Let other tasks (signal handlers, the recorder's queue) run.
+            tokio::task::yield_now().await;
+        }
+        Ok(batch)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{Connection, ImModel};
+
+    fn rig() -> SimImRigConfig {
+        let circuit = ImCircuit::from_values(
+            ImModel::Double,
+            &[0.8659, 3.4224, 119.6437, 1.9282, 0.7346, 0.2346, 3.2332],
+        )
+        .unwrap();
+        let supply = ImSupply {
+            line_voltage: 440.0,
+            frequency: 50.0,
+            connection: Connection::Star,
+            pole_pairs: 2,
+        };
+        SimImRigConfig::new(circuit, supply)
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn paced_batches_come_at_the_wall_clock_unpaced_at_once() {
+        // 500 Hz: 100 batches are 0.2 s of data.
+        let (_, _, sensors) = sim_im_rig(rig()).unwrap();
+        let mut paced = sensors.paced();
+        let t0 = tokio::time::Instant::now();
+        for _ in 0..100 {
+            paced.next_batch().await.unwrap();
+        }
+        let waited = t0.elapsed().as_secs_f64();
+        assert!((waited - 0.2).abs() < 1e-3, "{waited}");
+
+        let (_, _, mut free) = sim_im_rig(rig()).unwrap();
+        let t0 = tokio::time::Instant::now();
+        for _ in 0..100 {
+            free.next_batch().await.unwrap();
+        }
+        assert_eq!(t0.elapsed().as_secs_f64(), 0.0);
     }
 }

@@ -87,9 +87,10 @@ fn default_reorder() -> u64 {
     motorbench_drivers::DEFAULT_REORDER.as_millis() as u64
 }
 
+/// Raw link of one Modbus device (profile, unit, where it is).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawLink {
+pub(crate) struct RawLink {
     profile: String,
     unit_id: Option<u8>,
     transport: Option<String>,
@@ -405,7 +406,9 @@ impl RawModbusRig {
 }
 
 impl RawLink {
-    fn validate(
+    /// Validate under `key`; `dir` resolves the profile path; `simulated`:
+    /// the link is served by the simulated rig.
+    pub(crate) fn validate(
         self,
         key: &str,
         dir: &Path,

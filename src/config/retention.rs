@@ -11,7 +11,7 @@ pub const DEFAULT_MAX_TOTAL_GIB: f64 = 20.0;
 /// Raw `[records]` table.
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct RawRetention {
+pub(crate) struct RawRetention {
     #[serde(rename = "max_total_GiB")]
     max_total_gib: Option<f64>,
     max_age_days: Option<f64>,
@@ -29,7 +29,7 @@ pub struct Retention {
 
 impl RawRetention {
     /// Validate; `source` names the file in errors.
-    pub(super) fn validate(self, source: &str) -> Result<Retention, ConfigError> {
+    pub(crate) fn validate(self, source: &str) -> Result<Retention, ConfigError> {
         let invalid = |key: &str, reason: String| ConfigError::Invalid {
             path: source.to_string(),
             key: format!("records.{key}"),

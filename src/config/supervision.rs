@@ -10,7 +10,7 @@ use super::{ConfigError, Limits};
 /// Raw `[supervisor]` table.
 #[derive(Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct RawSupervisor {
+pub(crate) struct RawSupervisor {
     #[serde(rename = "max_power_W")]
     max_power: Option<f64>,
     stale_timeout_s: Option<f64>,
@@ -84,7 +84,7 @@ pub struct Supervision {
 impl RawSupervisor {
     /// Validate against the rest of the configuration; `source` names the
     /// file in errors.
-    pub(super) fn validate(
+    pub(crate) fn validate(
         self,
         source: &str,
         limits: &Limits,

@@ -2,9 +2,11 @@
 //! supervisor, the record started and indexed, the plan run by the bench's
 //! sequencer ([`run_test`]), then identification, the report files and the
 //! index updated. Progress (phase, segment, current values, ETA) is
-//! published on a watch channel for the API's live feed.
+//! published on a watch channel for the API's live feed. This module has
+//! the DC test and what every test shares ([`TestRun`], the ending
+//! [`conclude`]); [`super::im_jobs`] has the induction-machine sweep.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex as StdMutex};
 use std::time::SystemTime;
@@ -14,14 +16,17 @@ use tokio::sync::{watch, Mutex};
 
 use super::records_index::{unix_s, IndexEntry, KeyResults, RecordOutcome, RecordsIndex};
 use crate::bench::{
-    build_rig, plan_steps, record_channels, run_test, supervise, Outcome, PlanStep, Progress,
-    Readings, RecordSink, SafetyMonitor, ServedRig, StopCause, StopReport, Supervised,
-    SupervisorHandle, SupervisorTiming,
+    build_rig, plan_steps, record_channels, run_test, supervise, BenchError, Outcome, PlanStep,
+    Progress, Readings, RecordSink, SafetyMonitor, ServedRig, StopCause, StopReport, Supervised,
+    SupervisorHandle, SupervisorSummary, SupervisorTiming,
 };
-use crate::config::{Config, Plan};
+use crate::config::{Config, Plan, Retention};
+use crate::diagnose::attach_diagnosis;
 use crate::identify::identify_dc;
-use crate::record::{Entry, Event, EventLevel, Recorder, SegmentKind, TestMeta, SCHEMA_VERSION};
-use crate::report::{segment_plots, write_segments_svg};
+use crate::record::{
+    Entry, Event, EventLevel, Record, Recorder, SegmentKind, TestMeta, SCHEMA_VERSION,
+};
+use crate::report::{segment_plots, write_segments_svg, IdentificationReport};
 
 /// Recorder queue length, in entries.
 const QUEUE_CAPACITY: usize = 4096;
@@ -116,8 +121,8 @@ pub struct TestStatus {
 /// A test the daemon runs or ran; shared by the API and the job.
 #[derive(Debug)]
 pub struct TestRun {
-    status: watch::Sender<TestStatus>,
-    supervisor: SupervisorHandle,
+    pub(super) status: watch::Sender<TestStatus>,
+    pub(super) supervisor: SupervisorHandle,
 }
 
 impl TestRun {
@@ -337,140 +342,209 @@ impl Job {
             &never,
         )
         .await;
-        let stop = supervised.handle.stopped();
-        if let Some(s) = &stop {
-            let first = s.first_safe_t_ns.map_or_else(
-                || "no sample was read after it".to_string(),
-                |t| {
-                    format!(
-                        "first sample after it at test time {:.4} s",
-                        t as f64 * 1e-9
-                    )
-                },
-            );
-            let event = Entry::Event {
-                t_ns: s.requested_t_ns,
-                event: Event {
-                    level: EventLevel::Info,
-                    message: format!("safety supervisor: {}; {first}", s.describe()),
-                },
-            };
-            if let Err(e) = sink.push(event).await {
-                tracing::error!("{name}: recording the stop failed: {e}");
+        let ending = Ending {
+            run,
+            handle: supervised.handle,
+            task: supervised.task,
+            index,
+            dir,
+            name,
+            retention: cfg.retention,
+        };
+        conclude(ending, sink, outcome, |record| {
+            let mut identification = identify_dc(&record);
+            attach_diagnosis(&mut identification.report, &record, SegmentKind::DcStep);
+            let plots = segment_plots(&record, &identification);
+            Identified {
+                report: identification.report,
+                write_svg: Box::new(move |path| {
+                    write_segments_svg(path, &plots).map_err(|e| e.to_string())
+                }),
             }
-        }
-        supervised.handle.finish().await;
-        let summary = supervised.task.await.ok();
-        run.status.send_modify(|s| s.state = TestState::Identifying);
+        })
+        .await
+    }
+}
 
-        let (outcome, reason) = match &outcome {
-            Ok(Outcome::Completed) => (RecordOutcome::Completed, None),
-            Ok(Outcome::Aborted { reason }) => (RecordOutcome::Aborted, Some(reason.clone())),
-            Err(e) => (RecordOutcome::Failed, Some(e.to_string())),
+/// Draws a test's plot to the path given.
+pub type PlotWriter = Box<dyn FnOnce(&Path) -> Result<(), String> + Send>;
+
+/// What identification produced, for [`conclude`]: the report and how to
+/// draw the plot.
+pub struct Identified {
+    /// The report per the data contract.
+    pub report: IdentificationReport,
+    /// Writes the plot to the path given.
+    pub write_svg: PlotWriter,
+}
+
+/// What [`conclude`] needs of a job besides its record.
+pub struct Ending {
+    /// The test.
+    pub run: Arc<TestRun>,
+    /// Its supervisor.
+    pub handle: SupervisorHandle,
+    /// The supervisor's task.
+    pub task: tokio::task::JoinHandle<SupervisorSummary>,
+    /// The records index.
+    pub index: Arc<Mutex<RecordsIndex>>,
+    /// The records directory.
+    pub dir: PathBuf,
+    /// The record's name.
+    pub name: String,
+    /// The rig's retention limits.
+    pub retention: Retention,
+}
+
+/// The end of every test, once the sequencer has returned (the rig is
+/// safe): the supervisor's stop recorded, the supervisor finished, the
+/// record identified (`identify`, on a blocking thread), finished and
+/// indexed with its report and plot, the status published.
+pub async fn conclude(
+    ending: Ending,
+    mut sink: RecordSink,
+    outcome: Result<Outcome, BenchError>,
+    identify: impl FnOnce(Record) -> Identified + Send + 'static,
+) -> JobEnd {
+    let Ending {
+        run,
+        handle,
+        task,
+        index,
+        dir,
+        name,
+        retention,
+    } = ending;
+    let stop = handle.stopped();
+    if let Some(s) = &stop {
+        let first = s.first_safe_t_ns.map_or_else(
+            || "no sample was read after it".to_string(),
+            |t| {
+                format!(
+                    "first sample after it at test time {:.4} s",
+                    t as f64 * 1e-9
+                )
+            },
+        );
+        let event = Entry::Event {
+            t_ns: s.requested_t_ns,
+            event: Event {
+                level: EventLevel::Info,
+                message: format!("safety supervisor: {}; {first}", s.describe()),
+            },
         };
-        let t_end = sink.last_t_ns();
-        let (recorder, record) = sink.into_parts();
-        let identified = tokio::task::spawn_blocking(move || (identify_dc(&record), record)).await;
-        let (identification, record) = match identified {
-            Ok(pair) => pair,
-            Err(e) => {
-                // A bug, not a rig fault: the rig is already safe; the
-                // record stays as written so far (it replays).
-                tracing::error!("{name}: identification failed: {e}");
-                let reason = Some(format!("identification failed: {e}"));
-                finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
-                return JobEnd {
-                    latch: stop.filter(|s| s.cause.latches()),
-                    winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
-                };
-            }
-        };
-        let mut failure = None;
-        if let Some(recorder) = recorder {
-            let report = serde_json::to_value(&identification.report).expect("a report serialises");
-            let result = async {
-                recorder
-                    .send(Entry::Result {
-                        t_ns: t_end,
-                        report,
-                    })
-                    .await?;
-                recorder.finish().await
-            };
-            if let Err(e) = result.await {
-                failure = Some(format!("recording failed: {e}"));
-            }
+        if let Err(e) = sink.push(event).await {
+            tracing::error!("{name}: recording the stop failed: {e}");
         }
-        let report_name = format!("{name}.report.json");
-        let svg_name = format!("{name}.svg");
-        let report_ok = std::fs::write(
-            dir.join(&report_name),
-            identification.report.to_json_pretty() + "\n",
-        )
+    }
+    handle.finish().await;
+    let summary = task.await.ok();
+    run.status.send_modify(|s| s.state = TestState::Identifying);
+
+    let (outcome, reason) = match &outcome {
+        Ok(Outcome::Completed) => (RecordOutcome::Completed, None),
+        Ok(Outcome::Aborted { reason }) => (RecordOutcome::Aborted, Some(reason.clone())),
+        Err(e) => (RecordOutcome::Failed, Some(e.to_string())),
+    };
+    let t_end = sink.last_t_ns();
+    let (recorder, record) = sink.into_parts();
+    let identified = match tokio::task::spawn_blocking(move || identify(record)).await {
+        Ok(identified) => identified,
+        Err(e) => {
+            // A bug, not a rig fault: the rig is already safe; the
+            // record stays as written so far (it replays).
+            tracing::error!("{name}: identification failed: {e}");
+            let reason = Some(format!("identification failed: {e}"));
+            finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
+            return JobEnd {
+                latch: stop.filter(|s| s.cause.latches()),
+                winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
+            };
+        }
+    };
+    let Identified { report, write_svg } = identified;
+    let mut failure = None;
+    if let Some(recorder) = recorder {
+        let value = serde_json::to_value(&report).expect("a report serialises");
+        let result = async {
+            recorder
+                .send(Entry::Result {
+                    t_ns: t_end,
+                    report: value,
+                })
+                .await?;
+            recorder.finish().await
+        };
+        if let Err(e) = result.await {
+            failure = Some(format!("recording failed: {e}"));
+        }
+    }
+    let report_name = format!("{name}.report.json");
+    let svg_name = format!("{name}.svg");
+    let report_ok = std::fs::write(dir.join(&report_name), report.to_json_pretty() + "\n")
         .map_err(|e| tracing::error!("{name}: writing the report failed: {e}"))
         .is_ok();
-        let svg_ok = write_segments_svg(
-            &dir.join(&svg_name),
-            &segment_plots(&record, &identification),
-        )
+    let svg_path = dir.join(&svg_name);
+    let svg_ok = tokio::task::spawn_blocking(move || write_svg(&svg_path))
+        .await
+        .map_err(|e| e.to_string())
+        .and_then(|r| r)
         .map_err(|e| tracing::error!("{name}: writing the plot failed: {e}"))
         .is_ok();
-        let key_results = identification.report.best.as_ref().and_then(|best| {
-            let params = identification.report.methods.get(best)?.params.as_ref()?;
-            Some(KeyResults {
-                method: best.clone(),
-                params: params.iter().map(|(k, p)| (k.clone(), p.value)).collect(),
-            })
+    let key_results = report.best.as_ref().and_then(|best| {
+        let params = report.methods.get(best)?.params.as_ref()?;
+        Some(KeyResults {
+            method: best.clone(),
+            params: params.iter().map(|(k, p)| (k.clone(), p.value)).collect(),
+        })
+    });
+    let (outcome, reason) = match failure {
+        Some(f) => (RecordOutcome::Failed, Some(f)),
+        None => (outcome, reason),
+    };
+    let finished_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
+    {
+        let mut idx = index.lock().await;
+        let updated = idx.update(&name, |e| {
+            e.outcome = outcome;
+            e.reason = reason.clone();
+            e.finished_at = Some(finished_at);
+            e.key_results = key_results;
+            e.report = report_ok.then_some(report_name);
+            e.svg = svg_ok.then_some(svg_name);
         });
-        let (outcome, reason) = match failure {
-            Some(f) => (RecordOutcome::Failed, Some(f)),
-            None => (outcome, reason),
-        };
-        let finished_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
-        {
-            let mut idx = index.lock().await;
-            let updated = idx.update(&name, |e| {
-                e.outcome = outcome;
-                e.reason = reason.clone();
-                e.finished_at = Some(finished_at);
-                e.key_results = key_results;
-                e.report = report_ok.then_some(report_name);
-                e.svg = svg_ok.then_some(svg_name);
-            });
-            if let Err(e) = updated {
-                tracing::error!("{name}: updating the index failed: {e}");
-            }
-            if let Err(e) =
-                idx.apply_retention(&run.status.borrow().rig, &cfg.retention, SystemTime::now())
-            {
-                tracing::error!("retention: {e}");
-            }
+        if let Err(e) = updated {
+            tracing::error!("{name}: updating the index failed: {e}");
         }
-        match outcome {
-            RecordOutcome::Completed => tracing::info!("{name}: test complete"),
-            _ => tracing::warn!(
-                "{name}: test {}: {}",
-                serde_json::to_value(outcome).map_or_else(
-                    |_| "ended".into(),
-                    |v| v.as_str().unwrap_or("ended").to_string()
-                ),
-                reason.as_deref().unwrap_or("")
+        let rig = run.status.borrow().rig.clone();
+        if let Err(e) = idx.apply_retention(&rig, &retention, SystemTime::now()) {
+            tracing::error!("retention: {e}");
+        }
+    }
+    match outcome {
+        RecordOutcome::Completed => tracing::info!("{name}: test complete"),
+        _ => tracing::warn!(
+            "{name}: test {}: {}",
+            serde_json::to_value(outcome).map_or_else(
+                |_| "ended".into(),
+                |v| v.as_str().unwrap_or("ended").to_string()
             ),
-        }
-        let values = *run.supervisor.readings().borrow();
-        run.status.send_modify(|s| {
-            s.state = TestState::Finished;
-            s.outcome = Some(outcome);
-            s.reason = reason;
-            s.stop = stop.as_ref().map(StopStatus::from);
-            s.values = values;
-            s.eta_s = Some(0.0);
-            s.eta_max_s = Some(0.0);
-        });
-        JobEnd {
-            latch: stop.filter(|s| s.cause.latches()),
-            winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
-        }
+            reason.as_deref().unwrap_or("")
+        ),
+    }
+    let values = *run.supervisor.readings().borrow();
+    run.status.send_modify(|s| {
+        s.state = TestState::Finished;
+        s.outcome = Some(outcome);
+        s.reason = reason;
+        s.stop = stop.as_ref().map(StopStatus::from);
+        s.values = values;
+        s.eta_s = Some(0.0);
+        s.eta_max_s = Some(0.0);
+    });
+    JobEnd {
+        latch: stop.filter(|s| s.cause.latches()),
+        winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
     }
 }
 
@@ -501,7 +575,7 @@ async fn finish_failed(
 
 /// Publishes the sequencer's progress on the test's watch channel, with
 /// an ETA.
-struct FeedProgress {
+pub struct FeedProgress {
     run: Arc<TestRun>,
     /// Expected duration of a step before any has finished, s.
     guess_s: f64,
@@ -523,17 +597,34 @@ struct EtaState {
 impl FeedProgress {
     fn new(run: Arc<TestRun>, cfg: &Config, steps: &[PlanStep]) -> FeedProgress {
         let st = cfg.settle;
-        FeedProgress {
+        FeedProgress::with(
             run,
-            guess_s: st.min_hold_s.max(2.0 * st.window_s) + st.hold_s,
-            timeouts: steps
+            st.min_hold_s.max(2.0 * st.window_s) + st.hold_s,
+            steps
                 .iter()
                 .map(|s| match s {
                     PlanStep::Level { .. } => st.timeout_s + st.hold_s,
                     PlanStep::Coastdown { .. } => st.coastdown_timeout_s,
                 })
                 .collect(),
-            kinds: steps.iter().map(PlanStep::kind).collect(),
+            steps.iter().map(PlanStep::kind).collect(),
+        )
+    }
+
+    /// Progress of a plan whose segments take about `guess_s` each before
+    /// one has finished, at most `timeouts[k]` for segment `k`, of test
+    /// kinds `kinds`.
+    pub fn with(
+        run: Arc<TestRun>,
+        guess_s: f64,
+        timeouts: Vec<f64>,
+        kinds: Vec<SegmentKind>,
+    ) -> FeedProgress {
+        FeedProgress {
+            run,
+            guess_s,
+            timeouts,
+            kinds,
             eta: StdMutex::new(EtaState::default()),
             last_ms: AtomicU64::new(0),
         }

@@ -7,7 +7,9 @@
 //! - [`serve`]: bind, announce, serve until the shutdown future resolves,
 //!   then stop running tests safely and finish their records.
 //! - [`api`]: the HTTP endpoints. [`auth`]: the bearer token.
-//! - [`state`]: rigs, tests, the index. [`jobs`]: one test.
+//! - [`state`]: rigs, tests, the index. [`rig_config`]: a DC or an
+//!   induction-machine rig. [`jobs`]: one test, and what every test
+//!   shares; [`im_jobs`]: an induction-machine slip sweep.
 //! - [`records_index`]: the index file, interrupted records, retention.
 //! - [`client`] and [`ctl`]: the command-line client.
 
@@ -16,8 +18,10 @@ pub mod auth;
 pub mod cli;
 pub mod client;
 pub mod ctl;
+pub mod im_jobs;
 pub mod jobs;
 pub mod records_index;
+pub mod rig_config;
 pub mod state;
 pub mod systemd;
 pub mod test_override;
@@ -30,8 +34,9 @@ use std::time::Duration;
 
 use thiserror::Error;
 
-use crate::config::{Config, ConfigError};
+use crate::config::ConfigError;
 use auth::Token;
+use rig_config::{RigConfig, RigConfigError};
 use state::Daemon;
 
 /// Default address of the control API.
@@ -65,6 +70,9 @@ pub enum ServeError {
     /// A configuration is not usable.
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// An induction-machine configuration is not usable.
+    #[error("{0}")]
+    ImConfig(String),
     /// The options are refused (e.g. no token off loopback).
     #[error("{0}")]
     Refused(String),
@@ -77,22 +85,25 @@ impl ServeError {
     /// Exit code: 2 for bad input, 1 for runtime failures.
     pub fn exit_code(&self) -> u8 {
         match self {
-            ServeError::Config(_) | ServeError::Refused(_) => 2,
+            ServeError::Config(_) | ServeError::ImConfig(_) | ServeError::Refused(_) => 2,
             ServeError::Io(_) => 1,
         }
     }
 }
 
 /// The rigs of `configs`: (name, configuration), names from file stems.
-pub fn load_rigs(configs: &[PathBuf]) -> Result<Vec<(String, Config)>, ServeError> {
+pub fn load_rigs(configs: &[PathBuf]) -> Result<Vec<(String, RigConfig)>, ServeError> {
     if configs.is_empty() {
         return Err(ServeError::Refused(
             "serve needs at least one --config (one per rig)".into(),
         ));
     }
-    let mut rigs: Vec<(String, Config)> = Vec::new();
+    let mut rigs: Vec<(String, RigConfig)> = Vec::new();
     for path in configs {
-        let cfg = Config::load(path)?;
+        let cfg = RigConfig::load(path).map_err(|e| match e {
+            RigConfigError::Dc(e) => ServeError::Config(e),
+            RigConfigError::Im(e) => ServeError::ImConfig(e),
+        })?;
         let name = path
             .file_stem()
             .and_then(|s| s.to_str())

@@ -13,11 +13,11 @@ use tokio::sync::Mutex;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use super::jobs::{prepare, StopStatus, TestRun};
+use super::im_jobs::prepare_im;
+use super::jobs::{prepare, JobEnd, StopStatus, TestRun};
 use super::records_index::{IndexError, RecordsIndex};
-use super::test_override::with_test_override;
+use super::rig_config::RigConfig;
 use crate::bench::{StopCause, StopReport};
-use crate::config::Config;
 
 /// A latched stop: the rig refuses new tests until an operator resets it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -60,14 +60,14 @@ pub struct Rig {
     /// Name (the configuration file's stem).
     pub name: String,
     /// Its configuration.
-    pub cfg: Config,
+    pub cfg: RigConfig,
     runtime: Mutex<RigRuntime>,
 }
 
 impl Rig {
     /// The winding rise now, cooled since the last test, K.
-    fn rise_now(rt: &RigRuntime, cfg: &Config) -> f64 {
-        let tau = cfg.supervision.thermal.time_constant;
+    fn rise_now(rt: &RigRuntime, cfg: &RigConfig) -> f64 {
+        let tau = cfg.supervision().thermal.time_constant;
         rt.winding_rise_k * (-rt.winding_at.elapsed().as_secs_f64() / tau).exp()
     }
 }
@@ -81,6 +81,10 @@ pub struct RigStatus {
     pub motor_id: String,
     /// Backend kind.
     pub backend: String,
+    /// The machine: `dc` or `induction`.
+    pub machine: String,
+    /// The stages the supervisor commands safe on a stop, in order.
+    pub stages: Vec<String>,
     /// Configuration file.
     pub config: String,
     /// `idle`, `running` or `tripped`.
@@ -122,6 +126,21 @@ pub enum StopError {
     NotRunning(String),
 }
 
+/// A prepared job of either kind.
+enum AnyJob {
+    Dc(Box<super::jobs::Job>),
+    Im(Box<super::im_jobs::ImJob>),
+}
+
+impl AnyJob {
+    async fn run(self) -> JobEnd {
+        match self {
+            AnyJob::Dc(j) => j.run().await,
+            AnyJob::Im(j) => j.run().await,
+        }
+    }
+}
+
 /// The daemon. See the module docs.
 #[derive(Debug)]
 pub struct Daemon {
@@ -139,7 +158,7 @@ fn lock<T>(m: &StdMutex<T>) -> std::sync::MutexGuard<'_, T> {
 impl Daemon {
     /// A daemon over `rigs` (name, configuration) recording into `records`.
     /// Opening the index marks records left `running` as interrupted.
-    pub fn new(rigs: Vec<(String, Config)>, records: &Path) -> Result<Daemon, IndexError> {
+    pub fn new(rigs: Vec<(String, RigConfig)>, records: &Path) -> Result<Daemon, IndexError> {
         let (mut index, interrupted) = RecordsIndex::open(records)?;
         for name in &interrupted {
             let r = index.get(name).and_then(|e| e.recovered.clone());
@@ -148,7 +167,7 @@ impl Daemon {
             );
         }
         for (name, cfg) in &rigs {
-            index.apply_retention(name, &cfg.retention, SystemTime::now())?;
+            index.apply_retention(name, &cfg.retention(), SystemTime::now())?;
         }
         let rigs = rigs
             .into_iter()
@@ -210,13 +229,15 @@ impl Daemon {
         };
         let winding_c = match running {
             Some(r) => r.status().values.winding_c,
-            None => rig.cfg.supervision.thermal.ambient + Rig::rise_now(&rt, &rig.cfg),
+            None => rig.cfg.supervision().thermal.ambient + Rig::rise_now(&rt, &rig.cfg),
         };
         RigStatus {
             name: rig.name.clone(),
-            motor_id: rig.cfg.motor_id.clone(),
-            backend: rig.cfg.backend.describe(),
-            config: rig.cfg.source.clone(),
+            motor_id: rig.cfg.motor_id().to_string(),
+            backend: rig.cfg.describe(),
+            machine: rig.cfg.machine().to_string(),
+            stages: rig.cfg.stages().iter().map(|s| s.to_string()).collect(),
+            config: rig.cfg.source().to_string(),
             state: state.into(),
             running_test: running.map(|r| r.id()),
             trip: rt.latch.clone(),
@@ -257,14 +278,24 @@ impl Daemon {
             return Err(StartError::Tripped(latch.clone()));
         }
         let cfg = match test {
-            Some(t) => with_test_override(&rig.cfg, t)
-                .map_err(|e| StartError::BadRequest(e.to_string()))?,
+            Some(t) => rig.cfg.with_test(t).map_err(StartError::BadRequest)?,
             None => rig.cfg.clone(),
         };
         let rise = Rig::rise_now(&rt, &rig.cfg);
-        let (run, job) = prepare(rig_name, cfg, rise, self.index.clone())
-            .await
-            .map_err(StartError::Setup)?;
+        let (run, job) = match cfg {
+            RigConfig::Dc(cfg) => {
+                let (run, job) = prepare(rig_name, *cfg, rise, self.index.clone())
+                    .await
+                    .map_err(StartError::Setup)?;
+                (run, AnyJob::Dc(Box::new(job)))
+            }
+            RigConfig::Im(cfg) => {
+                let (run, job) = prepare_im(rig_name, *cfg, rise, self.index.clone())
+                    .await
+                    .map_err(StartError::Setup)?;
+                (run, AnyJob::Im(Box::new(job)))
+            }
+        };
         let id = run.id();
         tracing::info!(
             "{id}: test started on rig {rig_name} ({})",

@@ -3,6 +3,7 @@
 //! the configuration's, and the result is validated like any
 //! configuration file, so a bad override is refused with the key named.
 
+use crate::bench::ImRunConfig;
 use crate::config::{Config, ConfigError};
 
 /// Keys that describe one plan; a request naming a `plan` drops the
@@ -17,12 +18,40 @@ pub fn with_test_override(
     test: &serde_json::Map<String, serde_json::Value>,
 ) -> Result<Config, ConfigError> {
     let source = format!("{} with the request's [test]", cfg.source);
+    let text = merged_text(&cfg.text, test, &source, &PLAN_KEYS)?;
+    Config::parse(&source, &text)
+}
+
+/// An induction-machine sweep configuration with `test` applied, as
+/// [`with_test_override`] does for a DC one (profile paths stay relative
+/// to the configuration's own directory).
+pub fn with_im_test_override(
+    cfg: &ImRunConfig,
+    test: &serde_json::Map<String, serde_json::Value>,
+) -> Result<ImRunConfig, String> {
+    let source = format!("{} with the request's [test]", cfg.source);
+    let text = merged_text(&cfg.text, test, &source, &[]).map_err(|e| e.to_string())?;
+    let dir = std::path::Path::new(&cfg.source)
+        .parent()
+        .unwrap_or(std::path::Path::new("."));
+    ImRunConfig::parse_in(&source, dir, &text)
+}
+
+/// `text` (a configuration) with the keys of `test` merged into its
+/// `[test]` table (a request naming `plan` drops `plan_keys` first), as
+/// TOML text.
+fn merged_text(
+    text: &str,
+    test: &serde_json::Map<String, serde_json::Value>,
+    source: &str,
+    plan_keys: &[&str],
+) -> Result<String, ConfigError> {
     let invalid = |key: String, reason: String| ConfigError::Invalid {
-        path: source.clone(),
+        path: source.to_string(),
         key,
         reason,
     };
-    let mut doc: toml::Table = toml::from_str(&cfg.text).map_err(|e| {
+    let mut doc: toml::Table = toml::from_str(text).map_err(|e| {
         invalid(
             "test".into(),
             format!("the configuration text does not parse again: {e}"),
@@ -35,8 +64,8 @@ pub fn with_test_override(
         return Err(invalid("test".into(), "is not a table".into()));
     };
     if test.contains_key("plan") {
-        for k in PLAN_KEYS {
-            base.remove(k);
+        for k in plan_keys {
+            base.remove(*k);
         }
     }
     for (key, value) in test {
@@ -57,8 +86,7 @@ pub fn with_test_override(
             }
         }
     }
-    let text = toml::to_string(&doc).map_err(|e| invalid("test".into(), e.to_string()))?;
-    Config::parse(&source, &text)
+    toml::to_string(&doc).map_err(|e| invalid("test".into(), e.to_string()))
 }
 
 #[cfg(test)]
@@ -92,6 +120,27 @@ mod tests {
     fn a_new_plan_drops_the_old_plans_keys() {
         let c = apply(json!({"plan": "dc_coastdown", "coastdown_from_V": 200})).unwrap();
         assert_eq!(c.plan, Plan::DcCoastdown { from: 200.0 });
+    }
+
+    #[test]
+    fn an_im_sweep_takes_its_own_test_keys() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-modbus-im.toml");
+        let cfg = ImRunConfig::load(std::path::Path::new(path)).unwrap();
+        let t = json!({"points": 8, "voltages_V": [300], "settle": {"average_samples": 20}});
+        let c = with_im_test_override(&cfg, t.as_object().unwrap()).unwrap();
+        assert_eq!(c.plan.slips.len(), 8);
+        assert_eq!(c.plan.voltages, vec![300.0]);
+        assert_eq!(c.plan.average_samples, 20);
+        assert_eq!(c.plan.settle_window, 25, "other settle keys kept");
+        assert!(
+            c.modbus.is_some(),
+            "profiles found beside the configuration"
+        );
+        let e = with_im_test_override(&cfg, json!({"points": 2}).as_object().unwrap()).unwrap_err();
+        assert!(e.contains("test.points") && e.contains("request"), "{e}");
+        let e = with_im_test_override(&cfg, json!({"plan": "dc_step"}).as_object().unwrap())
+            .unwrap_err();
+        assert!(e.contains("im_slip_sweep"), "{e}");
     }
 
     #[test]

@@ -1,0 +1,299 @@
+//! The `[rig.modbus]` section of an induction-machine sweep configuration:
+//! the supply VFD, the dynamometer's VFD, the power meter and the encoder
+//! counter, each a Modbus device with its profile (`config/devices/`),
+//! optionally with the simulated rig served behind them.
+//!
+//! ```toml
+//! [rig.modbus]
+//! simulate = "tcp"            # serve [rig.simulated] on loopback TCP ("rtu": PTY pairs); omit on a real rig
+//! timeout_ms = 200            # deadline of every Modbus call
+//! retries = 2                 # extra attempts of idempotent calls
+//! max_lost_polls = 5          # failed polls in a row that end the test
+//!
+//! [rig.modbus.supply]         # the VFD feeding the machine under test
+//! profile = "devices/invertek-optidrive-e3.toml"
+//! unit_id = 1
+//! voltage_register = "motor_rated_voltage"   # where the output line voltage is set
+//!
+//! [rig.modbus.dynamometer]    # the VFD driving the load machine
+//! profile = "devices/invertek-optidrive-e3.toml"
+//! unit_id = 2
+//! pole_pairs = 2              # of the load machine: speed = 2π f / pole_pairs
+//!
+//! [rig.modbus.meter]          # line voltage, line current, input power
+//! profile = "devices/eastron-sdm630.toml"
+//! unit_id = 3
+//! channels = { line_voltage = "line12_voltage", line_current = "average_line_current", input_power = "total_power" }
+//!
+//! [rig.modbus.encoder]        # the shaft encoder's counter
+//! profile = "devices/sim-daq.toml"
+//! unit_id = 4
+//! encoder_lines = 4096
+//! channels = { encoder_count = "encoder_count" }
+//! ```
+//!
+//! On a real rig each device section also says where the device is
+//! (`transport = "tcp"` with `address`, or `"rtu"` with `path`), as in the
+//! DC rig's `[rig.modbus.power_stage]`.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Duration;
+
+use motorbench_drivers::modbus::{Access, CallPolicy};
+
+use crate::config::{ModbusDeviceLink, RawLink, SimulatedTransport};
+
+/// The `modbus` backend of a sweep, validated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImModbusRig {
+    /// Serve the simulated rig behind the links.
+    pub simulate: Option<SimulatedTransport>,
+    /// Deadline and retries of every call.
+    pub policy: CallPolicy,
+    /// Failed polls in a row that end the test.
+    pub max_lost_polls: u32,
+    /// The supply VFD.
+    pub supply: ModbusDeviceLink,
+    /// The supply's register that sets its output line voltage, V.
+    pub supply_voltage_register: String,
+    /// The dynamometer's VFD.
+    pub dynamometer: ModbusDeviceLink,
+    /// Pole pairs of the load machine (speed set point to frequency).
+    pub dyno_pole_pairs: u32,
+    /// The power meter.
+    pub meter: ModbusDeviceLink,
+    /// `(quantity, register)` read from the meter.
+    pub meter_channels: Vec<(String, String)>,
+    /// The encoder counter.
+    pub encoder: ModbusDeviceLink,
+    /// `(quantity, register)` read from the encoder counter.
+    pub encoder_channels: Vec<(String, String)>,
+    /// Encoder lines per revolution (4 counts per line).
+    pub encoder_lines: u32,
+}
+
+/// Quantities the sweep needs, and the device that must provide each.
+const REQUIRED: [(&str, &str); 4] = [
+    ("line_voltage", "meter"),
+    ("line_current", "meter"),
+    ("input_power", "meter"),
+    ("encoder_count", "encoder"),
+];
+
+type Bad = (String, String);
+
+fn take<T: serde::de::DeserializeOwned>(
+    table: &mut toml::Table,
+    section: &str,
+    key: &str,
+) -> Result<Option<T>, Bad> {
+    table
+        .remove(key)
+        .map(|v| {
+            v.try_into()
+                .map_err(|e: toml::de::Error| (format!("{section}.{key}"), e.message().to_string()))
+        })
+        .transpose()
+}
+
+fn section(rig: &mut toml::Table, name: &str) -> Result<toml::Table, Bad> {
+    let key = format!("rig.modbus.{name}");
+    match rig.remove(name) {
+        Some(toml::Value::Table(t)) => Ok(t),
+        Some(_) => Err((key, "must be a table".into())),
+        None => Err((key, "missing".into())),
+    }
+}
+
+fn link(t: toml::Table, key: &str, dir: &Path, simulated: bool) -> Result<ModbusDeviceLink, Bad> {
+    let raw: RawLink = toml::Value::Table(t)
+        .try_into()
+        .map_err(|e: toml::de::Error| (key.to_string(), e.message().to_string()))?;
+    raw.validate(key, dir, simulated)
+}
+
+fn channel_map(t: &mut toml::Table, key: &str) -> Result<BTreeMap<String, String>, Bad> {
+    take(t, key, "channels")?.ok_or_else(|| (format!("{key}.channels"), "missing".into()))
+}
+
+fn channels(
+    map: BTreeMap<String, String>,
+    key: &str,
+    device: &ModbusDeviceLink,
+) -> Result<Vec<(String, String)>, Bad> {
+    let mut out = Vec::new();
+    for (quantity, register) in map {
+        let k = format!("{key}.channels.{quantity}");
+        match device.profile.register(&register) {
+            None => {
+                return Err((
+                    k,
+                    format!("{} has no register `{register}`", device.profile_path),
+                ))
+            }
+            Some(r) if r.access == Access::Write => {
+                return Err((k, format!("register `{register}` is write-only")))
+            }
+            Some(_) => out.push((quantity, register)),
+        }
+    }
+    Ok(out)
+}
+
+impl ImModbusRig {
+    /// Validate the `[rig.modbus]` table; `dir` resolves relative profile
+    /// paths; `simulated_present`: the file has `[rig.simulated]`. Errors
+    /// are `(key, reason)`.
+    pub fn parse(
+        mut rig: toml::Table,
+        dir: &Path,
+        simulated_present: bool,
+    ) -> Result<ImModbusRig, Bad> {
+        let top = "rig.modbus";
+        let simulate = match take::<String>(&mut rig, top, "simulate")?.as_deref() {
+            None => None,
+            Some("tcp") => Some(SimulatedTransport::Tcp),
+            Some("rtu") => Some(SimulatedTransport::Rtu),
+            Some(other) => {
+                return Err((
+                    "rig.modbus.simulate".into(),
+                    format!("\"{other}\": use \"tcp\" or \"rtu\", or leave it out on a real rig"),
+                ))
+            }
+        };
+        if simulate.is_some() && !simulated_present {
+            return Err((
+                "rig.simulated".into(),
+                "missing: rig.modbus.simulate serves the simulated rig, which needs it".into(),
+            ));
+        }
+        let timeout_ms: u64 = take(&mut rig, top, "timeout_ms")?.unwrap_or(200);
+        if timeout_ms == 0 {
+            return Err(("rig.modbus.timeout_ms".into(), "must be > 0".into()));
+        }
+        let retries: u32 = take(&mut rig, top, "retries")?.unwrap_or(2);
+        let max_lost_polls: u32 = take(&mut rig, top, "max_lost_polls")?.unwrap_or(5);
+        let sim = simulate.is_some();
+
+        let key = "rig.modbus.supply";
+        let mut t = section(&mut rig, "supply")?;
+        let voltage_register: String = take(&mut t, key, "voltage_register")?
+            .ok_or_else(|| (format!("{key}.voltage_register"), "missing".into()))?;
+        let supply = link(t, key, dir, sim)?;
+        match supply.profile.register(&voltage_register) {
+            Some(r) if r.access != Access::Read => {}
+            Some(_) => {
+                return Err((
+                    format!("{key}.voltage_register"),
+                    format!("register `{voltage_register}` is read-only"),
+                ))
+            }
+            None => {
+                return Err((
+                    format!("{key}.voltage_register"),
+                    format!(
+                        "{} has no register `{voltage_register}`",
+                        supply.profile_path
+                    ),
+                ))
+            }
+        }
+
+        let key = "rig.modbus.dynamometer";
+        let mut t = section(&mut rig, "dynamometer")?;
+        let dyno_pole_pairs: u32 = take(&mut t, key, "pole_pairs")?
+            .ok_or_else(|| (format!("{key}.pole_pairs"), "missing".into()))?;
+        if dyno_pole_pairs == 0 {
+            return Err((format!("{key}.pole_pairs"), "must be ≥ 1".into()));
+        }
+        let dynamometer = link(t, key, dir, sim)?;
+        for (k, d) in [
+            ("rig.modbus.supply.profile", &supply),
+            ("rig.modbus.dynamometer.profile", &dynamometer),
+        ] {
+            if d.profile.power_stage.is_none() {
+                return Err((
+                    k.into(),
+                    format!(
+                        "{} has no [power_stage] section: it cannot drive the rig",
+                        d.profile_path
+                    ),
+                ));
+            }
+        }
+
+        let key = "rig.modbus.meter";
+        let mut t = section(&mut rig, "meter")?;
+        let map = channel_map(&mut t, key)?;
+        let meter = link(t, key, dir, sim)?;
+        let meter_channels = channels(map, key, &meter)?;
+
+        let key = "rig.modbus.encoder";
+        let mut t = section(&mut rig, "encoder")?;
+        let encoder_lines: u32 = take(&mut t, key, "encoder_lines")?
+            .ok_or_else(|| (format!("{key}.encoder_lines"), "missing".into()))?;
+        if encoder_lines == 0 {
+            return Err((format!("{key}.encoder_lines"), "must be > 0".into()));
+        }
+        let map = channel_map(&mut t, key)?;
+        let encoder = link(t, key, dir, sim)?;
+        let encoder_channels = channels(map, key, &encoder)?;
+
+        if let Some(extra) = rig.keys().next() {
+            return Err((
+                format!("rig.modbus.{extra}"),
+                "unknown key: want simulate, timeout_ms, retries, max_lost_polls, supply, \
+                 dynamometer, meter, encoder"
+                    .into(),
+            ));
+        }
+        for (q, device) in REQUIRED {
+            let list = if device == "meter" {
+                &meter_channels
+            } else {
+                &encoder_channels
+            };
+            if !list.iter().any(|(c, _)| c == q) {
+                return Err((
+                    format!("rig.modbus.{device}.channels"),
+                    format!("missing `{q}`: a slip sweep needs line voltage, current, input power and the encoder count"),
+                ));
+            }
+        }
+        Ok(ImModbusRig {
+            simulate,
+            policy: CallPolicy {
+                timeout: Duration::from_millis(timeout_ms),
+                retries,
+                retry_delay: Duration::from_millis(10),
+            },
+            max_lost_polls: max_lost_polls.max(1),
+            supply,
+            supply_voltage_register: voltage_register,
+            dynamometer,
+            dyno_pole_pairs,
+            meter,
+            meter_channels,
+            encoder,
+            encoder_channels,
+            encoder_lines,
+        })
+    }
+
+    /// For a person: the devices and where they are.
+    pub fn describe(&self) -> String {
+        let how = match self.simulate {
+            Some(SimulatedTransport::Tcp) => "the simulated rig served over Modbus TCP: ",
+            Some(SimulatedTransport::Rtu) => "the simulated rig served over Modbus RTU: ",
+            None => "Modbus: ",
+        };
+        format!(
+            "{how}supply {}, dynamometer {}, meter {}, encoder {}",
+            self.supply.profile.name,
+            self.dynamometer.profile.name,
+            self.meter.profile.name,
+            self.encoder.profile.name
+        )
+    }
+}

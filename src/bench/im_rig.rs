@@ -1,0 +1,268 @@
+//! Build the rig an induction-machine sweep configuration names: the
+//! simulated rig in process, or the supply VFD, the dynamometer VFD, the
+//! power meter and the encoder counter over Modbus (with the simulated rig
+//! served behind those links when the configuration asks for it).
+
+use motorbench_drivers::modbus::{
+    spawn_bus, BusHandle, ModbusPowerStage, ModbusSensors, PolledChannel,
+};
+use motorbench_drivers::{ChannelInfo, PowerStage, SensorStream};
+
+use super::im_modbus_config::ImModbusRig;
+use super::rig::{client, same_link};
+use super::served::ServedLink;
+use super::served_im::{ServedDevice, ServedImRig};
+use super::{sim_im_rig, ImRunConfig, MergedSensors, RigError, VfdDyno, VfdSupply};
+use crate::config::ModbusDeviceLink;
+use crate::model::ImCircuit;
+
+/// Plant rate of the simulated induction-machine rig when it is served
+/// behind Modbus, Hz (independent of the bench's poll rate).
+pub const SERVED_IM_PLANT_RATE_HZ: f64 = 1000.0;
+
+/// An induction-machine rig ready for a sweep.
+pub struct ImRig {
+    /// The supply VFD (set point: line voltage, V).
+    pub supply: Box<dyn PowerStage>,
+    /// The dynamometer (set point: shaft speed, rad/s).
+    pub dynamometer: Box<dyn PowerStage>,
+    /// Line voltage, line current, input power, encoder count (and torque
+    /// where fitted).
+    pub sensors: Box<dyn SensorStream>,
+    /// Encoder counts per revolution.
+    pub counts_per_rev: f64,
+    /// The simulated machine's circuit (simulated rigs only).
+    pub truth: Option<ImCircuit>,
+    /// The simulated rig's servers, when it is served behind Modbus.
+    pub served: Option<ServedImRig>,
+}
+
+impl std::fmt::Debug for ImRig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ImRig")
+            .field("supply", &self.supply.id())
+            .field("dynamometer", &self.dynamometer.id())
+            .field("sensors", &self.sensors.id())
+            .field("served", &self.served)
+            .finish()
+    }
+}
+
+/// Buses by link: devices on one line (or one gateway address) share the
+/// task that owns it.
+struct Buses<'a> {
+    m: &'a ImModbusRig,
+    served: bool,
+    open: Vec<(&'a ModbusDeviceLink, BusHandle)>,
+}
+
+impl<'a> Buses<'a> {
+    fn bus(
+        &mut self,
+        name: &str,
+        device: &'a ModbusDeviceLink,
+        served: Option<&ServedLink>,
+    ) -> BusHandle {
+        if !self.served {
+            if let Some((_, b)) = self.open.iter().find(|(d, _)| same_link(d, device)) {
+                return b.clone();
+            }
+        }
+        let bus = spawn_bus(client(
+            name,
+            &device.link,
+            served,
+            device.unit_id,
+            self.m.policy,
+        ));
+        self.open.push((device, bus.clone()));
+        bus
+    }
+}
+
+fn polled(
+    device: &ModbusDeviceLink,
+    channels: &[(String, String)],
+    rate_hz: f64,
+) -> Vec<PolledChannel> {
+    let source = format!("modbus:{}", device.profile.name);
+    channels
+        .iter()
+        .map(|(quantity, name)| {
+            let register = device
+                .profile
+                .register(name)
+                .expect("checked when the configuration was loaded")
+                .clone();
+            PolledChannel {
+                unit: device.unit_id,
+                info: ChannelInfo {
+                    quantity: quantity.clone(),
+                    unit: register.unit.clone(),
+                    source: source.clone(),
+                    rate_hz,
+                },
+                register,
+            }
+        })
+        .collect()
+}
+
+async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigError> {
+    let served = match (m.simulate, &cfg.simulated) {
+        (Some(transport), Some(sim)) => {
+            let count = &m
+                .encoder_channels
+                .iter()
+                .find(|(q, _)| q == "encoder_count")
+                .expect("checked when the configuration was loaded")
+                .1;
+            Some(
+                ServedImRig::start(
+                    sim,
+                    SERVED_IM_PLANT_RATE_HZ,
+                    transport,
+                    (
+                        ServedDevice {
+                            profile: &m.supply.profile,
+                            unit: m.supply.unit_id,
+                        },
+                        &m.supply_voltage_register,
+                    ),
+                    (
+                        ServedDevice {
+                            profile: &m.dynamometer.profile,
+                            unit: m.dynamometer.unit_id,
+                        },
+                        m.dyno_pole_pairs,
+                    ),
+                    (
+                        ServedDevice {
+                            profile: &m.meter.profile,
+                            unit: m.meter.unit_id,
+                        },
+                        &m.meter_channels,
+                    ),
+                    (
+                        ServedDevice {
+                            profile: &m.encoder.profile,
+                            unit: m.encoder.unit_id,
+                        },
+                        count,
+                    ),
+                )
+                .await?,
+            )
+        }
+        _ => None,
+    };
+    let s = served.as_ref();
+    let mut buses = Buses {
+        m,
+        served: s.is_some(),
+        open: Vec::new(),
+    };
+    let supply_bus = buses.bus("modbus-supply", &m.supply, s.map(|s| &s.supply.link));
+    let dyno_bus = buses.bus(
+        "modbus-dyno",
+        &m.dynamometer,
+        s.map(|s| &s.dynamometer.link),
+    );
+    let meter_bus = buses.bus("modbus-meter", &m.meter, s.map(|s| &s.meter_link));
+    let encoder_bus = buses.bus("modbus-encoder", &m.encoder, s.map(|s| &s.encoder_link));
+
+    let supply_drive = ModbusPowerStage::new(
+        &format!("modbus:{} (supply)", m.supply.profile.name),
+        supply_bus.clone(),
+        m.supply.unit_id,
+        &m.supply.profile,
+    )?;
+    let voltage = m
+        .supply
+        .profile
+        .register(&m.supply_voltage_register)
+        .expect("checked when the configuration was loaded")
+        .clone();
+    let supply = VfdSupply::new(
+        supply_drive,
+        supply_bus,
+        m.supply.unit_id,
+        voltage,
+        cfg.plan.frequency,
+        cfg.limits.max_voltage,
+    );
+    let dyno_drive = ModbusPowerStage::new(
+        &format!("modbus:{} (dynamometer)", m.dynamometer.profile.name),
+        dyno_bus,
+        m.dynamometer.unit_id,
+        &m.dynamometer.profile,
+    )?;
+    let dynamometer = VfdDyno::new(dyno_drive, m.dyno_pole_pairs);
+
+    let rate = cfg.sample_rate_hz;
+    let meter_channels = polled(&m.meter, &m.meter_channels, rate);
+    let encoder_channels = polled(&m.encoder, &m.encoder_channels, rate);
+    let sensors: Box<dyn SensorStream> = if s.is_none() && same_link(&m.meter, &m.encoder) {
+        // One line: one poller, the units read in turn.
+        let mut all = meter_channels;
+        all.extend(encoder_channels);
+        Box::new(
+            ModbusSensors::new("modbus-sensors", meter_bus, all, m.max_lost_polls)
+                .with_max_read_gap(m.meter.profile.max_read_gap),
+        )
+    } else {
+        let meter = ModbusSensors::new(
+            &format!("modbus:{}", m.meter.profile.name),
+            meter_bus,
+            meter_channels,
+            m.max_lost_polls,
+        )
+        .with_max_read_gap(m.meter.profile.max_read_gap);
+        let encoder = ModbusSensors::new(
+            &format!("modbus:{}", m.encoder.profile.name),
+            encoder_bus,
+            encoder_channels,
+            m.max_lost_polls,
+        )
+        .with_max_read_gap(m.encoder.profile.max_read_gap);
+        Box::new(MergedSensors::new(
+            "modbus-meter+encoder",
+            vec![Box::new(meter), Box::new(encoder)],
+        ))
+    };
+    Ok(ImRig {
+        supply: Box::new(supply),
+        dynamometer: Box::new(dynamometer),
+        sensors,
+        counts_per_rev: cfg.plan.encoder_counts_per_rev,
+        truth: cfg
+            .simulated
+            .as_ref()
+            .filter(|_| m.simulate.is_some())
+            .map(|s| s.circuit),
+        served,
+    })
+}
+
+/// Build `cfg`'s rig. `realtime` paces the in-process simulated rig at
+/// wall-clock time (a served or real rig always runs on it).
+pub async fn build_im_rig(cfg: &ImRunConfig, realtime: bool) -> Result<ImRig, RigError> {
+    match (&cfg.modbus, &cfg.simulated) {
+        (Some(m), _) => modbus_im_rig(cfg, m).await,
+        (None, Some(sim)) => {
+            let (vfd, dyno, sensors) = sim_im_rig(sim.clone()).map_err(RigError::Simulated)?;
+            let sensors = if realtime { sensors.paced() } else { sensors };
+            Ok(ImRig {
+                supply: Box::new(vfd),
+                dynamometer: Box::new(dyno),
+                sensors: Box::new(sensors),
+                counts_per_rev: cfg.plan.encoder_counts_per_rev,
+                truth: Some(sim.circuit),
+                served: None,
+            })
+        }
+        (None, None) => Err(RigError::Simulated(
+            "the configuration names no rig (checked when it was loaded)".into(),
+        )),
+    }
+}

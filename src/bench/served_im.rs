@@ -1,0 +1,516 @@
+//! The simulated induction-machine rig behind the real protocols: four
+//! Modbus devices, each on its own server (Modbus TCP on 127.0.0.1, a port
+//! the OS picks, or RTU on a pseudo-terminal pair), with the register maps
+//! of shipped profiles:
+//!
+//! - the supply VFD (e.g. `config/devices/invertek-optidrive-e3.toml`):
+//!   control word (bit 0 run, bit 3 coast stop), frequency set point (only
+//!   0 or the machine's rated frequency: the simulated supply has one
+//!   frequency), and a voltage register setting the output line voltage;
+//!   output frequency, output current and status read back;
+//! - the dynamometer VFD (same profile, another unit): run means hold the
+//!   speed `2π f / p` of its frequency set point, stop means ramp the shaft
+//!   to rest, coast stop lets it go;
+//! - the power meter (e.g. `config/devices/eastron-sdm630.toml`): phase and
+//!   line-to-line voltages, phase and average currents, phase and total
+//!   power, frequency, from the simulated sensors;
+//! - the encoder counter (e.g. `config/devices/sim-daq.toml`): the count.
+//!
+//! The plant runs on the wall clock, as in [`super::ServedRig`]: every
+//! request first advances it to "now" in steps of its own period.
+
+use std::f64::consts::TAU;
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::Instant;
+
+use motorbench_drivers::modbus::server::{
+    serve_rtu, serve_tcp, BankService, ExceptionCode, RegisterBank, SharedBank, SimulatedDevice,
+    WriteSpan,
+};
+use motorbench_drivers::modbus::{DeviceProfile, Register};
+use motorbench_drivers::serial::port::{pty_pair, SerialSettings, SerialStream};
+use motorbench_drivers::{PowerStage, SampleBatch};
+use tokio::task::JoinHandle;
+
+use super::served::{ready_now, register, touches, ServeError, ServedLink};
+use super::sim_im_rig::{channel, sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd};
+use crate::config::SimulatedTransport;
+use crate::model::Connection;
+
+/// The simulated machine, supply and dynamometer on the wall clock.
+struct Plant {
+    vfd: SimVfd,
+    dyno: SimDyno,
+    sensors: SimImSensors,
+    start: Instant,
+    period_s: f64,
+    steps: u64,
+    last: Option<SampleBatch>,
+    previous: Option<SampleBatch>,
+}
+
+impl Plant {
+    fn catch_up(&mut self) {
+        let due = (self.start.elapsed().as_secs_f64() / self.period_s) as u64;
+        while self.steps < due {
+            self.previous = self.last.replace(self.sensors.sample());
+            self.steps += 1;
+        }
+    }
+
+    /// The encoder count now: the latest step's, carried on at the speed
+    /// of the last step to the instant of the request, as a hardware
+    /// counter would read it (without this, a reading would be up to one
+    /// plant period old, and the polled speed jitter by that much).
+    fn count_now(&self) -> f64 {
+        let count = |b: &Option<SampleBatch>| {
+            b.as_ref()
+                .and_then(|b| b.samples.iter().find(|s| s.channel == channel::ENCODER))
+                .map(|s| s.value)
+        };
+        let (Some(c1), Some(c0)) = (count(&self.last), count(&self.previous)) else {
+            return self.reading(channel::ENCODER);
+        };
+        let since = self.start.elapsed().as_secs_f64() - self.steps as f64 * self.period_s;
+        (c1 + (c1 - c0) * (since / self.period_s).clamp(0.0, 1.0)).floor()
+    }
+
+    fn reading(&self, ch: usize) -> f64 {
+        self.last
+            .as_ref()
+            .and_then(|b| b.samples.iter().find(|s| s.channel == ch))
+            .map_or(0.0, |s| s.value)
+    }
+}
+
+type SharedPlant = Arc<Mutex<Plant>>;
+
+fn lock(p: &SharedPlant) -> MutexGuard<'_, Plant> {
+    p.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Control word bits of the drive (Optidrive E3 register 1).
+const RUN: u16 = 1;
+const COAST: u16 = 8;
+/// Status word, high byte: 0 stopped, 1 running.
+const STATUS_RUNNING: f64 = 256.0;
+
+/// The registers a served VFD answers on, from its profile.
+#[derive(Debug, Clone)]
+struct VfdRegisters {
+    control: Register,
+    frequency: Register,
+    output_frequency: Option<Register>,
+    output_current: Option<Register>,
+    status: Option<Register>,
+}
+
+impl VfdRegisters {
+    fn of(profile: &DeviceProfile) -> Result<VfdRegisters, ServeError> {
+        let map = profile
+            .power_stage
+            .as_ref()
+            .ok_or_else(|| ServeError::MissingRegister {
+                profile: profile.name.clone(),
+                register: "[power_stage] section".into(),
+            })?;
+        let control = match &map.enable {
+            Some((n, _, _)) => register(profile, n)?,
+            None => {
+                return Err(ServeError::MissingRegister {
+                    profile: profile.name.clone(),
+                    register: "[power_stage] enable (the control word)".into(),
+                })
+            }
+        };
+        Ok(VfdRegisters {
+            control,
+            frequency: register(profile, &map.setpoint)?,
+            output_frequency: profile.register("output_frequency").cloned(),
+            output_current: profile.register("output_current").cloned(),
+            status: profile.register("status").cloned(),
+        })
+    }
+
+    /// (run, coast) from the control word in `bank`.
+    fn command(&self, bank: &RegisterBank) -> (bool, bool) {
+        let raw = bank.get(&self.control) as u16;
+        (raw & RUN != 0 && raw & COAST == 0, raw & COAST != 0)
+    }
+}
+
+/// The supply VFD.
+struct SupplyDevice {
+    plant: SharedPlant,
+    regs: VfdRegisters,
+    voltage: Register,
+    frequency_hz: f64,
+}
+
+impl SupplyDevice {
+    fn running(&self, bank: &RegisterBank) -> bool {
+        self.regs.command(bank).0 && bank.get(&self.regs.frequency) > 0.0
+    }
+}
+
+impl SimulatedDevice for SupplyDevice {
+    fn before_read(&self, bank: &mut RegisterBank) {
+        let mut p = lock(&self.plant);
+        p.catch_up();
+        let running = self.running(bank);
+        if let Some(r) = &self.regs.output_frequency {
+            bank.set(r, if running { self.frequency_hz } else { 0.0 });
+        }
+        if let Some(r) = &self.regs.output_current {
+            bank.set(r, p.reading(channel::LINE_CURRENT).max(0.0));
+        }
+        if let Some(r) = &self.regs.status {
+            bank.set(r, if running { STATUS_RUNNING } else { 0.0 });
+        }
+    }
+
+    fn after_write(
+        &self,
+        bank: &mut RegisterBank,
+        _before: &RegisterBank,
+        span: WriteSpan,
+    ) -> Result<(), ExceptionCode> {
+        let mut p = lock(&self.plant);
+        p.catch_up();
+        if touches(&span, &self.regs.frequency) {
+            let f = bank.get(&self.regs.frequency);
+            // The simulated machine has one supply frequency.
+            if f != 0.0 && (f - self.frequency_hz).abs() > 0.051 {
+                return Err(ExceptionCode::IllegalDataValue);
+            }
+        }
+        if touches(&span, &self.voltage) {
+            ready_now(p.vfd.set_setpoint(bank.get(&self.voltage)))
+                .map_err(|_| ExceptionCode::IllegalDataValue)?;
+        }
+        let on = self.running(bank);
+        ready_now(p.vfd.set_output_enabled(on)).map_err(|_| ExceptionCode::ServerDeviceFailure)
+    }
+}
+
+/// The dynamometer VFD.
+struct DynoDevice {
+    plant: SharedPlant,
+    regs: VfdRegisters,
+    rad_s_per_hz: f64,
+}
+
+impl SimulatedDevice for DynoDevice {
+    fn before_read(&self, bank: &mut RegisterBank) {
+        lock(&self.plant).catch_up();
+        let (run, _) = self.regs.command(bank);
+        let f = bank.get(&self.regs.frequency);
+        if let Some(r) = &self.regs.output_frequency {
+            bank.set(r, if run { f } else { 0.0 });
+        }
+        if let Some(r) = &self.regs.status {
+            bank.set(r, if run { STATUS_RUNNING } else { 0.0 });
+        }
+    }
+
+    fn after_write(
+        &self,
+        bank: &mut RegisterBank,
+        _before: &RegisterBank,
+        _span: WriteSpan,
+    ) -> Result<(), ExceptionCode> {
+        let mut p = lock(&self.plant);
+        p.catch_up();
+        let (run, coast) = self.regs.command(bank);
+        let speed = bank.get(&self.regs.frequency) * self.rad_s_per_hz;
+        let r = if coast {
+            ready_now(p.dyno.set_output_enabled(false))
+        } else if run {
+            ready_now(p.dyno.set_setpoint(speed)).map_err(|_| ExceptionCode::IllegalDataValue)?;
+            ready_now(p.dyno.set_output_enabled(true))
+        } else {
+            // Stop: the drive ramps the shaft to rest.
+            ready_now(p.dyno.safe_state())
+        };
+        r.map_err(|_| ExceptionCode::ServerDeviceFailure)
+    }
+}
+
+/// The power meter.
+struct MeterDevice {
+    plant: SharedPlant,
+    /// `(register, what it shows)`.
+    registers: Vec<(Register, MeterValue)>,
+    frequency_hz: f64,
+    phase_voltage_per_line: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum MeterValue {
+    LineVoltage,
+    PhaseVoltage,
+    Current,
+    TotalPower,
+    PhasePower,
+    Frequency,
+}
+
+impl MeterValue {
+    /// What the SDM630-style register `name` shows, if known.
+    fn of_name(name: &str) -> Option<MeterValue> {
+        Some(match name {
+            "line_voltage" | "line12_voltage" | "line23_voltage" | "line31_voltage" => {
+                MeterValue::LineVoltage
+            }
+            "phase1_voltage" | "phase2_voltage" | "phase3_voltage" => MeterValue::PhaseVoltage,
+            "line_current"
+            | "phase1_current"
+            | "phase2_current"
+            | "phase3_current"
+            | "average_line_current" => MeterValue::Current,
+            "input_power" | "total_power" => MeterValue::TotalPower,
+            "phase1_power" | "phase2_power" | "phase3_power" => MeterValue::PhasePower,
+            "frequency" => MeterValue::Frequency,
+            _ => return None,
+        })
+    }
+}
+
+impl SimulatedDevice for MeterDevice {
+    fn before_read(&self, bank: &mut RegisterBank) {
+        let mut p = lock(&self.plant);
+        p.catch_up();
+        let v = p.reading(channel::LINE_VOLTAGE);
+        let i = p.reading(channel::LINE_CURRENT);
+        let w = p.reading(channel::INPUT_POWER);
+        for (r, what) in &self.registers {
+            let value = match what {
+                MeterValue::LineVoltage => v,
+                MeterValue::PhaseVoltage => v * self.phase_voltage_per_line,
+                MeterValue::Current => i,
+                MeterValue::TotalPower => w,
+                MeterValue::PhasePower => w / 3.0,
+                MeterValue::Frequency => {
+                    if v > 1.0 {
+                        self.frequency_hz
+                    } else {
+                        0.0
+                    }
+                }
+            };
+            bank.set(r, value);
+        }
+    }
+}
+
+/// The encoder counter.
+struct EncoderDevice {
+    plant: SharedPlant,
+    count: Register,
+}
+
+impl SimulatedDevice for EncoderDevice {
+    fn before_read(&self, bank: &mut RegisterBank) {
+        let mut p = lock(&self.plant);
+        p.catch_up();
+        bank.set(&self.count, p.count_now());
+    }
+}
+
+/// A served VFD: where it answers and its registers.
+#[derive(Debug, Clone)]
+pub struct ServedVfd {
+    /// Where it answers.
+    pub link: ServedLink,
+    /// Its registers (for tests and diagnostics).
+    pub bank: SharedBank,
+}
+
+/// The simulated induction-machine rig, served. Dropping it stops the
+/// servers.
+pub struct ServedImRig {
+    /// The supply VFD.
+    pub supply: ServedVfd,
+    /// The dynamometer VFD.
+    pub dynamometer: ServedVfd,
+    /// Where the power meter answers.
+    pub meter_link: ServedLink,
+    /// Where the encoder counter answers.
+    pub encoder_link: ServedLink,
+    tasks: Vec<JoinHandle<()>>,
+    _pty_ends: Vec<SerialStream>,
+    vfd: SimVfd,
+    dyno: SimDyno,
+}
+
+impl std::fmt::Debug for ServedImRig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ServedImRig")
+            .field("supply", &self.supply.link)
+            .field("dynamometer", &self.dynamometer.link)
+            .field("meter", &self.meter_link)
+            .field("encoder", &self.encoder_link)
+            .finish()
+    }
+}
+
+/// One served device of [`ServedImRig::start`]: profile, unit, and the
+/// register names it must answer on.
+#[derive(Debug, Clone, Copy)]
+pub struct ServedDevice<'a> {
+    /// Register map.
+    pub profile: &'a DeviceProfile,
+    /// Unit id.
+    pub unit: u8,
+}
+
+impl ServedImRig {
+    /// Serve `sim` (its plant stepped at `plant_rate_hz`) over `transport`:
+    /// the supply VFD (its output voltage set through `supply_voltage`),
+    /// the dynamometer VFD (a load machine of `dyno_pole_pairs`), the meter
+    /// (answering on every register its profile names that it knows, and
+    /// on `meter_channels`' registers by quantity) and the encoder counter
+    /// (`encoder_count` its count register).
+    #[allow(clippy::too_many_arguments)]
+    pub async fn start(
+        sim: &SimImRigConfig,
+        plant_rate_hz: f64,
+        transport: SimulatedTransport,
+        supply: (ServedDevice<'_>, &str),
+        dynamometer: (ServedDevice<'_>, u32),
+        meter: (ServedDevice<'_>, &[(String, String)]),
+        encoder: (ServedDevice<'_>, &str),
+    ) -> Result<ServedImRig, ServeError> {
+        let cfg = SimImRigConfig {
+            sample_rate_hz: plant_rate_hz,
+            ..sim.clone()
+        };
+        let frequency_hz = cfg.supply.frequency;
+        let phase_voltage_per_line = match cfg.supply.connection {
+            Connection::Star => 1.0 / 3f64.sqrt(),
+            Connection::Delta => 1.0,
+        };
+        let (vfd, dyno, sensors) = sim_im_rig(cfg).map_err(ServeError::Motor)?;
+        let plant = Arc::new(Mutex::new(Plant {
+            vfd: vfd.clone(),
+            dyno: dyno.clone(),
+            sensors,
+            start: Instant::now(),
+            period_s: 1.0 / plant_rate_hz,
+            steps: 0,
+            last: None,
+            previous: None,
+        }));
+
+        let (sd, voltage_name) = supply;
+        let supply_dev = SupplyDevice {
+            plant: plant.clone(),
+            regs: VfdRegisters::of(sd.profile)?,
+            voltage: register(sd.profile, voltage_name)?,
+            frequency_hz,
+        };
+        let (dd, pole_pairs) = dynamometer;
+        let dyno_dev = DynoDevice {
+            plant: plant.clone(),
+            regs: VfdRegisters::of(dd.profile)?,
+            rad_s_per_hz: TAU / f64::from(pole_pairs.max(1)),
+        };
+        let (md, meter_channels) = meter;
+        let mut registers: Vec<(Register, MeterValue)> = md
+            .profile
+            .registers
+            .iter()
+            .filter_map(|(name, r)| MeterValue::of_name(name).map(|v| (r.clone(), v)))
+            .collect();
+        for (quantity, name) in meter_channels {
+            let what =
+                MeterValue::of_name(quantity).ok_or_else(|| ServeError::MissingRegister {
+                    profile: format!("{} (served meter)", md.profile.name),
+                    register: format!(
+                        "{name} for `{quantity}`, which the simulated meter does not measure"
+                    ),
+                })?;
+            registers.push((register(md.profile, name)?, what));
+        }
+        let meter_dev = MeterDevice {
+            plant: plant.clone(),
+            registers,
+            frequency_hz,
+            phase_voltage_per_line,
+        };
+        let (ed, count_name) = encoder;
+        let encoder_dev = EncoderDevice {
+            plant: plant.clone(),
+            count: register(ed.profile, count_name)?,
+        };
+
+        let mut pty_ends = Vec::new();
+        let mut tasks = Vec::new();
+        let mut serve = |profile: &DeviceProfile,
+                         unit: u8,
+                         device: Arc<dyn SimulatedDevice>|
+         -> Result<(ServedLink, SharedBank), ServeError> {
+            let bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(profile)));
+            let service = BankService::new(unit, bank.clone(), device);
+            let io = |e: std::io::Error| ServeError::Io(e.to_string());
+            let link = match transport {
+                SimulatedTransport::Tcp => {
+                    let std_listener = std::net::TcpListener::bind("127.0.0.1:0").map_err(io)?;
+                    std_listener.set_nonblocking(true).map_err(io)?;
+                    let listener = tokio::net::TcpListener::from_std(std_listener).map_err(io)?;
+                    let (addr, task) = serve_tcp(listener, service).map_err(io)?;
+                    tasks.push(task);
+                    ServedLink::Tcp(addr)
+                }
+                SimulatedTransport::Rtu => {
+                    let pty = pty_pair().map_err(|e| ServeError::Io(e.to_string()))?;
+                    tasks.push(serve_rtu(pty.host, service));
+                    let baud = profile.serial.map_or(115_200, |s| s.baud_rate);
+                    let settings = SerialSettings::new_8n1(&pty.device_path, baud);
+                    pty_ends.push(pty.device_end);
+                    ServedLink::Rtu(settings)
+                }
+            };
+            Ok((link, bank))
+        };
+        let (supply_link, supply_bank) = serve(sd.profile, sd.unit, Arc::new(supply_dev))?;
+        let (dyno_link, dyno_bank) = serve(dd.profile, dd.unit, Arc::new(dyno_dev))?;
+        let (meter_link, _) = serve(md.profile, md.unit, Arc::new(meter_dev))?;
+        let (encoder_link, _) = serve(ed.profile, ed.unit, Arc::new(encoder_dev))?;
+        Ok(ServedImRig {
+            supply: ServedVfd {
+                link: supply_link,
+                bank: supply_bank,
+            },
+            dynamometer: ServedVfd {
+                link: dyno_link,
+                bank: dyno_bank,
+            },
+            meter_link,
+            encoder_link,
+            tasks,
+            _pty_ends: pty_ends,
+            vfd,
+            dyno,
+        })
+    }
+
+    /// Whether the simulated supply's output is on, as the plant sees it.
+    pub fn supply_output_enabled(&self) -> bool {
+        self.vfd.output_enabled()
+    }
+
+    /// The simulated dynamometer's speed set point and whether it holds
+    /// it, as the plant sees them (a stopped drive holds zero).
+    pub fn dyno_command(&self) -> (f64, bool) {
+        self.dyno.command()
+    }
+}
+
+impl Drop for ServedImRig {
+    fn drop(&mut self) {
+        for t in &self.tasks {
+            t.abort();
+        }
+    }
+}

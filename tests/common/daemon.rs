@@ -1,0 +1,142 @@
+//! The daemon under test: `motorbench serve` started as a child process on
+//! a configuration, its announced address, a client for its API, `ctl`
+//! against it, and polling helpers. Shared by `tests/daemon.rs`,
+//! `tests/daemon_modbus.rs` and `tests/daemon_im.rs`.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use motorbench::serve::client::{Client, Endpoint};
+use serde_json::Value;
+
+/// The binary under test.
+pub const BIN: &str = env!("CARGO_BIN_EXE_motorbench");
+
+/// Longest any wait below may take before the test fails (a bound on
+/// loops, not a timing requirement).
+pub const PATIENCE: Duration = Duration::from_secs(180);
+
+/// A running daemon; killed when dropped.
+pub struct Served {
+    /// The `serve` process.
+    pub child: Child,
+    /// The address it announced (`http://IP:PORT` or `unix:PATH`).
+    pub url: String,
+    log: PathBuf,
+}
+
+fn unique_suffix() -> u128 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .as_nanos()
+}
+
+impl Served {
+    /// Start `serve --config config --records records` with `extra`
+    /// arguments, its log in `log_dir`; returns once it has announced its
+    /// address.
+    pub fn start(config: &Path, records: &Path, log_dir: &Path, extra: &[&str]) -> Served {
+        let log = log_dir.join(format!(
+            "serve-{}.log",
+            std::process::id() as u128 + unique_suffix()
+        ));
+        let mut child = Command::new(BIN)
+            .arg("serve")
+            .arg("--config")
+            .arg(config)
+            .arg("--records")
+            .arg(records)
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stderr(std::fs::File::create(&log).unwrap())
+            .spawn()
+            .expect("motorbench serve starts");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let url = line
+            .trim()
+            .strip_prefix("listening on ")
+            .unwrap_or_else(|| {
+                panic!(
+                    "no address announced: {line:?}\n{}",
+                    std::fs::read_to_string(&log).unwrap_or_default()
+                )
+            })
+            .to_string();
+        Served { child, url, log }
+    }
+
+    /// A client on the loopback address of the bound port.
+    pub fn client(&self, token: Option<&str>) -> Client {
+        let endpoint = match Endpoint::parse(&self.url).unwrap() {
+            Endpoint::Tcp(a) => Endpoint::Tcp(a.replace("0.0.0.0", "127.0.0.1")),
+            unix => unix,
+        };
+        Client::new(endpoint, token.map(str::to_string))
+    }
+
+    /// Run `motorbench ctl --url URL args…`.
+    pub fn ctl(&self, args: &[&str]) -> Output {
+        Command::new(BIN)
+            .arg("ctl")
+            .arg("--url")
+            .arg(&self.url)
+            .args(args)
+            .output()
+            .unwrap()
+    }
+
+    /// The daemon's log so far.
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+/// GET `path`, which must succeed; its JSON.
+pub async fn get(c: &Client, path: &str) -> Value {
+    let r = c.get(path).await.unwrap();
+    assert!(
+        r.ok(),
+        "GET {path}: {} {}",
+        r.status,
+        String::from_utf8_lossy(&r.body)
+    );
+    r.json()
+}
+
+/// Poll test `id` until `until` holds.
+pub async fn wait_test(c: &Client, id: &str, until: impl Fn(&Value) -> bool) -> Value {
+    let t0 = Instant::now();
+    loop {
+        let s = get(c, &format!("/v1/tests/{id}")).await;
+        if until(&s) {
+            return s;
+        }
+        assert!(t0.elapsed() < PATIENCE, "waited too long; last status {s}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+/// The test has finished.
+pub fn finished(s: &Value) -> bool {
+    s["state"] == "finished"
+}
+
+/// A shipped configuration file.
+pub fn shipped(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("config")
+        .join(name)
+}
