@@ -2,14 +2,21 @@
 //! behind Modbus TCP, its armature voltage and current streaming over a
 //! serial pseudo-terminal, and its speed and position from the simulated
 //! CANopen (CiA 406) encoder over SLCAN on another pseudo-terminal, merged
-//! into one sample stream (`config/sim-modbus-can-dc.toml`); and a Modbus
-//! DAQ whose channels are polled at their own configured rates.
+//! into one sample stream (`config/sim-modbus-can-dc.toml`): the full DC
+//! test against the direct simulated rig, `probe` over every link, and a
+//! pulled CAN cable mid-test; and a Modbus DAQ whose channels are polled
+//! at their own configured rates.
 //!
 //! These tests run on the wall clock, one at a time (a shared lock).
 
+mod common;
+
 use std::path::Path;
 
-use motorbench::bench::{commission, CommissionOptions, Commissioned, NoProgress, Outcome};
+use motorbench::bench::{
+    build_rig, commission, plan_steps, record_channels, run_test, CommissionOptions, Commissioned,
+    NoProgress, Outcome, RecordSink,
+};
 use motorbench::config::{Backend, Config};
 use motorbench::report::IdentificationReport;
 
@@ -139,4 +146,71 @@ async fn modbus_channels_are_polled_at_their_configured_rates() {
         3 * received(voltage) < 2 * received(current),
         "{voltage}\n{current}"
     );
+}
+
+#[test]
+fn probe_reads_every_channel_of_every_link() {
+    let _one_at_a_time = REALTIME.blocking_lock();
+    let cfg = config_path("sim-modbus-can-dc.toml");
+    let out = common::motorbench(&["probe", "--config", cfg.to_str().unwrap()]);
+    let (stdout, stderr) = common::text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    for (q, source) in [
+        ("armature_voltage", "(serial:"),
+        ("armature_current", "(serial:"),
+        ("encoder_count", "(slcan:"),
+    ] {
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with(&format!("[idle] {q} ")))
+            .unwrap_or_else(|| panic!("no {q} in:\n{stdout}"));
+        assert!(!line.contains("FAILED"), "{line}");
+        assert!(line.contains(source), "{line}");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pulled_can_cable_ends_the_test_with_the_stage_commanded_safe() {
+    let _one_at_a_time = REALTIME.lock().await;
+    let cfg = Config::load(&config_path("sim-modbus-can-dc.toml")).unwrap();
+    let mut rig = build_rig(&cfg, false).await.unwrap();
+    let channels = record_channels(rig.sensors.channels(), rig.stage.id());
+    let mut sink = RecordSink::new(None, None, channels);
+    let steps = plan_steps(&cfg.plan);
+    let (_tx, rx) = tokio::sync::watch::channel(false);
+    let mut served = rig.served.take().expect("a served rig");
+    let outcome = {
+        let test = run_test(
+            &cfg,
+            &steps,
+            rig.stage.as_mut(),
+            rig.sensors.as_mut(),
+            rig.counts_per_rev,
+            &mut sink,
+            &NoProgress,
+            &rx,
+        );
+        tokio::pin!(test);
+        // Mid-test, with the output on, the encoder's adapter goes away;
+        // the serial DAQ goes on streaming.
+        tokio::select! {
+            o = &mut test => panic!("the test ended before the cable was pulled: {o:?}"),
+            _ = tokio::time::sleep(std::time::Duration::from_millis(1500)) => {
+                assert!(served.stage_output_enabled(), "the output is on mid-test");
+                served.pull_can_cable();
+                test.await.unwrap()
+            }
+        }
+    };
+    let Outcome::Aborted { reason } = outcome else {
+        panic!("the test went on without its encoder: {outcome:?}");
+    };
+    assert!(
+        reason.contains("power stage commanded to its safe state"),
+        "{reason}"
+    );
+    assert!(reason.contains("sensor fault"), "{reason}");
+    assert!(!served.stage_output_enabled());
+    assert_eq!(served.stage_setpoint(), 0.0);
+    eprintln!("abort reason: {reason}");
 }

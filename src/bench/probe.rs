@@ -89,21 +89,39 @@ async fn read_all(rig: &mut Rig, step: &'static str, out: &mut Vec<ProbeLine>) {
             }
         }
         None => {
+            // A batch carries the channels read at one instant, which need
+            // not be all of them (channels of several links or rates): read
+            // batches until every channel has a value, for at most 2 s.
             let channels = rig.sensors.channels().to_vec();
-            match tokio::time::timeout(Duration::from_secs(2), rig.sensors.next_batch()).await {
-                Ok(Ok(batch)) => {
-                    for (k, info) in channels.into_iter().enumerate() {
-                        let value = batch
-                            .samples
-                            .iter()
-                            .find(|s| s.channel == k)
-                            .map(|s| s.value)
-                            .ok_or_else(|| "not in the batch".to_string());
-                        out.push(ProbeLine::Channel { step, info, value });
+            let mut values: Vec<Option<f64>> = vec![None; channels.len()];
+            let deadline = tokio::time::Instant::now() + Duration::from_secs(2);
+            let mut failure = None;
+            while values.iter().any(Option::is_none) {
+                match tokio::time::timeout_at(deadline, rig.sensors.next_batch()).await {
+                    Ok(Ok(batch)) => {
+                        for s in batch.samples {
+                            if let Some(v) = values.get_mut(s.channel) {
+                                *v = Some(s.value);
+                            }
+                        }
                     }
+                    Ok(Err(e)) => {
+                        failure = Some(e.to_string());
+                        break;
+                    }
+                    Err(_) => break,
                 }
-                Ok(Err(e)) => fail_all(channels, step, &e.to_string(), out),
-                Err(_) => fail_all(channels, step, "no reading within 2 s", out),
+            }
+            if let (Some(why), true) = (&failure, values.iter().all(Option::is_none)) {
+                return fail_all(channels, step, why, out);
+            }
+            for (info, value) in channels.into_iter().zip(values) {
+                let value = value.ok_or_else(|| {
+                    failure
+                        .clone()
+                        .unwrap_or_else(|| "no reading within 2 s".to_string())
+                });
+                out.push(ProbeLine::Channel { step, info, value });
             }
         }
     }
