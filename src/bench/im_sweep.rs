@@ -109,12 +109,14 @@ impl ImSweepPlan {
 /// The mean speed over a window of encoder speed readings `(time, speed)`
 /// (each the count change since the previous reading over its interval):
 /// the least-squares slope of the angle they add up to against time, fitted
-/// again without the readings more than four robust standard deviations
-/// (1.4826 × the median absolute residual) off the first line. The angle
+/// again without the readings off the first line by more than four robust
+/// standard deviations (1.4826 × the median absolute residual) and more
+/// than four counts (`rad_per_count`: so that the count's quantisation and
+/// a still-settling shaft's curvature never count as outliers). The angle
 /// is the count itself, so the slope averages its quantisation; a polled
 /// count whose timestamp a stall threw off (a host busy for milliseconds)
 /// is one outlier in the angle, where in the plain fit it tilts the line.
-fn angle_slope(time: &[f64], speed: &[f64]) -> f64 {
+fn angle_slope(time: &[f64], speed: &[f64], rad_per_count: f64) -> f64 {
     let n = time.len().min(speed.len());
     if n < 3 {
         return speed[..n].iter().sum::<f64>() / n.max(1) as f64;
@@ -143,15 +145,15 @@ fn angle_slope(time: &[f64], speed: &[f64]) -> f64 {
     let residual = |k: usize| angle[k] - (a0 + w * time[k]);
     let mut abs: Vec<f64> = (0..n).map(|k| residual(k).abs()).collect();
     abs.sort_by(f64::total_cmp);
-    let sigma = 1.4826 * abs[n / 2];
-    if sigma.is_nan() || sigma <= 0.0 {
+    let bound = (4.0 * 1.4826 * abs[n / 2]).max(4.0 * rad_per_count);
+    if bound.is_nan() {
         return w;
     }
-    let kept = (0..n).filter(|&k| residual(k).abs() <= 4.0 * sigma).count();
+    let kept = (0..n).filter(|&k| residual(k).abs() <= bound).count();
     if kept < 3 || kept == n {
         return w;
     }
-    fit(&|k| residual(k).abs() <= 4.0 * sigma).0
+    fit(&|k| residual(k).abs() <= bound).0
 }
 
 /// Channels recorded for a sweep: every sensor channel, then the speed
@@ -404,7 +406,11 @@ impl Sweep<'_> {
         let speed = if speeds.is_empty() {
             window.last().and_then(|r| r.speed).unwrap_or(f64::NAN)
         } else {
-            angle_slope(&times, &speeds)
+            angle_slope(
+                &times,
+                &speeds,
+                std::f64::consts::TAU / self.plan.encoder_counts_per_rev,
+            )
         };
         let torques: Vec<f64> = window.iter().filter_map(|r| r.torque).collect();
         let point = OperatingPoint {
@@ -593,7 +599,7 @@ mod tests {
     #[test]
     fn the_slope_averages_the_quantisation() {
         let (t, s) = readings(156.0, &[], 0.0);
-        assert!((angle_slope(&t, &s) / 156.0 - 1.0).abs() < 2e-5);
+        assert!((angle_slope(&t, &s, std::f64::consts::TAU / 4096.0) / 156.0 - 1.0).abs() < 2e-5);
     }
 
     #[test]
@@ -601,7 +607,7 @@ mod tests {
         // Two readings stamped 3 ms late (a busy host), near the window's
         // end where they weigh most in a plain least-squares slope.
         let (t, s) = readings(156.0, &[90, 95], 0.003);
-        let robust = angle_slope(&t, &s);
+        let robust = angle_slope(&t, &s, std::f64::consts::TAU / 4096.0);
         let n = t.len();
         let mut angle = vec![0.0];
         for k in 1..n {
