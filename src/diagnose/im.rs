@@ -118,12 +118,6 @@ pub fn diagnose_im(
         };
         let b = blocks(&held);
         let sse: f64 = b.iter().sum();
-        if std::env::var("IM_DEBUG").is_ok() {
-            let g: Vec<String> = (0..data.len())
-                .map(|k| format!("{:.2}@{:.3}g{}", nominal_blocks[k] - b[k], data.inputs[k].slip, data.group[k]))
-                .collect();
-            eprintln!("{:?} nrmse {:.4} sig {:.2e} {:.2e} gains {}", effect, held_out_nrmse(&data, &held), data.sigma_i, data.sigma_p, g.join(" "));
-        }
         evaluated.push(Evaluated {
             effect,
             model,

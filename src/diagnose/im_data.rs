@@ -187,29 +187,15 @@ impl SweepSet {
 
     /// Held-out folds: the points each fold leaves out, and a description.
     ///
-    /// Three or more supply voltages: leave one voltage out (the training
-    /// voltages still show how the machine changes with voltage). One or
-    /// two: interleaved points (by slip rank within each segment, point `r`
-    /// to fold `r mod k`), so that every fold trains on every voltage — a
-    /// model fitted on one voltage alone cannot learn a voltage dependence
-    /// (main-flux or leakage saturation), and leaving one of two voltages
-    /// out would deny exactly the effects a second voltage is taken for.
+    /// Interleaved points, stratified by sweep: within each segment the
+    /// points ranked by slip go to fold `rank mod k`, so that every fold
+    /// trains on every supply voltage and on the whole slip range.
+    /// Leaving a whole voltage out would test extrapolation to a voltage
+    /// the fit never saw, and an effect that shows only at the highest
+    /// voltage (main-flux or leakage saturation) cannot be learnt then:
+    /// leave-one-voltage-out denies exactly the effects a second voltage is
+    /// taken for.
     pub fn folds(&self) -> (Vec<Vec<usize>>, String) {
-        if self.group_voltage.len() >= 3 {
-            let folds = (0..self.group_voltage.len())
-                .map(|g| (0..self.len()).filter(|&k| self.group[k] == g).collect())
-                .collect();
-            let desc = format!(
-                "leave-one-voltage-out ({} folds: {})",
-                self.group_voltage.len(),
-                self.group_voltage
-                    .iter()
-                    .map(|v| format!("{v:.0} V"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            );
-            return (folds, desc);
-        }
         let k = INTERLEAVED_FOLDS.min(self.len() / 4).max(2);
         let mut folds = vec![Vec::new(); k];
         let mut segs = self.segment.clone();

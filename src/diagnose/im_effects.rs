@@ -14,8 +14,8 @@
 //! | `iron_loss` | `Rfe` (Ω) | `Rfe` in parallel with `Xm` |
 //! | `deep_bar` | `xi1`, `bar_share` (1) | skin effect of a rectangular bar: `Rr(s) = Rr·(1 − b + b·kR(ξ))`, `Xr(s) = Xr·(1 − b + b·kX(ξ))`, `ξ = xi1·√s` |
 //! | `main_flux_saturation` | `Es` (V) | `Xm(E) = Xm/(1 + (E/Es)^7)`, `E` the air-gap voltage |
-//! | `leakage_saturation` | `Isat` (A) | `Xs, Xr` times `1/√(1 + (I/Isat)²)`, `I` the phase current |
-//! | `stray_load_loss` | `Rsll` (Ω) | input power `+ 3·Rsll·Ir²` (current unchanged) |
+//! | `leakage_saturation` | `Isat` (A), `drop` (1) | `Xs, Xr` times `1 − drop·u⁴/(1 + u⁴)`, `u = I/Isat`, `I` the phase current |
+//! | `stray_load_loss` | `Rsll` (Ω) | a loss `3·Rsll·Ir²` drawn from the supply as in-phase current |
 //! | `thermal_drift` | `rise` (1) | `Rs, Rr` times `1 + rise·h`, `h` the heat index 0…1 |
 //!
 //! The heat index `h` of a point is the measured `I²` accumulated in
@@ -226,11 +226,18 @@ impl ImAugmentation {
             unit: "V",
             transform: Transform::Log,
         }];
-        const ISAT: [EffectParam; 1] = [EffectParam {
-            key: "Isat",
-            unit: "A",
-            transform: Transform::Log,
-        }];
+        const ISAT: [EffectParam; 2] = [
+            EffectParam {
+                key: "Isat",
+                unit: "A",
+                transform: Transform::Log,
+            },
+            EffectParam {
+                key: "drop",
+                unit: "1",
+                transform: Transform::Linear,
+            },
+        ];
         const RSLL: [EffectParam; 1] = [EffectParam {
             key: "Rsll",
             unit: "ohm",
@@ -274,9 +281,9 @@ impl ImAugmentation {
                 .iter()
                 .map(|k| vec![(k * v_max).ln()])
                 .collect(),
-            Some(Effect::LeakageSaturation) => [1.0, 2.5, 8.0]
+            Some(Effect::LeakageSaturation) => [0.5, 1.0, 2.0]
                 .iter()
-                .map(|k| vec![(k * i_max).ln()])
+                .map(|k| vec![(k * i_max).ln(), 0.3])
                 .collect(),
             Some(Effect::StrayLoadLoss) | Some(Effect::ThermalDrift) => vec![vec![0.0]],
             Some(_) => vec![vec![]],
@@ -328,17 +335,20 @@ impl ImAugmentation {
             }
             Some(Effect::LeakageSaturation) => {
                 let isat = x[4].exp();
-                if !(isat.is_finite() && isat > 0.0) {
+                let drop = x[5];
+                // Below 0.6 the leakage flux I·X(I) rises with I.
+                if !(isat.is_finite() && isat > 0.0 && (0.0..0.6).contains(&drop)) {
                     return None;
                 }
                 leakage_terminal(rs, xs, xm, rr, xr, s, v, |i| {
-                    1.0 / (1.0 + (i / isat).powi(2)).sqrt()
+                    let u4 = (i / isat).powi(4);
+                    1.0 - drop * u4 / (1.0 + u4)
                 })?
             }
             Some(Effect::StrayLoadLoss) => {
-                let mut t = linear_terminal(rs, xs, xm, None, rr, xr, s, v);
-                t.power += 3.0 * x[4] * t.rotor_current * t.rotor_current;
-                t
+                let t = linear_terminal(rs, xs, xm, None, rr, xr, s, v);
+                let p_sll = 3.0 * x[4] * t.rotor_current * t.rotor_current;
+                stray_terminal(rs, xs, xm, rr, xr, s, v, p_sll)
             }
             Some(Effect::ThermalDrift) => {
                 let f = 1.0 + x[4] * p.heat;
@@ -405,6 +415,33 @@ pub fn main_flux_terminal(
     })
 }
 
+/// Terminal values with a loss `p_sll` (W, three phases) drawn from the
+/// supply as in-phase current on top of the circuit's own current.
+#[allow(clippy::too_many_arguments)]
+pub fn stray_terminal(
+    rs: f64,
+    xs: f64,
+    xm: f64,
+    rr: f64,
+    xr: f64,
+    s: f64,
+    v: f64,
+    p_sll: f64,
+) -> Terminal {
+    let y_r = C64::new(s, 0.0) / C64::new(rr, s * xr);
+    let y_ag = C64::new(0.0, -1.0 / xm) + y_r;
+    let z = C64::new(rs, xs) + y_ag.inv();
+    let i = C64::new(v, 0.0) / z;
+    let e = (C64::new(v, 0.0) - i * C64::new(rs, xs)).norm();
+    let total = i + C64::new(p_sll / (3.0 * v), 0.0);
+    Terminal {
+        current: total.norm(),
+        power: 3.0 * v * total.re,
+        air_gap_voltage: e,
+        rotor_current: e * y_r.norm(),
+    }
+}
+
 /// Terminal values with both leakage reactances scaled by `f(I)` of the
 /// phase current (`f ≤ 1`, with `I·f(I)` increasing): solve `I·|Z(I)| = V`.
 #[allow(clippy::too_many_arguments)]
@@ -428,6 +465,9 @@ pub fn leakage_terminal(
     };
     let h = |i: f64| i * z(i) - v;
     let lo = at(0.0).current;
+    if h(lo) >= 0.0 {
+        return Some(at(lo));
+    }
     let mut hi = 2.0 * lo;
     while h(hi) < 0.0 {
         hi *= 2.0;
@@ -477,18 +517,19 @@ mod tests {
     #[test]
     fn neutral_effect_parameters_give_the_nominal_model() {
         let nominal = ImAugmentation::nominal(1.0);
-        let neutral: [(Effect, f64); 6] = [
-            (Effect::IronLoss, 1e12f64.ln()),
-            (Effect::DeepBar, 0.0),
-            (Effect::MainFluxSaturation, 1e9f64.ln()),
-            (Effect::LeakageSaturation, 1e9f64.ln()),
-            (Effect::StrayLoadLoss, 0.0),
-            (Effect::ThermalDrift, 0.0),
+        let neutral: [(Effect, &[f64]); 6] = [
+            (Effect::IronLoss, &[27.6]),
+            (Effect::DeepBar, &[0.0, 0.0]),
+            (Effect::MainFluxSaturation, &[20.7]),
+            (Effect::LeakageSaturation, &[1.0, 0.0]),
+            (Effect::StrayLoadLoss, &[0.0]),
+            (Effect::ThermalDrift, &[0.0]),
         ];
-        for (e, v) in neutral {
+        for (e, extra) in neutral {
             let m = ImAugmentation::with(e, 1.0);
             let mut x = x0();
-            x.resize(m.len(), v);
+            x.extend_from_slice(extra);
+            assert_eq!(x.len(), m.len());
             for s in [0.003, 0.1, 1.0] {
                 let a = m.predict(&x, &point(s)).unwrap();
                 let b = nominal.predict(&x0(), &point(s)).unwrap();
@@ -524,14 +565,15 @@ mod tests {
         // Leakage saturation: more current at locked rotor.
         let ls = at(
             ImAugmentation::with(Effect::LeakageSaturation, 1.0),
-            &[30f64.ln()],
+            &[30f64.ln(), 0.4],
             1.0,
         );
         assert!(ls.current > 1.05 * base(1.0).current);
-        // Stray load loss: power, not current.
+        // Stray load loss: power, and a little in-phase current.
         let sl = at(ImAugmentation::with(Effect::StrayLoadLoss, 1.0), &[0.3], 0.5);
-        assert_eq!(sl.current, base(0.5).current);
-        assert!(sl.power > base(0.5).power);
+        let extra = 3.0 * 0.3 * base(0.5).rotor_current.powi(2);
+        assert!((sl.power - base(0.5).power - extra).abs() < 1e-6 * extra);
+        assert!(sl.current > base(0.5).current && sl.current < 1.05 * base(0.5).current);
         // Deep bar: more power at locked rotor for the same kx = 0.
         let db = at(ImAugmentation::with(Effect::DeepBar, 1.0), &[2.0, 0.7], 1.0);
         assert!(db.power > base(1.0).power);

@@ -23,7 +23,7 @@
 //! the exact skin effect of a rectangular bar on part of the rotor
 //! resistance and leakage, main-flux saturation with a random exponent,
 //! leakage saturation with a knee (flux linear up to a knee current, then a
-//! smaller slope), stray load loss with a random power of the rotor current
+//! smaller slope, the bend smoothed over a quarter of the knee current), stray load loss with a random power of the rotor current
 //! drawn as extra in-phase current, and thermal drift from a first-order
 //! thermal model of stator and rotor over the test's real timing (dwell per
 //! point, pauses between sweeps).
@@ -128,12 +128,14 @@ fn terminal(m: &Machine, truth: &Truth, heat: Heat, s: f64, v: f64) -> (f64, f64
             y_r(rr, m.xr),
         ),
         Truth::Leakage { knee, slope } => {
+            // Leakage flux linear up to the knee, then rising with
+            // `slope` of its initial slope; the bend spread over a quarter
+            // of the knee current (softplus).
             let f = |i: f64| {
-                if i <= knee {
-                    1.0
-                } else {
-                    (knee + slope * (i - knee)) / i
-                }
+                let w = 0.25 * knee;
+                let x = (i - knee) / w;
+                let soft = if x > 30.0 { x } else { x.exp().ln_1p() };
+                (i - (1.0 - slope) * w * soft).max(1e-9 * i) / i.max(1e-300)
             };
             let h = |i: f64| {
                 let (ii, _, _) = linear(m.xs * f(i), m.xr * f(i), rr);
@@ -261,7 +263,7 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
     let truth = match effect {
         None => Truth::None,
         Some(Effect::IronLoss) => {
-            let frac = uniform(rng, 0.008, 0.03);
+            let frac = uniform(rng, 0.012, 0.035);
             let beta = uniform(rng, 1.8, 2.2);
             effect_params.insert("iron_loss_at_rated_voltage_fraction_of_rating".into(), frac);
             effect_params.insert("steinmetz_exponent".into(), beta);
@@ -308,8 +310,8 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
             Truth::Leakage { knee, slope }
         }
         Some(Effect::StrayLoadLoss) => {
-            let frac = uniform(rng, 0.005, 0.025);
-            let gamma = uniform(rng, 1.8, 2.2);
+            let frac = uniform(rng, 0.008, 0.03);
+            let gamma = uniform(rng, 1.9, 2.1);
             let ir_rated = rated_rotor_current(&m, v_ph, frequency, poles, power);
             let c = frac * power / ir_rated.powf(gamma);
             effect_params.insert("stray_loss_at_rated_load_fraction_of_rating".into(), frac);
@@ -346,12 +348,27 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
     }
     let heats = if truth == Truth::Thermal {
         let rise = uniform(rng, 0.03, 0.2);
-        let unit = thermal_path(&m, v_ph / line_v, &schedule, connection, tau, dwell, 1.0);
-        let end = unit.iter().map(|h| h.rs).fold(1.0f64, f64::max) - 1.0;
-        let gain = if end > 0.0 { rise / end } else { 0.0 };
-        effect_params.insert("Rs_rise_at_end".into(), rise);
+        // A small-signal run (0.01 K per unit loss) sets the gain so that
+        // the stator resistance rises by about `rise` at its hottest.
+        let path = |gain: f64| thermal_path(&m, v_ph / line_v, &schedule, i_ph, tau, dwell, gain);
+        let hottest = |p: &[Heat]| p.iter().map(|h| h.rs).fold(1.0f64, f64::max) - 1.0;
+        let unit = hottest(&path(0.01));
+        let mut gain = if unit > 0.0 { 0.01 * rise / unit } else { 0.0 };
+        // Hotter windings draw less current: correct the gain twice.
+        for _ in 0..2 {
+            let got = hottest(&path(gain));
+            if got > 0.0 {
+                gain *= rise / got;
+            }
+        }
+        let heats = path(gain);
+        effect_params.insert("Rs_rise_hottest".into(), hottest(&heats));
+        effect_params.insert(
+            "Rr_rise_hottest".into(),
+            heats.iter().map(|h| h.rr).fold(1.0f64, f64::max) - 1.0,
+        );
         effect_params.insert("thermal_time_constant_s".into(), tau);
-        thermal_path(&m, v_ph / line_v, &schedule, connection, tau, dwell, gain)
+        heats
     } else {
         vec![Heat { rs: 1.0, rr: 1.0 }; schedule.len()]
     };
@@ -469,22 +486,22 @@ fn rated_rotor_current(m: &Machine, v_ph: f64, f: f64, poles: u32, power: f64) -
     terminal(m, &Truth::None, heat, s, v_ph).2
 }
 
-/// Resistance factors along the schedule from a first-order thermal model
-/// (stator heated by its copper loss, rotor by its own; `gain` K per W·τ
-/// scale), with the point dwell and pauses as time.
+/// Resistance factors along the schedule from a first-order thermal model:
+/// stator and rotor each heated towards `gain`·(their loss per unit of the
+/// stator's loss at `i_ref`) kelvin with time constant `tau`, over the
+/// point dwell and the pauses between sweeps.
 fn thermal_path(
     m: &Machine,
     phase_per_line: f64,
     schedule: &[(u32, f64, f64, f64)],
-    connection: Connection,
+    i_ref: f64,
     tau: f64,
     dwell: f64,
     gain: f64,
 ) -> Vec<Heat> {
-    let _ = connection;
     let (mut th_s, mut th_r) = (0.0f64, 0.0f64);
     let mut out = Vec::with_capacity(schedule.len());
-    let base = 1.0 / (3.0 * m.rs);
+    let p_ref = 3.0 * i_ref * i_ref * m.rs;
     for &(_, v, s, pause) in schedule {
         let cool = (-pause / tau).exp();
         th_s *= cool;
@@ -495,9 +512,8 @@ fn thermal_path(
         };
         out.push(heat);
         let (i, _, ir) = terminal(m, &Truth::Thermal, heat, s, v * phase_per_line);
-        // Steady-state rises per watt, normalised by the stator loss scale.
-        let target_s = gain * 3.0 * i * i * m.rs * base / ALPHA_CU;
-        let target_r = gain * 3.0 * ir * ir * m.rr * base / ALPHA_AL;
+        let target_s = gain * 3.0 * i * i * m.rs * heat.rs / p_ref;
+        let target_r = gain * 3.0 * ir * ir * m.rr * heat.rr / p_ref;
         let k = 1.0 - (-dwell / tau).exp();
         th_s += (target_s - th_s) * k;
         th_r += (target_r - th_r) * k;
