@@ -240,7 +240,10 @@ mod tests {
         let candidate: Vec<f64> = noise(12, 60).iter().map(|x| x * x).collect();
         assert!(!held_out_test(&nominal, &candidate, 6).significant());
         assert!(held_out_sign_flip_test(&nominal, &candidate, 6).significant());
-        assert_eq!(held_out_sign_flip_test(&candidate, &candidate, 1).p_value, 1.0);
+        assert_eq!(
+            held_out_sign_flip_test(&candidate, &candidate, 1).p_value,
+            1.0
+        );
     }
 
     #[test]

@@ -19,17 +19,13 @@
 
 use std::collections::BTreeMap;
 
-use super::decision::{
-    held_out_sign_flip_test, noise_sigma, penalised_score, HeldOutTest,
-};
+use super::decision::{held_out_sign_flip_test, noise_sigma, penalised_score, HeldOutTest};
 use super::im_data::SweepSet;
 use super::im_effects::{effect_name, ImAugmentation, IM_EFFECTS, NOMINAL_KEYS};
 use super::im_fit::{fit, held_out, intervals, starts_from, AugmentedFit, HeldOut};
 use super::im_gap::{evidence, shares, SlipRegions, CHANNELS};
 use super::im_verdict::separating_plan;
-use super::report::{
-    Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
-};
+use super::report::{Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict};
 use super::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{fit_lm, nrmse, LmOptions, PhaseData, SplitPolicy};
 use crate::model::{Effect, ImModel, LeakageSplit};
@@ -82,7 +78,7 @@ pub fn diagnose_im(
         }
     };
     let x_lm: Vec<f64> = [c.rs, c.xm, rr, xr].iter().map(|v| v.ln()).collect();
-    let unweighted = fit(nominal, &data, &all, &[x_lm.clone()])
+    let unweighted = fit(nominal, &data, &all, std::slice::from_ref(&x_lm))
         .ok_or_else(|| DiagnoseError::NominalFit("no finite nominal fit".into()))?;
     estimate_noise(&mut data, &nominal, &unweighted.x);
     let nominal_full = fit(nominal, &data, &all, &[unweighted.x, x_lm])
@@ -299,12 +295,9 @@ fn nominal_params(
     let all: Vec<usize> = (0..data.len()).collect();
     let iv = intervals(*model, data, &all, f);
     let ci = |j: usize, factor: f64| {
-        iv[j].half_width.map(|h| {
-            [
-                factor * (iv[j].x - h).exp(),
-                factor * (iv[j].x + h).exp(),
-            ]
-        })
+        iv[j]
+            .half_width
+            .map(|h| [factor * (iv[j].x - h).exp(), factor * (iv[j].x + h).exp()])
     };
     let mut out = BTreeMap::new();
     for (j, key) in NOMINAL_KEYS.iter().enumerate() {
@@ -327,7 +320,10 @@ fn candidate_report(data: &SweepSet, e: &Evaluated, gap_before: f64, ratio: f64)
         let ci = iv[k]
             .half_width
             .map(|h| [t.value(iv[k].x - h), t.value(iv[k].x + h)]);
-        params.insert(p.key.to_string(), estimate(t.value(e.full.x[k]), ci, p.unit));
+        params.insert(
+            p.key.to_string(),
+            estimate(t.value(e.full.x[k]), ci, p.unit),
+        );
     }
     Candidate {
         effect: effect_name(Some(e.effect)),
@@ -451,5 +447,155 @@ fn residual_plot(
     ResidualPlot {
         effect: effect_name(winner.map(|w| w.effect)),
         panels,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::Connection;
+    use crate::record::OperatingPoint;
+    use rand::rngs::StdRng;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+
+    /// A star-connected 400 V machine (Ω per phase) swept at `voltages`,
+    /// simulated by `model` at `x`, with 0.2 % noise on current and power.
+    fn record(model: ImAugmentation, x: &[f64], voltages: &[f64], seed: u64) -> Record {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, 0.002).unwrap();
+        let mut points = Vec::new();
+        for (seg, &v) in voltages.iter().enumerate() {
+            for k in 0..30 {
+                let u = k as f64 / 29.0;
+                let s = 0.003 + 0.997 * u * u;
+                points.push((seg as u32, s, v));
+            }
+        }
+        // Heat index as the diagnosis computes it (accumulated I²).
+        let currents: Vec<f64> = points
+            .iter()
+            .map(|&(_, s, v)| {
+                let p = super::super::im_effects::PointInput {
+                    slip: s,
+                    voltage: v / 3f64.sqrt(),
+                    heat: 0.0,
+                };
+                ImAugmentation::nominal(1.0).predict(&x[..4], &p).unwrap().0
+            })
+            .collect();
+        let total: f64 = currents.iter().map(|i| i * i).sum();
+        let mut acc = 0.0;
+        let operating_points = points
+            .iter()
+            .zip(&currents)
+            .map(|(&(segment, s, v), i0)| {
+                let heat = (acc + 0.5 * i0 * i0) / total;
+                acc += i0 * i0;
+                let p = super::super::im_effects::PointInput {
+                    slip: s,
+                    voltage: v / 3f64.sqrt(),
+                    heat,
+                };
+                let (i, pw) = model.predict(x, &p).unwrap();
+                OperatingPoint {
+                    segment,
+                    slip: s,
+                    line_voltage: v,
+                    line_current: i * (1.0 + noise.sample(&mut rng)),
+                    input_power: pw * (1.0 + noise.sample(&mut rng)),
+                    speed: (1.0 - s) * 157.08,
+                    frequency: 50.0,
+                    torque: None,
+                }
+            })
+            .collect();
+        Record {
+            operating_points,
+            ..Record::default()
+        }
+    }
+
+    fn nominal_x() -> Vec<f64> {
+        [0.8f64, 110.0, 0.9, 3.0].iter().map(|v| v.ln()).collect()
+    }
+
+    fn star() -> DiagnoseOptions {
+        DiagnoseOptions {
+            connection: Some(Connection::Star),
+        }
+    }
+
+    #[test]
+    fn too_few_points_are_refused_with_the_count() {
+        let mut r = record(ImAugmentation::nominal(1.0), &nominal_x(), &[400.0], 1);
+        r.operating_points.truncate(8);
+        let e = diagnose_im(&r, &star()).unwrap_err();
+        assert!(matches!(&e, DiagnoseError::NotEnoughData(m) if m.contains("8 operating points")));
+        let mut bad = record(ImAugmentation::nominal(1.0), &nominal_x(), &[400.0], 1);
+        bad.operating_points[4].line_current = f64::NAN;
+        let e = diagnose_im(&bad, &star()).unwrap_err().to_string();
+        assert!(
+            e.contains("operating point 4") && e.contains("line_current"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn the_nominal_machine_gives_none_and_a_star_warning_without_nameplate() {
+        let r = record(ImAugmentation::nominal(1.0), &nominal_x(), &[400.0], 2);
+        let run = diagnose_im(&r, &DiagnoseOptions::default()).unwrap();
+        let d = &run.report;
+        assert_eq!(d.verdict.effect, "none");
+        assert_eq!(d.verdict.gap_after, d.verdict.gap_before);
+        assert_eq!(d.candidates.len(), 6);
+        assert!(d.warnings.iter().any(|w| w.contains("star assumed")));
+        // The nominal fit recovers the machine (Xs = Xr by convention here).
+        for (key, truth) in [("Rs", 0.8), ("Xm", 110.0), ("Rr", 0.9), ("Xr", 3.0)] {
+            let p = &d.nominal.params[key];
+            let [lo, hi] = p.ci95.expect("interval");
+            assert!(lo <= truth && truth <= hi, "{key}: {p:?}");
+        }
+        let shares: f64 = d.gap.regions.iter().map(|r| r.share).sum();
+        assert!((shares - 1.0).abs() < 1e-9, "region shares sum to {shares}");
+        assert!(d.validation.starts_with("interleaved"));
+    }
+
+    #[test]
+    fn an_iron_loss_is_found_with_its_resistance_and_the_bias_it_caused() {
+        let model = ImAugmentation::with(Effect::IronLoss, 1.0);
+        let mut x = nominal_x();
+        x.push(1200f64.ln());
+        let run = diagnose_im(&record(model, &x, &[400.0, 300.0], 3), &star()).unwrap();
+        let d = &run.report;
+        assert_eq!(d.verdict.effect, "iron_loss", "{:?}", d.candidates);
+        assert!(d.verdict.gap_after < d.verdict.gap_before);
+        let winner = d
+            .candidates
+            .iter()
+            .find(|c| c.effect == "iron_loss")
+            .unwrap();
+        let rfe = &winner.params["Rfe"];
+        let [lo, hi] = rfe.ci95.expect("interval");
+        assert!(lo <= 1200.0 && 1200.0 <= hi, "{rfe:?}");
+        // Corrected Rs is back near the truth; the nominal fit was biased.
+        let rs = &d.verdict.corrected_params["Rs"];
+        assert!((rs.corrected - 0.8).abs() < (rs.nominal - 0.8).abs());
+        assert!(!run.plot.panels.is_empty() && run.plot.effect == "iron_loss");
+        assert_eq!(d.gap.regions[0].label, "low_slip");
+    }
+
+    #[test]
+    fn one_voltage_warns_that_main_flux_saturation_is_unresolved() {
+        let model = ImAugmentation::with(Effect::DeepBar, 1.0);
+        let mut x = nominal_x();
+        x.extend([2.0, 0.7]);
+        let run = diagnose_im(&record(model, &x, &[400.0], 4), &star()).unwrap();
+        let d = &run.report;
+        assert_eq!(d.verdict.effect, "deep_bar", "{:?}", d.candidates);
+        assert!(d.warnings.iter().any(|w| w.contains("one supply voltage")));
+        for l in &d.verdict.look_alikes {
+            assert!(!l.plan.is_empty());
+        }
     }
 }

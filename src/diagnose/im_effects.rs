@@ -14,7 +14,7 @@
 //! | `iron_loss` | `Rfe` (Ω) | `Rfe` in parallel with `Xm` |
 //! | `deep_bar` | `xi1`, `bar_share` (1) | skin effect of a rectangular bar: `Rr(s) = Rr·(1 − b + b·kR(ξ))`, `Xr(s) = Xr·(1 − b + b·kX(ξ))`, `ξ = xi1·√s` |
 //! | `main_flux_saturation` | `Es` (V) | `Xm(E) = Xm/(1 + (E/Es)^7)`, `E` the air-gap voltage |
-//! | `leakage_saturation` | `Isat` (A), `drop` (1) | `Xs, Xr` times `1 − drop·u⁴/(1 + u⁴)`, `u = I/Isat`, `I` the phase current |
+//! | `leakage_saturation` | `Iknee` (A), `slope` (1) | leakage flux `X·I` linear up to the knee current, then rising with `slope` of its slope (bend smoothed over a quarter of the knee), `I` the phase current; both leakages |
 //! | `stray_load_loss` | `Rsll` (Ω) | a loss `3·Rsll·Ir²` drawn from the supply as in-phase current |
 //! | `thermal_drift` | `rise` (1) | `Rs, Rr` times `1 + rise·h`, `h` the heat index 0…1 |
 //!
@@ -116,17 +116,25 @@ pub struct Terminal {
     pub rotor_current: f64,
 }
 
-/// Terminal values of a linear single-cage circuit (iron loss optional).
-pub fn linear_terminal(
-    rs: f64,
-    xs: f64,
-    xm: f64,
-    rfe: Option<f64>,
-    rr: f64,
-    xr: f64,
-    s: f64,
-    v: f64,
-) -> Terminal {
+/// The elements of a single-cage circuit, Ω.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cage {
+    /// Stator resistance.
+    pub rs: f64,
+    /// Stator leakage reactance.
+    pub xs: f64,
+    /// Magnetising reactance.
+    pub xm: f64,
+    /// Rotor resistance.
+    pub rr: f64,
+    /// Rotor leakage reactance.
+    pub xr: f64,
+}
+
+/// Terminal values of a linear single-cage circuit (iron loss optional)
+/// at slip `s` and phase voltage `v`.
+pub fn linear_terminal(c: &Cage, rfe: Option<f64>, s: f64, v: f64) -> Terminal {
+    let Cage { rs, xs, xm, rr, xr } = *c;
     let y_r = C64::new(s, 0.0) / C64::new(rr, s * xr);
     let y_m = C64::new(rfe.map_or(0.0, |r| 1.0 / r), -1.0 / xm);
     from_air_gap(C64::new(rs, xs), y_m + y_r, y_r, v)
@@ -228,12 +236,12 @@ impl ImAugmentation {
         }];
         const ISAT: [EffectParam; 2] = [
             EffectParam {
-                key: "Isat",
+                key: "Iknee",
                 unit: "A",
                 transform: Transform::Log,
             },
             EffectParam {
-                key: "drop",
+                key: "slope",
                 unit: "1",
                 transform: Transform::Linear,
             },
@@ -281,9 +289,9 @@ impl ImAugmentation {
                 .iter()
                 .map(|k| vec![(k * v_max).ln()])
                 .collect(),
-            Some(Effect::LeakageSaturation) => [0.5, 1.0, 2.0]
+            Some(Effect::LeakageSaturation) => [0.3, 0.6, 1.0]
                 .iter()
-                .map(|k| vec![(k * i_max).ln(), 0.3])
+                .map(|k| vec![(k * i_max).ln(), 0.5])
                 .collect(),
             Some(Effect::StrayLoadLoss) | Some(Effect::ThermalDrift) => vec![vec![0.0]],
             Some(_) => vec![vec![]],
@@ -305,14 +313,15 @@ impl ImAugmentation {
         if !finite {
             return None;
         }
+        let cage = Cage { rs, xs, xm, rr, xr };
         let t = match self.effect {
-            None => linear_terminal(rs, xs, xm, None, rr, xr, s, v),
+            None => linear_terminal(&cage, None, s, v),
             Some(Effect::IronLoss) => {
                 let rfe = x[4].exp();
                 if !(rfe.is_finite() && rfe > 0.0) {
                     return None;
                 }
-                linear_terminal(rs, xs, xm, Some(rfe), rr, xr, s, v)
+                linear_terminal(&cage, Some(rfe), s, v)
             }
             Some(Effect::DeepBar) => {
                 let b = x[5];
@@ -322,40 +331,45 @@ impl ImAugmentation {
                 let (kr, kx) = skin_effect(x[4].abs() * s.sqrt());
                 let fr = 1.0 - b + b * kr;
                 let fx = 1.0 - b + b * kx;
-                linear_terminal(rs, xs, xm, None, rr * fr, xr * fx, s, v)
+                let deep = Cage {
+                    rr: rr * fr,
+                    xr: xr * fx,
+                    ..cage
+                };
+                linear_terminal(&deep, None, s, v)
             }
             Some(Effect::MainFluxSaturation) => {
                 let es = x[4].exp();
                 if !(es.is_finite() && es > 0.0) {
                     return None;
                 }
-                main_flux_terminal(rs, xs, xm, rr, xr, s, v, |e| {
-                    1.0 + (e / es).powi(MAIN_FLUX_EXPONENT)
-                })?
+                main_flux_terminal(&cage, s, v, |e| 1.0 + (e / es).powi(MAIN_FLUX_EXPONENT))?
             }
             Some(Effect::LeakageSaturation) => {
-                let isat = x[4].exp();
-                let drop = x[5];
-                // Below 0.6 the leakage flux I·X(I) rises with I.
-                if !(isat.is_finite() && isat > 0.0 && (0.0..0.6).contains(&drop)) {
+                let knee = x[4].exp();
+                let slope = x[5];
+                // A positive slope keeps the leakage flux rising with I.
+                if !(knee.is_finite() && knee > 0.0 && (0.02..=1.0).contains(&slope)) {
                     return None;
                 }
-                leakage_terminal(rs, xs, xm, rr, xr, s, v, |i| {
-                    let u4 = (i / isat).powi(4);
-                    1.0 - drop * u4 / (1.0 + u4)
-                })?
+                leakage_terminal(&cage, s, v, |i| leakage_factor(i, knee, slope, 0.25))?
             }
             Some(Effect::StrayLoadLoss) => {
-                let t = linear_terminal(rs, xs, xm, None, rr, xr, s, v);
+                let t = linear_terminal(&cage, None, s, v);
                 let p_sll = 3.0 * x[4] * t.rotor_current * t.rotor_current;
-                stray_terminal(rs, xs, xm, rr, xr, s, v, p_sll)
+                stray_terminal(&cage, s, v, p_sll)
             }
             Some(Effect::ThermalDrift) => {
                 let f = 1.0 + x[4] * p.heat;
                 if f < 0.2 {
                     return None;
                 }
-                linear_terminal(rs * f, xs, xm, None, rr * f, xr, s, v)
+                let hot = Cage {
+                    rs: rs * f,
+                    rr: rr * f,
+                    ..cage
+                };
+                linear_terminal(&hot, None, s, v)
             }
             Some(_) => return None,
         };
@@ -383,17 +397,14 @@ pub fn skin_effect(xi: f64) -> (f64, f64) {
 /// Terminal values with a magnetising reactance `xm0/d(E)` that depends on
 /// the air-gap voltage `E` (`d ≥ 1`, increasing): solve
 /// `E·|1 + Zs·Y_ag(E)| = V` for `E`.
-#[allow(clippy::too_many_arguments)]
-pub fn main_flux_terminal(
-    rs: f64,
-    xs: f64,
-    xm0: f64,
-    rr: f64,
-    xr: f64,
-    s: f64,
-    v: f64,
-    d: impl Fn(f64) -> f64,
-) -> Option<Terminal> {
+pub fn main_flux_terminal(c: &Cage, s: f64, v: f64, d: impl Fn(f64) -> f64) -> Option<Terminal> {
+    let Cage {
+        rs,
+        xs,
+        xm: xm0,
+        rr,
+        xr,
+    } = *c;
     let zs = C64::new(rs, xs);
     let y_r = C64::new(s, 0.0) / C64::new(rr, s * xr);
     let y_ag = |e: f64| C64::new(0.0, -d(e) / xm0) + y_r;
@@ -415,19 +426,25 @@ pub fn main_flux_terminal(
     })
 }
 
+/// Factor on the leakage reactances at phase current `i`: the leakage
+/// flux `X·I` is linear up to `knee`, then rises with `slope` of its
+/// initial slope; the bend is smoothed (softplus) over `width`·`knee`.
+pub fn leakage_factor(i: f64, knee: f64, slope: f64, width: f64) -> f64 {
+    if i <= 0.0 {
+        return 1.0;
+    }
+    let w = width * knee;
+    let x = (i - knee) / w;
+    let soft = if x > 30.0 { x } else { x.exp().ln_1p() };
+    // Subtract the softplus' value at i = 0 so that f(0) = 1 exactly.
+    let soft0 = (-knee / w).exp().ln_1p();
+    ((i - (1.0 - slope) * w * (soft - soft0)) / i).max(1e-9)
+}
+
 /// Terminal values with a loss `p_sll` (W, three phases) drawn from the
 /// supply as in-phase current on top of the circuit's own current.
-#[allow(clippy::too_many_arguments)]
-pub fn stray_terminal(
-    rs: f64,
-    xs: f64,
-    xm: f64,
-    rr: f64,
-    xr: f64,
-    s: f64,
-    v: f64,
-    p_sll: f64,
-) -> Terminal {
+pub fn stray_terminal(c: &Cage, s: f64, v: f64, p_sll: f64) -> Terminal {
+    let Cage { rs, xs, xm, rr, xr } = *c;
     let y_r = C64::new(s, 0.0) / C64::new(rr, s * xr);
     let y_ag = C64::new(0.0, -1.0 / xm) + y_r;
     let z = C64::new(rs, xs) + y_ag.inv();
@@ -444,20 +461,15 @@ pub fn stray_terminal(
 
 /// Terminal values with both leakage reactances scaled by `f(I)` of the
 /// phase current (`f ≤ 1`, with `I·f(I)` increasing): solve `I·|Z(I)| = V`.
-#[allow(clippy::too_many_arguments)]
-pub fn leakage_terminal(
-    rs: f64,
-    xs: f64,
-    xm: f64,
-    rr: f64,
-    xr: f64,
-    s: f64,
-    v: f64,
-    f: impl Fn(f64) -> f64,
-) -> Option<Terminal> {
+pub fn leakage_terminal(c: &Cage, s: f64, v: f64, f: impl Fn(f64) -> f64) -> Option<Terminal> {
     let at = |i: f64| {
         let k = f(i);
-        linear_terminal(rs, xs * k, xm, None, rr, xr * k, s, v)
+        let sat = Cage {
+            xs: c.xs * k,
+            xr: c.xr * k,
+            ..*c
+        };
+        linear_terminal(&sat, None, s, v)
     };
     let z = |i: f64| {
         let t = at(i);
@@ -521,7 +533,7 @@ mod tests {
             (Effect::IronLoss, &[27.6]),
             (Effect::DeepBar, &[0.0, 0.0]),
             (Effect::MainFluxSaturation, &[20.7]),
-            (Effect::LeakageSaturation, &[1.0, 0.0]),
+            (Effect::LeakageSaturation, &[1.0, 1.0]),
             (Effect::StrayLoadLoss, &[0.0]),
             (Effect::ThermalDrift, &[0.0]),
         ];
@@ -551,7 +563,11 @@ mod tests {
         };
         let base = |s: f64| nominal.terminal(&x0(), &point(s)).unwrap();
         // Iron loss: more power at no load.
-        let fe = at(ImAugmentation::with(Effect::IronLoss, 1.0), &[900f64.ln()], 0.0);
+        let fe = at(
+            ImAugmentation::with(Effect::IronLoss, 1.0),
+            &[900f64.ln()],
+            0.0,
+        );
         assert!(fe.power > base(0.0).power + 10.0);
         // Saturation of the main flux: more magnetising current at no load.
         let sat = at(
@@ -565,12 +581,16 @@ mod tests {
         // Leakage saturation: more current at locked rotor.
         let ls = at(
             ImAugmentation::with(Effect::LeakageSaturation, 1.0),
-            &[30f64.ln(), 0.4],
+            &[20f64.ln(), 0.4],
             1.0,
         );
         assert!(ls.current > 1.05 * base(1.0).current);
         // Stray load loss: power, and a little in-phase current.
-        let sl = at(ImAugmentation::with(Effect::StrayLoadLoss, 1.0), &[0.3], 0.5);
+        let sl = at(
+            ImAugmentation::with(Effect::StrayLoadLoss, 1.0),
+            &[0.3],
+            0.5,
+        );
         let extra = 3.0 * 0.3 * base(0.5).rotor_current.powi(2);
         assert!((sl.power - base(0.5).power - extra).abs() < 1e-6 * extra);
         assert!(sl.current > base(0.5).current && sl.current < 1.05 * base(0.5).current);

@@ -136,9 +136,7 @@ pub fn fit(
         {
             continue;
         }
-        let lm = LevenbergMarquardt::new()
-            .with_patience(100)
-            .with_tol(1e-10);
+        let lm = LevenbergMarquardt::new().with_patience(100).with_tol(1e-10);
         let (p, _report) = lm.minimize(problem);
         let x: Vec<f64> = p.x.iter().copied().collect();
         let Some(r) = p.residuals_at(&x) else {

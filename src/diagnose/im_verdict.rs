@@ -30,7 +30,8 @@ pub fn separating_plan(a: Effect, b: Effect) -> String {
     } else if a == IronLoss || b == IronLoss {
         "a no-load test at several voltages (iron loss: power ∝ E², at no load)".into()
     } else {
-        "a second sweep at another supply voltage, and a locked-rotor test at reduced frequency".into()
+        "a second sweep at another supply voltage, and a locked-rotor test at reduced frequency"
+            .into()
     }
 }
 

@@ -23,7 +23,8 @@
 //! the exact skin effect of a rectangular bar on part of the rotor
 //! resistance and leakage, main-flux saturation with a random exponent,
 //! leakage saturation with a knee (flux linear up to a knee current, then a
-//! smaller slope, the bend smoothed over a quarter of the knee current), stray load loss with a random power of the rotor current
+//! smaller slope, the bend smoothed over 15–40 % of the knee current; the
+//! candidate fixes it at 25 %), stray load loss with a random power of the rotor current
 //! drawn as extra in-phase current, and thermal drift from a first-order
 //! thermal model of stator and rotor over the test's real timing (dwell per
 //! point, pauses between sweeps).
@@ -35,7 +36,7 @@ use rand::RngExt;
 use rand_distr::{Distribution, Normal};
 
 use super::{BlindRecord, CaseTruth};
-use crate::diagnose::im_effects::{increasing_root, skin_effect as skin};
+use crate::diagnose::im_effects::{increasing_root, leakage_factor, skin_effect as skin};
 use crate::model::{Connection, Effect, C64};
 use crate::record::{OperatingPoint, Record, SegmentKind, TestMeta, SCHEMA_VERSION};
 
@@ -48,11 +49,29 @@ const ALPHA_AL: f64 = 0.00403;
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Truth {
     None,
-    IronLoss { p_fe_rated: f64, beta: f64, e_rated: f64 },
-    DeepBar { xi1: f64, bar_r: f64, bar_x: f64 },
-    MainFlux { es: f64, n: f64 },
-    Leakage { knee: f64, slope: f64 },
-    Stray { c: f64, gamma: f64 },
+    IronLoss {
+        p_fe_rated: f64,
+        beta: f64,
+        e_rated: f64,
+    },
+    DeepBar {
+        xi1: f64,
+        bar_r: f64,
+        bar_x: f64,
+    },
+    MainFlux {
+        es: f64,
+        n: f64,
+    },
+    Leakage {
+        knee: f64,
+        slope: f64,
+        width: f64,
+    },
+    Stray {
+        c: f64,
+        gamma: f64,
+    },
     Thermal,
 }
 
@@ -99,7 +118,11 @@ fn terminal(m: &Machine, truth: &Truth, heat: Heat, s: f64, v: f64) -> (f64, f64
         let z = C64::new(rs, xs) + y.inv();
         let i = C64::new(v, 0.0) / z;
         let e = C64::new(v, 0.0) - i * C64::new(rs, xs);
-        (i.norm(), 3.0 * (C64::new(v, 0.0) * i.conj()).re, (e * yr).norm())
+        (
+            i.norm(),
+            3.0 * (C64::new(v, 0.0) * i.conj()).re,
+            (e * yr).norm(),
+        )
     };
     match *truth {
         Truth::None | Truth::Thermal => linear(m.xs, m.xr, rr),
@@ -127,16 +150,11 @@ fn terminal(m: &Machine, truth: &Truth, heat: Heat, s: f64, v: f64) -> (f64, f64
             &|e: f64| C64::new(0.0, -(1.0 + (e / es).powf(n)) / m.xm),
             y_r(rr, m.xr),
         ),
-        Truth::Leakage { knee, slope } => {
+        Truth::Leakage { knee, slope, width } => {
             // Leakage flux linear up to the knee, then rising with
-            // `slope` of its initial slope; the bend spread over a quarter
-            // of the knee current (softplus).
-            let f = |i: f64| {
-                let w = 0.25 * knee;
-                let x = (i - knee) / w;
-                let soft = if x > 30.0 { x } else { x.exp().ln_1p() };
-                (i - (1.0 - slope) * w * soft).max(1e-9 * i) / i.max(1e-300)
-            };
+            // `slope` of its initial slope; the bend spread over `width` of
+            // the knee current.
+            let f = |i: f64| leakage_factor(i, knee, slope, width);
             let h = |i: f64| {
                 let (ii, _, _) = linear(m.xs * f(i), m.xr * f(i), rr);
                 // I·|Z(I)| − V with |Z(I)| = V/I(I).
@@ -212,9 +230,23 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
     let power = (1000f64.ln() + (50f64.ln()) * rng.random::<f64>()).exp();
     let poles: u32 = [2, 4, 4, 6][rng.random_range(0..4)];
     let (frequency, line_v) = if rng.random::<f64>() < 0.6 {
-        (50.0, if rng.random::<f64>() < 0.7 { 400.0 } else { 230.0 })
+        (
+            50.0,
+            if rng.random::<f64>() < 0.7 {
+                400.0
+            } else {
+                230.0
+            },
+        )
     } else {
-        (60.0, if rng.random::<f64>() < 0.7 { 460.0 } else { 230.0 })
+        (
+            60.0,
+            if rng.random::<f64>() < 0.7 {
+                460.0
+            } else {
+                230.0
+            },
+        )
     };
     let connection = if rng.random::<f64>() < 0.5 {
         Connection::Star
@@ -267,7 +299,10 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
             let beta = uniform(rng, 1.8, 2.2);
             effect_params.insert("iron_loss_at_rated_voltage_fraction_of_rating".into(), frac);
             effect_params.insert("steinmetz_exponent".into(), beta);
-            effect_params.insert("Rfe_at_rated_ohm".into(), 3.0 * e_rated * e_rated / (frac * power));
+            effect_params.insert(
+                "Rfe_at_rated_ohm".into(),
+                3.0 * e_rated * e_rated / (frac * power),
+            );
             Truth::IronLoss {
                 p_fe_rated: frac * power,
                 beta,
@@ -306,8 +341,10 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
             let knee = i_lr * (1.0 - drop / (1.0 - slope));
             effect_params.insert("leakage_drop_at_locked_rotor".into(), drop);
             effect_params.insert("knee_current_A".into(), knee);
+            let width = uniform(rng, 0.15, 0.4);
             effect_params.insert("slope_above_knee".into(), slope);
-            Truth::Leakage { knee, slope }
+            effect_params.insert("bend_width_of_knee".into(), width);
+            Truth::Leakage { knee, slope, width }
         }
         Some(Effect::StrayLoadLoss) => {
             let frac = uniform(rng, 0.008, 0.03);
@@ -316,7 +353,10 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
             let c = frac * power / ir_rated.powf(gamma);
             effect_params.insert("stray_loss_at_rated_load_fraction_of_rating".into(), frac);
             effect_params.insert("current_exponent".into(), gamma);
-            effect_params.insert("Rsll_equivalent_ohm".into(), frac * power / (3.0 * ir_rated * ir_rated));
+            effect_params.insert(
+                "Rsll_equivalent_ohm".into(),
+                frac * power / (3.0 * ir_rated * ir_rated),
+            );
             Truth::Stray { c, gamma }
         }
         Some(Effect::ThermalDrift) => Truth::Thermal,
@@ -454,12 +494,18 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         effect_params,
         nominal,
         noise: BTreeMap::from([
-            ("line_current".to_string(), rms_sigma(&current_meter, &clean_i)),
+            (
+                "line_current".to_string(),
+                rms_sigma(&current_meter, &clean_i),
+            ),
             ("input_power".to_string(), rms_sigma(&power_meter, &clean_p)),
         ]),
         // Largest resolution step met (autoranging: the step follows the reading).
         quantisation: BTreeMap::from([
-            ("line_current".to_string(), max_step(&current_meter, &meas_i)),
+            (
+                "line_current".to_string(),
+                max_step(&current_meter, &meas_i),
+            ),
             ("input_power".to_string(), max_step(&power_meter, &meas_p)),
             ("line_voltage".to_string(), voltage_meter.step(line_v)),
         ]),
@@ -541,7 +587,9 @@ mod tests {
             let case = simulate_im_case(effect, &mut rng);
             let pts = &case.record.operating_points;
             assert!(pts.len() >= 20);
-            assert!(pts.iter().all(|p| p.line_current > 0.0 && p.input_power > 0.0));
+            assert!(pts
+                .iter()
+                .all(|p| p.line_current > 0.0 && p.input_power > 0.0));
             assert!(pts.iter().all(|p| (0.0..=1.0).contains(&p.slip)));
             let plate = &case.record.meta.as_ref().unwrap().nameplate;
             assert!(Connection::parse(plate["connection"].as_str().unwrap()).is_some());
@@ -553,7 +601,7 @@ mod tests {
             }
             // Locked-rotor current is several times the no-load current.
             let first = pts[0].line_current;
-            let locked = pts.iter().filter(|p| p.segment == 0).last().unwrap().line_current;
+            let locked = pts.iter().rfind(|p| p.segment == 0).unwrap().line_current;
             assert!(locked > 2.0 * first, "{first} → {locked}");
         }
     }
