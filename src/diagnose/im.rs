@@ -5,12 +5,13 @@
 //!    and input power, each reading weighted by its noise (a relative σ per
 //!    channel estimated from the first differences of the residual along
 //!    slip, times `|reading| + 1 %` of the channel's largest reading).
-//! 2. Held out: leave one supply voltage out when there are two or more,
-//!    else interleaved points. `gap_before` is the nominal held-out NRMSE
+//! 2. Held out: interleaved points stratified by sweep (every fold trains
+//!    on every supply voltage; see [`SweepSet::folds`] for why not
+//!    leave-one-voltage-out). `gap_before` is the nominal held-out NRMSE
 //!    (mean over line current and input power).
 //! 3. Every IM effect of the vocabulary ([`IM_EFFECTS`]) refitted with the
 //!    nominal parameters, cross-validated on the same folds, compared with
-//!    the nominal model per operating point by the paired held-out test of
+//!    the nominal model per operating point by the paired sign-flip test of
 //!    [`super::decision`] (Bonferroni over the six candidates), ranked by
 //!    the held-out BIC score. The verdict is the best-scoring candidate if
 //!    its test is significant and its score positive, else `none`.

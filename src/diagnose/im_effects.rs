@@ -234,7 +234,7 @@ impl ImAugmentation {
             unit: "V",
             transform: Transform::Log,
         }];
-        const ISAT: [EffectParam; 2] = [
+        const KNEE: [EffectParam; 2] = [
             EffectParam {
                 key: "Iknee",
                 unit: "A",
@@ -261,7 +261,7 @@ impl ImAugmentation {
             Some(Effect::IronLoss) => &RFE,
             Some(Effect::DeepBar) => &DEEP,
             Some(Effect::MainFluxSaturation) => &ES,
-            Some(Effect::LeakageSaturation) => &ISAT,
+            Some(Effect::LeakageSaturation) => &KNEE,
             Some(Effect::StrayLoadLoss) => &RSLL,
             Some(Effect::ThermalDrift) => &RISE,
             Some(_) => &[],
