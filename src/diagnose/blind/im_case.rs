@@ -17,6 +17,10 @@
 //!   display (one or ten counts of the reading's decade range); the supply voltage itself wanders by
 //!   0.1 %.
 //!
+//! `truth.noise_floor` compares the readings with the truth evaluated at
+//! the voltage as read (the contract's ŷ takes the measured input), so it
+//! holds the voltage meter's share of the noise too.
+//!
 //! The generator's effect models are deliberately a little richer than the
 //! diagnosis' candidates (see `docs/diagnosis-im.md` for the ranges):
 //! iron loss with a Steinmetz exponent (Rfe varies with E), deep bar as
@@ -426,17 +430,20 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         let v_true = v_set * (1.0 + gaussian(rng, 0.001));
         let v_phase = connection.phase_voltage(v_true);
         let (i, p, _) = terminal(&m, &truth, heats[k], s, v_phase);
-        let line_current = connection.line_current(i);
-        let li = current_meter.read(rng, line_current);
+        let li = current_meter.read(rng, connection.line_current(i));
         let lp = power_meter.read(rng, p);
-        clean_i.push(line_current);
-        clean_p.push(p);
+        let v_read = voltage_meter.read(rng, v_true);
+        // What a perfect model gives from the measured input (the
+        // contract's ŷ): the truth at the voltage as read.
+        let (ci, cp, _) = terminal(&m, &truth, heats[k], s, connection.phase_voltage(v_read));
+        clean_i.push(connection.line_current(ci));
+        clean_p.push(cp);
         meas_i.push(li);
         meas_p.push(lp);
         points.push(OperatingPoint {
             segment: seg,
             slip: s,
-            line_voltage: voltage_meter.read(rng, v_true),
+            line_voltage: v_read,
             line_current: li,
             input_power: lp,
             speed: (1.0 - s) * w_sync,
