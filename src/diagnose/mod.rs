@@ -20,6 +20,11 @@ mod text;
 
 mod dc;
 mod im;
+mod im_data;
+mod im_effects;
+mod im_fit;
+mod im_gap;
+mod im_verdict;
 
 pub use dc::diagnose_dc;
 pub use im::diagnose_im;

@@ -1,0 +1,30 @@
+//! A full induction-machine diagnosis (nominal fit, six candidates each
+//! cross-validated on interleaved folds, gap localisation, verdict) of a
+//! blind case: the deep-bar case of a fixed seed, and a case without an
+//! effect.
+//!
+//! `cargo bench --bench diagnose_im`
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use motorbench::diagnose::blind::simulate_im_case;
+use motorbench::diagnose::{diagnose_im, DiagnoseOptions};
+use motorbench::model::Effect;
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use std::hint::black_box;
+
+fn bench(c: &mut Criterion) {
+    let mut group = c.benchmark_group("diagnose_im");
+    group.sample_size(10);
+    for (name, effect) in [("deep_bar", Some(Effect::DeepBar)), ("none", None)] {
+        let case = simulate_im_case(effect, &mut StdRng::seed_from_u64(5));
+        let points = case.record.operating_points.len();
+        group.bench_function(format!("{name} ({points} points)"), |b| {
+            b.iter(|| diagnose_im(black_box(&case.record), &DiagnoseOptions::default()).unwrap())
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

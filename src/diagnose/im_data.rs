@@ -1,0 +1,223 @@
+//! A record's slip sweeps as the IM diagnosis reads them: per-phase
+//! operating points in recording order, their supply-voltage groups, the
+//! heat index, the noise weights and the held-out folds.
+
+use super::im_effects::PointInput;
+use super::{DiagnoseError, DiagnoseOptions};
+use crate::identify::sweep_of;
+use crate::model::Connection;
+use crate::record::Record;
+
+/// Segments whose mean line voltages differ by less than this fraction
+/// are one supply voltage.
+const SAME_VOLTAGE: f64 = 0.03;
+/// Interleaved folds on a single sweep.
+const INTERLEAVED_FOLDS: usize = 5;
+/// Fewest operating points a diagnosis works with.
+pub const MIN_POINTS: usize = 12;
+/// Reading floor of a channel's noise scale, as a fraction of its largest
+/// reading: a meter's "digits" (range-related) error, which keeps the
+/// weight of a near-zero reading finite.
+const DIGIT_FLOOR: f64 = 0.01;
+
+/// The operating points of a record, per phase.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweepSet {
+    /// Winding connection used to go from line to phase quantities.
+    pub connection: Connection,
+    /// Model inputs per point (slip, phase voltage, heat index).
+    pub inputs: Vec<PointInput>,
+    /// Measured phase current, A.
+    pub current: Vec<f64>,
+    /// Measured three-phase input power, W.
+    pub power: Vec<f64>,
+    /// Segment of each point.
+    pub segment: Vec<u32>,
+    /// Supply-voltage group of each point (index into `group_voltage`).
+    pub group: Vec<usize>,
+    /// Mean line voltage of each group, V.
+    pub group_voltage: Vec<f64>,
+    /// Scale of each current reading: `|I| + floor`, A.
+    pub scale_i: Vec<f64>,
+    /// Scale of each power reading: `|P| + floor`, W.
+    pub scale_p: Vec<f64>,
+    /// Relative noise of the current (σ per unit of scale), once estimated.
+    pub sigma_i: f64,
+    /// Relative noise of the power, once estimated.
+    pub sigma_p: f64,
+    /// Line current per phase current (1 star, √3 delta).
+    pub line_per_phase: f64,
+    /// Warnings about the data.
+    pub warnings: Vec<String>,
+}
+
+impl SweepSet {
+    /// Read the record's operating points.
+    pub fn from_record(
+        record: &Record,
+        options: &DiagnoseOptions,
+    ) -> Result<SweepSet, DiagnoseError> {
+        let mut warnings = Vec::new();
+        let connection = options
+            .connection
+            .or_else(|| {
+                record
+                    .meta
+                    .as_ref()
+                    .and_then(|m| m.nameplate.get("connection"))
+                    .and_then(|v| v.as_str())
+                    .and_then(Connection::parse)
+            })
+            .unwrap_or_else(|| {
+                warnings.push(
+                    "no winding connection given (--connection or the nameplate's \"connection\"): \
+                     star assumed; per-phase impedances scale by 3 between star and delta"
+                        .into(),
+                );
+                Connection::Star
+            });
+        let sweep = sweep_of(record, connection);
+        sweep
+            .validate()
+            .map_err(|e| DiagnoseError::NotEnoughData(format!("im_slip_sweep record: {e}")))?;
+        let n = sweep.points.len();
+        if n < MIN_POINTS {
+            return Err(DiagnoseError::NotEnoughData(format!(
+                "{n} operating points; the IM diagnosis needs at least {MIN_POINTS} \
+                 (a sweep from near synchronous speed to locked rotor)"
+            )));
+        }
+        let d = sweep.phase_data();
+        // Voltage groups by segment mean.
+        let mut segs: Vec<u32> = sweep.points.iter().map(|p| p.segment).collect();
+        segs.sort_unstable();
+        segs.dedup();
+        let mut group_voltage: Vec<f64> = Vec::new();
+        let mut seg_group = Vec::new();
+        for &s in &segs {
+            let vs: Vec<f64> = sweep
+                .points
+                .iter()
+                .filter(|p| p.segment == s)
+                .map(|p| p.line_voltage)
+                .collect();
+            let mean = vs.iter().sum::<f64>() / vs.len() as f64;
+            let g = group_voltage
+                .iter()
+                .position(|&gv| (gv - mean).abs() <= SAME_VOLTAGE * gv.max(mean));
+            let g = g.unwrap_or_else(|| {
+                group_voltage.push(mean);
+                group_voltage.len() - 1
+            });
+            seg_group.push((s, g));
+        }
+        let group: Vec<usize> = sweep
+            .points
+            .iter()
+            .map(|p| {
+                seg_group
+                    .iter()
+                    .find(|(s, _)| *s == p.segment)
+                    .map_or(0, |(_, g)| *g)
+            })
+            .collect();
+        // Heat index: I² accumulated in recording order, mid-point rule.
+        let total: f64 = d.current.iter().map(|i| i * i).sum();
+        let mut acc = 0.0;
+        let heat: Vec<f64> = d
+            .current
+            .iter()
+            .map(|i| {
+                let h = acc + 0.5 * i * i;
+                acc += i * i;
+                h / total
+            })
+            .collect();
+        let inputs = (0..n)
+            .map(|k| PointInput {
+                slip: d.slip[k],
+                voltage: d.voltage[k],
+                heat: heat[k],
+            })
+            .collect();
+        let floor = |v: &[f64]| DIGIT_FLOOR * v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let (fi, fp) = (floor(&d.current), floor(&d.power));
+        let has_low = d.slip.iter().any(|&s| s < 0.05);
+        let has_high = d.slip.iter().any(|&s| s > 0.5);
+        if !(has_low && has_high) {
+            warnings.push(
+                "the sweep does not reach both near-synchronous speed (slip < 0.05) and high slip (> 0.5): \
+                 regions outside it cannot be diagnosed"
+                    .into(),
+            );
+        }
+        Ok(SweepSet {
+            connection,
+            inputs,
+            scale_i: d.current.iter().map(|i| i.abs() + fi).collect(),
+            scale_p: d.power.iter().map(|p| p.abs() + fp).collect(),
+            current: d.current,
+            power: d.power,
+            segment: sweep.points.iter().map(|p| p.segment).collect(),
+            group,
+            group_voltage,
+            sigma_i: 1.0,
+            sigma_p: 1.0,
+            line_per_phase: connection.line_current(1.0),
+            warnings,
+        })
+    }
+
+    /// Number of points.
+    pub fn len(&self) -> usize {
+        self.inputs.len()
+    }
+
+    /// Largest phase voltage and current.
+    pub fn maxima(&self) -> (f64, f64) {
+        let v = self.inputs.iter().fold(0.0f64, |m, p| m.max(p.voltage));
+        let i = self.current.iter().fold(0.0f64, |m, x| m.max(*x));
+        (v, i)
+    }
+
+    /// Whether the record holds sweeps at two or more supply voltages.
+    pub fn several_voltages(&self) -> bool {
+        self.group_voltage.len() >= 2
+    }
+
+    /// Held-out folds: the points each fold leaves out, and a description.
+    ///
+    /// Interleaved points, stratified by sweep: within each segment the
+    /// points ranked by slip go to fold `rank mod k`, so that every fold
+    /// trains on every supply voltage and on the whole slip range.
+    /// Leaving a whole voltage out would test extrapolation to a voltage
+    /// the fit never saw, and an effect that shows only at the highest
+    /// voltage (main-flux or leakage saturation) cannot be learnt then:
+    /// leave-one-voltage-out denies exactly the effects a second voltage is
+    /// taken for.
+    pub fn folds(&self) -> (Vec<Vec<usize>>, String) {
+        let k = INTERLEAVED_FOLDS.min(self.len() / 4).max(2);
+        let mut folds = vec![Vec::new(); k];
+        let mut segs = self.segment.clone();
+        segs.sort_unstable();
+        segs.dedup();
+        for s in segs {
+            let mut idx: Vec<usize> = (0..self.len()).filter(|&j| self.segment[j] == s).collect();
+            idx.sort_by(|&a, &b| self.inputs[a].slip.total_cmp(&self.inputs[b].slip));
+            for (r, j) in idx.into_iter().enumerate() {
+                folds[r % k].push(j);
+            }
+        }
+        for f in &mut folds {
+            f.sort_unstable();
+        }
+        (
+            folds,
+            format!(
+                "interleaved points ({k} folds by slip rank within each sweep, {} supply voltage{})",
+                self.group_voltage.len(),
+                if self.group_voltage.len() == 1 { "" } else { "s" }
+            ),
+        )
+    }
+}

@@ -1,0 +1,613 @@
+//! The induction machine's nominal model and its six augmentations, as
+//! the diagnosis fits them: one parameter vector, one prediction of phase
+//! current and three-phase input power per operating point.
+//!
+//! The nominal model is the seed paper's single cage **without** iron
+//! loss (`Rs`, `Xs`, `Xm`, `Rr`, `Xr`), with the leakage split fixed by
+//! convention (`Xs = ratio·Xr`, IEEE 112 design A: a sweep alone cannot
+//! split the leakage). So iron loss is an augmentation like the others.
+//! Every vector starts with `ln Rs, ln Xm, ln Rr, ln Xr`; an effect appends
+//! its own few parameters:
+//!
+//! | effect | parameters | model |
+//! | --- | --- | --- |
+//! | `iron_loss` | `Rfe` (Ω) | `Rfe` in parallel with `Xm` |
+//! | `deep_bar` | `xi1`, `bar_share` (1) | skin effect of a rectangular bar: `Rr(s) = Rr·(1 − b + b·kR(ξ))`, `Xr(s) = Xr·(1 − b + b·kX(ξ))`, `ξ = xi1·√s` |
+//! | `main_flux_saturation` | `Es` (V) | `Xm(E) = Xm/(1 + (E/Es)^7)`, `E` the air-gap voltage |
+//! | `leakage_saturation` | `Iknee` (A), `slope` (1) | leakage flux `X·I` linear up to the knee current, then rising with `slope` of its slope (bend smoothed over a quarter of the knee), `I` the phase current; both leakages |
+//! | `stray_load_loss` | `Rsll` (Ω) | a loss `3·Rsll·Ir²` drawn from the supply as in-phase current |
+//! | `thermal_drift` | `rise` (1) | `Rs, Rr` times `1 + rise·h`, `h` the heat index 0…1 |
+//!
+//! The heat index `h` of a point is the measured `I²` accumulated in
+//! recording order up to it, normalised to 1 at the end of the record: a
+//! winding heated by its copper loss without cooling. `rise` is then the
+//! resistance rise from the start to the end of the test.
+
+use crate::model::{Effect, C64};
+
+/// Exponent of the magnetising-reactance saturation curve (fixed: with a
+/// free exponent the knee and the exponent trade off on sweep data).
+pub const MAIN_FLUX_EXPONENT: i32 = 7;
+
+/// Parameters of the nominal model, in the order of the vector.
+pub const NOMINAL_KEYS: [&str; 4] = ["Rs", "Xm", "Rr", "Xr"];
+
+/// What one operating point gives the model besides the parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointInput {
+    /// Slip, 0–1.
+    pub slip: f64,
+    /// Phase (winding) voltage, V.
+    pub voltage: f64,
+    /// Heat index, 0 at the start of the record, 1 at its end.
+    pub heat: f64,
+}
+
+/// How an effect parameter is carried in the fitted vector.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Transform {
+    /// The vector holds `ln(value)`.
+    Log,
+    /// The vector holds the value itself.
+    Linear,
+}
+
+impl Transform {
+    /// The physical value of a vector entry.
+    pub fn value(self, x: f64) -> f64 {
+        match self {
+            Transform::Log => x.exp(),
+            Transform::Linear => x,
+        }
+    }
+}
+
+/// One effect parameter: contract-style key, unit, meaning.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EffectParam {
+    /// Key in the report, e.g. `Rfe`.
+    pub key: &'static str,
+    /// Unit, e.g. `ohm`.
+    pub unit: &'static str,
+    /// How the vector holds it.
+    pub transform: Transform,
+}
+
+/// The nominal model (`None`) or the nominal model with one effect.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImAugmentation {
+    /// The effect, `None` for the nominal model.
+    pub effect: Option<Effect>,
+    /// `Xs/Xr`, the leakage-split convention.
+    pub split_ratio: f64,
+}
+
+/// The induction-machine effects in the order the diagnosis tries them.
+pub const IM_EFFECTS: [Effect; 6] = [
+    Effect::IronLoss,
+    Effect::DeepBar,
+    Effect::MainFluxSaturation,
+    Effect::LeakageSaturation,
+    Effect::StrayLoadLoss,
+    Effect::ThermalDrift,
+];
+
+/// The vocabulary name of an effect (`none` for `None`).
+pub fn effect_name(effect: Option<Effect>) -> String {
+    match effect {
+        None => "none".into(),
+        Some(e) => serde_json::to_value(e)
+            .ok()
+            .and_then(|v| v.as_str().map(str::to_string))
+            .unwrap_or_else(|| format!("{e:?}")),
+    }
+}
+
+/// Terminal quantities of a circuit: phase current magnitude and power.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Terminal {
+    /// Phase current, A.
+    pub current: f64,
+    /// Three-phase input power, W.
+    pub power: f64,
+    /// Air-gap voltage, V.
+    pub air_gap_voltage: f64,
+    /// Rotor current (referred), A.
+    pub rotor_current: f64,
+}
+
+/// The elements of a single-cage circuit, Ω.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Cage {
+    /// Stator resistance.
+    pub rs: f64,
+    /// Stator leakage reactance.
+    pub xs: f64,
+    /// Magnetising reactance.
+    pub xm: f64,
+    /// Rotor resistance.
+    pub rr: f64,
+    /// Rotor leakage reactance.
+    pub xr: f64,
+}
+
+/// Terminal values of a linear single-cage circuit (iron loss optional)
+/// at slip `s` and phase voltage `v`.
+pub fn linear_terminal(c: &Cage, rfe: Option<f64>, s: f64, v: f64) -> Terminal {
+    let Cage { rs, xs, xm, rr, xr } = *c;
+    let y_r = C64::new(s, 0.0) / C64::new(rr, s * xr);
+    let y_m = C64::new(rfe.map_or(0.0, |r| 1.0 / r), -1.0 / xm);
+    from_air_gap(C64::new(rs, xs), y_m + y_r, y_r, v)
+}
+
+/// Terminal values from the stator impedance and the air-gap branch's
+/// admittance: `V = E·|1 + Zs·Y_ag|`.
+pub fn from_air_gap(zs: C64, y_ag: C64, y_r: C64, v: f64) -> Terminal {
+    let k = (C64::new(1.0, 0.0) + zs * y_ag).norm();
+    let e = v / k;
+    Terminal {
+        current: e * y_ag.norm(),
+        power: 3.0 * e * e * (y_ag.re + zs.re * y_ag.norm_sqr()),
+        air_gap_voltage: e,
+        rotor_current: e * y_r.norm(),
+    }
+}
+
+/// Root of an increasing function on `[lo, hi]` where `f(lo) ≤ 0 ≤ f(hi)`,
+/// by the Illinois variant of false position (bracketed, superlinear).
+pub fn increasing_root(f: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> Option<f64> {
+    let (mut flo, mut fhi) = (f(lo), f(hi));
+    if !(flo <= 0.0 && fhi >= 0.0) {
+        return None;
+    }
+    let mut side = 0i8;
+    for _ in 0..100 {
+        let x = if fhi - flo > 0.0 {
+            (lo * fhi - hi * flo) / (fhi - flo)
+        } else {
+            0.5 * (lo + hi)
+        };
+        let fx = f(x);
+        if !fx.is_finite() {
+            return None;
+        }
+        if fx == 0.0 || (hi - lo) <= 1e-14 * hi.abs() {
+            return Some(x);
+        }
+        if fx < 0.0 {
+            lo = x;
+            flo = fx;
+            if side == -1 {
+                fhi *= 0.5;
+            }
+            side = -1;
+        } else {
+            hi = x;
+            fhi = fx;
+            if side == 1 {
+                flo *= 0.5;
+            }
+            side = 1;
+        }
+    }
+    Some(0.5 * (lo + hi))
+}
+
+impl ImAugmentation {
+    /// The nominal model.
+    pub fn nominal(split_ratio: f64) -> ImAugmentation {
+        ImAugmentation {
+            effect: None,
+            split_ratio,
+        }
+    }
+
+    /// The nominal model with `effect`.
+    pub fn with(effect: Effect, split_ratio: f64) -> ImAugmentation {
+        ImAugmentation {
+            effect: Some(effect),
+            split_ratio,
+        }
+    }
+
+    /// The effect's own parameters.
+    pub fn effect_params(&self) -> &'static [EffectParam] {
+        const RFE: [EffectParam; 1] = [EffectParam {
+            key: "Rfe",
+            unit: "ohm",
+            transform: Transform::Log,
+        }];
+        const DEEP: [EffectParam; 2] = [
+            EffectParam {
+                key: "xi1",
+                unit: "1",
+                transform: Transform::Linear,
+            },
+            EffectParam {
+                key: "bar_share",
+                unit: "1",
+                transform: Transform::Linear,
+            },
+        ];
+        const ES: [EffectParam; 1] = [EffectParam {
+            key: "Es",
+            unit: "V",
+            transform: Transform::Log,
+        }];
+        const KNEE: [EffectParam; 2] = [
+            EffectParam {
+                key: "Iknee",
+                unit: "A",
+                transform: Transform::Log,
+            },
+            EffectParam {
+                key: "slope",
+                unit: "1",
+                transform: Transform::Linear,
+            },
+        ];
+        const RSLL: [EffectParam; 1] = [EffectParam {
+            key: "Rsll",
+            unit: "ohm",
+            transform: Transform::Linear,
+        }];
+        const RISE: [EffectParam; 1] = [EffectParam {
+            key: "rise",
+            unit: "1",
+            transform: Transform::Linear,
+        }];
+        match self.effect {
+            None => &[],
+            Some(Effect::IronLoss) => &RFE,
+            Some(Effect::DeepBar) => &DEEP,
+            Some(Effect::MainFluxSaturation) => &ES,
+            Some(Effect::LeakageSaturation) => &KNEE,
+            Some(Effect::StrayLoadLoss) => &RSLL,
+            Some(Effect::ThermalDrift) => &RISE,
+            Some(_) => &[],
+        }
+    }
+
+    /// Length of the parameter vector.
+    pub fn len(&self) -> usize {
+        NOMINAL_KEYS.len() + self.effect_params().len()
+    }
+
+    /// Starting values of the effect's parameters, several where the fit
+    /// may need them; `nominal` is a fitted nominal vector, `v_max` and
+    /// `i_max` the largest phase voltage and current of the data.
+    pub fn effect_starts(&self, nominal: &[f64], v_max: f64, i_max: f64) -> Vec<Vec<f64>> {
+        let xm = nominal[1].exp();
+        match self.effect {
+            None => vec![vec![]],
+            Some(Effect::IronLoss) => [8.0, 25.0, 80.0]
+                .iter()
+                .map(|k| vec![(k * xm).ln()])
+                .collect(),
+            Some(Effect::DeepBar) => vec![vec![1.0, 0.5], vec![2.0, 0.5]],
+            Some(Effect::MainFluxSaturation) => [0.9, 1.2, 2.0]
+                .iter()
+                .map(|k| vec![(k * v_max).ln()])
+                .collect(),
+            Some(Effect::LeakageSaturation) => [0.3, 0.6, 1.0]
+                .iter()
+                .map(|k| vec![(k * i_max).ln(), 0.5])
+                .collect(),
+            Some(Effect::StrayLoadLoss) | Some(Effect::ThermalDrift) => vec![vec![0.0]],
+            Some(_) => vec![vec![]],
+        }
+    }
+
+    /// Phase current and three-phase power at one point; `None` where the
+    /// vector leaves the physical region.
+    pub fn predict(&self, x: &[f64], p: &PointInput) -> Option<(f64, f64)> {
+        self.terminal(x, p).map(|t| (t.current, t.power))
+    }
+
+    /// Terminal values at one point.
+    pub fn terminal(&self, x: &[f64], p: &PointInput) -> Option<Terminal> {
+        let (rs, xm, rr, xr) = (x[0].exp(), x[1].exp(), x[2].exp(), x[3].exp());
+        let xs = self.split_ratio * xr;
+        let (s, v) = (p.slip, p.voltage);
+        let finite = [rs, xm, rr, xr].iter().all(|v| v.is_finite() && *v > 0.0);
+        if !finite {
+            return None;
+        }
+        let cage = Cage { rs, xs, xm, rr, xr };
+        let t = match self.effect {
+            None => linear_terminal(&cage, None, s, v),
+            Some(Effect::IronLoss) => {
+                let rfe = x[4].exp();
+                if !(rfe.is_finite() && rfe > 0.0) {
+                    return None;
+                }
+                linear_terminal(&cage, Some(rfe), s, v)
+            }
+            Some(Effect::DeepBar) => {
+                let b = x[5];
+                if !(0.0..=1.0).contains(&b) {
+                    return None;
+                }
+                let (kr, kx) = skin_effect(x[4].abs() * s.sqrt());
+                let fr = 1.0 - b + b * kr;
+                let fx = 1.0 - b + b * kx;
+                let deep = Cage {
+                    rr: rr * fr,
+                    xr: xr * fx,
+                    ..cage
+                };
+                linear_terminal(&deep, None, s, v)
+            }
+            Some(Effect::MainFluxSaturation) => {
+                let es = x[4].exp();
+                if !(es.is_finite() && es > 0.0) {
+                    return None;
+                }
+                main_flux_terminal(&cage, s, v, |e| 1.0 + (e / es).powi(MAIN_FLUX_EXPONENT))?
+            }
+            Some(Effect::LeakageSaturation) => {
+                let knee = x[4].exp();
+                let slope = x[5];
+                // A positive slope keeps the leakage flux rising with I.
+                if !(knee.is_finite() && knee > 0.0 && (0.02..=1.0).contains(&slope)) {
+                    return None;
+                }
+                leakage_terminal(&cage, s, v, |i| leakage_factor(i, knee, slope, 0.25))?
+            }
+            Some(Effect::StrayLoadLoss) => {
+                let t = linear_terminal(&cage, None, s, v);
+                let p_sll = 3.0 * x[4] * t.rotor_current * t.rotor_current;
+                stray_terminal(&cage, s, v, p_sll)
+            }
+            Some(Effect::ThermalDrift) => {
+                let f = 1.0 + x[4] * p.heat;
+                if f < 0.2 {
+                    return None;
+                }
+                let hot = Cage {
+                    rs: rs * f,
+                    rr: rr * f,
+                    ..cage
+                };
+                linear_terminal(&hot, None, s, v)
+            }
+            Some(_) => return None,
+        };
+        (t.current.is_finite() && t.power.is_finite()).then_some(t)
+    }
+}
+
+/// Resistance and reactance factors `(kR, kX)` of a rectangular bar at
+/// reduced height `xi` (the classical skin-effect functions; 1 at `xi = 0`,
+/// `kR → xi`, `kX → 3/(2·xi)` for a deep bar).
+pub fn skin_effect(xi: f64) -> (f64, f64) {
+    if xi < 0.05 {
+        // Series: kR ≈ 1 + 4ξ⁴/45, kX ≈ 1 − 8ξ⁴/315.
+        let x4 = xi.powi(4);
+        return (1.0 + 4.0 * x4 / 45.0, 1.0 - 8.0 * x4 / 315.0);
+    }
+    let a = 2.0 * xi;
+    let den = a.cosh() - a.cos();
+    (
+        xi * (a.sinh() + a.sin()) / den,
+        1.5 / xi * (a.sinh() - a.sin()) / den,
+    )
+}
+
+/// Terminal values with a magnetising reactance `xm0/d(E)` that depends on
+/// the air-gap voltage `E` (`d ≥ 1`, increasing): solve
+/// `E·|1 + Zs·Y_ag(E)| = V` for `E`.
+pub fn main_flux_terminal(c: &Cage, s: f64, v: f64, d: impl Fn(f64) -> f64) -> Option<Terminal> {
+    let Cage {
+        rs,
+        xs,
+        xm: xm0,
+        rr,
+        xr,
+    } = *c;
+    let zs = C64::new(rs, xs);
+    let y_r = C64::new(s, 0.0) / C64::new(rr, s * xr);
+    let y_ag = |e: f64| C64::new(0.0, -d(e) / xm0) + y_r;
+    let g = |e: f64| e * (C64::new(1.0, 0.0) + zs * y_ag(e)).norm() - v;
+    let mut hi = v;
+    while g(hi) < 0.0 {
+        hi *= 2.0;
+        if hi > 1e3 * v {
+            return None;
+        }
+    }
+    let e = increasing_root(g, 0.0, hi)?;
+    let ya = y_ag(e);
+    Some(Terminal {
+        current: e * ya.norm(),
+        power: 3.0 * e * e * (ya.re + rs * ya.norm_sqr()),
+        air_gap_voltage: e,
+        rotor_current: e * y_r.norm(),
+    })
+}
+
+/// Factor on the leakage reactances at phase current `i`: the leakage
+/// flux `X·I` is linear up to `knee`, then rises with `slope` of its
+/// initial slope; the bend is smoothed (softplus) over `width`·`knee`.
+pub fn leakage_factor(i: f64, knee: f64, slope: f64, width: f64) -> f64 {
+    if i <= 0.0 {
+        return 1.0;
+    }
+    let w = width * knee;
+    let x = (i - knee) / w;
+    let soft = if x > 30.0 { x } else { x.exp().ln_1p() };
+    // Subtract the softplus' value at i = 0 so that f(0) = 1 exactly.
+    let soft0 = (-knee / w).exp().ln_1p();
+    ((i - (1.0 - slope) * w * (soft - soft0)) / i).max(1e-9)
+}
+
+/// Terminal values with a loss `p_sll` (W, three phases) drawn from the
+/// supply as in-phase current on top of the circuit's own current.
+pub fn stray_terminal(c: &Cage, s: f64, v: f64, p_sll: f64) -> Terminal {
+    let Cage { rs, xs, xm, rr, xr } = *c;
+    let y_r = C64::new(s, 0.0) / C64::new(rr, s * xr);
+    let y_ag = C64::new(0.0, -1.0 / xm) + y_r;
+    let z = C64::new(rs, xs) + y_ag.inv();
+    let i = C64::new(v, 0.0) / z;
+    let e = (C64::new(v, 0.0) - i * C64::new(rs, xs)).norm();
+    let total = i + C64::new(p_sll / (3.0 * v), 0.0);
+    Terminal {
+        current: total.norm(),
+        power: 3.0 * v * total.re,
+        air_gap_voltage: e,
+        rotor_current: e * y_r.norm(),
+    }
+}
+
+/// Terminal values with both leakage reactances scaled by `f(I)` of the
+/// phase current (`f ≤ 1`, with `I·f(I)` increasing): solve `I·|Z(I)| = V`.
+pub fn leakage_terminal(c: &Cage, s: f64, v: f64, f: impl Fn(f64) -> f64) -> Option<Terminal> {
+    let at = |i: f64| {
+        let k = f(i);
+        let sat = Cage {
+            xs: c.xs * k,
+            xr: c.xr * k,
+            ..*c
+        };
+        linear_terminal(&sat, None, s, v)
+    };
+    let z = |i: f64| {
+        let t = at(i);
+        v / t.current
+    };
+    let h = |i: f64| i * z(i) - v;
+    let lo = at(0.0).current;
+    if h(lo) >= 0.0 {
+        return Some(at(lo));
+    }
+    let mut hi = 2.0 * lo;
+    while h(hi) < 0.0 {
+        hi *= 2.0;
+        if hi > 1e3 * lo {
+            return None;
+        }
+    }
+    let i = increasing_root(h, lo.min(hi), hi)?;
+    Some(at(i))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::identify::predict;
+    use crate::model::{ImCircuit, RotorCage};
+
+    fn x0() -> Vec<f64> {
+        [1.0f64, 60.0, 1.2, 2.0].iter().map(|v| v.ln()).collect()
+    }
+
+    fn point(s: f64) -> PointInput {
+        PointInput {
+            slip: s,
+            voltage: 230.0,
+            heat: 0.5,
+        }
+    }
+
+    #[test]
+    fn nominal_matches_the_model_circuit() {
+        let c = ImCircuit {
+            rs: 1.0,
+            xs: 2.0,
+            xm: 60.0,
+            rfe: None,
+            rotor: RotorCage::Single { rr: 1.2, xr: 2.0 },
+        };
+        let m = ImAugmentation::nominal(1.0);
+        for s in [0.0, 0.01, 0.2, 1.0] {
+            let (i, p) = m.predict(&x0(), &point(s)).unwrap();
+            let (i0, p0) = predict(&c, s, 230.0);
+            assert!((i - i0).abs() < 1e-9 * i0 && (p - p0).abs() < 1e-9 * p0.abs().max(1.0));
+        }
+    }
+
+    #[test]
+    fn neutral_effect_parameters_give_the_nominal_model() {
+        let nominal = ImAugmentation::nominal(1.0);
+        let neutral: [(Effect, &[f64]); 6] = [
+            (Effect::IronLoss, &[27.6]),
+            (Effect::DeepBar, &[0.0, 0.0]),
+            (Effect::MainFluxSaturation, &[20.7]),
+            (Effect::LeakageSaturation, &[1.0, 1.0]),
+            (Effect::StrayLoadLoss, &[0.0]),
+            (Effect::ThermalDrift, &[0.0]),
+        ];
+        for (e, extra) in neutral {
+            let m = ImAugmentation::with(e, 1.0);
+            let mut x = x0();
+            x.extend_from_slice(extra);
+            assert_eq!(x.len(), m.len());
+            for s in [0.003, 0.1, 1.0] {
+                let a = m.predict(&x, &point(s)).unwrap();
+                let b = nominal.predict(&x0(), &point(s)).unwrap();
+                assert!(
+                    (a.0 - b.0).abs() < 1e-7 * b.0 && (a.1 - b.1).abs() < 1e-7 * b.1.abs(),
+                    "{e:?} at {s}: {a:?} vs {b:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn effects_move_the_curves_the_physical_way() {
+        let nominal = ImAugmentation::nominal(1.0);
+        let at = |m: ImAugmentation, extra: &[f64], s: f64| {
+            let mut x = x0();
+            x.extend_from_slice(extra);
+            m.terminal(&x, &point(s)).unwrap()
+        };
+        let base = |s: f64| nominal.terminal(&x0(), &point(s)).unwrap();
+        // Iron loss: more power at no load.
+        let fe = at(
+            ImAugmentation::with(Effect::IronLoss, 1.0),
+            &[900f64.ln()],
+            0.0,
+        );
+        assert!(fe.power > base(0.0).power + 10.0);
+        // Saturation of the main flux: more magnetising current at no load.
+        let sat = at(
+            ImAugmentation::with(Effect::MainFluxSaturation, 1.0),
+            &[200f64.ln()],
+            0.0,
+        );
+        assert!(sat.current > 1.2 * base(0.0).current);
+        // E solves V = E·|1 + Zs·Y|: the power balance holds.
+        assert!(sat.air_gap_voltage < 230.0);
+        // Leakage saturation: more current at locked rotor.
+        let ls = at(
+            ImAugmentation::with(Effect::LeakageSaturation, 1.0),
+            &[20f64.ln(), 0.4],
+            1.0,
+        );
+        assert!(ls.current > 1.05 * base(1.0).current);
+        // Stray load loss: power, and a little in-phase current.
+        let sl = at(
+            ImAugmentation::with(Effect::StrayLoadLoss, 1.0),
+            &[0.3],
+            0.5,
+        );
+        let extra = 3.0 * 0.3 * base(0.5).rotor_current.powi(2);
+        assert!((sl.power - base(0.5).power - extra).abs() < 1e-6 * extra);
+        assert!(sl.current > base(0.5).current && sl.current < 1.05 * base(0.5).current);
+        // Deep bar: more power at locked rotor for the same kx = 0.
+        let db = at(ImAugmentation::with(Effect::DeepBar, 1.0), &[2.0, 0.7], 1.0);
+        assert!(db.power > base(1.0).power);
+        let (kr, kx) = skin_effect(0.05);
+        let (kr2, kx2) = skin_effect(0.0499);
+        assert!((kr - kr2).abs() < 1e-6 && (kx - kx2).abs() < 1e-6);
+        let (kr, kx) = skin_effect(5.0);
+        assert!((kr - 5.0).abs() < 0.01 && (kx - 0.3).abs() < 0.01);
+    }
+
+    #[test]
+    fn root_finder_brackets() {
+        let r = increasing_root(|x| x * x * x - 8.0, 0.0, 10.0).unwrap();
+        assert!((r - 2.0).abs() < 1e-12);
+        assert!(increasing_root(|x| x + 1.0, 0.0, 1.0).is_none());
+    }
+}

@@ -1,0 +1,304 @@
+//! Levenberg–Marquardt fit of the nominal model or an augmented one to a
+//! subset of a sweep's points (current and power, noise-weighted), the
+//! held-out residuals of a model over folds, and linearised 95 %
+//! intervals of a fit.
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::storage::Owned;
+use nalgebra::{DMatrix, DVector, Dyn};
+
+use super::im_data::SweepSet;
+use super::im_effects::ImAugmentation;
+use crate::identify::PRACTICAL_LIMIT;
+
+/// A fitted model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AugmentedFit {
+    /// The fitted vector.
+    pub x: Vec<f64>,
+    /// Sum of squared weighted residuals on the fitted points.
+    pub cost: f64,
+}
+
+/// Weighted residuals of `model` at point `k`: current and power, each
+/// divided by its noise scale. `None` outside the physical region.
+pub fn weighted_residual(
+    model: &ImAugmentation,
+    x: &[f64],
+    data: &SweepSet,
+    k: usize,
+) -> Option<(f64, f64)> {
+    let (i, p) = model.predict(x, &data.inputs[k])?;
+    Some((
+        (data.current[k] - i) / (data.sigma_i * data.scale_i[k]),
+        (data.power[k] - p) / (data.sigma_p * data.scale_p[k]),
+    ))
+}
+
+struct Problem<'a> {
+    model: ImAugmentation,
+    data: &'a SweepSet,
+    idx: &'a [usize],
+    x: DVector<f64>,
+}
+
+impl Problem<'_> {
+    fn residuals_at(&self, x: &[f64]) -> Option<DVector<f64>> {
+        let n = self.idx.len();
+        let mut r = DVector::zeros(2 * n);
+        for (j, &k) in self.idx.iter().enumerate() {
+            let (a, b) = weighted_residual(&self.model, x, self.data, k)?;
+            r[j] = a;
+            r[n + j] = b;
+        }
+        Some(r)
+    }
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.x.copy_from(x);
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.x.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        // A large finite residual outside the physical region rejects the
+        // trial step (None would end the run).
+        Some(
+            self.residuals_at(self.x.as_slice())
+                .filter(|r| r.iter().all(|v| v.is_finite()))
+                .unwrap_or_else(|| DVector::from_element(2 * self.idx.len(), 1e100)),
+        )
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        jacobian(self.model, self.data, self.idx, self.x.as_slice())
+    }
+}
+
+/// Central-difference Jacobian of the weighted residuals.
+fn jacobian(
+    model: ImAugmentation,
+    data: &SweepSet,
+    idx: &[usize],
+    x: &[f64],
+) -> Option<DMatrix<f64>> {
+    let p = Problem {
+        model,
+        data,
+        idx,
+        x: DVector::from_column_slice(x),
+    };
+    let n = idx.len();
+    let mut jac = DMatrix::zeros(2 * n, x.len());
+    let mut xp = x.to_vec();
+    for j in 0..x.len() {
+        let h = 1e-6 * (1.0 + x[j].abs());
+        xp[j] = x[j] + h;
+        let up = p.residuals_at(&xp)?;
+        xp[j] = x[j] - h;
+        let dn = p.residuals_at(&xp)?;
+        xp[j] = x[j];
+        jac.set_column(j, &((up - dn) / (2.0 * h)));
+    }
+    jac.iter().all(|v| v.is_finite()).then_some(jac)
+}
+
+/// Fit `model` to the points `idx` from each of `starts`; the lowest cost
+/// wins. `None` when no start gives a finite fit.
+pub fn fit(
+    model: ImAugmentation,
+    data: &SweepSet,
+    idx: &[usize],
+    starts: &[Vec<f64>],
+) -> Option<AugmentedFit> {
+    let mut best: Option<AugmentedFit> = None;
+    for s in starts {
+        if s.len() != model.len() {
+            continue;
+        }
+        let problem = Problem {
+            model,
+            data,
+            idx,
+            x: DVector::from_column_slice(s),
+        };
+        if problem
+            .residuals_at(s)
+            .is_none_or(|r| !r.iter().all(|v| v.is_finite()))
+        {
+            continue;
+        }
+        let lm = LevenbergMarquardt::new().with_patience(100).with_tol(1e-10);
+        let (p, _report) = lm.minimize(problem);
+        let x: Vec<f64> = p.x.iter().copied().collect();
+        let Some(r) = p.residuals_at(&x) else {
+            continue;
+        };
+        let cost = r.norm_squared();
+        if cost.is_finite() && best.as_ref().is_none_or(|b| cost < b.cost) {
+            best = Some(AugmentedFit { x, cost });
+        }
+    }
+    best
+}
+
+/// Starting vectors of `model` from a fitted nominal vector: the nominal
+/// part with each of the effect's starts, plus `extra` full vectors.
+pub fn starts_from(
+    model: &ImAugmentation,
+    nominal: &[f64],
+    data: &SweepSet,
+    extra: &[Vec<f64>],
+) -> Vec<Vec<f64>> {
+    let (v, i) = data.maxima();
+    let mut out: Vec<Vec<f64>> = model
+        .effect_starts(nominal, v, i)
+        .into_iter()
+        .map(|e| nominal[..4].iter().copied().chain(e).collect())
+        .collect();
+    out.extend(extra.iter().filter(|x| x.len() == model.len()).cloned());
+    out
+}
+
+/// Held-out residuals of `model` over `folds`: each fold fitted on the
+/// other points, its own points predicted. Per point: the weighted
+/// (current, power) residual, and the fold fits.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HeldOut {
+    /// Weighted held-out residual per point (current, power).
+    pub weighted: Vec<(f64, f64)>,
+    /// Predicted phase current and power per point (held out).
+    pub predicted: Vec<(f64, f64)>,
+    /// The vector fitted for each fold.
+    pub fold_x: Vec<Vec<f64>>,
+}
+
+/// Cross-validate `model`: `start` is the model's fit on all points (the
+/// folds start from it and from the fold's nominal fit `fold_nominal`).
+pub fn held_out(
+    model: ImAugmentation,
+    data: &SweepSet,
+    folds: &[Vec<usize>],
+    start: &[f64],
+    fold_nominal: &[Vec<f64>],
+) -> Option<HeldOut> {
+    let n = data.len();
+    let mut weighted = vec![(f64::NAN, f64::NAN); n];
+    let mut predicted = vec![(f64::NAN, f64::NAN); n];
+    let mut fold_x = Vec::with_capacity(folds.len());
+    for (f, out) in folds.iter().enumerate() {
+        let train: Vec<usize> = (0..n).filter(|k| !out.contains(k)).collect();
+        let mut starts = vec![start.to_vec()];
+        if let Some(nom) = fold_nominal.get(f) {
+            starts.extend(starts_from(&model, nom, data, &[]));
+        }
+        let fitted = fit(model, data, &train, &starts)?;
+        for &k in out {
+            let (i, p) = model.predict(&fitted.x, &data.inputs[k])?;
+            predicted[k] = (i, p);
+            weighted[k] = weighted_residual(&model, &fitted.x, data, k)?;
+        }
+        fold_x.push(fitted.x);
+    }
+    Some(HeldOut {
+        weighted,
+        predicted,
+        fold_x,
+    })
+}
+
+/// A fitted vector entry with its 95 % interval on the vector's scale.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Interval {
+    /// Value on the vector's scale.
+    pub x: f64,
+    /// Half-width of the 95 % interval on the vector's scale (`None`:
+    /// not determined by the data).
+    pub half_width: Option<f64>,
+}
+
+/// Linearised 95 % intervals of a fit on the points `idx`
+/// (`σ² = cost/(m − q)`, Student t). An entry whose standard error on
+/// the log scale exceeds [`PRACTICAL_LIMIT`] (or whose direction the data
+/// do not see) gets no interval.
+pub fn intervals(
+    model: ImAugmentation,
+    data: &SweepSet,
+    idx: &[usize],
+    fit: &AugmentedFit,
+) -> Vec<Interval> {
+    let q = fit.x.len();
+    let none = || {
+        fit.x
+            .iter()
+            .map(|&x| Interval {
+                x,
+                half_width: None,
+            })
+            .collect()
+    };
+    let Some(jac) = jacobian(model, data, idx, &fit.x) else {
+        return none();
+    };
+    let m = jac.nrows();
+    if m <= q {
+        return none();
+    }
+    let s2 = fit.cost / (m - q) as f64;
+    let svd = jac.svd(false, true);
+    let Some(v_t) = svd.v_t else {
+        return none();
+    };
+    let sv = svd.singular_values;
+    let smax = sv.max();
+    let mut cov = DMatrix::zeros(q, q);
+    let mut undetermined = vec![0.0; q];
+    for k in 0..q {
+        let vk = v_t.row(k).transpose();
+        if sv[k] > smax * 1e-9 {
+            cov += &vk * vk.transpose() * (s2 / (sv[k] * sv[k]));
+        } else {
+            for j in 0..q {
+                undetermined[j] += vk[j] * vk[j];
+            }
+        }
+    }
+    let t = t975(m - q);
+    let log_entries = log_mask(&model);
+    (0..q)
+        .map(|j| {
+            let sd = cov[(j, j)].max(0.0).sqrt();
+            let weak = undetermined[j] > 1e-4 || (log_entries[j] && sd > PRACTICAL_LIMIT);
+            Interval {
+                x: fit.x[j],
+                half_width: (!weak && sd.is_finite()).then_some(t * sd),
+            }
+        })
+        .collect()
+}
+
+/// The 97.5 % quantile of Student's t with `dof` degrees of freedom.
+fn t975(dof: usize) -> f64 {
+    use statrs::distribution::{ContinuousCDF, StudentsT};
+    StudentsT::new(0.0, 1.0, dof.max(1) as f64).map_or(1.96, |d| d.inverse_cdf(0.975))
+}
+
+/// Which entries of the vector are logarithms.
+pub fn log_mask(model: &ImAugmentation) -> Vec<bool> {
+    let mut m = vec![true; 4];
+    m.extend(
+        model
+            .effect_params()
+            .iter()
+            .map(|p| p.transform == super::im_effects::Transform::Log),
+    );
+    m
+}
