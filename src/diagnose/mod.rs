@@ -17,6 +17,10 @@ mod plot;
 pub mod report;
 
 mod dc;
+mod dc_candidates;
+mod dc_fit;
+mod dc_gap;
+mod dc_model;
 mod im;
 
 pub use dc::diagnose_dc;
