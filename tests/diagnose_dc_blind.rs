@@ -85,3 +85,22 @@ fn one_case_per_effect_and_two_nones() {
 fn three_cases_per_effect_and_six_nones() {
     check(2024, 3, 6);
 }
+
+#[test]
+#[ignore = "probe"]
+fn probe() {
+    let mut rng = StdRng::seed_from_u64(7);
+    let _ = simulate_dc_case(None, &mut rng);
+    let case = simulate_dc_case(None, &mut rng);
+    eprintln!("{:?}", case.truth);
+    for s in &case.record.segments {
+        eprintln!("{} {} n={}", s.index, s.label, s.time.len());
+    }
+    let run = diagnose_dc(&case.record, &DiagnoseOptions::default()).unwrap();
+    let r = &run.report;
+    eprintln!("nominal {:?}", r.nominal);
+    eprintln!("segments {:?} channels {:?}", r.gap.segments, r.gap.channels);
+    for g in r.gap.regions.iter().take(6) { eprintln!("{g:?}"); }
+    for e in &r.gap.evidence { eprintln!("{e:?}"); }
+    eprintln!("{:?}", r.warnings);
+}

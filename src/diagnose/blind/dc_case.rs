@@ -131,23 +131,38 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
     let volts = fam.volts * (p.k / fam.p.k);
     let amps = fam.amps;
 
-    // Plan: five levels from rest, consecutive levels at least 15 % of the
-    // rated voltage apart, at least one step down, the last one high.
+    // Plan: five levels from rest (the first at most half the rated
+    // voltage), consecutive levels 15–60 % of the rated voltage apart, at
+    // least one step down, the last one high.
     let levels = loop {
         let l: Vec<f64> = (0..5)
             .map(|n| {
-                let lo = if n == 4 { 0.7 } else { 0.2 };
-                volts * rng.random_range(lo..1.0)
+                let (lo, hi) = match n {
+                    0 => (0.2, 0.5),
+                    4 => (0.7, 1.0),
+                    _ => (0.2, 1.0),
+                };
+                volts * rng.random_range(lo..hi)
             })
             .collect();
-        let apart = l.windows(2).all(|w| (w[1] - w[0]).abs() >= 0.15 * volts);
+        let apart = l
+            .windows(2)
+            .all(|w| (0.15..=0.6).contains(&((w[1] - w[0]).abs() / volts)));
         let down = l.windows(2).any(|w| w[1] < w[0]);
         if apart && down {
             break l;
         }
     };
-    let tau_slow = p.tau_m().max(p.tau_e());
-    let hold = (10.0 * tau_slow).clamp(0.3, 1.2);
+    // Each level is held until the slowest mode has decayed some twelve
+    // times (complex poles decay with 2·τe).
+    let (tm, te) = (p.tau_m(), p.tau_e());
+    let disc = tm * tm - 4.0 * tm * te;
+    let tau_slow = if disc < 0.0 {
+        2.0 * te
+    } else {
+        2.0 * tm * te / (tm - disc.sqrt())
+    };
+    let hold = (12.0 * tau_slow).clamp(0.3, 1.5);
     let slew = volts * rng.random_range(20.0..200.0); // V/s per rated volt: 5–50 ms full swing
 
     let peak_current = {
