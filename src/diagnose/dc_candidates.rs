@@ -190,7 +190,9 @@ pub fn effect_params(
             put(
                 "Isat",
                 isat(m.e[0]),
-                ci(0).filter(|c| c[0] > 0.0).map(|c| [isat(c[1]), isat(c[0])]),
+                ci(0)
+                    .filter(|c| c[0] > 0.0)
+                    .map(|c| [isat(c[1]), isat(c[0])]),
                 "A",
             );
         }
@@ -209,7 +211,12 @@ pub fn effect_params(
                 LagChannel::Current => "tau_current",
                 LagChannel::Speed => "tau_speed",
             };
-            put(key, m.e[0].abs(), ci(0).map(|c| [c[0].max(0.0), c[1].abs()]), "s");
+            put(
+                key,
+                m.e[0].abs(),
+                ci(0).map(|c| [c[0].max(0.0), c[1].abs()]),
+                "s",
+            );
         }
         Augment::ShaftCompliance => {
             put("fr", m.e[0], ci(0), "Hz");

@@ -18,7 +18,7 @@ use std::cell::RefCell;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 
-use super::dc_model::{AugModel, Augment, SegmentRun};
+use super::dc_model::{AugModel, SegmentRun};
 use crate::model::DcParams;
 
 /// How one fitted parameter maps to its physical value.
@@ -85,11 +85,7 @@ impl FitSpec {
         for (n, t) in self.effect.iter().enumerate() {
             e[n] = t.apply(self.start.e[n], x[6 + n]);
         }
-        AugModel {
-            p,
-            e,
-            ..self.start
-        }
+        AugModel { p, e, ..self.start }
     }
 }
 
@@ -146,7 +142,6 @@ struct FitProblem<'a> {
     rows: usize,
     x: DVector<f64>,
     last: RefCell<Option<Linearisation>>,
-    evaluations: RefCell<usize>,
 }
 
 impl FitProblem<'_> {
@@ -170,7 +165,6 @@ impl FitProblem<'_> {
                 return;
             }
         }
-        *self.evaluations.borrow_mut() += 1;
         let np = x.len();
         let mut buf = Vec::with_capacity(self.rows);
         let l = if self.residuals_into(x, &mut buf) {
@@ -270,17 +264,15 @@ pub struct Fitted {
     pub model: AugModel,
     /// Sum of squared weighted residuals.
     pub sse: f64,
-    /// Residual rows.
-    pub rows: usize,
     /// Covariance of the transformed parameters (`s²·(JᵀJ)⁻¹`, inflated
     /// by the residuals' colour); `None` when singular.
     pub covariance: Option<DMatrix<f64>>,
-    /// The optimum in transformed parameters.
-    pub x: DVector<f64>,
     /// Whether the optimiser reports convergence.
     pub converged: bool,
-    /// Residual evaluations used.
-    pub evaluations: usize,
+    /// Residual variance per degree of freedom, `SSE/(rows − P)`.
+    pub s2: f64,
+    /// Colour of the residuals: rows per effective independent sample.
+    pub colour: f64,
 }
 
 /// Fit `spec` to `runs` weighted by `w`, at most `patience` (×P)
@@ -295,7 +287,6 @@ pub fn fit(spec: &FitSpec, runs: &[SegmentRun], w: &Weights, patience: usize) ->
         rows,
         x: DVector::zeros(np),
         last: RefCell::new(None),
-        evaluations: RefCell::new(0),
     };
     let lm = LevenbergMarquardt::new()
         .with_ftol(1e-8)
@@ -304,7 +295,6 @@ pub fn fit(spec: &FitSpec, runs: &[SegmentRun], w: &Weights, patience: usize) ->
         .with_patience(patience);
     let (problem, report) = lm.minimize(problem);
     problem.linearise(&problem.x);
-    let evaluations = *problem.evaluations.borrow();
     let last = problem.last.into_inner()?;
     if last.r.is_empty() {
         return None;
@@ -321,25 +311,11 @@ pub fn fit(spec: &FitSpec, runs: &[SegmentRun], w: &Weights, patience: usize) ->
     Some(Fitted {
         model: spec.model_at(&last.x),
         sse,
-        rows,
         covariance,
-        x: last.x,
         converged: report.termination.was_successful(),
-        evaluations,
+        s2,
+        colour: colour.max(1.0),
     })
-}
-
-/// Start a fit of `aug` from the fitted nominal (or augmented) model
-/// `from`, with effect parameters `e` and their transforms.
-pub fn spec_from(from: &AugModel, aug: Augment, e: [f64; 3], effect: Vec<Transform>) -> FitSpec {
-    FitSpec {
-        start: AugModel {
-            aug,
-            e,
-            ..*from
-        },
-        effect,
-    }
 }
 
 /// The spec that refits `fitted` itself (a fold's start).

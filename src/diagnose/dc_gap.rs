@@ -358,8 +358,8 @@ fn evidence(series: &[HeldOutSeries], measured: &[Measured], w: [f64; 2]) -> Vec
             (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for (s, m) in series.iter().zip(measured) {
             let res = if c == 0 { &s.current } else { &s.speed };
-            for k in 0..res.len().min(m.voltage.len()) {
-                r.push(res[k] * w[c]);
+            for (k, rv) in res.iter().enumerate().take(m.voltage.len()) {
+                r.push(rv * w[c]);
                 u.push(m.voltage[k]);
                 sw.push(m.speed[k].signum());
                 ai.push(m.current[k].abs());
@@ -407,7 +407,9 @@ mod tests {
         let ringing: Vec<f64> = white
             .iter()
             .enumerate()
-            .map(|(k, v)| v + 2.0 * (TAU * 37.0 * k as f64 * dt).sin() * (-(k as f64) * dt / 0.3).exp())
+            .map(|(k, v)| {
+                v + 2.0 * (TAU * 37.0 * k as f64 * dt).sin() * (-(k as f64) * dt / 0.3).exp()
+            })
             .collect();
         let p = spectral_peak(&[&ringing], dt).unwrap();
         assert!(p.p_value < 1e-6 && (p.hz - 37.0).abs() <= 1.0, "{p:?}");
@@ -417,7 +419,10 @@ mod tests {
             .map(|(k, v)| v + 30.0 * (-(k as f64) * dt / 0.05).exp())
             .collect();
         let p = spectral_peak(&[&decay], dt).unwrap();
-        assert!(p.p_value > FALSE_ALARM_RATE, "smooth misfit is no peak: {p:?}");
+        assert!(
+            p.p_value > FALSE_ALARM_RATE,
+            "smooth misfit is no peak: {p:?}"
+        );
     }
 
     #[test]
@@ -450,7 +455,12 @@ mod tests {
         let loc = locate(&[s], &[m], [1.0, 1.0], 0.2, 1e-3);
         assert_eq!(loc.regions[0].label, "transient");
         assert!((loc.regions[0].share - 1.0).abs() < 1e-12);
-        let sum: f64 = loc.regions.iter().filter(|r| r.label != "oscillation").map(|r| r.share).sum();
+        let sum: f64 = loc
+            .regions
+            .iter()
+            .filter(|r| r.label != "oscillation")
+            .map(|r| r.share)
+            .sum();
         assert!((sum - 1.0).abs() < 1e-12);
         assert!((loc.channels["armature_current"] - 1.0).abs() < 1e-12);
     }

@@ -66,8 +66,6 @@ pub enum Start {
 pub struct SegmentRun<'a> {
     /// The record's segment.
     pub seg: &'a DcSegment,
-    /// Position of the segment in the record.
-    pub pos: usize,
     /// Sample interval, s.
     pub dt: f64,
     /// How it starts.
@@ -134,7 +132,10 @@ fn coast_step(p: &DcParams, dt: f64, w: f64, t: f64) -> (f64, f64) {
     let x = p.f * dt / p.j;
     // (1 − e^−x)·J/f and (dt − that)/f, by series when x is small.
     let (g, h) = if x < 1e-6 {
-        (dt * (1.0 - x / 2.0), dt * dt / (2.0 * p.j) * (1.0 - x / 3.0))
+        (
+            dt * (1.0 - x / 2.0),
+            dt * dt / (2.0 * p.j) * (1.0 - x / 3.0),
+        )
     } else {
         let g = -(-x).exp_m1() * p.j / p.f;
         (g, (dt - g) / p.f)
@@ -166,9 +167,7 @@ impl AugModel {
                 let d = self.e[0] * i * i;
                 (-p.k * d * w, p.k * d * i)
             }
-            Augment::InductanceSaturation => {
-                (-(u - p.ra * i - p.k * w) * self.e[0] * i * i, 0.0)
-            }
+            Augment::InductanceSaturation => (-(u - p.ra * i - p.k * w) * self.e[0] * i * i, 0.0),
             Augment::ThermalDrift => (p.ra * self.e[0] * heat * i, 0.0),
             _ => (0.0, 0.0),
         }
@@ -210,9 +209,7 @@ impl AugModel {
                 _ => 0.0,
             };
             let t = match self.aug {
-                Augment::CoulombFriction => {
-                    p.tst + self.e[0] * (-w.abs() / self.e[1]).exp()
-                }
+                Augment::CoulombFriction => p.tst + self.e[0] * (-w.abs() / self.e[1]).exp(),
                 _ => p.tst,
             } * u.signum();
             let kg = p.k * g;
@@ -257,7 +254,11 @@ impl AugModel {
         match self.aug {
             Augment::SensorLag(ch) => {
                 let tau = self.e[0].abs();
-                let a = if tau > 0.0 { (-run.dt / tau).exp() } else { 0.0 };
+                let a = if tau > 0.0 {
+                    (-run.dt / tau).exp()
+                } else {
+                    0.0
+                };
                 let nominal = AugModel::nominal(self.p);
                 let mut y: Option<(f64, f64)> = None;
                 nominal.simulate(run, &mut |i, w| {
@@ -351,12 +352,7 @@ impl AugModel {
                         let (pi, pw, _) = step.step(i, w, uk - dv0, t + dt0);
                         let ph = heat + dt * i * i;
                         let (dv1, dt1) = self.perturb(pi, pw, uk, ph, d);
-                        step.step(
-                            i,
-                            w,
-                            uk - 0.5 * (dv0 + dv1),
-                            t + 0.5 * (dt0 + dt1),
-                        )
+                        step.step(i, w, uk - 0.5 * (dv0 + dv1), t + 0.5 * (dt0 + dt1))
                     }
                 }
             };
@@ -434,7 +430,11 @@ impl AugModel {
             } else if p.tst == 0.0 {
                 Some(1.0)
             } else if !at_rest || (p.k * x[0]).abs() > p.tst {
-                Some(if at_rest { x[0].signum() } else { x[1].signum() })
+                Some(if at_rest {
+                    x[0].signum()
+                } else {
+                    x[1].signum()
+                })
             } else {
                 None
             };
@@ -503,7 +503,6 @@ mod tests {
     fn run(seg: &DcSegment) -> SegmentRun<'_> {
         SegmentRun {
             seg,
-            pos: 1,
             dt: 5e-4,
             start: Start::Settled(60.0),
             coast: false,
@@ -595,8 +594,16 @@ mod tests {
             ..AugModel::nominal(p)
         };
         let (i1, w1) = sim(&m, &r);
-        let di = i0.iter().zip(&i1).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-        let dw = w0.iter().zip(&w1).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let di = i0
+            .iter()
+            .zip(&i1)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let dw = w0
+            .iter()
+            .zip(&w1)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
         assert!(di < 0.02 && dw < 0.5, "{di} {dw}");
     }
 
@@ -610,7 +617,6 @@ mod tests {
         };
         let r = SegmentRun {
             seg: &seg,
-            pos: 0,
             dt: 1e-3,
             start: Start::Settled(248.0),
             coast: true,

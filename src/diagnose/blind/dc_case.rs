@@ -15,7 +15,7 @@
 //! | `inductance_saturation` | `La(i) = La·(ℓ + (1−ℓ)/(1 + (i/Isat)²))`, floor ℓ 0.3–0.5 | La 20–50 % lower at the largest step current |
 //! | `thermal_drift` | first-order thermal network, `Ra = Ra0·(1 + α·ϑ)`, τth 30–300 s | Ra 3–12 % higher at the end |
 //! | `sensor_lag` | transport delay (0–2 samples) then a first-order lag, on current or speed | current τ 10–40 % of τe; speed τ 5–20 % of τm |
-//! | `shaft_compliance` | two masses, friction on the load, a little viscous loss on the motor | fr 10–50 Hz, ζ 0.02–0.08, motor share 0.3–0.7 |
+//! | `shaft_compliance` | two masses, friction on the load, a little viscous loss on the motor | fr 10–50 Hz, ζ 0.03–0.1, motor share 0.3–0.7 |
 //!
 //! Magnitudes run from barely above the noise to strong; below those
 //! ranges an effect does not change a 2 kHz staircase by more than its
@@ -46,13 +46,35 @@ const ALPHA_CU: f64 = 0.003_93;
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Truth {
     None,
-    Stribeck { tb: f64, ws: f64 },
-    Brush { vb: f64, i0: f64 },
-    Armature { iar: f64 },
-    Inductance { isat: f64, floor: f64 },
-    Thermal { cth: f64, rth: f64 },
-    Lag { current: bool, tau: f64, delay: usize },
-    Shaft { fr: f64, r: f64, zeta: f64 },
+    Stribeck {
+        tb: f64,
+        ws: f64,
+    },
+    Brush {
+        vb: f64,
+        i0: f64,
+    },
+    Armature {
+        iar: f64,
+    },
+    Inductance {
+        isat: f64,
+        floor: f64,
+    },
+    Thermal {
+        cth: f64,
+        rth: f64,
+    },
+    Lag {
+        current: bool,
+        tau: f64,
+        delay: usize,
+    },
+    Shaft {
+        fr: f64,
+        r: f64,
+        zeta: f64,
+    },
 }
 
 /// A machine family: nominal values and ratings.
@@ -162,7 +184,7 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
     } else {
         2.0 * tm * te / (tm - disc.sqrt())
     };
-    let hold = (12.0 * tau_slow).clamp(0.3, 1.5);
+    let mut hold = (12.0 * tau_slow).clamp(0.3, 1.5);
     let slew = volts * rng.random_range(20.0..200.0); // V/s per rated volt: 5–50 ms full swing
 
     let peak_current = {
@@ -239,9 +261,15 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         Some(Effect::SensorLag) => {
             let current = rng.random_bool(0.5);
             let (tau, delay) = if current {
-                (p.tau_e() * rng.random_range(0.1..0.4), rng.random_range(0..2))
+                (
+                    p.tau_e() * rng.random_range(0.1..0.4),
+                    rng.random_range(0..2),
+                )
             } else {
-                (p.tau_m() * rng.random_range(0.05..0.2), rng.random_range(0..3))
+                (
+                    p.tau_m() * rng.random_range(0.05..0.2),
+                    rng.random_range(0..3),
+                )
             };
             params.insert(
                 if current { "tau_current" } else { "tau_speed" }.into(),
@@ -258,7 +286,9 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         Some(Effect::ShaftCompliance) => {
             let fr = (rng.random_range(10f64.ln()..50f64.ln())).exp();
             let r = rng.random_range(0.3..0.7);
-            let zeta = rng.random_range(0.02..0.08);
+            let zeta: f64 = rng.random_range(0.03..0.1);
+            // The bench holds a level until it settles: the ringing too.
+            hold = hold.max((6.0 / (zeta * TAU * fr)).min(3.0));
             params.insert("fr".into(), fr);
             params.insert("r_motor".into(), r);
             params.insert("zeta".into(), zeta);
@@ -354,7 +384,10 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         } else {
             0.5 * (nrmse(&seg.current, &clean_i).unwrap_or(0.0) + speed_floor)
         });
-        clean_prev = (*clean_i.last().unwrap_or(&0.0), *clean_w.last().unwrap_or(&0.0));
+        clean_prev = (
+            *clean_i.last().unwrap_or(&0.0),
+            *clean_w.last().unwrap_or(&0.0),
+        );
         t0 += n - 1;
         segments.push(seg);
     }
@@ -529,72 +562,75 @@ fn simulate(p: &DcParams, truth: Truth, plan: &Plan) -> Clean {
         Truth::Armature { iar } => 1.0 / (1.0 + (i / iar).powi(2)).sqrt(),
         _ => 1.0,
     };
-    let mut run = |target: Option<f64>, n: usize, label: String, x: &mut State, applied: &mut f64| {
-        let open = target.is_none();
-        let mut seg = CleanSegment {
-            label,
-            coast: open,
-            u: Vec::with_capacity(n),
-            i: Vec::with_capacity(n),
-            w: Vec::with_capacity(n),
-            theta: Vec::with_capacity(n),
-            emf: Vec::with_capacity(n),
-        };
-        for _ in 0..n {
-            if let Some(t) = target {
-                *applied += (t - *applied).clamp(-plan.slew * DT, plan.slew * DT);
-            }
-            let u = if open { 0.0 } else { *applied };
-            if open {
-                x[0] = 0.0;
-            }
-            let th0 = x[4];
-            let moving_speed = if shaft { x[2] } else { x[1] };
-            let at_rest = x[1] == 0.0 && x[2] == 0.0;
-            let dir = if moving_speed != 0.0 {
-                Some(moving_speed.signum())
-            } else if !at_rest {
-                Some(x[1].signum())
-            } else if (p.k * kf_of(x[0]) * x[0]).abs() > breakaway {
-                Some((x[0]).signum())
-            } else {
-                None
+    let mut run =
+        |target: Option<f64>, n: usize, label: String, x: &mut State, applied: &mut f64| {
+            let open = target.is_none();
+            let mut seg = CleanSegment {
+                label,
+                coast: open,
+                u: Vec::with_capacity(n),
+                i: Vec::with_capacity(n),
+                w: Vec::with_capacity(n),
+                theta: Vec::with_capacity(n),
+                emf: Vec::with_capacity(n),
             };
-            for _ in 0..SUBSTEPS {
-                let k1 = deriv(x, u, open, dir);
-                let add = |a: &State, k: &State, c: f64| -> State { std::array::from_fn(|n| a[n] + c * k[n]) };
-                let k2 = deriv(&add(x, &k1, h / 2.0), u, open, dir);
-                let k3 = deriv(&add(x, &k2, h / 2.0), u, open, dir);
-                let k4 = deriv(&add(x, &k3, h), u, open, dir);
-                for n in 0..6 {
-                    x[n] += h / 6.0 * (k1[n] + 2.0 * k2[n] + 2.0 * k3[n] + k4[n]);
+            for _ in 0..n {
+                if let Some(t) = target {
+                    *applied += (t - *applied).clamp(-plan.slew * DT, plan.slew * DT);
                 }
-                if !shaft {
-                    x[2] = x[1];
+                let u = if open { 0.0 } else { *applied };
+                if open {
+                    x[0] = 0.0;
                 }
-                if let Some(d) = dir {
-                    let s = if shaft { x[2] } else { x[1] };
-                    if s * d < 0.0 {
-                        if shaft && moving_speed == 0.0 {
-                            // The load is still held by its friction.
-                            x[2] = 0.0;
-                        } else {
-                            x[1] = 0.0;
-                            x[2] = 0.0;
-                            x[3] = 0.0;
+                let th0 = x[4];
+                let moving_speed = if shaft { x[2] } else { x[1] };
+                let at_rest = x[1] == 0.0 && x[2] == 0.0;
+                let dir = if moving_speed != 0.0 {
+                    Some(moving_speed.signum())
+                } else if !at_rest {
+                    Some(x[1].signum())
+                } else if (p.k * kf_of(x[0]) * x[0]).abs() > breakaway {
+                    Some((x[0]).signum())
+                } else {
+                    None
+                };
+                for _ in 0..SUBSTEPS {
+                    let k1 = deriv(x, u, open, dir);
+                    let add = |a: &State, k: &State, c: f64| -> State {
+                        std::array::from_fn(|n| a[n] + c * k[n])
+                    };
+                    let k2 = deriv(&add(x, &k1, h / 2.0), u, open, dir);
+                    let k3 = deriv(&add(x, &k2, h / 2.0), u, open, dir);
+                    let k4 = deriv(&add(x, &k3, h), u, open, dir);
+                    for n in 0..6 {
+                        x[n] += h / 6.0 * (k1[n] + 2.0 * k2[n] + 2.0 * k3[n] + k4[n]);
+                    }
+                    if !shaft {
+                        x[2] = x[1];
+                    }
+                    if let Some(d) = dir {
+                        let s = if shaft { x[2] } else { x[1] };
+                        if s * d < 0.0 {
+                            if shaft && moving_speed == 0.0 {
+                                // The load is still held by its friction.
+                                x[2] = 0.0;
+                            } else {
+                                x[1] = 0.0;
+                                x[2] = 0.0;
+                                x[3] = 0.0;
+                            }
                         }
                     }
+                    energy += h * x[0] * x[0] * p.ra;
                 }
-                energy += h * x[0] * x[0] * p.ra;
+                seg.u.push(u);
+                seg.i.push(x[0]);
+                seg.w.push((x[4] - th0) / DT);
+                seg.theta.push(x[4]);
+                seg.emf.push(p.k * x[1]);
             }
-            seg.u.push(u);
-            seg.i.push(x[0]);
-            seg.w.push((x[4] - th0) / DT);
-            seg.theta.push(x[4]);
-            seg.emf.push(p.k * x[1]);
-        }
-        seg
-    };
+            seg
+        };
     let mut prev_level = 0.0;
     for (n, &level) in plan.levels.iter().enumerate() {
         let label = if n == 0 {
@@ -617,7 +653,13 @@ fn simulate(p: &DcParams, truth: Truth, plan: &Plan) -> Clean {
     let decel = (p.f * w0 + p.tst) / p.j;
     let t_stop = (p.j / p.f * (1.0 + w0 * p.f / p.tst).ln()).min(w0 / decel * 3.0);
     let samples = (((t_stop + 0.2).min(8.0)) / DT).round() as usize;
-    let mut seg = run(None, samples, format!("{prev_level:.1} V → coast-down"), &mut x, &mut applied);
+    let mut seg = run(
+        None,
+        samples,
+        format!("{prev_level:.1} V → coast-down"),
+        &mut x,
+        &mut applied,
+    );
     prepend(&mut seg, &segments[segments.len() - 1]);
     segments.push(seg);
 
