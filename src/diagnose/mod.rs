@@ -19,6 +19,10 @@ pub mod report;
 mod text;
 
 mod dc;
+mod dc_candidates;
+mod dc_fit;
+mod dc_gap;
+mod dc_model;
 mod im;
 mod im_data;
 mod im_effects;

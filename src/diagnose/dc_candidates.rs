@@ -1,0 +1,255 @@
+//! The seven DC candidate augmentations: how each starts, how its
+//! parameters are transformed for the fit, their names and units in the
+//! report, and which sign physics allows.
+
+use std::collections::BTreeMap;
+
+use super::dc_fit::{Fitted, Transform};
+use super::dc_model::{AugModel, Augment, LagChannel};
+use crate::model::Effect;
+use crate::report::ParamEstimate;
+
+/// Scales of the record that set start values and parameter scales.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RecordScales {
+    /// Largest |measured current|, A.
+    pub i_max: f64,
+    /// Largest |measured voltage|, V.
+    pub u_max: f64,
+    /// Largest |measured speed|, rad/s.
+    pub w_max: f64,
+    /// `∫i²dt` over the whole record, A²·s.
+    pub heat_total: f64,
+    /// Sample interval, s.
+    pub dt: f64,
+    /// Frequency of a spectral peak in the nominal residual, Hz.
+    pub peak_hz: Option<f64>,
+}
+
+/// One candidate ready to fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CandidateDef {
+    /// The vocabulary effect.
+    pub effect: Effect,
+    /// The augmentation.
+    pub aug: Augment,
+    /// Start values of its parameters.
+    pub e: [f64; 3],
+    /// Their transforms.
+    pub transforms: Vec<Transform>,
+}
+
+/// Every candidate (sensor lag twice: on the current and on the speed; the
+/// better of the two on the fitting data stands for `sensor_lag`).
+pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
+    let p = &nominal.p;
+    let i2 = (s.i_max * s.i_max).max(1e-12);
+    let lin = |scale: f64| Transform::Linear(scale.max(1e-300));
+    let def = |effect, aug, e, transforms| CandidateDef {
+        effect,
+        aug,
+        e,
+        transforms,
+    };
+    vec![
+        def(
+            Effect::CoulombFriction,
+            Augment::CoulombFriction,
+            [0.3 * p.tst.max(1e-4), 0.05 * s.w_max.max(1.0), 0.0],
+            vec![lin(0.3 * p.tst.max(1e-4)), Transform::Log],
+        ),
+        def(
+            Effect::BrushDrop,
+            Augment::BrushDrop,
+            [0.0; 3],
+            vec![lin(0.01 * s.u_max)],
+        ),
+        def(
+            Effect::ArmatureReaction,
+            Augment::ArmatureReaction,
+            [0.0; 3],
+            vec![lin(0.02 / i2)],
+        ),
+        def(
+            Effect::InductanceSaturation,
+            Augment::InductanceSaturation,
+            [0.0; 3],
+            vec![lin(0.2 / i2)],
+        ),
+        def(
+            Effect::ThermalDrift,
+            Augment::ThermalDrift,
+            [0.0; 3],
+            vec![lin(0.01 / s.heat_total.max(1e-9))],
+        ),
+        def(
+            Effect::SensorLag,
+            Augment::SensorLag(LagChannel::Current),
+            [s.dt, 0.0, 0.0],
+            vec![lin(s.dt)],
+        ),
+        def(
+            Effect::SensorLag,
+            Augment::SensorLag(LagChannel::Speed),
+            [s.dt, 0.0, 0.0],
+            vec![lin(s.dt)],
+        ),
+        def(
+            Effect::ShaftCompliance,
+            Augment::ShaftCompliance,
+            [s.peak_hz.unwrap_or(40.0), 0.5, 0.1],
+            vec![Transform::Log, Transform::Logit, Transform::Log],
+        ),
+    ]
+}
+
+/// Extra parameters of a candidate (the sensor-lag channel counts as one).
+pub fn extra_params(aug: Augment) -> usize {
+    match aug {
+        Augment::Nominal => 0,
+        Augment::CoulombFriction => 2,
+        Augment::SensorLag(_) => 2,
+        Augment::ShaftCompliance => 3,
+        _ => 1,
+    }
+}
+
+/// Whether the fitted effect has the sign physics gives it.
+pub fn physical(m: &AugModel) -> bool {
+    match m.aug {
+        Augment::CoulombFriction
+        | Augment::BrushDrop
+        | Augment::ArmatureReaction
+        | Augment::InductanceSaturation
+        | Augment::ThermalDrift => m.e[0] > 0.0,
+        _ => true,
+    }
+}
+
+fn estimate(value: f64, ci: Option<[f64; 2]>, unit: &str) -> ParamEstimate {
+    ParamEstimate {
+        value,
+        ci95: ci.filter(|c| c.iter().all(|v| v.is_finite())),
+        unit: unit.into(),
+    }
+}
+
+/// 95 % interval of effect parameter `n` from the fit's covariance.
+fn interval(f: &Fitted, transforms: &[Transform], n: usize) -> Option<[f64; 2]> {
+    let cov = f.covariance.as_ref()?;
+    let sd = cov[(6 + n, 6 + n)].max(0.0).sqrt();
+    let v = |dx: f64| -> f64 {
+        let spec_start = f.model.e[n];
+        // Re-apply the transform relative to the optimum: the transforms
+        // are monotone, so the interval maps through them.
+        match transforms[n] {
+            Transform::Linear(s) => spec_start + s * dx,
+            Transform::Log => spec_start * dx.exp(),
+            Transform::Logit => {
+                let z = dx + (spec_start / (1.0 - spec_start)).ln();
+                1.0 / (1.0 + (-z).exp())
+            }
+        }
+    };
+    let (a, b) = (v(-1.96 * sd), v(1.96 * sd));
+    Some([a.min(b), a.max(b)])
+}
+
+/// The effect's parameters in physical units, with 95 % intervals.
+pub fn effect_params(
+    f: &Fitted,
+    transforms: &[Transform],
+    s: &RecordScales,
+) -> BTreeMap<String, ParamEstimate> {
+    let m = &f.model;
+    let ci = |n| interval(f, transforms, n);
+    let mut out = BTreeMap::new();
+    let mut put = |k: &str, v: f64, c: Option<[f64; 2]>, u: &str| {
+        out.insert(k.to_string(), estimate(v, c, u));
+    };
+    match m.aug {
+        Augment::Nominal => {}
+        Augment::CoulombFriction => {
+            put("Tb", m.e[0], ci(0), "N*m");
+            put("ws", m.e[1], ci(1), "rad/s");
+        }
+        Augment::BrushDrop => put("Vb", m.e[0], ci(0), "V"),
+        Augment::ArmatureReaction => {
+            put("kappa", m.e[0], ci(0), "1/A^2");
+            let at = |k: f64| k * s.i_max * s.i_max;
+            put(
+                "K_drop_at_peak_current",
+                at(m.e[0]),
+                ci(0).map(|c| [at(c[0]), at(c[1])]),
+                "1",
+            );
+        }
+        Augment::InductanceSaturation => {
+            put("s", m.e[0], ci(0), "1/A^2");
+            let isat = |v: f64| if v > 0.0 { v.powf(-0.5) } else { f64::INFINITY };
+            put(
+                "Isat",
+                isat(m.e[0]),
+                ci(0)
+                    .filter(|c| c[0] > 0.0)
+                    .map(|c| [isat(c[1]), isat(c[0])]),
+                "A",
+            );
+        }
+        Augment::ThermalDrift => {
+            put("beta", m.e[0], ci(0), "1/(A^2*s)");
+            let rise = |b: f64| b * s.heat_total;
+            put(
+                "Ra_rise",
+                rise(m.e[0]),
+                ci(0).map(|c| [rise(c[0]), rise(c[1])]),
+                "1",
+            );
+        }
+        Augment::SensorLag(ch) => {
+            let key = match ch {
+                LagChannel::Current => "tau_current",
+                LagChannel::Speed => "tau_speed",
+            };
+            put(
+                key,
+                m.e[0].abs(),
+                ci(0).map(|c| [c[0].max(0.0), c[1].abs()]),
+                "s",
+            );
+        }
+        Augment::ShaftCompliance => {
+            put("fr", m.e[0], ci(0), "Hz");
+            put("r_motor", m.e[1], ci(1), "1");
+            put("zeta", m.e[2], ci(2), "1");
+        }
+    }
+    out
+}
+
+/// The test plan that separates two look-alike effects.
+pub fn separating_plan(a: Effect, b: Effect) -> String {
+    use Effect::*;
+    let pair = |x: Effect, y: Effect| (a == x && b == y) || (a == y && b == x);
+    if pair(CoulombFriction, BrushDrop) {
+        "end the test with a coast-down from the highest level: friction acts with no current, \
+         the brush drop needs current"
+    } else if pair(SensorLag, InductanceSaturation) {
+        "steps of several sizes to the same level (saturation follows the current, a sensor \
+         lag does not), or a reference sensor of known bandwidth"
+    } else if pair(ThermalDrift, ArmatureReaction) || pair(ThermalDrift, BrushDrop) {
+        "repeat the first level at the end of the test: heating changes the same level's \
+         current with time, armature reaction and brush drop do not"
+    } else if pair(ArmatureReaction, BrushDrop) {
+        "levels spread over the whole current range, up to rated current: armature reaction \
+         grows with the current, the brush drop is constant once the brushes conduct"
+    } else if pair(ShaftCompliance, SensorLag) {
+        "a load-side speed sensor, or steps with faster voltage slew to excite the resonance"
+    } else if pair(CoulombFriction, ThermalDrift) {
+        "a second coast-down at the start of the test"
+    } else {
+        "more levels over the current range, a level repeated at the end of the test and a \
+         coast-down from the highest level"
+    }
+    .into()
+}

@@ -1,0 +1,327 @@
+//! Output-error fit of a nominal or augmented DC model on a set of
+//! segments, by the `levenberg-marquardt` crate on noise-weighted
+//! residuals of current and speed, and the held-out simulation of one
+//! segment.
+//!
+//! Parameters are transformed so that the optimiser works unconstrained:
+//! the six nominal parameters as `ln(p/p_ref)`, an effect parameter
+//! linearly (a zero effect lies inside the search space, so a fit on data
+//! without the effect finds it at zero), logarithmically or as a logit
+//! where physics bounds it. The Jacobian is taken by forward differences
+//! (what is simulated is what is differentiated, stiction included), and
+//! the crate sees the problem reduced to `P+1` rows (`R` of a QR of the
+//! Jacobian and the residual's norm), so it never factorises the tall
+//! Jacobian itself.
+
+use std::cell::RefCell;
+
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use nalgebra::{DMatrix, DVector, Dyn, Owned};
+
+use super::dc_model::{AugModel, SegmentRun};
+use crate::model::DcParams;
+
+/// How one fitted parameter maps to its physical value.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Transform {
+    /// `v = reference·e^x`.
+    Log,
+    /// `v = reference + scale·x`.
+    Linear(f64),
+    /// `v = 1/(1 + e^−(x + logit(reference)))`, in (0, 1).
+    Logit,
+}
+
+impl Transform {
+    fn apply(self, reference: f64, x: f64) -> f64 {
+        match self {
+            Transform::Log => reference * x.exp(),
+            Transform::Linear(scale) => reference + scale * x,
+            Transform::Logit => {
+                let z = x + (reference / (1.0 - reference)).ln();
+                1.0 / (1.0 + (-z).exp())
+            }
+        }
+    }
+}
+
+/// Noise weights `1/σ` of current and speed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Weights {
+    /// 1/σ of the current, 1/A.
+    pub current: f64,
+    /// 1/σ of the speed, s/rad.
+    pub speed: f64,
+}
+
+/// What is fitted: the model's form, where it starts and how each
+/// parameter is transformed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FitSpec {
+    /// The start (and reference of the transforms).
+    pub start: AugModel,
+    /// Transforms of the effect's parameters (0 to 3 of them).
+    pub effect: Vec<Transform>,
+}
+
+impl FitSpec {
+    /// Parameters fitted.
+    pub fn len(&self) -> usize {
+        6 + self.effect.len()
+    }
+
+    /// The model at `x`.
+    pub fn model_at(&self, x: &DVector<f64>) -> AugModel {
+        let r = &self.start.p;
+        let p = DcParams {
+            ra: r.ra * x[0].exp(),
+            la: r.la * x[1].exp(),
+            k: r.k * x[2].exp(),
+            j: r.j * x[3].exp(),
+            f: r.f * x[4].exp(),
+            tst: r.tst * x[5].exp(),
+        };
+        let mut e = self.start.e;
+        for (n, t) in self.effect.iter().enumerate() {
+            e[n] = t.apply(self.start.e[n], x[6 + n]);
+        }
+        AugModel { p, e, ..self.start }
+    }
+}
+
+/// Weighted residuals of one segment: current then speed per sample
+/// (speed only for a coast-down, whose current is zero by construction).
+pub fn segment_residuals(
+    model: &AugModel,
+    run: &SegmentRun,
+    w: &Weights,
+    out: &mut Vec<f64>,
+) -> bool {
+    let (yi, yw) = (&run.seg.current, &run.seg.speed);
+    let mut k = 0;
+    let coast = run.coast;
+    let ok = model.simulate(run, &mut |i, s| {
+        if k < yi.len() {
+            if !coast {
+                out.push((i - yi[k]) * w.current);
+            }
+            out.push((s - yw[k]) * w.speed);
+        }
+        k += 1;
+    });
+    ok && k == yi.len()
+}
+
+/// Rows of one segment's residuals.
+pub fn segment_rows(run: &SegmentRun) -> usize {
+    if run.coast {
+        run.len()
+    } else {
+        2 * run.len()
+    }
+}
+
+/// Residual value standing for a model the simulation refuses.
+const REFUSED: f64 = 1e15;
+
+/// Forward-difference step in the transformed parameters.
+const FD_STEP: f64 = 1e-7;
+
+struct Linearisation {
+    x: DVector<f64>,
+    r: DVector<f64>,
+    jac: DMatrix<f64>,
+    reduced_r: DVector<f64>,
+    reduced_j: DMatrix<f64>,
+}
+
+struct FitProblem<'a> {
+    spec: &'a FitSpec,
+    runs: &'a [SegmentRun<'a>],
+    w: Weights,
+    rows: usize,
+    x: DVector<f64>,
+    last: RefCell<Option<Linearisation>>,
+}
+
+impl FitProblem<'_> {
+    fn residuals_into(&self, x: &DVector<f64>, r: &mut Vec<f64>) -> bool {
+        r.clear();
+        if !x.iter().all(|v| v.is_finite() && v.abs() < 30.0) {
+            return false;
+        }
+        let m = self.spec.model_at(x);
+        for run in self.runs {
+            if !segment_residuals(&m, run, &self.w, r) {
+                return false;
+            }
+        }
+        r.len() == self.rows && r.iter().all(|v| v.is_finite())
+    }
+
+    fn linearise(&self, x: &DVector<f64>) {
+        if let Some(l) = self.last.borrow().as_ref() {
+            if l.x == *x {
+                return;
+            }
+        }
+        let np = x.len();
+        let mut buf = Vec::with_capacity(self.rows);
+        let l = if self.residuals_into(x, &mut buf) {
+            let r = DVector::from_vec(buf.clone());
+            let mut jac = DMatrix::<f64>::zeros(self.rows, np);
+            for n in 0..np {
+                let mut xp = x.clone();
+                let mut h = FD_STEP;
+                xp[n] += h;
+                if !self.residuals_into(&xp, &mut buf) {
+                    h = -FD_STEP;
+                    xp[n] = x[n] + h;
+                    if !self.residuals_into(&xp, &mut buf) {
+                        continue;
+                    }
+                }
+                let col = &mut jac.as_mut_slice()[n * self.rows..(n + 1) * self.rows];
+                for ((c, b), a) in col.iter_mut().zip(&buf).zip(r.iter()) {
+                    *c = (b - a) / h;
+                }
+            }
+            let (reduced_r, reduced_j) = reduce(&jac, &r);
+            Linearisation {
+                x: x.clone(),
+                r,
+                jac,
+                reduced_r,
+                reduced_j,
+            }
+        } else {
+            let mut reduced_r = DVector::zeros(np + 1);
+            reduced_r[np] = REFUSED;
+            Linearisation {
+                x: x.clone(),
+                r: DVector::zeros(0),
+                jac: DMatrix::zeros(0, np),
+                reduced_r,
+                reduced_j: DMatrix::zeros(np + 1, np),
+            }
+        };
+        *self.last.borrow_mut() = Some(l);
+    }
+}
+
+/// The `P+1`-row problem equivalent to `(jac, r)`: `R = Λ^½·Vᵀ` from
+/// `JᵀJ = V·Λ·Vᵀ`, `r' = [R⁻ᵀ·Jᵀr; ‖r − projection‖]`.
+fn reduce(jac: &DMatrix<f64>, r: &DVector<f64>) -> (DVector<f64>, DMatrix<f64>) {
+    let np = jac.ncols();
+    let g = jac.tr_mul(r);
+    let eig = jac.tr_mul(jac).symmetric_eigen();
+    let largest = eig.eigenvalues.max();
+    let mut rr = DVector::zeros(np + 1);
+    let mut rj = DMatrix::zeros(np + 1, np);
+    let mut explained = 0.0;
+    for i in 0..np {
+        let l = eig.eigenvalues[i];
+        if l > 1e-14 * largest && l > 0.0 {
+            let v = eig.eigenvectors.column(i);
+            let root = l.sqrt();
+            rj.row_mut(i).copy_from(&(v.transpose() * root));
+            rr[i] = v.dot(&g) / root;
+            explained += rr[i] * rr[i];
+        }
+    }
+    rr[np] = (r.norm_squared() - explained).max(0.0).sqrt();
+    (rr, rj)
+}
+
+impl LeastSquaresProblem<f64, Dyn, Dyn> for FitProblem<'_> {
+    type ResidualStorage = Owned<f64, Dyn>;
+    type JacobianStorage = Owned<f64, Dyn, Dyn>;
+    type ParameterStorage = Owned<f64, Dyn>;
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.x = x.clone();
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.x.clone()
+    }
+
+    fn residuals(&self) -> Option<DVector<f64>> {
+        self.linearise(&self.x);
+        self.last.borrow().as_ref().map(|l| l.reduced_r.clone())
+    }
+
+    fn jacobian(&self) -> Option<DMatrix<f64>> {
+        self.linearise(&self.x);
+        self.last.borrow().as_ref().map(|l| l.reduced_j.clone())
+    }
+}
+
+/// A fitted model.
+#[derive(Debug, Clone)]
+pub struct Fitted {
+    /// The model at the optimum.
+    pub model: AugModel,
+    /// Sum of squared weighted residuals.
+    pub sse: f64,
+    /// Covariance of the transformed parameters (`s²·(JᵀJ)⁻¹`, inflated
+    /// by the residuals' colour); `None` when singular.
+    pub covariance: Option<DMatrix<f64>>,
+    /// Whether the optimiser reports convergence.
+    pub converged: bool,
+    /// Residual variance per degree of freedom, `SSE/(rows − P)`.
+    pub s2: f64,
+    /// Colour of the residuals: rows per effective independent sample.
+    pub colour: f64,
+}
+
+/// Fit `spec` to `runs` weighted by `w`, at most `patience` (×P)
+/// evaluations. `None` when the start itself is refused.
+pub fn fit(spec: &FitSpec, runs: &[SegmentRun], w: &Weights, patience: usize) -> Option<Fitted> {
+    let rows: usize = runs.iter().map(segment_rows).sum();
+    let np = spec.len();
+    let problem = FitProblem {
+        spec,
+        runs,
+        w: *w,
+        rows,
+        x: DVector::zeros(np),
+        last: RefCell::new(None),
+    };
+    let lm = LevenbergMarquardt::new()
+        .with_ftol(1e-8)
+        .with_xtol(1e-9)
+        .with_gtol(1e-9)
+        .with_patience(patience);
+    let (problem, report) = lm.minimize(problem);
+    problem.linearise(&problem.x);
+    let last = problem.last.into_inner()?;
+    if last.r.is_empty() {
+        return None;
+    }
+    let sse = last.r.norm_squared();
+    let dof = (rows as f64 - np as f64).max(1.0);
+    let s2 = sse / dof;
+    let colour = rows as f64 / super::decision::effective_samples(last.r.as_slice()).max(1.0);
+    let covariance = last
+        .jac
+        .tr_mul(&last.jac)
+        .try_inverse()
+        .map(|m| m * s2 * colour.max(1.0));
+    Some(Fitted {
+        model: spec.model_at(&last.x),
+        sse,
+        covariance,
+        converged: report.termination.was_successful(),
+        s2,
+        colour: colour.max(1.0),
+    })
+}
+
+/// The spec that refits `fitted` itself (a fold's start).
+pub fn refit_spec(spec: &FitSpec, fitted: &Fitted) -> FitSpec {
+    FitSpec {
+        start: fitted.model,
+        effect: spec.effect.clone(),
+    }
+}

@@ -1,0 +1,631 @@
+//! The DC models the diagnosis fits: the paper's model (Ra, La, K, J, f,
+//! Tst) alone or with one augmentation from the contract's vocabulary,
+//! simulated on one recorded segment from the measured voltage.
+//!
+//! The nominal model is simulated exactly (zero-order hold, as the
+//! output-error identification does). An augmentation enters the same
+//! exact discretisation as an extra voltage `ΔV` and an extra torque `ΔT`
+//! evaluated on the state (predictor–corrector over each sample), so the
+//! augmented model with its effect at zero IS the nominal model, sample for
+//! sample: a candidate cannot win on discretisation error. Shaft compliance
+//! changes the state (two masses) and has its own exact discretisation;
+//! sensor lag filters the simulated reading.
+
+use nalgebra::{SMatrix, SVector};
+
+use crate::model::{DcMotor, DcParams, Zoh};
+use crate::record::DcSegment;
+
+/// Which channel a sensor lag delays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LagChannel {
+    /// The armature-current reading.
+    Current,
+    /// The speed reading.
+    Speed,
+}
+
+/// An augmentation of the nominal model (its parameters live in
+/// [`AugModel::e`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Augment {
+    /// The paper's model alone.
+    Nominal,
+    /// Dry friction beyond the constant static torque: a breakaway excess
+    /// `Tb·exp(−|ω|/ωs)` at low speed. `e = [Tb (N·m), ωs (rad/s)]`.
+    CoulombFriction,
+    /// `ΔV = Vb·tanh(i/i0)`, `i0` a fixed knee. `e = [Vb (V)]`.
+    BrushDrop,
+    /// `K(i) = K·(1 − κ·i²)` in the EMF and the torque. `e = [κ (1/A²)]`.
+    ArmatureReaction,
+    /// `La(i) = La/(1 + s·i²)`, `s = 1/Isat²`. `e = [s (1/A²)]`.
+    InductanceSaturation,
+    /// `Ra(t) = Ra·(1 + β·E(t))`, `E = ∫i²dt` since the record began
+    /// (the winding's heat, adiabatic over a test). `e = [β (1/(A²·s))]`.
+    ThermalDrift,
+    /// First-order lag `τ` on one reading. `e = [τ (s)]`.
+    SensorLag(LagChannel),
+    /// Two masses (motor `r·J`, load `(1−r)·J`) joined by a shaft with
+    /// resonance `fr` and damping ratio `ζ`; friction on the load, the
+    /// encoder on the motor. `e = [fr (Hz), r, ζ]`.
+    ShaftCompliance,
+}
+
+/// How a segment starts.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Start {
+    /// At rest without current before the first sample.
+    Rest,
+    /// Settled at the given voltage (the level before); the first sample
+    /// is that steady state.
+    Settled(f64),
+}
+
+/// One recorded segment ready to simulate.
+#[derive(Debug, Clone, Copy)]
+pub struct SegmentRun<'a> {
+    /// The record's segment.
+    pub seg: &'a DcSegment,
+    /// Sample interval, s.
+    pub dt: f64,
+    /// How it starts.
+    pub start: Start,
+    /// Armature open (coast-down): no current flows.
+    pub coast: bool,
+    /// `∫i²dt` of the measured current before the segment, A²·s.
+    pub heat_before: f64,
+}
+
+impl SegmentRun<'_> {
+    /// Samples in the segment.
+    pub fn len(&self) -> usize {
+        self.seg.time.len()
+    }
+}
+
+/// The nominal parameters plus one augmentation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AugModel {
+    /// The paper's parameters.
+    pub p: DcParams,
+    /// Which augmentation.
+    pub aug: Augment,
+    /// Its parameters (see [`Augment`]); unused entries are ignored.
+    pub e: [f64; 3],
+    /// Knee current of the brush drop, A.
+    pub knee: f64,
+}
+
+/// Exact one-sample step of the rigid driven motor, in scalars.
+struct Rigid {
+    a: [[f64; 2]; 3],
+    b: [[f64; 2]; 3],
+    decay: f64,
+}
+
+impl Rigid {
+    fn new(p: &DcParams, dt: f64) -> Option<Rigid> {
+        let motor = DcMotor::new(*p, dt).ok()?;
+        let z = motor.driven_zoh();
+        Some(Rigid {
+            a: std::array::from_fn(|r| [z.ad[(r, 0)], z.ad[(r, 1)]]),
+            b: std::array::from_fn(|r| [z.bd[(r, 0)], z.bd[(r, 1)]]),
+            decay: (-dt / p.tau_e()).exp(),
+        })
+    }
+
+    #[inline]
+    fn step(&self, i: f64, w: f64, u: f64, t: f64) -> (f64, f64, f64) {
+        let (a, b) = (&self.a, &self.b);
+        (
+            a[0][0] * i + a[0][1] * w + b[0][0] * u + b[0][1] * t,
+            a[1][0] * i + a[1][1] * w + b[1][0] * u + b[1][1] * t,
+            a[2][0] * i + a[2][1] * w + b[2][0] * u + b[2][1] * t,
+        )
+    }
+}
+
+/// Exact one-sample step of the open-armature (coast-down) rotor under a
+/// constant torque `t`: `J·ω' = −f·ω − t`. Returns `(ω, Δθ)`.
+#[inline]
+fn coast_step(p: &DcParams, dt: f64, w: f64, t: f64) -> (f64, f64) {
+    let x = p.f * dt / p.j;
+    // (1 − e^−x)·J/f and (dt − that)/f, by series when x is small.
+    let (g, h) = if x < 1e-6 {
+        (
+            dt * (1.0 - x / 2.0),
+            dt * dt / (2.0 * p.j) * (1.0 - x / 3.0),
+        )
+    } else {
+        let g = -(-x).exp_m1() * p.j / p.f;
+        (g, (dt - g) / p.f)
+    };
+    let a = (-x).exp();
+    let nw = a * w - t * g / p.j;
+    (nw, w * g - t * h)
+}
+
+impl AugModel {
+    /// The nominal model.
+    pub fn nominal(p: DcParams) -> AugModel {
+        AugModel {
+            p,
+            aug: Augment::Nominal,
+            e: [0.0; 3],
+            knee: 1.0,
+        }
+    }
+
+    /// `(ΔV, ΔT)` at a state; `ΔT` signed with the friction direction.
+    #[inline]
+    fn perturb(&self, i: f64, w: f64, u: f64, heat: f64, dir: f64) -> (f64, f64) {
+        let p = &self.p;
+        match self.aug {
+            Augment::CoulombFriction => (0.0, self.e[0] * (-w.abs() / self.e[1]).exp() * dir),
+            Augment::BrushDrop => (self.e[0] * (i / self.knee).tanh(), 0.0),
+            Augment::ArmatureReaction => {
+                let d = self.e[0] * i * i;
+                (-p.k * d * w, p.k * d * i)
+            }
+            Augment::InductanceSaturation => (-(u - p.ra * i - p.k * w) * self.e[0] * i * i, 0.0),
+            Augment::ThermalDrift => (p.ra * self.e[0] * heat * i, 0.0),
+            _ => (0.0, 0.0),
+        }
+    }
+
+    /// Friction that must be overcome to start from rest, N·m.
+    fn breakaway(&self) -> f64 {
+        match self.aug {
+            Augment::CoulombFriction => self.p.tst + self.e[0].max(0.0),
+            _ => self.p.tst,
+        }
+    }
+
+    /// Steady state `(i, ω)` under a constant voltage with `heat` A²·s.
+    pub fn steady_state(&self, u: f64, heat: f64) -> (f64, f64) {
+        let p = &self.p;
+        let s = p.steady_state(u);
+        let (mut i, mut w) = (s.current, s.speed);
+        if matches!(
+            self.aug,
+            Augment::Nominal
+                | Augment::InductanceSaturation
+                | Augment::SensorLag(_)
+                | Augment::ShaftCompliance
+        ) {
+            return (i, w);
+        }
+        for _ in 0..40 {
+            let g = match self.aug {
+                Augment::ArmatureReaction => 1.0 - self.e[0] * i * i,
+                _ => 1.0,
+            };
+            let ra = match self.aug {
+                Augment::ThermalDrift => p.ra * (1.0 + self.e[0] * heat),
+                _ => p.ra,
+            };
+            let vd = match self.aug {
+                Augment::BrushDrop => self.e[0] * (i / self.knee).tanh(),
+                _ => 0.0,
+            };
+            let t = match self.aug {
+                Augment::CoulombFriction => p.tst + self.e[0] * (-w.abs() / self.e[1]).exp(),
+                _ => p.tst,
+            } * u.signum();
+            let kg = p.k * g;
+            let nw = (u - vd - ra * t / kg) / (ra * p.f / kg + kg);
+            let (ni, nw) = if nw * u > 0.0 {
+                ((p.f * nw + t) / kg, nw)
+            } else {
+                ((u - vd) / ra, 0.0)
+            };
+            let done = (ni - i).abs() <= 1e-12 * (1.0 + i.abs())
+                && (nw - w).abs() <= 1e-12 * (1.0 + w.abs());
+            (i, w) = (ni, nw);
+            if done {
+                break;
+            }
+        }
+        (i, w)
+    }
+
+    /// Whether the parameters describe a motor the simulation accepts.
+    fn valid(&self) -> bool {
+        if self.p.validate().is_err() || !self.e.iter().all(|v| v.is_finite()) {
+            return false;
+        }
+        match self.aug {
+            Augment::CoulombFriction => self.e[1] > 0.0,
+            Augment::ShaftCompliance => {
+                self.e[0] > 0.0 && self.e[1] > 0.0 && self.e[1] < 1.0 && self.e[2] > 0.0
+            }
+            _ => true,
+        }
+    }
+
+    /// Simulate `run`; `out(current, speed reading)` for every sample (the
+    /// speed reading is the mean speed over the preceding interval, as
+    /// differentiated encoder counts give it). `false` when the model
+    /// refuses the parameters or the simulation diverges.
+    pub fn simulate(&self, run: &SegmentRun, out: &mut dyn FnMut(f64, f64)) -> bool {
+        if !self.valid() {
+            return false;
+        }
+        match self.aug {
+            Augment::SensorLag(ch) => {
+                let tau = self.e[0].abs();
+                let a = if tau > 0.0 {
+                    (-run.dt / tau).exp()
+                } else {
+                    0.0
+                };
+                let nominal = AugModel::nominal(self.p);
+                let mut y: Option<(f64, f64)> = None;
+                nominal.simulate(run, &mut |i, w| {
+                    let (fi, fw) = match y {
+                        None => (i, w),
+                        Some((pi, pw)) => match ch {
+                            LagChannel::Current => (a * pi + (1.0 - a) * i, w),
+                            LagChannel::Speed => (i, a * pw + (1.0 - a) * w),
+                        },
+                    };
+                    y = Some((fi, fw));
+                    out(fi, fw);
+                })
+            }
+            Augment::ShaftCompliance => self.simulate_shaft(run, out),
+            _ => self.simulate_rigid(run, out),
+        }
+    }
+
+    fn simulate_rigid(&self, run: &SegmentRun, out: &mut dyn FnMut(f64, f64)) -> bool {
+        let p = &self.p;
+        let dt = run.dt;
+        let inv_dt = 1.0 / dt;
+        let u = &run.seg.voltage;
+        let plain = self.aug == Augment::Nominal;
+        let mut heat = run.heat_before;
+        let (mut i, mut w) = match run.start {
+            Start::Rest => (0.0, 0.0),
+            Start::Settled(u0) => {
+                let s = self.steady_state(u0, heat);
+                out(if run.coast { 0.0 } else { s.0 }, s.1);
+                s
+            }
+        };
+        let first = match run.start {
+            Start::Rest => 0,
+            Start::Settled(_) => 1,
+        };
+        if run.coast {
+            for _ in first..u.len() {
+                let (nw, dth) = if w == 0.0 {
+                    (0.0, 0.0)
+                } else {
+                    let dir = w.signum();
+                    let t0 = p.tst * dir + self.perturb(0.0, w, 0.0, heat, dir).1;
+                    let (pw, _) = coast_step(p, dt, w, t0);
+                    let t = if plain {
+                        t0
+                    } else {
+                        let t1 = p.tst * dir + self.perturb(0.0, pw, 0.0, heat, dir).1;
+                        0.5 * (t0 + t1)
+                    };
+                    let (nw, dth) = coast_step(p, dt, w, t);
+                    (if nw * dir < 0.0 { 0.0 } else { nw }, dth)
+                };
+                w = nw;
+                out(0.0, dth * inv_dt);
+            }
+            return w.is_finite();
+        }
+        let Some(step) = Rigid::new(p, dt) else {
+            return false;
+        };
+        let k_eff = |i: f64| match self.aug {
+            Augment::ArmatureReaction => p.k * (1.0 - self.e[0] * i * i),
+            _ => p.k,
+        };
+        for &uk in &u[first..] {
+            let friction = self.breakaway();
+            let dir = if w != 0.0 {
+                Some(w.signum())
+            } else if friction == 0.0 {
+                Some(1.0)
+            } else if (k_eff(i) * i).abs() > friction {
+                Some((k_eff(i) * i).signum())
+            } else {
+                None
+            };
+            let (ni, nw, dth) = match dir {
+                None => {
+                    let (dv, _) = self.perturb(i, 0.0, uk, heat, 1.0);
+                    let i_ss = (uk - dv) / p.ra;
+                    (i_ss + (i - i_ss) * step.decay, 0.0, 0.0)
+                }
+                Some(d) => {
+                    let t = p.tst * d;
+                    if plain {
+                        step.step(i, w, uk, t)
+                    } else {
+                        let (dv0, dt0) = self.perturb(i, w, uk, heat, d);
+                        let (pi, pw, _) = step.step(i, w, uk - dv0, t + dt0);
+                        let ph = heat + dt * i * i;
+                        let (dv1, dt1) = self.perturb(pi, pw, uk, ph, d);
+                        step.step(i, w, uk - 0.5 * (dv0 + dv1), t + 0.5 * (dt0 + dt1))
+                    }
+                }
+            };
+            heat += 0.5 * dt * (i * i + ni * ni);
+            let nw = match dir {
+                Some(d) if nw * d < 0.0 => 0.0,
+                _ => nw,
+            };
+            (i, w) = (ni, nw);
+            if !(i.is_finite() && w.is_finite()) {
+                return false;
+            }
+            out(i, dth * inv_dt);
+        }
+        true
+    }
+
+    /// Two-mass model: state `[i, ωm, ωl, φ, θm]`, inputs `[U, Tst·dir]`.
+    fn simulate_shaft(&self, run: &SegmentRun, out: &mut dyn FnMut(f64, f64)) -> bool {
+        let p = &self.p;
+        let dt = run.dt;
+        let inv_dt = 1.0 / dt;
+        let (fr, r, zeta) = (self.e[0], self.e[1], self.e[2]);
+        let (jm, jl) = (r * p.j, (1.0 - r) * p.j);
+        let w0 = std::f64::consts::TAU * fr;
+        let mu = jm * jl / p.j;
+        let (ks, cs) = (w0 * w0 * mu, 2.0 * zeta * w0 * mu);
+        #[rustfmt::skip]
+        let a = SMatrix::<f64, 5, 5>::from_row_slice(&[
+            -p.ra / p.la, -p.k / p.la, 0.0, 0.0, 0.0,
+            p.k / jm, -cs / jm, cs / jm, -ks / jm, 0.0,
+            0.0, cs / jl, -(cs + p.f) / jl, ks / jl, 0.0,
+            0.0, 1.0, -1.0, 0.0, 0.0,
+            0.0, 1.0, 0.0, 0.0, 0.0,
+        ]);
+        #[rustfmt::skip]
+        let b = SMatrix::<f64, 5, 2>::from_row_slice(&[
+            if run.coast { 0.0 } else { 1.0 / p.la }, 0.0,
+            0.0, 0.0,
+            0.0, -1.0 / jl,
+            0.0, 0.0,
+            0.0, 0.0,
+        ]);
+        let mut a = a;
+        if run.coast {
+            for c in 0..5 {
+                a[(0, c)] = 0.0;
+            }
+        }
+        let zoh = Zoh::new(&a, &b, dt);
+        let decay = (-dt / p.tau_e()).exp();
+        let u = &run.seg.voltage;
+        let mut x = SVector::<f64, 5>::zeros();
+        let first = match run.start {
+            Start::Rest => 0,
+            Start::Settled(u0) => {
+                let s = p.steady_state(u0);
+                let twist = (p.f * s.speed + p.tst * s.speed.signum()) / ks;
+                x = SVector::<f64, 5>::new(
+                    if run.coast { 0.0 } else { s.current },
+                    s.speed,
+                    s.speed,
+                    twist,
+                    0.0,
+                );
+                out(x[0], x[1]);
+                1
+            }
+        };
+        for &uk in &u[first..] {
+            let uk = if run.coast { 0.0 } else { uk };
+            let at_rest = x[1] == 0.0 && x[2] == 0.0;
+            let dir = if x[2] != 0.0 {
+                Some(x[2].signum())
+            } else if p.tst == 0.0 {
+                Some(1.0)
+            } else if !at_rest || (p.k * x[0]).abs() > p.tst {
+                Some(if at_rest {
+                    x[0].signum()
+                } else {
+                    x[1].signum()
+                })
+            } else {
+                None
+            };
+            let th0 = x[4];
+            match dir {
+                None => {
+                    let i_ss = uk / p.ra;
+                    x[0] = if run.coast {
+                        0.0
+                    } else {
+                        i_ss + (x[0] - i_ss) * decay
+                    };
+                }
+                Some(d) => {
+                    let load_was_moving = x[2] != 0.0;
+                    x = zoh.step(&x, &SVector::<f64, 2>::new(uk, p.tst * d));
+                    if x[2] * d < 0.0 && !load_was_moving {
+                        // The load is still held by its friction.
+                        x[2] = 0.0;
+                    } else if x[2] * d < 0.0 {
+                        // The load stops: the shaft relaxes with it.
+                        x[1] = 0.0;
+                        x[2] = 0.0;
+                        x[3] = 0.0;
+                    }
+                }
+            }
+            if !x.iter().all(|v| v.is_finite()) {
+                return false;
+            }
+            out(x[0], (x[4] - th0) * inv_dt);
+        }
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::{DcState, Terminal};
+
+    fn staircase(p: &DcParams, dt: f64) -> DcSegment {
+        // 60 V → 200 V step from the settled 60 V level.
+        let motor = DcMotor::new(*p, dt).unwrap();
+        let mut x: DcState = p.steady_state(60.0);
+        let mut seg = DcSegment {
+            index: 1,
+            ..Default::default()
+        };
+        let push = |seg: &mut DcSegment, k: usize, x: &DcState, u: f64, w: f64| {
+            seg.time.push(k as f64 * dt);
+            seg.voltage.push(u);
+            seg.current.push(x.current);
+            seg.speed.push(w);
+        };
+        push(&mut seg, 0, &x, 60.0, x.speed);
+        for k in 1..1500 {
+            let n = motor.step(&x, Terminal::Driven(200.0));
+            let w = (n.angle - x.angle) / dt;
+            x = n;
+            push(&mut seg, k, &x, 200.0, w);
+        }
+        seg
+    }
+
+    fn run(seg: &DcSegment) -> SegmentRun<'_> {
+        SegmentRun {
+            seg,
+            dt: 5e-4,
+            start: Start::Settled(60.0),
+            coast: false,
+            heat_before: 0.0,
+        }
+    }
+
+    fn sim(m: &AugModel, r: &SegmentRun) -> (Vec<f64>, Vec<f64>) {
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        assert!(m.simulate(r, &mut |i, w| {
+            a.push(i);
+            b.push(w);
+        }));
+        (a, b)
+    }
+
+    #[test]
+    fn nominal_reproduces_the_motor_and_zero_effects_are_nominal() {
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let seg = staircase(&p, 5e-4);
+        let r = run(&seg);
+        let (i0, w0) = sim(&AugModel::nominal(p), &r);
+        for k in 0..seg.time.len() {
+            assert!((i0[k] - seg.current[k]).abs() < 1e-9);
+            assert!((w0[k] - seg.speed[k]).abs() < 1e-6, "{k}");
+        }
+        for aug in [
+            Augment::BrushDrop,
+            Augment::ArmatureReaction,
+            Augment::InductanceSaturation,
+            Augment::ThermalDrift,
+            Augment::SensorLag(LagChannel::Current),
+        ] {
+            let m = AugModel {
+                aug,
+                ..AugModel::nominal(p)
+            };
+            let (i1, w1) = sim(&m, &r);
+            assert!(i0.iter().zip(&i1).all(|(a, b)| (a - b).abs() < 1e-12));
+            assert!(w0.iter().zip(&w1).all(|(a, b)| (a - b).abs() < 1e-9));
+        }
+    }
+
+    #[test]
+    fn brush_drop_matches_the_rk4_reference_model() {
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let dt = 5e-4;
+        let motor = DcMotor::new(p, dt)
+            .unwrap()
+            .with_effect(Box::new(crate::model::BrushDrop {
+                volts: 3.0,
+                knee_amperes: 0.05,
+            }));
+        let seg = staircase(&p, dt);
+        let m = AugModel {
+            aug: Augment::BrushDrop,
+            e: [3.0, 0.0, 0.0],
+            knee: 0.05,
+            p,
+        };
+        // Start both from the augmented steady state at 60 V.
+        let (si, sw) = m.steady_state(60.0, 0.0);
+        let (i1, _) = sim(&m, &run(&seg));
+        let mut x = DcState {
+            current: si,
+            speed: sw,
+            angle: 0.0,
+        };
+        let mut worst = 0.0f64;
+        for &ik in i1.iter().skip(1) {
+            x = motor.step(&x, Terminal::Driven(200.0));
+            worst = worst.max((x.current - ik).abs());
+        }
+        assert!(worst < 2e-3, "worst current error {worst}");
+    }
+
+    #[test]
+    fn stiff_shaft_approaches_the_rigid_model() {
+        let p = DcParams {
+            la: 0.1,
+            ..DcParams::SEED_TABLE4_MOMENTS
+        };
+        let seg = staircase(&p, 5e-4);
+        let r = run(&seg);
+        let (i0, w0) = sim(&AugModel::nominal(p), &r);
+        let m = AugModel {
+            aug: Augment::ShaftCompliance,
+            e: [400.0, 0.5, 0.7],
+            ..AugModel::nominal(p)
+        };
+        let (i1, w1) = sim(&m, &r);
+        let di = i0
+            .iter()
+            .zip(&i1)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let dw = w0
+            .iter()
+            .zip(&w1)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(di < 0.02 && dw < 0.5, "{di} {dw}");
+    }
+
+    #[test]
+    fn coast_down_stops_where_the_closed_form_says() {
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let seg = DcSegment {
+            voltage: vec![0.0; 8000],
+            time: (0..8000).map(|k| k as f64 * 1e-3).collect(),
+            ..Default::default()
+        };
+        let r = SegmentRun {
+            seg: &seg,
+            dt: 1e-3,
+            start: Start::Settled(248.0),
+            coast: true,
+            heat_before: 0.0,
+        };
+        let (_, w) = sim(&AugModel::nominal(p), &r);
+        let w0 = p.steady_state(248.0).speed;
+        let t_stop = p.j / p.f * (1.0 + w0 * p.f / p.tst).ln();
+        let stop = w.iter().position(|&v| v == 0.0).unwrap() as f64 * 1e-3;
+        assert!((stop - t_stop).abs() < 3e-3, "{stop} vs {t_stop}");
+    }
+}

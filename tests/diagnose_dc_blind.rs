@@ -1,0 +1,92 @@
+//! The DC blind benchmark criterion on a fixed-seed set: the verdict is
+//! right in at least 90 % of cases, never an effect on a `none` case, and
+//! `gap_after` within twice the noise floor where the verdict is right.
+
+use motorbench::diagnose::blind::simulate_dc_case;
+use motorbench::diagnose::{diagnose_dc, DiagnoseOptions};
+use motorbench::model::Effect;
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+
+const EFFECTS: [Option<Effect>; 8] = [
+    None,
+    Some(Effect::CoulombFriction),
+    Some(Effect::BrushDrop),
+    Some(Effect::ArmatureReaction),
+    Some(Effect::InductanceSaturation),
+    Some(Effect::ThermalDrift),
+    Some(Effect::SensorLag),
+    Some(Effect::ShaftCompliance),
+];
+
+fn name(e: Option<Effect>) -> String {
+    e.map_or("none".into(), |e| {
+        serde_json::to_value(e)
+            .unwrap()
+            .as_str()
+            .unwrap()
+            .to_string()
+    })
+}
+
+/// Run `per_effect` cases of every effect (and `nones` of none); returns
+/// (right, total, false alarms, right cases whose gap_after exceeds twice the floor).
+fn run(seed: u64, per_effect: usize, nones: usize) -> (usize, usize, usize, usize) {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let (mut right, mut total, mut alarms, mut far) = (0, 0, 0, 0);
+    for e in EFFECTS {
+        let count = if e.is_none() { nones } else { per_effect };
+        for _ in 0..count {
+            let case = simulate_dc_case(e, &mut rng);
+            let run = diagnose_dc(&case.record, &DiagnoseOptions::default()).expect("diagnosis");
+            let v = &run.report.verdict;
+            let ok = v.effect == name(e);
+            total += 1;
+            if ok {
+                right += 1;
+                if v.gap_after > 2.0 * case.truth.noise_floor {
+                    far += 1;
+                }
+            }
+            if e.is_none() && v.effect != "none" {
+                alarms += 1;
+            }
+            eprintln!(
+                "truth {:<22} verdict {:<22} p {:.2e} gap {:.4} -> {:.4} floor {:.4} {}",
+                name(e),
+                v.effect,
+                1.0 - v.confidence,
+                v.gap_before,
+                v.gap_after,
+                case.truth.noise_floor,
+                run.report
+                    .candidates
+                    .iter()
+                    .map(|c| format!("{}:{:.1}/{:.1e}", c.effect, c.score, c.p_value))
+                    .collect::<Vec<_>>()
+                    .join(" ")
+            );
+        }
+    }
+    (right, total, alarms, far)
+}
+
+fn check(seed: u64, per_effect: usize, nones: usize) {
+    let (right, total, alarms, far) = run(seed, per_effect, nones);
+    eprintln!("right {right}/{total}, false alarms {alarms}, gap_after > 2·floor in {far}");
+    assert_eq!(alarms, 0, "false alarms on none");
+    assert!(right as f64 >= 0.9 * total as f64, "{right}/{total} right");
+    assert_eq!(far, 0, "gap_after above twice the noise floor");
+}
+
+#[test]
+#[ignore = "fails today (8/9 right in release: an armature-reaction case is called none); slow in debug"]
+fn one_case_per_effect_and_two_nones() {
+    check(7, 1, 2);
+}
+
+#[test]
+#[ignore = "long: three cases per effect and six nones (run with --release); fails today: 22/27 right, one false alarm"]
+fn three_cases_per_effect_and_six_nones() {
+    check(2024, 3, 6);
+}
