@@ -5,7 +5,9 @@
 //! - **Channels**: the sources' channels in order, source after source;
 //!   a sample keeps its own source's timestamp (taken by that source as
 //!   close to its read as it can), so channels of different sources and
-//!   rates are never forced onto a common instant.
+//!   rates are never forced onto a common instant. A batch therefore
+//!   carries one source's channels only: a consumer that needs every
+//!   channel at once holds the latest value of each.
 //! - **Time base**: each source's `t_ns` is relative to its own
 //!   [`SensorStream::epoch`]; the merged stream counts from the earliest
 //!   of them and shifts every other source by the difference. A source

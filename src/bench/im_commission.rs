@@ -106,7 +106,11 @@ pub async fn commission_im(
         let mut identification = identify_im(&record, None, model);
         let residuals = diagnose
             .then(|| {
-                attach_diagnosis(&mut identification.report, &record, SegmentKind::ImSlipSweep)
+                attach_diagnosis(
+                    &mut identification.report,
+                    &record,
+                    SegmentKind::ImSlipSweep,
+                )
             })
             .flatten();
         (identification, record, residuals)

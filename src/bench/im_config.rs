@@ -492,6 +492,26 @@ mod tests {
             c.describe_rig()
         );
         assert_eq!(c.supervision.max_power, 40000.0);
+        assert_eq!(m.merge_window, std::time::Duration::from_millis(10));
+        // Left out: the drivers' default window.
+        let c = ImRunConfig::parse(
+            &modbus_source(),
+            &SIM_MODBUS_IM.replace("merge_window_ms = 10 ", "# "),
+        )
+        .unwrap();
+        assert_eq!(
+            c.modbus.unwrap().merge_window,
+            motorbench_drivers::DEFAULT_REORDER
+        );
+        let c = ImRunConfig::parse(
+            &modbus_source(),
+            &SIM_MODBUS_IM.replace("merge_window_ms = 10 ", "merge_window_ms = 25 "),
+        )
+        .unwrap();
+        assert_eq!(
+            c.modbus.unwrap().merge_window,
+            std::time::Duration::from_millis(25)
+        );
     }
 
     #[test]
@@ -521,6 +541,13 @@ mod tests {
             e.contains("must equal rig.simulated.sensors.encoder_lines"),
             "{e}"
         );
+        let e = bad("merge_window_ms = 10 ", "merge_window_ms = 5000 ");
+        assert!(
+            e.contains("rig.modbus.merge_window_ms") && e.contains("at most 1000"),
+            "{e}"
+        );
+        let e = bad("merge_window_ms = 10 ", "merge_window_ms = -1 ");
+        assert!(e.contains("rig.modbus.merge_window_ms"), "{e}");
         let e = bad("pole_pairs = 2 ", "pole_pairs = 0 ");
         assert!(e.contains("rig.modbus.dynamometer.pole_pairs"), "{e}");
         let e = bad("simulate = \"tcp\"", "simulate = \"udp\"");

@@ -9,6 +9,7 @@
 //! timeout_ms = 200            # deadline of every Modbus call
 //! retries = 2                 # extra attempts of idempotent calls
 //! max_lost_polls = 5          # failed polls in a row that end the test
+//! merge_window_ms = 10        # meter and counter on separate links: how long a batch waits to be put in time order
 //!
 //! [rig.modbus.supply]         # the VFD feeding the machine under test
 //! profile = "devices/invertek-optidrive-e3.toml"
@@ -34,7 +35,11 @@
 //!
 //! On a real rig each device section also says where the device is
 //! (`transport = "tcp"` with `address`, or `"rtu"` with `path`), as in the
-//! DC rig's `[rig.modbus.power_stage]`.
+//! DC rig's `[rig.modbus.power_stage]`. A meter and a counter on separate
+//! links are read by separate pollers whose batches are merged in time
+//! order (`motorbench_drivers::MergedSensors`, as the DC rig's CAN
+//! signals are), each batch held `merge_window_ms` (default 10 ms, at
+//! most 1000) for the slower link.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -42,7 +47,7 @@ use std::time::Duration;
 
 use motorbench_drivers::modbus::{Access, CallPolicy};
 
-use crate::config::{ModbusDeviceLink, RawLink, SimulatedTransport};
+use crate::config::{merge_window, ModbusDeviceLink, RawLink, SimulatedTransport};
 
 /// The `modbus` backend of a sweep, validated.
 #[derive(Debug, Clone, PartialEq)]
@@ -53,6 +58,9 @@ pub struct ImModbusRig {
     pub policy: CallPolicy,
     /// Failed polls in a row that end the test.
     pub max_lost_polls: u32,
+    /// How long the merged sensor stream holds each batch to put the meter
+    /// and the counter in time order (when they are on separate links).
+    pub merge_window: Duration,
     /// The supply VFD.
     pub supply: ModbusDeviceLink,
     /// The supply's register that sets its output line voltage, V.
@@ -174,6 +182,10 @@ impl ImModbusRig {
         }
         let retries: u32 = take(&mut rig, top, "retries")?.unwrap_or(2);
         let max_lost_polls: u32 = take(&mut rig, top, "max_lost_polls")?.unwrap_or(5);
+        let merge_window = merge_window(
+            take(&mut rig, top, "merge_window_ms")?
+                .unwrap_or(motorbench_drivers::DEFAULT_REORDER.as_millis() as u64),
+        )?;
         let sim = simulate.is_some();
 
         let key = "rig.modbus.supply";
@@ -243,8 +255,8 @@ impl ImModbusRig {
         if let Some(extra) = rig.keys().next() {
             return Err((
                 format!("rig.modbus.{extra}"),
-                "unknown key: want simulate, timeout_ms, retries, max_lost_polls, supply, \
-                 dynamometer, meter, encoder"
+                "unknown key: want simulate, timeout_ms, retries, max_lost_polls, \
+                 merge_window_ms, supply, dynamometer, meter, encoder"
                     .into(),
             ));
         }
@@ -269,6 +281,7 @@ impl ImModbusRig {
                 retry_delay: Duration::from_millis(10),
             },
             max_lost_polls: max_lost_polls.max(1),
+            merge_window,
             supply,
             supply_voltage_register: voltage_register,
             dynamometer,

@@ -6,13 +6,13 @@
 use motorbench_drivers::modbus::{
     spawn_bus, BusHandle, ModbusPowerStage, ModbusSensors, PolledChannel,
 };
-use motorbench_drivers::{ChannelInfo, PowerStage, SensorStream};
+use motorbench_drivers::{ChannelInfo, MergedSensors, PowerStage, SensorStream};
 
 use super::im_modbus_config::ImModbusRig;
 use super::rig::{client, same_link};
 use super::served::ServedLink;
 use super::served_im::{ServedDevice, ServedImRig};
-use super::{sim_im_rig, ImRunConfig, MergedSensors, RigError, VfdDyno, VfdSupply};
+use super::{sim_im_rig, ImRunConfig, RigError, VfdDyno, VfdSupply};
 use crate::config::ModbusDeviceLink;
 use crate::model::ImCircuit;
 
@@ -225,9 +225,13 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
             m.max_lost_polls,
         )
         .with_max_read_gap(m.encoder.profile.max_read_gap);
+        // Separate links: a poller each, their batches (each with one
+        // device's channels) put on one time base and in time order; the
+        // sweep holds the latest value of every channel.
         Box::new(MergedSensors::new(
             "modbus-meter+encoder",
             vec![Box::new(meter), Box::new(encoder)],
+            m.merge_window,
         ))
     };
     Ok(ImRig {

@@ -10,7 +10,6 @@ mod im_commission;
 mod im_config;
 mod im_modbus_config;
 mod im_rig;
-mod im_sensors;
 mod im_stages;
 mod im_sweep;
 mod interlock;
@@ -35,7 +34,6 @@ pub use im_commission::{commission_im, ImCommissioned};
 pub use im_config::{im_model_of_config, is_im_sweep_config, ImRunConfig};
 pub use im_modbus_config::ImModbusRig;
 pub use im_rig::{build_im_rig, ImRig, SERVED_IM_PLANT_RATE_HZ};
-pub use im_sensors::MergedSensors;
 pub use im_stages::{VfdDyno, VfdSupply};
 pub use im_sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
 pub use interlock::{

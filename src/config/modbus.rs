@@ -87,6 +87,22 @@ fn default_reorder() -> u64 {
     motorbench_drivers::DEFAULT_REORDER.as_millis() as u64
 }
 
+/// `rig.modbus.merge_window_ms` (of a DC or an induction-machine rig)
+/// validated: how long the merged sensor stream holds each batch to put
+/// the links in time order. Every reading, and so every limit check, waits
+/// that long: at most 1 s.
+pub(crate) fn merge_window(ms: u64) -> Result<Duration, (String, String)> {
+    if ms > 1000 {
+        return Err((
+            "rig.modbus.merge_window_ms".into(),
+            format!(
+                "{ms} ms would delay every reading (and every limit check) that long: at most 1000"
+            ),
+        ));
+    }
+    Ok(Duration::from_millis(ms))
+}
+
 /// Raw link of one Modbus device (profile, unit, where it is).
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -382,15 +398,7 @@ impl RawModbusRig {
                 "must be > 0".into(),
             ));
         }
-        if self.merge_window_ms > 1000 {
-            return Err((
-                "rig.modbus.merge_window_ms".into(),
-                format!(
-                    "{} ms would delay every reading (and every limit check) that long: at most 1000",
-                    self.merge_window_ms
-                ),
-            ));
-        }
+        let merge_window = merge_window(self.merge_window_ms)?;
         Ok(ModbusRig {
             simulate,
             policy,
@@ -400,7 +408,7 @@ impl RawModbusRig {
             channels,
             encoder_lines: raw.encoder_lines,
             can,
-            merge_window: Duration::from_millis(self.merge_window_ms),
+            merge_window,
         })
     }
 }

@@ -218,7 +218,11 @@ impl ImJob {
         let model = cfg.model;
         conclude(ending, sink, outcome, move |record| {
             let mut identification = identify_im(&record, None, model);
-            attach_diagnosis(&mut identification.report, &record, SegmentKind::ImSlipSweep);
+            attach_diagnosis(
+                &mut identification.report,
+                &record,
+                SegmentKind::ImSlipSweep,
+            );
             Identified {
                 report: identification.report.clone(),
                 write_svg: Box::new(move |path| write_im_svg(path, &identification)),
