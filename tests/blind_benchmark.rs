@@ -6,11 +6,12 @@
 //!
 //! Issue 7's bar is the verdict right in at least 90 % of the cases, no
 //! false alarm on `none`, gap_after within twice the noise floor wherever
-//! the verdict is right. The diagnosis does not reach it yet on this seed
-//! (41 of 46 right, 39 of the 41 right verdicts within twice the noise
-//! floor; docs/diagnosis.md): this test holds the line where it stands —
-//! no false alarm at all, at least 85 % right, at least 90 % of the right
-//! verdicts at the noise floor — so a change that makes it worse fails.
+//! the verdict is right. The first two hold on this seed (42 of 46 right,
+//! none of the 7 `none` cases named an effect). The third does not yet:
+//! 40 of the 42 right verdicts reach twice the noise floor
+//! (docs/diagnosis.md). This test asserts the first two as the issue states
+//! them and holds the third where it stands (at least 90 % of the right
+//! verdicts), so a change that makes it worse fails.
 
 mod common;
 
@@ -18,7 +19,7 @@ use common::{motorbench_release as motorbench, text};
 use motorbench::diagnose::blind::{Manifest, SuiteScore};
 
 #[test]
-fn fixed_seed_suite_holds_its_score() {
+fn fixed_seed_suite_meets_the_verdict_bar() {
     let dir = tempfile::tempdir().unwrap();
     let suite = dir.path().join("suite");
     let suite_arg = suite.to_str().unwrap();
@@ -64,7 +65,7 @@ fn fixed_seed_suite_holds_its_score() {
     assert!(nones >= 6);
     assert_eq!(alarms, 0, "false alarms on none:\n{score}");
     assert!(
-        score.accuracy() >= 0.85,
+        score.accuracy() >= 0.9,
         "accuracy {:.3}:\n{score}",
         score.accuracy()
     );

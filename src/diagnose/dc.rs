@@ -98,10 +98,15 @@ pub fn diagnose_dc(
         warnings.push("the nominal fit stopped without converging".into());
     }
 
-    // A spectral peak of the all-segment nominal residual starts the
-    // shaft-compliance candidate at its resonance.
-    let peak_hz = all_segment_peak(&nominal_all.model, &runs, scales0.dt);
-    let scales = RecordScales { peak_hz, ..scales0 };
+    // The largest spectral peak of the all-segment nominal residual in each
+    // channel starts a shaft-compliance fit at that resonance. A start
+    // decides nothing (the tests below do), so a peak need not be
+    // significant to be tried.
+    let peaks_hz = all_segment_peaks(&nominal_all.model, &runs, scales0.dt);
+    let scales = RecordScales {
+        peaks_hz,
+        ..scales0
+    };
 
     // Phase 1: nominal folds and candidates' all-segment fits.
     let defs = candidates(&nominal_all.model, &scales);
@@ -147,15 +152,18 @@ pub fn diagnose_dc(
             )),
         }
     }
-    // Sensor lag: keep the channel that fits the fitting data better.
-    let mut lag_best: Option<(usize, f64)> = None;
-    for (d, f) in &cand_all {
-        if defs[*d].effect == Effect::SensorLag && lag_best.is_none_or(|(_, s)| f.sse < s) {
-            lag_best = Some((*d, f.sse));
-        }
-    }
-    cand_all
-        .retain(|(d, _)| defs[*d].effect != Effect::SensorLag || Some(*d) == lag_best.map(|b| b.0));
+    // An effect fitted more than once (sensor lag on either channel, shaft
+    // compliance from each resonance start): keep the fit that explains
+    // the fitting data best.
+    let best_of = |effect: Effect| {
+        cand_all
+            .iter()
+            .filter(|(d, _)| defs[*d].effect == effect)
+            .min_by(|a, b| a.1.sse.total_cmp(&b.1.sse))
+            .map(|(d, _)| *d)
+    };
+    let keep: Vec<Option<usize>> = defs.iter().map(|d| best_of(d.effect)).collect();
+    cand_all.retain(|(d, _)| keep[*d] == Some(*d));
 
     // Phase 2: candidates' folds, warm-started from their optimum.
     let jobs2: Vec<(usize, usize)> = (0..cand_all.len())
@@ -518,16 +526,21 @@ fn transient_seconds(p: &DcParams) -> f64 {
     3.0 * (p.tau_e() + p.tau_m())
 }
 
-fn all_segment_peak(model: &AugModel, runs: &[SegmentRun], dt: f64) -> Option<f64> {
+fn all_segment_peaks(model: &AugModel, runs: &[SegmentRun], dt: f64) -> Vec<f64> {
     let series: Vec<HeldOutSeries> = runs
         .iter()
         .filter(|r| !r.coast)
         .filter_map(|r| held_out(model, r))
         .collect();
-    let pieces: Vec<&[f64]> = series.iter().map(|s| &s.speed[..]).collect();
-    spectral_peak(&pieces, dt)
-        .filter(|p| p.p_value < super::decision::FALSE_ALARM_RATE)
+    let speed: Vec<&[f64]> = series.iter().map(|s| &s.speed[..]).collect();
+    let current: Vec<&[f64]> = series.iter().map(|s| &s.current[..]).collect();
+    let mut peaks: Vec<f64> = [speed, current]
+        .iter()
+        .filter_map(|pieces| spectral_peak(pieces, dt))
         .map(|p| p.hz)
+        .collect();
+    peaks.dedup_by(|a, b| (*a - *b).abs() <= 0.1 * b.abs());
+    peaks
 }
 
 /// The segments that take part, each with how it starts.
@@ -721,7 +734,7 @@ fn scales(runs: &[SegmentRun]) -> RecordScales {
         w_max: 0.0,
         heat_total: 0.0,
         dt: runs[0].dt,
-        peak_hz: None,
+        peaks_hz: Vec::new(),
     };
     for r in runs {
         for k in 0..r.len() {

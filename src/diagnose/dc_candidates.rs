@@ -10,7 +10,7 @@ use crate::model::Effect;
 use crate::report::ParamEstimate;
 
 /// Scales of the record that set start values and parameter scales.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RecordScales {
     /// Largest |measured current|, A.
     pub i_max: f64,
@@ -22,8 +22,9 @@ pub struct RecordScales {
     pub heat_total: f64,
     /// Sample interval, s.
     pub dt: f64,
-    /// Frequency of a spectral peak in the nominal residual, Hz.
-    pub peak_hz: Option<f64>,
+    /// Frequencies of the largest spectral peaks in the nominal residual
+    /// (speed and current), Hz; each starts a shaft-compliance fit.
+    pub peaks_hz: Vec<f64>,
 }
 
 /// One candidate ready to fit.
@@ -94,13 +95,30 @@ pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
             [s.dt, 0.0, 0.0],
             vec![lin(s.dt)],
         ),
+    ]
+    .into_iter()
+    .chain(shaft_starts(s).into_iter().map(|hz| {
         def(
             Effect::ShaftCompliance,
             Augment::ShaftCompliance,
-            [s.peak_hz.unwrap_or(40.0), 0.5, 0.1],
+            [hz, 0.5, 0.1],
             vec![Transform::Log, Transform::Logit, Transform::Log],
-        ),
-    ]
+        )
+    }))
+    .collect()
+}
+
+/// Resonance frequencies a shaft-compliance fit starts from: the residual
+/// peak of each channel (a resonance shows in the current, the speed, or
+/// both, and an encoder's quantisation can put a peak of its own in the
+/// speed), or 40 Hz when there is none. The fit that explains the
+/// fitting data best is kept.
+fn shaft_starts(s: &RecordScales) -> Vec<f64> {
+    if s.peaks_hz.is_empty() {
+        vec![40.0]
+    } else {
+        s.peaks_hz.clone()
+    }
 }
 
 /// Extra parameters of a candidate (the sensor-lag channel counts as one).

@@ -8,8 +8,8 @@
 //!   estimates; shared by both machines.
 //! - [`plot`]: residuals before and after per region, as SVG.
 //! - `dc*`: the DC motor (leave-one-segment-out on a staircase).
-//! - `im*`: the induction machine (leave-one-voltage-out, or interleaved
-//!   points on a single sweep).
+//! - `im*`: the induction machine (interleaved points, stratified by
+//!   sweep, so every fold sees every supply voltage).
 
 pub mod blind;
 pub mod cli;
