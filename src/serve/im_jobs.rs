@@ -13,13 +13,11 @@ use std::time::SystemTime;
 
 use tokio::sync::{watch, Mutex};
 
-use super::jobs::{
-    conclude, Ending, FeedProgress, Identified, JobEnd, TestRun, TestState, TestStatus,
-};
+use super::jobs::{conclude, Ending, FeedProgress, Identified, JobEnd, TestRun, TestStatus};
 use super::records_index::{unix_s, IndexEntry, RecordOutcome, RecordsIndex};
 use crate::bench::{
-    build_im_rig, run_im_sweep, supervise_stages, sweep_channels, ImRunConfig, Readings,
-    RecordSink, SafetyMonitor, ServedImRig, SupervisedStages, SupervisorTiming,
+    build_im_rig, run_im_sweep, supervise_stages, sweep_channels, ImRunConfig, RecordSink,
+    SafetyMonitor, ServedImRig, SupervisedStages, SupervisorTiming,
 };
 use crate::diagnose::attach_diagnosis;
 use crate::identify::identify_im;
@@ -125,21 +123,7 @@ pub async fn prepare_im(
         monitor,
         timing,
     );
-    let (status, _) = watch::channel(TestStatus {
-        id: name.clone(),
-        rig: rig.to_string(),
-        motor_id: cfg.motor_id.clone(),
-        plan,
-        state: TestState::Running,
-        segment: None,
-        t_s: 0.0,
-        eta_s: None,
-        eta_max_s: None,
-        values: Readings::default(),
-        outcome: None,
-        reason: None,
-        stop: None,
-    });
+    let (status, _) = watch::channel(TestStatus::running(&name, rig, &cfg.motor_id, plan));
     let run = Arc::new(TestRun {
         status,
         supervisor: supervised.handle.clone(),

@@ -118,6 +118,27 @@ pub struct TestStatus {
     pub stop: Option<StopStatus>,
 }
 
+impl TestStatus {
+    /// The status of a test that has just started running.
+    pub fn running(id: &str, rig: &str, motor_id: &str, plan: String) -> TestStatus {
+        TestStatus {
+            id: id.to_string(),
+            rig: rig.to_string(),
+            motor_id: motor_id.to_string(),
+            plan,
+            state: TestState::Running,
+            segment: None,
+            t_s: 0.0,
+            eta_s: None,
+            eta_max_s: None,
+            values: Readings::default(),
+            outcome: None,
+            reason: None,
+            stop: None,
+        }
+    }
+}
+
 /// A test the daemon runs or ran; shared by the API and the job.
 #[derive(Debug)]
 pub struct TestRun {
@@ -276,21 +297,7 @@ pub async fn prepare(
 
     let timing = SupervisorTiming::new(cfg.supervision.bus_loss_timeout, cfg.sample_rate_hz);
     let supervised = supervise(stage, sensors, monitor, timing, cfg.limits.max_voltage);
-    let (status, _) = watch::channel(TestStatus {
-        id: name.clone(),
-        rig: rig.to_string(),
-        motor_id: cfg.motor_id.clone(),
-        plan,
-        state: TestState::Running,
-        segment: None,
-        t_s: 0.0,
-        eta_s: None,
-        eta_max_s: None,
-        values: Readings::default(),
-        outcome: None,
-        reason: None,
-        stop: None,
-    });
+    let (status, _) = watch::channel(TestStatus::running(&name, rig, &cfg.motor_id, plan));
     let run = Arc::new(TestRun {
         status,
         supervisor: supervised.handle.clone(),
