@@ -80,13 +80,13 @@ fn check(seed: u64, per_effect: usize, nones: usize) {
 }
 
 #[test]
-#[ignore = "fails today (8/9 right in release: an armature-reaction case is called none); slow in debug"]
+#[ignore = "slow in debug; run with --release (last measured 8/9 right, before the shaft-compliance multi-start: docs/diagnosis-dc.md)"]
 fn one_case_per_effect_and_two_nones() {
     check(7, 1, 2);
 }
 
 #[test]
-#[ignore = "long: three cases per effect and six nones (run with --release); fails today: 22/27 right, one false alarm"]
+#[ignore = "long: run with --release (last measured 22/27 right with one false alarm, before the shaft-compliance multi-start: docs/diagnosis-dc.md)"]
 fn three_cases_per_effect_and_six_nones() {
     check(2024, 3, 6);
 }
