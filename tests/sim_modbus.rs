@@ -112,6 +112,7 @@ fn modbus_rtu_run_through_the_cli_identifies_the_motor() {
         "--out",
         dir.path().to_str().unwrap(),
         "--json",
+        "--no-diagnose",
     ]);
     let (stdout, stderr) = common::text(&out);
     assert!(out.status.success(), "{stdout}\n{stderr}");
