@@ -21,7 +21,7 @@ pub use sensor_channels::{SensorChannel, MAX_RATE_HZ};
 mod retention;
 mod supervision;
 
-pub(crate) use modbus::{merge_window, RawLink};
+pub(crate) use modbus::{merge_window, simulated_transport, RawLink};
 pub(crate) use retention::RawRetention;
 pub(crate) use supervision::RawSupervisor;
 

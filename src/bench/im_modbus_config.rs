@@ -47,7 +47,9 @@ use std::time::Duration;
 
 use motorbench_drivers::modbus::{Access, CallPolicy};
 
-use crate::config::{merge_window, ModbusDeviceLink, RawLink, SimulatedTransport};
+use crate::config::{
+    merge_window, simulated_transport, ModbusDeviceLink, RawLink, SimulatedTransport,
+};
 
 /// The `modbus` backend of a sweep, validated.
 #[derive(Debug, Clone, PartialEq)]
@@ -159,23 +161,10 @@ impl ImModbusRig {
         simulated_present: bool,
     ) -> Result<ImModbusRig, Bad> {
         let top = "rig.modbus";
-        let simulate = match take::<String>(&mut rig, top, "simulate")?.as_deref() {
-            None => None,
-            Some("tcp") => Some(SimulatedTransport::Tcp),
-            Some("rtu") => Some(SimulatedTransport::Rtu),
-            Some(other) => {
-                return Err((
-                    "rig.modbus.simulate".into(),
-                    format!("\"{other}\": use \"tcp\" or \"rtu\", or leave it out on a real rig"),
-                ))
-            }
-        };
-        if simulate.is_some() && !simulated_present {
-            return Err((
-                "rig.simulated".into(),
-                "missing: rig.modbus.simulate serves the simulated rig, which needs it".into(),
-            ));
-        }
+        let simulate = simulated_transport(
+            take::<String>(&mut rig, top, "simulate")?.as_deref(),
+            simulated_present,
+        )?;
         let timeout_ms: u64 = take(&mut rig, top, "timeout_ms")?.unwrap_or(200);
         if timeout_ms == 0 {
             return Err(("rig.modbus.timeout_ms".into(), "must be > 0".into()));

@@ -87,6 +87,33 @@ fn default_reorder() -> u64 {
     motorbench_drivers::DEFAULT_REORDER.as_millis() as u64
 }
 
+/// `rig.modbus.simulate` (of a DC or an induction-machine rig), validated:
+/// which transport serves the simulated rig, if any. Serving it needs a
+/// `[rig.simulated]` section.
+pub(crate) fn simulated_transport(
+    simulate: Option<&str>,
+    simulated_present: bool,
+) -> Result<Option<SimulatedTransport>, (String, String)> {
+    let transport = match simulate {
+        None => None,
+        Some("tcp") => Some(SimulatedTransport::Tcp),
+        Some("rtu") => Some(SimulatedTransport::Rtu),
+        Some(other) => {
+            return Err((
+                "rig.modbus.simulate".into(),
+                format!("\"{other}\": use \"tcp\" or \"rtu\", or leave it out on a real rig"),
+            ))
+        }
+    };
+    if transport.is_some() && !simulated_present {
+        return Err((
+            "rig.simulated".into(),
+            "missing: rig.modbus.simulate serves the simulated rig, which needs it".into(),
+        ));
+    }
+    Ok(transport)
+}
+
 /// `rig.modbus.merge_window_ms` (of a DC or an induction-machine rig)
 /// validated: how long the merged sensor stream holds each batch to put
 /// the links in time order. Every reading, and so every limit check, waits
@@ -234,23 +261,7 @@ impl RawModbusRig {
         simulated_present: bool,
         default_rate: f64,
     ) -> Result<ModbusRig, (String, String)> {
-        let simulate = match self.simulate.as_deref() {
-            None => None,
-            Some("tcp") => Some(SimulatedTransport::Tcp),
-            Some("rtu") => Some(SimulatedTransport::Rtu),
-            Some(other) => {
-                return Err((
-                    "rig.modbus.simulate".into(),
-                    format!("\"{other}\": use \"tcp\" or \"rtu\", or leave it out on a real rig"),
-                ))
-            }
-        };
-        if simulate.is_some() && !simulated_present {
-            return Err((
-                "rig.simulated".into(),
-                "missing: rig.modbus.simulate serves the simulated rig, which needs it".into(),
-            ));
-        }
+        let simulate = simulated_transport(self.simulate.as_deref(), simulated_present)?;
         if self.timeout_ms == 0 {
             return Err(("rig.modbus.timeout_ms".into(), "must be > 0".into()));
         }

@@ -14,7 +14,7 @@ use std::time::SystemTime;
 use tokio::sync::{watch, Mutex};
 
 use super::jobs::{conclude, Ending, FeedProgress, Identified, JobEnd, TestRun, TestStatus};
-use super::records_index::{unix_s, IndexEntry, RecordOutcome, RecordsIndex};
+use super::records_index::{unix_s, IndexEntry, RecordsIndex};
 use crate::bench::{
     build_im_rig, run_im_sweep, supervise_stages, sweep_channels, ImRunConfig, RecordSink,
     SafetyMonitor, ServedImRig, SupervisedStages, SupervisorTiming,
@@ -92,24 +92,15 @@ pub async fn prepare_im(
     let mcap = format!("{name}.mcap");
     let recorder = Recorder::start(&dir.join(&mcap), &meta, &record_channels, QUEUE_CAPACITY)
         .map_err(|e| e.to_string())?;
-    idx.insert(IndexEntry {
-        name: name.clone(),
-        rig: rig.to_string(),
-        motor_id: cfg.motor_id.clone(),
-        kind: SegmentKind::ImSlipSweep.to_string(),
-        plan: plan.clone(),
+    idx.insert(IndexEntry::running(
+        &name,
+        rig,
+        &cfg.motor_id,
+        SegmentKind::ImSlipSweep.as_str(),
+        &plan,
         started_at,
-        started_unix_s: unix_s(now),
-        finished_at: None,
-        outcome: RecordOutcome::Running,
-        reason: None,
-        key_results: None,
-        mcap,
-        report: None,
-        svg: None,
-        bytes: 0,
-        recovered: None,
-    })
+        unix_s(now),
+    ))
     .map_err(|e| e.to_string())?;
     drop(idx);
 

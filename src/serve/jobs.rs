@@ -274,24 +274,15 @@ pub async fn prepare(
     let recorder = Recorder::start(&dir.join(&mcap), &meta, &record_channels, QUEUE_CAPACITY)
         .map_err(|e| e.to_string())?;
     let plan = plan_summary(&cfg.plan);
-    idx.insert(IndexEntry {
-        name: name.clone(),
-        rig: rig.to_string(),
-        motor_id: cfg.motor_id.clone(),
-        kind: kind.to_string(),
-        plan: plan.clone(),
+    idx.insert(IndexEntry::running(
+        &name,
+        rig,
+        &cfg.motor_id,
+        &kind.to_string(),
+        &plan,
         started_at,
-        started_unix_s: unix_s(now),
-        finished_at: None,
-        outcome: RecordOutcome::Running,
-        reason: None,
-        key_results: None,
-        mcap,
-        report: None,
-        svg: None,
-        bytes: 0,
-        recovered: None,
-    })
+        unix_s(now),
+    ))
     .map_err(|e| e.to_string())?;
     drop(idx);
 

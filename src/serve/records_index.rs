@@ -110,6 +110,36 @@ pub struct IndexEntry {
 }
 
 impl IndexEntry {
+    /// The entry of a test that has just started recording to `<name>.mcap`.
+    pub fn running(
+        name: &str,
+        rig: &str,
+        motor_id: &str,
+        kind: &str,
+        plan: &str,
+        started_at: String,
+        started_unix_s: f64,
+    ) -> IndexEntry {
+        IndexEntry {
+            name: name.to_string(),
+            rig: rig.to_string(),
+            motor_id: motor_id.to_string(),
+            kind: kind.to_string(),
+            plan: plan.to_string(),
+            started_at,
+            started_unix_s,
+            finished_at: None,
+            outcome: RecordOutcome::Running,
+            reason: None,
+            key_results: None,
+            mcap: format!("{name}.mcap"),
+            report: None,
+            svg: None,
+            bytes: 0,
+            recovered: None,
+        }
+    }
+
     /// The record's files that exist (MCAP, report, plot).
     pub fn files(&self) -> Vec<&str> {
         std::iter::once(self.mcap.as_str())
