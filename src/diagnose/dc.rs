@@ -82,11 +82,7 @@ pub fn diagnose_dc(
         },
     )
     .map_err(DiagnoseError::NominalFit)?;
-    let knee = 0.05 * scales0.i_max.max(1e-6);
-    let nominal_start = AugModel {
-        knee,
-        ..AugModel::nominal(oe.params)
-    };
+    let nominal_start = AugModel::nominal(oe.params);
     let nominal_spec = FitSpec {
         start: nominal_start,
         effect: Vec::new(),

@@ -62,8 +62,8 @@ pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
         def(
             Effect::BrushDrop,
             Augment::BrushDrop,
-            [0.0; 3],
-            vec![lin(0.01 * s.u_max)],
+            [0.0, 0.05 * s.i_max.max(1e-6), 0.0],
+            vec![lin(0.01 * s.u_max), Transform::Log],
         ),
         def(
             Effect::ArmatureReaction,
@@ -125,7 +125,7 @@ fn shaft_starts(s: &RecordScales) -> Vec<f64> {
 pub fn extra_params(aug: Augment) -> usize {
     match aug {
         Augment::Nominal => 0,
-        Augment::CoulombFriction => 2,
+        Augment::CoulombFriction | Augment::BrushDrop => 2,
         Augment::SensorLag(_) => 2,
         Augment::ShaftCompliance => 3,
         _ => 1,
@@ -191,7 +191,10 @@ pub fn effect_params(
             put("Tb", m.e[0], ci(0), "N*m");
             put("ws", m.e[1], ci(1), "rad/s");
         }
-        Augment::BrushDrop => put("Vb", m.e[0], ci(0), "V"),
+        Augment::BrushDrop => {
+            put("Vb", m.e[0], ci(0), "V");
+            put("i0", m.e[1], ci(1), "A");
+        }
         Augment::ArmatureReaction => {
             put("kappa", m.e[0], ci(0), "1/A^2");
             let at = |k: f64| k * s.i_max * s.i_max;

@@ -34,7 +34,8 @@ pub enum Augment {
     /// Dry friction beyond the constant static torque: a breakaway excess
     /// `Tb·exp(−|ω|/ωs)` at low speed. `e = [Tb (N·m), ωs (rad/s)]`.
     CoulombFriction,
-    /// `ΔV = Vb·tanh(i/i0)`, `i0` a fixed knee. `e = [Vb (V)]`.
+    /// `ΔV = Vb·tanh(i/i0)`: the contact drop `Vb` reached above the knee
+    /// current `i0`. `e = [Vb (V), i0 (A)]`.
     BrushDrop,
     /// `K(i) = K·(1 − κ·i²)` in the EMF and the torque. `e = [κ (1/A²)]`.
     ArmatureReaction,
@@ -92,8 +93,6 @@ pub struct AugModel {
     pub aug: Augment,
     /// Its parameters (see [`Augment`]); unused entries are ignored.
     pub e: [f64; 3],
-    /// Knee current of the brush drop, A.
-    pub knee: f64,
 }
 
 /// Exact one-sample step of the rigid driven motor, in scalars.
@@ -152,7 +151,6 @@ impl AugModel {
             p,
             aug: Augment::Nominal,
             e: [0.0; 3],
-            knee: 1.0,
         }
     }
 
@@ -162,7 +160,7 @@ impl AugModel {
         let p = &self.p;
         match self.aug {
             Augment::CoulombFriction => (0.0, self.e[0] * (-w.abs() / self.e[1]).exp() * dir),
-            Augment::BrushDrop => (self.e[0] * (i / self.knee).tanh(), 0.0),
+            Augment::BrushDrop => (self.e[0] * (i / self.e[1]).tanh(), 0.0),
             Augment::ArmatureReaction => {
                 let d = self.e[0] * i * i;
                 (-p.k * d * w, p.k * d * i)
@@ -205,7 +203,7 @@ impl AugModel {
                 _ => p.ra,
             };
             let vd = match self.aug {
-                Augment::BrushDrop => self.e[0] * (i / self.knee).tanh(),
+                Augment::BrushDrop => self.e[0] * (i / self.e[1]).tanh(),
                 _ => 0.0,
             };
             let t = match self.aug {
@@ -559,8 +557,7 @@ mod tests {
         let seg = staircase(&p, dt);
         let m = AugModel {
             aug: Augment::BrushDrop,
-            e: [3.0, 0.0, 0.0],
-            knee: 0.05,
+            e: [3.0, 0.05, 0.0],
             p,
         };
         // Start both from the augmented steady state at 60 V.
