@@ -87,9 +87,28 @@ pub fn diagnose_dc(
         start: nominal_start,
         effect: Vec::new(),
     };
-    let nominal_all = fit(&nominal_spec, &runs, &weights, 3 * PATIENCE_ALL).ok_or_else(|| {
-        DiagnoseError::NominalFit("the nominal model refuses its own start values".into())
-    })?;
+    let mut nominal_all =
+        fit(&nominal_spec, &runs, &weights, 3 * PATIENCE_ALL).ok_or_else(|| {
+            DiagnoseError::NominalFit("the nominal model refuses its own start values".into())
+        })?;
+    // A fit can collapse La to absorb an effect (a resonance, a sensor lag)
+    // and then cannot leave, since the record is insensitive to an
+    // electrical time constant far below one sample. Candidates therefore
+    // start with at least one sample; so that they are compared with the
+    // best nominal fit, the nominal is refitted from there too.
+    let candidate_base = la_floored(&nominal_all.model, scales0.dt);
+    if candidate_base != nominal_all.model {
+        let spec = FitSpec {
+            start: candidate_base,
+            effect: Vec::new(),
+        };
+        if let Some(f) = fit(&spec, &runs, &weights, 3 * PATIENCE_ALL) {
+            if f.sse < nominal_all.sse {
+                nominal_all = f;
+            }
+        }
+    }
+    let candidate_base = la_floored(&nominal_all.model, scales0.dt);
     if !nominal_all.converged {
         warnings.push("the nominal fit stopped without converging".into());
     }
@@ -123,7 +142,7 @@ pub fn diagnose_dc(
                 start: AugModel {
                     aug: d.aug,
                     e: d.e,
-                    ..nominal_all.model
+                    ..candidate_base
                 },
                 effect: d.transforms.clone(),
             };
@@ -537,6 +556,13 @@ fn all_segment_peaks(model: &AugModel, runs: &[SegmentRun], dt: f64) -> Vec<f64>
         .collect();
     peaks.dedup_by(|a, b| (*a - *b).abs() <= 0.1 * b.abs());
     peaks
+}
+
+/// `m` with its electrical time constant raised to at least one sample.
+fn la_floored(m: &AugModel, dt: f64) -> AugModel {
+    let mut m = *m;
+    m.p.la = m.p.la.max(m.p.ra * dt);
+    m
 }
 
 /// The segments that take part, each with how it starts.
