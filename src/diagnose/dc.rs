@@ -91,12 +91,14 @@ pub fn diagnose_dc(
         fit(&nominal_spec, &runs, &weights, 3 * PATIENCE_ALL).ok_or_else(|| {
             DiagnoseError::NominalFit("the nominal model refuses its own start values".into())
         })?;
-    // A fit can collapse La to absorb an effect (a resonance, a sensor lag)
-    // and then cannot leave, since the record is insensitive to an
-    // electrical time constant far below one sample. Candidates therefore
-    // start with at least one sample; so that they are compared with the
-    // best nominal fit, the nominal is refitted from there too.
-    let candidate_base = la_floored(&nominal_all.model, scales0.dt);
+    // A fit can collapse La or f to absorb an effect (La for a resonance
+    // or a sensor lag, f for armature reaction) and then cannot leave:
+    // their log is the fitted parameter, and the record is insensitive to
+    // an electrical time constant far below one sample or to a viscous
+    // torque far below the electrical damping. Candidates therefore start
+    // from floors; so that they are compared with the best nominal fit,
+    // the nominal is refitted from there too.
+    let candidate_base = floored(&nominal_all.model, scales0.dt);
     if candidate_base != nominal_all.model {
         let spec = FitSpec {
             start: candidate_base,
@@ -108,7 +110,7 @@ pub fn diagnose_dc(
             }
         }
     }
-    let candidate_base = la_floored(&nominal_all.model, scales0.dt);
+    let candidate_base = floored(&nominal_all.model, scales0.dt);
     if !nominal_all.converged {
         warnings.push("the nominal fit stopped without converging".into());
     }
@@ -558,10 +560,13 @@ fn all_segment_peaks(model: &AugModel, runs: &[SegmentRun], dt: f64) -> Vec<f64>
     peaks
 }
 
-/// `m` with its electrical time constant raised to at least one sample.
-fn la_floored(m: &AugModel, dt: f64) -> AugModel {
+/// `m` with its electrical time constant raised to at least one sample
+/// and its viscous friction to at least 0.1 % of the electrical damping
+/// `K²/Ra`.
+fn floored(m: &AugModel, dt: f64) -> AugModel {
     let mut m = *m;
     m.p.la = m.p.la.max(m.p.ra * dt);
+    m.p.f = m.p.f.max(1e-3 * m.p.k * m.p.k / m.p.ra);
     m
 }
 
