@@ -203,11 +203,39 @@ pub fn diagnose_dc(
     });
 
     let w = [weights.current, weights.speed];
+    // A held-out segment the nominal predicts far worse than the others (a
+    // coast-down predicted from steps alone, whose friction the steps
+    // barely show) would outweigh them with the size of a misfit both
+    // models share rather than with evidence for or against the effect.
+    // So each segment's squares are divided by the larger of the nominal's
+    // mean square on it and the median of those over the segments: the
+    // outlying segment counts as if it were predicted like a typical one,
+    // and every other segment keeps its absolute weight.
+    let fold_ms: Vec<f64> = nominal_folds
+        .iter()
+        .map(|s| {
+            let sq = s.weighted_squares(w[0], w[1]);
+            sq.iter().sum::<f64>() / sq.len().max(1) as f64
+        })
+        .collect();
+    let median_ms = {
+        let mut v = fold_ms.clone();
+        let mid = v.len() / 2;
+        *v.select_nth_unstable_by(mid, f64::total_cmp).1
+    };
+    let fold_scale: Vec<f64> = fold_ms
+        .iter()
+        .map(|m| m.max(median_ms).max(f64::MIN_POSITIVE))
+        .collect();
     let family = |all: Fitted, transforms: Vec<Transform>, folds: Vec<HeldOutSeries>| {
         let mut blocks = Vec::new();
         let mut sse = 0.0;
-        for s in &folds {
-            let sq = s.weighted_squares(w[0], w[1]);
+        for (s, scale) in folds.iter().zip(&fold_scale) {
+            let sq: Vec<f64> = s
+                .weighted_squares(w[0], w[1])
+                .iter()
+                .map(|v| v / scale)
+                .collect();
             sse += sq.iter().sum::<f64>();
             blocks.extend(block_sums(&sq, BLOCK));
         }
