@@ -6,12 +6,10 @@
 //!
 //! Issue 7's bar is the verdict right in at least 90 % of the cases, no
 //! false alarm on `none`, gap_after within twice the noise floor wherever
-//! the verdict is right. The first two hold on this seed (42 of 46 right,
-//! none of the 7 `none` cases named an effect). The third does not yet:
-//! 40 of the 42 right verdicts reach twice the noise floor
-//! (docs/diagnosis.md). This test asserts the first two as the issue states
-//! them and holds the third where it stands (at least 90 % of the right
-//! verdicts), so a change that makes it worse fails.
+//! the verdict is right. All three hold on this seed (last measured: 44 of
+//! 46 right, none of the 7 `none` cases named an effect, all 44 right
+//! verdicts within twice the noise floor; docs/diagnosis.md), and this test
+//! asserts them as the issue states them.
 
 mod common;
 
@@ -70,8 +68,9 @@ fn fixed_seed_suite_meets_the_verdict_bar() {
         score.accuracy()
     );
     let (floor, right) = score.noise_floor_reached();
-    assert!(
-        floor as f64 >= 0.9 * right as f64,
+    assert_eq!(
+        floor,
+        right,
         "gap_after above twice the noise floor in {} of {right} right verdicts:\n{score}",
         right - floor
     );

@@ -80,13 +80,13 @@ fn check(seed: u64, per_effect: usize, nones: usize) {
 }
 
 #[test]
-#[ignore = "slow in debug; run with --release (last measured 8/9 right, before the shaft-compliance multi-start: docs/diagnosis-dc.md)"]
+#[ignore = "slow in debug; run with --release (last measured 9/9 right, every gap within twice the floor: docs/diagnosis-dc.md)"]
 fn one_case_per_effect_and_two_nones() {
     check(7, 1, 2);
 }
 
 #[test]
-#[ignore = "long: run with --release (last measured 22/27 right with one false alarm, before the shaft-compliance multi-start: docs/diagnosis-dc.md)"]
+#[ignore = "long: run with --release (last measured 24/27 right, one false alarm, one gap at 4.1x the floor: fails the bar; docs/diagnosis-dc.md)"]
 fn three_cases_per_effect_and_six_nones() {
     check(2024, 3, 6);
 }
