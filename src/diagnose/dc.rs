@@ -785,6 +785,7 @@ fn noise_floor(runs: &[SegmentRun], w: &Weights) -> f64 {
 fn scales(runs: &[SegmentRun]) -> RecordScales {
     let mut s = RecordScales {
         i_max: 0.0,
+        i_settled: 0.0,
         u_max: 0.0,
         w_max: 0.0,
         heat_total: 0.0,
@@ -798,6 +799,15 @@ fn scales(runs: &[SegmentRun]) -> RecordScales {
             s.w_max = s.w_max.max(r.seg.speed[k].abs());
         }
         s.heat_total = s.heat_total.max(r.heat_before + heat_of(r.seg));
+    }
+    let mut settled: Vec<f64> = runs
+        .iter()
+        .filter(|r| !r.coast)
+        .map(|r| tail_mean(&r.seg.current).abs())
+        .collect();
+    if !settled.is_empty() {
+        let mid = settled.len() / 2;
+        s.i_settled = *settled.select_nth_unstable_by(mid, f64::total_cmp).1;
     }
     s
 }

@@ -14,6 +14,8 @@ use crate::report::ParamEstimate;
 pub struct RecordScales {
     /// Largest |measured current|, A.
     pub i_max: f64,
+    /// Median over the levels of the settled |current|, A.
+    pub i_settled: f64,
     /// Largest |measured voltage|, V.
     pub u_max: f64,
     /// Largest |measured speed|, rad/s.
@@ -40,8 +42,16 @@ pub struct CandidateDef {
     pub transforms: Vec<Transform>,
 }
 
-/// Every candidate (sensor lag twice: on the current and on the speed; the
-/// better of the two on the fitting data stands for `sensor_lag`).
+/// Knee currents a brush-drop fit starts from, as shares of the median
+/// settled current (where the record spends its time, unlike the start-up
+/// peaks). A fit can drive the knee far below every current of the record,
+/// where the record no longer tells it where the knee is: on a noise-free
+/// record with a 0.1 A knee, a start at 0.33 A ended at 0.002 A.
+const BRUSH_KNEES: [f64; 2] = [0.3, 1.0];
+
+/// Every candidate (sensor lag twice, on the current and on the speed; the
+/// brush drop from two knees; shaft compliance from each resonance start):
+/// the best on the fitting data stands for its effect.
 pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
     let p = &nominal.p;
     let i2 = (s.i_max * s.i_max).max(1e-12);
@@ -58,12 +68,6 @@ pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
             Augment::CoulombFriction,
             [0.3 * p.tst.max(1e-4), 0.05 * s.w_max.max(1.0), 0.0],
             vec![lin(0.3 * p.tst.max(1e-4)), Transform::Log],
-        ),
-        def(
-            Effect::BrushDrop,
-            Augment::BrushDrop,
-            [0.0, 0.05 * s.i_max.max(1e-6), 0.0],
-            vec![lin(0.01 * s.u_max), Transform::Log],
         ),
         def(
             Effect::ArmatureReaction,
@@ -97,6 +101,15 @@ pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
         ),
     ]
     .into_iter()
+    .chain(BRUSH_KNEES.iter().map(|share| {
+        let knee = share * s.i_settled.max(1e-3 * s.i_max).max(1e-6);
+        def(
+            Effect::BrushDrop,
+            Augment::BrushDrop,
+            [0.01 * s.u_max, knee, 0.0],
+            vec![lin(0.01 * s.u_max), Transform::Log],
+        )
+    }))
     .chain(shaft_starts(s).into_iter().map(|hz| {
         def(
             Effect::ShaftCompliance,
