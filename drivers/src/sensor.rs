@@ -35,6 +35,16 @@ pub struct SampleBatch {
     pub samples: Vec<Sample>,
 }
 
+impl SampleBatch {
+    /// The reading of `channel` in this batch, if it has one.
+    pub fn value(&self, channel: usize) -> Option<f64> {
+        self.samples
+            .iter()
+            .find(|s| s.channel == channel)
+            .map(|s| s.value)
+    }
+}
+
 /// A source of timestamped samples.
 ///
 /// `next_batch` waits for the next instant at which readings are available.

@@ -11,7 +11,7 @@ use super::{
     build_rig, plan_steps, record_channels, run_test, BenchError, Outcome, Progress, RecordSink,
 };
 use crate::config::{Config, Plan};
-use crate::diagnose::{attach_diagnosis, write_residual_svg};
+use crate::diagnose::{attach_diagnosis, write_residual_svg, ResidualPlot};
 use crate::identify::{identify_dc, Identification};
 use crate::model::DcParams;
 use crate::record::{
@@ -123,6 +123,21 @@ pub(super) fn unique_stem(dir: &Path, motor_id: &str, started: &str) -> String {
     })
 }
 
+/// Write the diagnosis' residual plot, when there is one, as
+/// `<stem>.residuals.svg` in `dir`; its path.
+pub(super) fn write_residuals(
+    dir: &Path,
+    stem: &str,
+    plot: Option<&ResidualPlot>,
+) -> Result<Option<PathBuf>, CommissionError> {
+    plot.map(|plot| {
+        let path = dir.join(format!("{stem}.residuals.svg"));
+        write_residual_svg(plot, &path).map_err(CommissionError::ResidualPlot)?;
+        Ok(path)
+    })
+    .transpose()
+}
+
 /// Run `cfg`'s test on its rig, record it to MCAP, identify the motor and
 /// write the report files. An aborted test still yields its record and
 /// whatever identification the data allows.
@@ -202,14 +217,7 @@ pub async fn commission(
         .map_err(io(&report_path))?;
     let svg_path = opts.out_dir.join(format!("{stem}.svg"));
     write_segments_svg(&svg_path, &segment_plots(&record, &identification))?;
-    let residuals_svg_path = match residuals {
-        Some(plot) => {
-            let path = opts.out_dir.join(format!("{stem}.residuals.svg"));
-            write_residual_svg(&plot, &path).map_err(CommissionError::ResidualPlot)?;
-            Some(path)
-        }
-        None => None,
-    };
+    let residuals_svg_path = write_residuals(&opts.out_dir, &stem, residuals.as_ref())?;
     progress.done(match &outcome {
         Outcome::Completed => "test complete",
         Outcome::Aborted { .. } => "test aborted",

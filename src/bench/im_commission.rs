@@ -8,12 +8,12 @@ use std::path::{Path, PathBuf};
 
 use tokio::sync::watch;
 
-use super::commission::unique_stem;
+use super::commission::{unique_stem, write_residuals};
 use super::{
     build_im_rig, run_im_sweep, sweep_channels, CommissionError, CommissionOptions, ImRunConfig,
     NoProgress, Outcome, RecordSink,
 };
-use crate::diagnose::{attach_diagnosis, write_residual_svg};
+use crate::diagnose::attach_diagnosis;
 use crate::identify::{identify_im, ImIdentification};
 use crate::model::ImCircuit;
 use crate::record::{
@@ -135,14 +135,7 @@ pub async fn commission_im(
             reason,
         })
     })?;
-    let residuals_svg_path = match residuals {
-        Some(plot) => {
-            let path = opts.out_dir.join(format!("{stem}.residuals.svg"));
-            write_residual_svg(&plot, &path).map_err(CommissionError::ResidualPlot)?;
-            Some(path)
-        }
-        None => None,
-    };
+    let residuals_svg_path = write_residuals(&opts.out_dir, &stem, residuals.as_ref())?;
     Ok(ImCommissioned {
         outcome,
         mcap_path,

@@ -121,13 +121,7 @@ fn angle_slope(time: &[f64], speed: &[f64], rad_per_count: f64) -> f64 {
     if n < 3 {
         return speed[..n].iter().sum::<f64>() / n.max(1) as f64;
     }
-    let mut angle = Vec::with_capacity(n);
-    let mut acc = 0.0;
-    angle.push(0.0);
-    for k in 1..n {
-        acc += speed[k] * (time[k] - time[k - 1]);
-        angle.push(acc);
-    }
+    let angle = crate::identify::running_angle(&time[..n], &speed[..n]);
     let fit = |keep: &dyn Fn(usize) -> bool| {
         let idx: Vec<usize> = (0..n).filter(|&k| keep(k)).collect();
         let m = idx.len() as f64;
@@ -265,13 +259,7 @@ impl Sweep<'_> {
             self.progress.tick(self.t_ns as f64 * 1e-9);
             let mut values: Vec<(usize, f64)> =
                 batch.samples.iter().map(|s| (s.channel, s.value)).collect();
-            let get = |c: usize| {
-                batch
-                    .samples
-                    .iter()
-                    .find(|s| s.channel == c)
-                    .map(|s| s.value)
-            };
+            let get = |c: usize| batch.value(c);
             if let Some(w) =
                 get(self.ix.encoder).and_then(|count| self.encoder.update(batch.t_ns, count))
             {

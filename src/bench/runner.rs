@@ -262,13 +262,7 @@ impl Bench<'_> {
         self.t_ns = batch.t_ns;
         let mut values: Vec<(usize, f64)> =
             batch.samples.iter().map(|s| (s.channel, s.value)).collect();
-        let get = |c: usize| {
-            batch
-                .samples
-                .iter()
-                .find(|s| s.channel == c)
-                .map(|s| s.value)
-        };
+        let get = |c: usize| batch.value(c);
         let t = batch.t_ns;
         self.latest.first_t_ns.get_or_insert(t);
         if let Some(v) = get(self.ch.voltage) {

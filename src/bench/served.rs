@@ -104,23 +104,20 @@ impl RealtimePlant {
             0 => self.history.front(),
             i => self.history.get(i - 1),
         };
-        let value = |b: &SampleBatch, ch: usize| {
-            b.samples
-                .iter()
-                .find(|s| s.channel == ch)
-                .map_or(0.0, |s| s.value)
-        };
         match found {
-            Some((s, b)) => (*s, channels.iter().map(|&c| value(b, c)).collect()),
+            Some((s, b)) => (
+                *s,
+                channels
+                    .iter()
+                    .map(|&c| b.value(c).unwrap_or(0.0))
+                    .collect(),
+            ),
             None => (0, vec![0.0; channels.len()]),
         }
     }
 
     fn reading(&self, ch: usize) -> f64 {
-        self.last
-            .as_ref()
-            .and_then(|b| b.samples.iter().find(|s| s.channel == ch))
-            .map_or(0.0, |s| s.value)
+        self.last.as_ref().and_then(|b| b.value(ch)).unwrap_or(0.0)
     }
 }
 

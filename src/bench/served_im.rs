@@ -63,11 +63,7 @@ impl Plant {
     /// counter would read it (without this, a reading would be up to one
     /// plant period old, and the polled speed jitter by that much).
     fn count_now(&self) -> f64 {
-        let count = |b: &Option<SampleBatch>| {
-            b.as_ref()
-                .and_then(|b| b.samples.iter().find(|s| s.channel == channel::ENCODER))
-                .map(|s| s.value)
-        };
+        let count = |b: &Option<SampleBatch>| b.as_ref().and_then(|b| b.value(channel::ENCODER));
         let (Some(c1), Some(c0)) = (count(&self.last), count(&self.previous)) else {
             return self.reading(channel::ENCODER);
         };
@@ -76,10 +72,7 @@ impl Plant {
     }
 
     fn reading(&self, ch: usize) -> f64 {
-        self.last
-            .as_ref()
-            .and_then(|b| b.samples.iter().find(|s| s.channel == ch))
-            .map_or(0.0, |s| s.value)
+        self.last.as_ref().and_then(|b| b.value(ch)).unwrap_or(0.0)
     }
 }
 

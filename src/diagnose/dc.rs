@@ -27,7 +27,9 @@ use super::dc_candidates::{
 use super::dc_fit::{fit, refit_spec, FitSpec, Fitted, Transform, Weights};
 use super::dc_gap::{locate, spectral_peak, HeldOutSeries, Measured};
 use super::dc_model::{AugModel, SegmentRun, Start};
-use super::decision::{block_sums, effective_samples, held_out_test, penalised_score, HeldOutTest};
+use super::decision::{
+    block_sums, effective_samples, held_out_test, median, penalised_score, HeldOutTest,
+};
 use super::report::{Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict};
 use super::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{
@@ -218,11 +220,7 @@ pub fn diagnose_dc(
             sq.iter().sum::<f64>() / sq.len().max(1) as f64
         })
         .collect();
-    let median_ms = {
-        let mut v = fold_ms.clone();
-        let mid = v.len() / 2;
-        *v.select_nth_unstable_by(mid, f64::total_cmp).1
-    };
+    let median_ms = median(&mut fold_ms.clone()).unwrap_or(0.0);
     let fold_scale: Vec<f64> = fold_ms
         .iter()
         .map(|m| m.max(median_ms).max(f64::MIN_POSITIVE))
@@ -805,10 +803,7 @@ fn scales(runs: &[SegmentRun]) -> RecordScales {
         .filter(|r| !r.coast)
         .map(|r| tail_mean(&r.seg.current).abs())
         .collect();
-    if !settled.is_empty() {
-        let mid = settled.len() / 2;
-        s.i_settled = *settled.select_nth_unstable_by(mid, f64::total_cmp).1;
-    }
+    s.i_settled = median(&mut settled).unwrap_or(0.0);
     s
 }
 

@@ -8,7 +8,7 @@ use std::f64::consts::TAU;
 
 use statrs::distribution::{ChiSquared, ContinuousCDF, StudentsT};
 
-use super::decision::{effective_samples, FALSE_ALARM_RATE};
+use super::decision::{effective_samples, median, FALSE_ALARM_RATE};
 use super::report::{GapRegion, RegionAxis, ResidualEvidence};
 
 /// Held-out residuals (measured − simulated) of one segment.
@@ -249,9 +249,7 @@ pub fn spectral_peak(pieces: &[&[f64]], dt: f64) -> Option<SpectralPeak> {
         if hood.len() < 6 {
             continue;
         }
-        let mid = hood.len() / 2;
-        let (_, median, _) = hood.select_nth_unstable_by(mid, f64::total_cmp);
-        let background = *median / std::f64::consts::LN_2;
+        let background = median(&mut hood).unwrap_or(0.0) / std::f64::consts::LN_2;
         if background <= 0.0 {
             continue;
         }

@@ -167,12 +167,17 @@ pub fn effective_samples(residual: &[f64]) -> f64 {
 /// `median|Δy| / (√2 · 0.6745)`.
 pub fn noise_sigma(y: &[f64]) -> f64 {
     let mut d: Vec<f64> = y.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
-    if d.is_empty() {
-        return 0.0;
+    median(&mut d).map_or(0.0, |m| m / (std::f64::consts::SQRT_2 * 0.674_489_75))
+}
+
+/// The median of `values` (the upper one of an even count), reordering
+/// them; `None` when there are none.
+pub fn median(values: &mut [f64]) -> Option<f64> {
+    if values.is_empty() {
+        return None;
     }
-    let mid = d.len() / 2;
-    let (_, median, _) = d.select_nth_unstable_by(mid, f64::total_cmp);
-    *median / (std::f64::consts::SQRT_2 * 0.674_489_75)
+    let mid = values.len() / 2;
+    Some(*values.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
 
 #[cfg(test)]

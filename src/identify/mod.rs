@@ -61,6 +61,7 @@ pub use output_error::{
 pub use pasek::{PasekEstimate, PasekReading};
 pub use simulate::simulate_segment;
 pub use steady_state::{PairEstimate, SteadyStateEstimate, SteadyStateFit};
+pub(crate) use step::running_angle;
 pub use step::VoltageStep;
 pub use transient::TransientFit;
 

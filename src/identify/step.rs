@@ -106,6 +106,21 @@ pub fn voltage_step(
     })
 }
 
+/// The angle the speed readings integrate to (each reading over the
+/// interval before it), starting at 0: for a speed derived from encoder
+/// counts, the count itself in radians.
+pub(crate) fn running_angle(time: &[f64], speed: &[f64]) -> Vec<f64> {
+    let mut acc = 0.0;
+    (0..time.len().min(speed.len()))
+        .map(|k| {
+            if k > 0 {
+                acc += speed[k] * (time[k] - time[k - 1]);
+            }
+            acc
+        })
+        .collect()
+}
+
 /// The mean speed over a window, as the least-squares slope of the angle
 /// (the running sum of speed × interval) against time.
 ///
@@ -120,13 +135,7 @@ pub fn counter_speed(time: &[f64], speed: &[f64]) -> f64 {
     if n < 3 {
         return speed[..n].iter().sum::<f64>() / n.max(1) as f64;
     }
-    let mut angle = Vec::with_capacity(n);
-    let mut acc = 0.0;
-    angle.push(0.0);
-    for k in 1..n {
-        acc += speed[k] * (time[k] - time[k - 1]);
-        angle.push(acc);
-    }
+    let angle = running_angle(&time[..n], &speed[..n]);
     let tm = time[..n].iter().sum::<f64>() / n as f64;
     let am = angle.iter().sum::<f64>() / n as f64;
     let (mut sxy, mut sxx) = (0.0, 0.0);
