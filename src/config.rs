@@ -9,19 +9,23 @@ use std::path::{Path, PathBuf};
 use serde::Deserialize;
 use thiserror::Error;
 
+use crate::bounds;
+use crate::excerpt::{cut, quoted};
 use crate::model::DcParams;
 
 mod can;
+mod key_line;
 mod modbus;
 mod sensor_channels;
 
 pub use can::{CanLink, CanTransport};
+pub use key_line::key_line;
 pub use modbus::{LinkSpec, ModbusDeviceLink, ModbusRig, SensorLink, SimulatedTransport};
-pub use sensor_channels::{SensorChannel, MAX_RATE_HZ};
+pub use sensor_channels::SensorChannel;
 mod retention;
 mod supervision;
 
-pub(crate) use modbus::{merge_window, simulated_transport, RawLink};
+pub(crate) use modbus::{call_policy, merge_window, simulated_transport, RawLink};
 pub(crate) use retention::RawRetention;
 pub(crate) use supervision::RawSupervisor;
 
@@ -63,15 +67,53 @@ pub enum ConfigError {
         message: String,
     },
     /// A value parsed but is not usable.
-    #[error("{path}: {key}: {reason}")]
+    #[error("{path}{}: {key}: {reason}", at_line(*.line))]
     Invalid {
         /// The file.
         path: String,
+        /// 1-based line of the key (or of the deepest part of its path the
+        /// file has), where known.
+        line: Option<usize>,
         /// Dotted key path.
         key: String,
         /// Why.
         reason: String,
     },
+}
+
+/// `checked` with its error as an invalid value of `key` in `source`.
+fn bounded<T>(source: &str, key: &str, checked: Result<T, String>) -> Result<T, ConfigError> {
+    checked.map_err(|reason| ConfigError::Invalid {
+        path: source.to_string(),
+        line: None,
+        key: key.to_string(),
+        reason,
+    })
+}
+
+/// `:line` when the line is known.
+fn at_line(line: Option<usize>) -> String {
+    line.map(|l| format!(":{l}")).unwrap_or_default()
+}
+
+impl ConfigError {
+    /// The error with the line of its key in `text` (when given) filled in.
+    pub(crate) fn located(self, text: Option<&str>) -> ConfigError {
+        match self {
+            ConfigError::Invalid {
+                path,
+                line: None,
+                key,
+                reason,
+            } => ConfigError::Invalid {
+                line: text.and_then(|t| key_line(t, &key)),
+                path,
+                key,
+                reason,
+            },
+            other => other,
+        }
+    }
 }
 
 /// Raw file layout; see `config/sim-dc.toml` for a documented example.
@@ -335,20 +377,29 @@ impl Config {
             .expect("the embedded default configuration is valid")
     }
 
-    /// Parse and validate `text`; `source` names it in errors.
+    /// Parse and validate `text`; `source` names it in errors, with the
+    /// line and the key.
     pub fn parse(source: &str, text: &str) -> Result<Config, ConfigError> {
+        Config::parse_composed(source, text).map_err(|e| e.located(Some(text)))
+    }
+
+    /// Parse and validate `text` the program composed (the daemon's
+    /// configuration with a request's `[test]`): errors name the key, not
+    /// a line of the composed text.
+    pub(crate) fn parse_composed(source: &str, text: &str) -> Result<Config, ConfigError> {
         let raw: RawConfig = toml::from_str(text).map_err(|e| {
             let start = e.span().map(|s| s.start).unwrap_or(0).min(text.len());
             let line = text[..start].matches('\n').count() + 1;
             ConfigError::Parse {
                 path: source.to_string(),
                 line,
-                text: text.lines().nth(line - 1).unwrap_or("").trim().to_string(),
+                text: cut(text.lines().nth(line - 1).unwrap_or("").trim()),
                 message: e.message().replace('\n', " ").trim().to_string(),
             }
         })?;
         let invalid = |key: &str, reason: String| ConfigError::Invalid {
             path: source.to_string(),
+            line: None,
             key: key.to_string(),
             reason,
         };
@@ -366,7 +417,11 @@ impl Config {
         let nameplate = serde_json::to_value(&raw.motor.nameplate)
             .map_err(|e| invalid("motor.nameplate", e.to_string()))?;
 
-        positive("rig.sample_rate_Hz", raw.rig.sample_rate_hz)?;
+        bounded(
+            source,
+            "rig.sample_rate_Hz",
+            bounds::sample_rate(raw.rig.sample_rate_hz),
+        )?;
         let check_simulated = |sim: &SimulatedRig| -> Result<(), ConfigError> {
             sim.motor
                 .validate()
@@ -457,7 +512,8 @@ impl Config {
                 return Err(invalid(
                     "rig.backend",
                     format!(
-                        "unknown backend \"{other}\" (this version has: \"simulated\", \"modbus\")"
+                        "unknown backend {} (this version has: \"simulated\", \"modbus\")",
+                        quoted(other)
                     ),
                 ))
             }
@@ -494,6 +550,11 @@ impl Config {
                         "a staircase needs at least 2 levels".into(),
                     ));
                 }
+                bounded(
+                    source,
+                    "test.levels_V",
+                    bounds::count(raw.test.levels.len(), bounds::MAX_LEVELS),
+                )?;
                 for (n, v) in raw.test.levels.iter().enumerate() {
                     level_ok(&format!("test.levels_V[{n}]"), *v)?;
                 }
@@ -528,23 +589,27 @@ impl Config {
                 return Err(invalid(
                     "test.plan",
                     format!(
-                    "unknown plan \"{other}\" (this version has: \"dc_step\", \"dc_coastdown\")"
-                ),
+                        "unknown plan {} (this version has: \"dc_step\", \"dc_coastdown\")",
+                        quoted(other)
+                    ),
                 ))
             }
         };
 
         let st = raw.test.settle;
-        positive("test.settle.window_s", st.window_s)?;
         positive("test.settle.tolerance", st.tolerance)?;
-        positive("test.settle.hold_s", st.hold_s)?;
-        positive("test.settle.timeout_s", st.timeout_s)?;
-        positive("test.settle.coastdown_timeout_s", st.coastdown_timeout_s)?;
-        if !(st.min_hold_s.is_finite() && st.min_hold_s >= 0.0) {
-            return Err(invalid(
-                "test.settle.min_hold_s",
-                format!("{} must be ≥ 0", st.min_hold_s),
-            ));
+        for (key, v, zero_ok) in [
+            ("test.settle.window_s", st.window_s, false),
+            ("test.settle.hold_s", st.hold_s, false),
+            ("test.settle.timeout_s", st.timeout_s, false),
+            (
+                "test.settle.coastdown_timeout_s",
+                st.coastdown_timeout_s,
+                false,
+            ),
+            ("test.settle.min_hold_s", st.min_hold_s, true),
+        ] {
+            bounded(source, key, bounds::wait_s(v, zero_ok))?;
         }
         // Settling is judged on the encoder's readings.
         let encoder_rate = match &backend {
@@ -558,6 +623,35 @@ impl Config {
                 format!("must span at least 10 encoder readings ({encoder_rate} Hz)"),
             ));
         }
+        bounded(
+            source,
+            "test.settle.window_s",
+            bounds::window_samples(st.window_s * encoder_rate),
+        )?;
+        // The longest the plan can take (every level to its timeout, then
+        // the coast-down to its own), read at the fastest channel's rate.
+        let (steps, coastdown) = match &plan {
+            Plan::DcStep { levels, coastdown } => (levels.len(), *coastdown),
+            Plan::DcCoastdown { .. } => (1, true),
+        };
+        let longest = steps as f64 * st.timeout_s
+            + if coastdown {
+                st.coastdown_timeout_s
+            } else {
+                0.0
+            };
+        let fastest = match &backend {
+            Backend::Modbus { rig, .. } => {
+                rig.all_channels().map(|c| c.rate_hz).fold(0.0, f64::max)
+            }
+            Backend::Simulated(_) => 0.0,
+        }
+        .max(raw.rig.sample_rate_hz);
+        bounded(
+            source,
+            "test.settle.timeout_s",
+            bounds::test_length(longest, fastest),
+        )?;
 
         let supervision = raw.supervisor.validate(source, &raw.limits, &nameplate)?;
         let retention = raw.records.validate(source)?;
@@ -660,7 +754,15 @@ mod tests {
         let err = with("max_current_A = 6", "max_current_A = -6")
             .unwrap_err()
             .to_string();
-        assert!(err.starts_with("rig.toml: limits.max_current_A:"), "{err}");
+        let line = DEFAULT_CONFIG
+            .lines()
+            .position(|l| l.starts_with("max_current_A"))
+            .unwrap()
+            + 1;
+        assert!(
+            err.starts_with(&format!("rig.toml:{line}: limits.max_current_A:")),
+            "{err}"
+        );
         let err = with("La = 0.803", "La = 0").unwrap_err().to_string();
         assert!(err.contains("rig.simulated.motor.La"), "{err}");
         let err = with("levels_V = [60,", "levels_V = [600,")
@@ -678,6 +780,75 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("rig.backend"), "{err}");
+    }
+
+    #[test]
+    fn numbers_that_size_memory_loops_or_waits_are_bounded() {
+        let key_of = |r: Result<Config, ConfigError>| match r {
+            Err(ConfigError::Invalid { key, line, .. }) => (key, line),
+            other => panic!("not an invalid value: {other:?}"),
+        };
+        let (key, line) = key_of(with("sample_rate_Hz = 2000", "sample_rate_Hz = 1e12"));
+        assert_eq!(key, "rig.sample_rate_Hz");
+        let expected = DEFAULT_CONFIG
+            .lines()
+            .position(|l| l.starts_with("sample_rate_Hz"))
+            .unwrap()
+            + 1;
+        assert_eq!(line, Some(expected));
+        for (from, to, key) in [
+            (
+                "sample_rate_Hz = 2000",
+                "sample_rate_Hz = 0.001",
+                "rig.sample_rate_Hz",
+            ),
+            ("window_s = 0.1", "window_s = 1e7", "test.settle.window_s"),
+            // 1 000 s windows at 2 kHz: two million samples per window.
+            ("window_s = 0.1", "window_s = 1000", "test.settle.window_s"),
+            ("\nhold_s = ", "\nhold_s = 1e9 #", "test.settle.hold_s"),
+            (
+                "min_hold_s = ",
+                "min_hold_s = 1e9 #",
+                "test.settle.min_hold_s",
+            ),
+            (
+                "timeout_s = 10",
+                "timeout_s = 1e300",
+                "test.settle.timeout_s",
+            ),
+            (
+                "coastdown_timeout_s = 60",
+                "coastdown_timeout_s = 1e9",
+                "test.settle.coastdown_timeout_s",
+            ),
+            // Each wait in range, the whole test not: 3 000 s at 2 kHz for
+            // each of 27 levels is 1.6·10⁸ readings per channel.
+            (
+                "timeout_s = 10",
+                "timeout_s = 3000",
+                "test.settle.timeout_s",
+            ),
+        ] {
+            let text = if to == "timeout_s = 3000" {
+                DEFAULT_CONFIG.replacen("levels_V = [60,", "levels_V = [10, 20, 30, 40, 50, 70, 80, 90, 100, 110, 120, 130, 140, 150, 160, 170, 180, 190, 200, 60,", 1)
+            } else {
+                DEFAULT_CONFIG.to_string()
+            };
+            assert!(text.contains(from), "{from}");
+            let r = Config::parse("rig.toml", &text.replacen(from, to, 1));
+            assert_eq!(key_of(r).0, key, "{to}");
+        }
+        let levels: Vec<String> = (0..1001).map(|k| format!("{}", 1 + k % 200)).collect();
+        let (key, _) = key_of(with(
+            "levels_V = [60,",
+            &format!("levels_V = [{}, 60,", levels.join(", ")),
+        ));
+        assert_eq!(key, "test.levels_V");
+        let (key, _) = key_of(Config::parse(
+            "rig.toml",
+            &format!("{DEFAULT_CONFIG}\n[supervisor]\nbus_loss_timeout_s = 3600\n"),
+        ));
+        assert_eq!(key, "supervisor.bus_loss_timeout_s");
     }
 
     #[test]

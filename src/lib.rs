@@ -3,6 +3,9 @@
 //! Map of the crate (data flows top to bottom):
 //!
 //! - [`config`]: rig and test configuration (TOML), validated.
+//! - [`bounds`]: the practical bounds on every number from outside that
+//!   sizes an allocation, a loop or a wait.
+//! - [`excerpt`]: user input quoted in error messages, long values cut.
 //! - [`model`]: DC machine equations, effects, exact simulation; the
 //!   induction machine's steady-state equivalent circuits.
 //! - [`bench`]: test plans, settle detection, limits and safe state, the
@@ -18,8 +21,10 @@
 //! The binary (`src/main.rs`) is a thin CLI over these modules.
 
 pub mod bench;
+pub mod bounds;
 pub mod config;
 pub mod diagnose;
+pub mod excerpt;
 pub mod identify;
 pub mod model;
 pub mod record;

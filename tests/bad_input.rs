@@ -167,3 +167,123 @@ fn a_truncated_record_replays_what_it_holds_and_says_so() {
     assert_eq!(out.status.code(), Some(0), "{stderr}");
     assert!(stdout.contains("method steady_state"), "{stdout}");
 }
+
+/// The line of the first line of `text` starting with `prefix`, 1-based.
+fn line_of(text: &str, prefix: &str) -> usize {
+    text.lines().position(|l| l.starts_with(prefix)).unwrap() + 1
+}
+
+#[test]
+fn config_numbers_that_size_memory_loops_or_waits_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    // Each once aborted the process allocating hundreds of gigabytes.
+    let dc = motorbench::config::DEFAULT_CONFIG;
+    for (from, to, key) in [
+        (
+            "sample_rate_Hz = 2000",
+            "sample_rate_Hz = 1e12",
+            "rig.sample_rate_Hz",
+        ),
+        ("window_s = 0.1", "window_s = 1e7", "test.settle.window_s"),
+        (
+            "timeout_s = 10",
+            "timeout_s = 3000",
+            "test.settle.timeout_s",
+        ),
+    ] {
+        assert!(dc.contains(from), "{from}");
+        let text = dc.replacen(from, to, 1);
+        let path = write(dir.path(), "rig.toml", &text);
+        let err = run_bad(&["run", "--config", &path, "--out", out]);
+        let line = line_of(&text, to);
+        assert!(
+            err.contains(&format!("rig.toml:{line}: {key}:")),
+            "{to}: {err}"
+        );
+    }
+    let im = include_str!("../config/sim-im.toml");
+    let from = "average_samples = 50";
+    assert!(im.contains(from));
+    let text = im.replacen(from, "average_samples = 100000000000", 1);
+    let path = write(dir.path(), "im.toml", &text);
+    let err = run_bad(&["run", "--config", &path, "--out", out]);
+    let line = line_of(&text, "average_samples");
+    assert!(
+        err.contains(&format!("im.toml:{line}: test.settle.average_samples:")),
+        "{err}"
+    );
+}
+
+/// A DC step segment at 1 kHz, `rows` rows, with row `k`'s time from `t`.
+fn dc_csv(rows: usize, t: impl Fn(usize) -> String) -> String {
+    let mut s = String::from("time_s,armature_voltage_V,armature_current_A,speed_rad_s\n");
+    for k in 0..rows {
+        let i = 1.9 * (-(k as f64) / 30.0).exp() + 0.1;
+        let w = 40.0 * (1.0 - (-(k as f64) / 200.0).exp());
+        s += &format!("{},60,{i:.5},{w:.4}\n", t(k));
+    }
+    s
+}
+
+#[test]
+fn csv_times_that_break_the_numerics_are_refused_at_import() {
+    let dir = tempfile::tempdir().unwrap();
+    let good = write(
+        dir.path(),
+        "a.csv",
+        &dc_csv(400, |k| format!("{}", k as f64 * 1e-3)),
+    );
+    // Each made `identify` or `diagnose` panic ("Singular value was NaN").
+    let cases: [(&str, Box<dyn Fn(usize) -> String>, usize); 3] = [
+        (
+            "tiny_step.csv",
+            Box::new(|k| format!("{:e}", k as f64 * 1e-300)),
+            3,
+        ),
+        (
+            "huge.csv",
+            Box::new(|k| format!("{:e}", 1e300 + k as f64 * 1e290)),
+            2,
+        ),
+        (
+            "one_huge.csv",
+            Box::new(|k| {
+                if k == 399 {
+                    "1e308".into()
+                } else {
+                    format!("{}", k as f64 * 1e-3)
+                }
+            }),
+            401,
+        ),
+    ];
+    for (name, t, line) in cases {
+        let bad = write(dir.path(), name, &dc_csv(400, t));
+        for command in ["identify", "diagnose"] {
+            let err = run_bad(&[command, "--kind", "dc_step", &good, &bad]);
+            assert!(
+                err.contains(&format!("{name}:{line}: column time_s:")),
+                "{command} {name}: {err}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_huge_bad_csv_field_is_cut_in_the_message() {
+    let dir = tempfile::tempdir().unwrap();
+    let field = "x".repeat(10 << 20);
+    let csv = format!(
+        "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,60,0.11,42\n0.001,60,{field},42\n"
+    );
+    let path = write(dir.path(), "big.csv", &csv);
+    let err = run_bad(&["identify", "--kind", "dc_step", &path]);
+    assert!(
+        err.contains("big.csv:3: column armature_current_A:"),
+        "{}",
+        &err[..err.len().min(300)]
+    );
+    assert!(err.len() < 300, "{} bytes: {}", err.len(), &err[..300]);
+    assert!(err.contains(&format!("…({} bytes)", 10 << 20)), "{err}");
+}

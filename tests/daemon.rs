@@ -398,6 +398,49 @@ async fn off_loopback_no_endpoint_answers_without_the_token() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn hostile_test_overrides_get_400_naming_the_field_and_the_daemon_stays_up() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    let served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+    let many_levels: Vec<f64> = (0..5000).map(|k| 10.0 + (k % 200) as f64).collect();
+    // The first once answered 201 and aborted the daemon a second later
+    // allocating 320 GB.
+    for (test, field) in [
+        (
+            json!({"levels_V": [60, 248], "coastdown": false, "settle": {"window_s": 1e7}}),
+            "test.settle.window_s",
+        ),
+        (
+            json!({"settle": {"timeout_s": 1e9}}),
+            "test.settle.timeout_s",
+        ),
+        (
+            json!({"settle": {"coastdown_timeout_s": 1e300}}),
+            "test.settle.coastdown_timeout_s",
+        ),
+        (json!({"settle": {"hold_s": 4000}}), "test.settle.hold_s"),
+        (json!({"levels_V": many_levels}), "test.levels_V"),
+    ] {
+        let r = start(&c, Some(test.clone())).await;
+        let body = String::from_utf8_lossy(&r.body).to_string();
+        assert_eq!(r.status, 400, "{test}: {body}");
+        assert_eq!(r.json()["error"], "bad_request", "{body}");
+        let message = r.json()["message"].as_str().unwrap().to_string();
+        assert!(message.contains(&format!("{field}: ")), "{test}: {message}");
+    }
+    // Still up, the rig idle, and no record was started.
+    assert_eq!(get(&c, "/v1/health").await["healthy"], true);
+    assert_eq!(get(&c, "/v1/rigs/rig").await["state"], "idle");
+    let listed = get(&c, "/v1/records").await;
+    assert_eq!(
+        listed["records"].as_array().map(Vec::len),
+        Some(0),
+        "{listed}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn unix_socket_emergency_stop_latches_until_reset() {
     let dir = tempfile::tempdir().unwrap();
     let records = dir.path().join("records");

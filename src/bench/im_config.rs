@@ -13,7 +13,9 @@
 use serde::Deserialize;
 
 use super::{ImModbusRig, ImSweepPlan, SimImRigConfig};
-use crate::config::{Limits, RawRetention, RawSupervisor, Retention, Supervision};
+use crate::bounds;
+use crate::config::{key_line, Limits, RawRetention, RawSupervisor, Retention, Supervision};
+use crate::excerpt::quoted;
 use crate::identify::slip_grid;
 use crate::model::{Connection, ImCircuit, ImModel, ImParam, ImSupply};
 
@@ -187,6 +189,25 @@ fn number(t: &toml::Table, key: &str) -> Option<f64> {
     }
 }
 
+/// An error naming `key` of `source` and, where `lines_of` (the text)
+/// has it, its line.
+fn keyed_error(source: &str, lines_of: Option<&str>, key: &str, why: &str) -> String {
+    match lines_of.and_then(|text| key_line(text, key)) {
+        Some(line) => format!("{source}:{line}: {key}: {why}"),
+        None => format!("{source}: {key}: {why}"),
+    }
+}
+
+/// `checked` with its error named by [`keyed_error`].
+fn bounded<T>(
+    source: &str,
+    lines_of: Option<&str>,
+    key: &str,
+    checked: Result<T, String>,
+) -> Result<T, String> {
+    checked.map_err(|why| keyed_error(source, lines_of, key, &why))
+}
+
 impl ImRunConfig {
     /// Read and validate a file.
     pub fn load(path: &std::path::Path) -> Result<ImRunConfig, String> {
@@ -203,12 +224,34 @@ impl ImRunConfig {
         ImRunConfig::parse_in(source, dir, text)
     }
 
-    /// Parse and validate `text`; `source` names it in errors; relative
-    /// profile paths are resolved in `dir`.
+    /// Parse and validate `text`; `source` names it in errors, with the
+    /// line and the key; relative profile paths are resolved in `dir`.
     pub fn parse_in(
         source: &str,
         dir: &std::path::Path,
         text: &str,
+    ) -> Result<ImRunConfig, String> {
+        ImRunConfig::parse_with(source, dir, text, Some(text))
+    }
+
+    /// As [`ImRunConfig::parse_in`], for a text the program composed (the
+    /// daemon's configuration with a request's `[test]`): validation
+    /// errors name the key, not a line of the composed text.
+    pub(crate) fn parse_composed(
+        source: &str,
+        dir: &std::path::Path,
+        text: &str,
+    ) -> Result<ImRunConfig, String> {
+        ImRunConfig::parse_with(source, dir, text, None)
+    }
+
+    /// Parse and validate `text`; validation errors name the line of
+    /// their key in `lines_of`, when given.
+    fn parse_with(
+        source: &str,
+        dir: &std::path::Path,
+        text: &str,
+        lines_of: Option<&str>,
     ) -> Result<ImRunConfig, String> {
         let raw: Raw = toml::from_str(text).map_err(|e| {
             let start = e.span().map(|s| s.start).unwrap_or(0).min(text.len());
@@ -216,6 +259,7 @@ impl ImRunConfig {
             format!("{source}:{line}: {}", e.message())
         })?;
         let bad = |what: String| format!("{source}: {what}");
+        let bad_key = |key: &str, why: String| keyed_error(source, lines_of, key, &why);
         let modbus = match (raw.rig.backend.as_str(), raw.rig.modbus) {
             ("simulated", None) => None,
             ("simulated", Some(_)) => {
@@ -223,12 +267,13 @@ impl ImRunConfig {
             }
             ("modbus", Some(m)) => Some(
                 ImModbusRig::parse(m, dir, raw.rig.simulated.is_some())
-                    .map_err(|(key, reason)| bad(format!("{key}: {reason}")))?,
+                    .map_err(|(key, reason)| bad_key(&key, reason))?,
             ),
             ("modbus", None) => return Err(bad("rig.modbus: missing".into())),
             (other, _) => {
                 return Err(bad(format!(
-                    "rig.backend {other:?}: want \"simulated\" or \"modbus\""
+                    "rig.backend {}: want \"simulated\" or \"modbus\"",
+                    quoted(other)
                 )))
             }
         };
@@ -244,14 +289,14 @@ impl ImRunConfig {
         }
         if raw.test.plan != "im_slip_sweep" {
             return Err(bad(format!(
-                "test.plan {:?} is not im_slip_sweep",
-                raw.test.plan
+                "test.plan {} is not im_slip_sweep",
+                quoted(&raw.test.plan)
             )));
         }
         let model = ImModel::parse(&raw.test.model).ok_or_else(|| {
             bad(format!(
-                "test.model {:?}: want single, single-fe, double or double-fe",
-                raw.test.model
+                "test.model {}: want single, single-fe, double or double-fe",
+                quoted(&raw.test.model)
             ))
         })?;
         let plate = &raw.motor.nameplate;
@@ -281,10 +326,15 @@ impl ImRunConfig {
             if v.is_finite() && v > 0.0 {
                 Ok(v)
             } else {
-                Err(bad(format!("{name} = {v} must be a finite number > 0")))
+                Err(bad_key(name, format!("{v} must be a finite number > 0")))
             }
         };
-        positive("rig.sample_rate_Hz", raw.rig.sample_rate_hz)?;
+        let rate = bounded(
+            source,
+            lines_of,
+            "rig.sample_rate_Hz",
+            bounds::sample_rate(raw.rig.sample_rate_hz),
+        )?;
         positive("limits.max_current_A", raw.limits.max_current)?;
         positive("test.hot_current_A", raw.test.hot_current)?;
         if raw.test.voltages.is_empty()
@@ -304,6 +354,59 @@ impl ImRunConfig {
                 "test.points must be ≥ 5 and test.min_slip in (0, 0.2)".into()
             ));
         }
+        bounded(
+            source,
+            lines_of,
+            "test.voltages_V",
+            bounds::count(raw.test.voltages.len(), bounds::MAX_LEVELS),
+        )?;
+        bounded(
+            source,
+            lines_of,
+            "test.points",
+            bounds::count(raw.test.points, bounds::MAX_SWEEP_POINTS),
+        )?;
+        let st = &raw.test.settle;
+        for (key, n) in [
+            ("test.settle.window_samples", st.window_samples),
+            ("test.settle.average_samples", st.average_samples),
+        ] {
+            bounded(source, lines_of, key, bounds::window_samples(n as f64))?;
+        }
+        let point_s = bounded(
+            source,
+            lines_of,
+            "test.settle.timeout_s",
+            bounds::wait_s(st.timeout_s, false),
+        )?;
+        let hot_s = bounded(
+            source,
+            lines_of,
+            "test.hot_point_max_s",
+            bounds::wait_s(raw.test.hot_point_max_s, false),
+        )?;
+        let cooldown_s = bounded(
+            source,
+            lines_of,
+            "test.cooldown_s",
+            bounds::wait_s(raw.test.cooldown_s.max(0.0), true),
+        )?;
+        let average_s = bounded(
+            source,
+            lines_of,
+            "test.settle.average_samples",
+            bounds::wait_s(st.average_samples as f64 / rate, true),
+        )?;
+        // The longest the sweep can take: every point to its timeout, its
+        // average and a cool-down.
+        let longest = (raw.test.voltages.len() * raw.test.points) as f64
+            * (point_s.max(hot_s) + average_s + cooldown_s);
+        bounded(
+            source,
+            lines_of,
+            "test.settle.timeout_s",
+            bounds::test_length(longest, rate),
+        )?;
         let supply = ImSupply {
             line_voltage: voltage * 1.1,
             frequency,
@@ -389,7 +492,6 @@ impl ImRunConfig {
                 raw.limits.max_speed.unwrap_or(1.2 * synchronous),
             )?,
         };
-        let st = &raw.test.settle;
         let plan = ImSweepPlan {
             voltages: raw.test.voltages.clone(),
             slips: slip_grid(raw.test.points, raw.test.min_slip),
@@ -398,12 +500,12 @@ impl ImRunConfig {
             settle_window: st.window_samples.max(2),
             settle_tolerance: positive("test.settle.tolerance", st.tolerance)?,
             average_samples: st.average_samples.max(1),
-            max_point_s: positive("test.settle.timeout_s", st.timeout_s)?,
+            max_point_s: point_s,
             rated_current: current,
             max_current: raw.limits.max_current,
             hot_current: raw.test.hot_current,
-            hot_point_max_s: positive("test.hot_point_max_s", raw.test.hot_point_max_s)?,
-            cooldown_s: raw.test.cooldown_s.max(0.0),
+            hot_point_max_s: hot_s,
+            cooldown_s,
             max_i2t_s: positive("limits.max_i2t_s", raw.limits.max_i2t_s)?,
             i2t_time_constant_s: positive(
                 "limits.i2t_time_constant_s",
@@ -416,8 +518,11 @@ impl ImRunConfig {
         let supervision = raw
             .supervisor
             .validate(source, &limits, &nameplate)
-            .map_err(|e| e.to_string())?;
-        let retention = raw.records.validate(source).map_err(|e| e.to_string())?;
+            .map_err(|e| e.located(lines_of).to_string())?;
+        let retention = raw
+            .records
+            .validate(source)
+            .map_err(|e| e.located(lines_of).to_string())?;
         Ok(ImRunConfig {
             source: source.into(),
             text: text.into(),
@@ -467,6 +572,49 @@ mod tests {
         assert!(!is_im_sweep_config(include_str!(
             "../../config/sim-dc.toml"
         )));
+    }
+
+    #[test]
+    fn numbers_that_size_memory_loops_or_waits_name_key_and_line() {
+        let bad = |from: &str, to: &str| {
+            assert!(SIM_IM.contains(from), "{from}");
+            let text = SIM_IM.replacen(from, to, 1);
+            let line = text.lines().position(|l| l.starts_with(to)).unwrap() + 1;
+            (line, ImRunConfig::parse("im.toml", &text).unwrap_err())
+        };
+        for (from, to, key) in [
+            ("points = 30", "points = 100000", "test.points"),
+            (
+                "window_samples = 25",
+                "window_samples = 100000000000",
+                "test.settle.window_samples",
+            ),
+            (
+                "average_samples = 50",
+                "average_samples = 100000000000",
+                "test.settle.average_samples",
+            ),
+            ("timeout_s = 5", "timeout_s = 1e9", "test.settle.timeout_s"),
+            (
+                "hot_point_max_s = 1.5",
+                "hot_point_max_s = 1e300",
+                "test.hot_point_max_s",
+            ),
+            ("cooldown_s = 10", "cooldown_s = 1e12", "test.cooldown_s"),
+            // 30 points of 3 000 s each: beyond a day.
+            ("timeout_s = 5", "timeout_s = 3000", "test.settle.timeout_s"),
+            (
+                "sample_rate_Hz = 500",
+                "sample_rate_Hz = 1e12",
+                "rig.sample_rate_Hz",
+            ),
+        ] {
+            let (line, e) = bad(from, to);
+            assert!(
+                e.starts_with(&format!("im.toml:{line}: {key}: ")),
+                "{to}: {e}"
+            );
+        }
     }
 
     const SIM_MODBUS_IM: &str = include_str!("../../config/sim-modbus-im.toml");

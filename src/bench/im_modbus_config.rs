@@ -47,8 +47,9 @@ use std::time::Duration;
 
 use motorbench_drivers::modbus::{Access, CallPolicy};
 
+use crate::bounds;
 use crate::config::{
-    merge_window, simulated_transport, ModbusDeviceLink, RawLink, SimulatedTransport,
+    call_policy, merge_window, simulated_transport, ModbusDeviceLink, RawLink, SimulatedTransport,
 };
 
 /// The `modbus` backend of a sweep, validated.
@@ -165,12 +166,13 @@ impl ImModbusRig {
             take::<String>(&mut rig, top, "simulate")?.as_deref(),
             simulated_present,
         )?;
-        let timeout_ms: u64 = take(&mut rig, top, "timeout_ms")?.unwrap_or(200);
-        if timeout_ms == 0 {
-            return Err(("rig.modbus.timeout_ms".into(), "must be > 0".into()));
-        }
-        let retries: u32 = take(&mut rig, top, "retries")?.unwrap_or(2);
+        let policy = call_policy(
+            take(&mut rig, top, "timeout_ms")?.unwrap_or(200),
+            take(&mut rig, top, "retries")?.unwrap_or(2),
+        )?;
         let max_lost_polls: u32 = take(&mut rig, top, "max_lost_polls")?.unwrap_or(5);
+        let max_lost_polls = bounds::at_most(max_lost_polls, bounds::MAX_LOST_POLLS)
+            .map_err(|why| (format!("{top}.max_lost_polls"), why))?;
         let merge_window = merge_window(
             take(&mut rig, top, "merge_window_ms")?
                 .unwrap_or(motorbench_drivers::DEFAULT_REORDER.as_millis() as u64),
@@ -264,11 +266,7 @@ impl ImModbusRig {
         }
         Ok(ImModbusRig {
             simulate,
-            policy: CallPolicy {
-                timeout: Duration::from_millis(timeout_ms),
-                retries,
-                retry_delay: Duration::from_millis(10),
-            },
+            policy,
             max_lost_polls: max_lost_polls.max(1),
             merge_window,
             supply,

@@ -53,6 +53,8 @@ use motorbench_drivers::serial::port::{Parity, SerialSettings};
 use motorbench_drivers::serial::SerialFraming;
 use serde::Deserialize;
 
+use crate::bounds;
+
 use super::can::{CanLink, RawCanLink};
 use super::sensor_channels::{ChannelField, RawChannel, SensorChannel};
 
@@ -112,6 +114,21 @@ pub(crate) fn simulated_transport(
         ));
     }
     Ok(transport)
+}
+
+/// `rig.modbus.timeout_ms` and `rig.modbus.retries` (of a DC or an
+/// induction-machine rig) validated against [`bounds`]: how long one bus
+/// call may wait, and how often it is tried again.
+pub(crate) fn call_policy(timeout_ms: u64, retries: u32) -> Result<CallPolicy, (String, String)> {
+    let timeout_ms = bounds::call_timeout_ms(timeout_ms)
+        .map_err(|why| ("rig.modbus.timeout_ms".to_string(), why))?;
+    let retries = bounds::at_most(retries, bounds::MAX_RETRIES)
+        .map_err(|why| ("rig.modbus.retries".to_string(), why))?;
+    Ok(CallPolicy {
+        timeout: Duration::from_millis(timeout_ms),
+        retries,
+        retry_delay: Duration::from_millis(10),
+    })
 }
 
 /// `rig.modbus.merge_window_ms` (of a DC or an induction-machine rig)
@@ -262,14 +279,9 @@ impl RawModbusRig {
         default_rate: f64,
     ) -> Result<ModbusRig, (String, String)> {
         let simulate = simulated_transport(self.simulate.as_deref(), simulated_present)?;
-        if self.timeout_ms == 0 {
-            return Err(("rig.modbus.timeout_ms".into(), "must be > 0".into()));
-        }
-        let policy = CallPolicy {
-            timeout: Duration::from_millis(self.timeout_ms),
-            retries: self.retries,
-            retry_delay: Duration::from_millis(10),
-        };
+        let policy = call_policy(self.timeout_ms, self.retries)?;
+        let max_lost_polls = bounds::at_most(self.max_lost_polls, bounds::MAX_LOST_POLLS)
+            .map_err(|why| ("rig.modbus.max_lost_polls".to_string(), why))?;
         let power_stage =
             self.power_stage
                 .validate("rig.modbus.power_stage", dir, simulate.is_some())?;
@@ -413,7 +425,7 @@ impl RawModbusRig {
         Ok(ModbusRig {
             simulate,
             policy,
-            max_lost_polls: self.max_lost_polls.max(1),
+            max_lost_polls: max_lost_polls.max(1),
             power_stage,
             sensors,
             channels,

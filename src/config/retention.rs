@@ -31,6 +31,7 @@ impl RawRetention {
     /// Validate; `source` names the file in errors.
     pub(crate) fn validate(self, source: &str) -> Result<Retention, ConfigError> {
         let invalid = |key: &str, reason: String| ConfigError::Invalid {
+            line: None,
             path: source.to_string(),
             key: format!("records.{key}"),
             reason,

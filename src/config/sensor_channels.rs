@@ -125,19 +125,7 @@ impl RawChannel {
                 if let Err(why) = rate_allowed {
                     return Err((format!("{key}.rate_Hz"), why.to_string()));
                 }
-                if !(r.is_finite() && r > 0.0) {
-                    return Err((
-                        format!("{key}.rate_Hz"),
-                        format!("{r} must be a finite number > 0"),
-                    ));
-                }
-                if r > MAX_RATE_HZ {
-                    return Err((
-                        format!("{key}.rate_Hz"),
-                        format!("{r} Hz is beyond {MAX_RATE_HZ} Hz, faster than any bus here can carry a channel"),
-                    ));
-                }
-                r
+                crate::bounds::sample_rate(r).map_err(|why| (format!("{key}.rate_Hz"), why))?
             }
         };
         Ok(SensorChannel {
@@ -147,9 +135,6 @@ impl RawChannel {
         })
     }
 }
-
-/// Highest per-channel rate accepted, Hz.
-pub const MAX_RATE_HZ: f64 = 100_000.0;
 
 #[cfg(test)]
 mod tests {

@@ -91,6 +91,7 @@ impl RawSupervisor {
         nameplate: &serde_json::Value,
     ) -> Result<Supervision, ConfigError> {
         let invalid = |key: &str, reason: String| ConfigError::Invalid {
+            line: None,
             path: source.to_string(),
             key: format!("supervisor.{key}"),
             reason,
@@ -107,11 +108,14 @@ impl RawSupervisor {
             self.max_power
                 .unwrap_or(limits.max_voltage * limits.max_current),
         )?;
-        let stale_timeout = positive(
+        let timeout = |key: &str, v: f64| {
+            crate::bounds::supervision_timeout_s(v).map_err(|why| invalid(key, why))
+        };
+        let stale_timeout = timeout(
             "stale_timeout_s",
             self.stale_timeout_s.unwrap_or(DEFAULT_STALE_TIMEOUT_S),
         )?;
-        let bus_loss_timeout = positive(
+        let bus_loss_timeout = timeout(
             "bus_loss_timeout_s",
             self.bus_loss_timeout_s
                 .unwrap_or(DEFAULT_BUS_LOSS_TIMEOUT_S),

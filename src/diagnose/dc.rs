@@ -30,7 +30,9 @@ use super::dc_model::{AugModel, SegmentRun, Start};
 use super::decision::{
     block_sums, effective_samples, held_out_test, median, penalised_score, HeldOutTest,
 };
-use super::report::{Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict};
+use super::report::{
+    reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
+};
 use super::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{
     is_coastdown, nrmse, output_error, OutputErrorOptions, PARAM_KEYS, PARAM_UNITS,
@@ -326,18 +328,16 @@ pub fn diagnose_dc(
     );
     let noise_floor = noise_floor(&runs, &weights);
 
-    let candidates_report: Vec<Candidate> = scored
-        .iter()
-        .map(|(e, fam, test, score)| Candidate {
-            effect: effect_name(*e),
-            params: effect_params(&fam.all, &fam.transforms, &scales),
-            validation_nrmse: fam.validation,
-            shrink: 1.0 - fam.validation / gap_before,
-            score: *score,
-            p_value: test.p_value,
-            nominal_params: nominal_estimates(&fam.all),
-        })
-        .collect();
+    let candidates_report = scored.iter().map(|(e, fam, test, score)| Candidate {
+        effect: effect_name(*e),
+        params: effect_params(&fam.all, &fam.transforms, &scales),
+        validation_nrmse: fam.validation,
+        shrink: 1.0 - fam.validation / gap_before,
+        score: *score,
+        p_value: test.p_value,
+        nominal_params: nominal_estimates(&fam.all),
+    });
+    let candidates_report = reportable(candidates_report, &mut warnings);
 
     let verdict = match winner {
         Some(wi) => {

@@ -213,8 +213,21 @@ impl FitProblem<'_> {
 /// `JᵀJ = V·Λ·Vᵀ`, `r' = [R⁻ᵀ·Jᵀr; ‖r − projection‖]`.
 fn reduce(jac: &DMatrix<f64>, r: &DVector<f64>) -> (DVector<f64>, DMatrix<f64>) {
     let np = jac.ncols();
+    // A non-finite linearisation is refused like a refused `x` (the
+    // eigen-decomposition need not converge on a NaN).
     let g = jac.tr_mul(r);
-    let eig = jac.tr_mul(jac).symmetric_eigen();
+    let jtj = jac.tr_mul(jac);
+    if !jtj
+        .iter()
+        .chain(g.iter())
+        .chain(r.iter())
+        .all(|v| v.is_finite())
+    {
+        let mut refused = DVector::zeros(np + 1);
+        refused[np] = REFUSED;
+        return (refused, DMatrix::zeros(np + 1, np));
+    }
+    let eig = jtj.symmetric_eigen();
     let largest = eig.eigenvalues.max();
     let mut rr = DVector::zeros(np + 1);
     let mut rj = DMatrix::zeros(np + 1, np);

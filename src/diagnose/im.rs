@@ -26,7 +26,9 @@ use super::im_effects::{effect_name, ImAugmentation, IM_EFFECTS, NOMINAL_KEYS};
 use super::im_fit::{fit, held_out, intervals, starts_from, AugmentedFit, HeldOut};
 use super::im_gap::{evidence, shares, SlipRegions, CHANNELS};
 use super::im_verdict::separating_plan;
-use super::report::{Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict};
+use super::report::{
+    reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
+};
 use super::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{fit_lm, nrmse, LmOptions, PhaseData, SplitPolicy};
 use crate::model::{Effect, ImModel, LeakageSplit};
@@ -188,6 +190,12 @@ pub fn diagnose_im(
                 .unwrap_or((f64::NAN, f64::NAN))
         })
         .collect();
+    let candidates = reportable(
+        evaluated
+            .iter()
+            .map(|e| candidate_report(&data, e, gap_before, split.ratio())),
+        &mut warnings,
+    );
     let report = Diagnosis {
         schema_version: SCHEMA_VERSION.into(),
         kind: "im_slip_sweep".into(),
@@ -198,10 +206,7 @@ pub fn diagnose_im(
             validation_nrmse: gap_before,
         },
         gap,
-        candidates: evaluated
-            .iter()
-            .map(|e| candidate_report(&data, e, gap_before, split.ratio()))
-            .collect(),
+        candidates,
         verdict,
         validation,
         warnings,

@@ -253,6 +253,10 @@ pub fn intervals(
         return none();
     }
     let s2 = fit.cost / (m - q) as f64;
+    // The SVD panics on a NaN.
+    if !jac.iter().all(|v| v.is_finite()) {
+        return none();
+    }
     let svd = jac.svd(false, true);
     let Some(v_t) = svd.v_t else {
         return none();

@@ -114,6 +114,53 @@ pub struct Candidate {
     pub nominal_params: BTreeMap<String, ParamEstimate>,
 }
 
+impl Candidate {
+    /// The first of its numbers that is not finite (a parameter, a bound
+    /// of an interval, a score), named: JSON has no NaN or infinity, so
+    /// such a candidate cannot be reported.
+    pub fn non_finite(&self) -> Option<String> {
+        let params = self
+            .params
+            .iter()
+            .chain(&self.nominal_params)
+            .flat_map(|(k, p)| {
+                std::iter::once((k.as_str(), p.value))
+                    .chain(p.ci95.iter().flatten().map(move |v| (k.as_str(), *v)))
+            });
+        let scores = [
+            ("validation_nrmse", self.validation_nrmse),
+            ("shrink", self.shrink),
+            ("score", self.score),
+            ("p_value", self.p_value),
+        ];
+        params
+            .chain(scores)
+            .find(|(_, v)| !v.is_finite())
+            .map(|(k, v)| format!("{k} = {v}"))
+    }
+}
+
+/// `candidates` without those holding a non-finite number; each dropped
+/// one is named, with the number, in `warnings`.
+pub fn reportable(
+    candidates: impl IntoIterator<Item = Candidate>,
+    warnings: &mut Vec<String>,
+) -> Vec<Candidate> {
+    candidates
+        .into_iter()
+        .filter(|c| match c.non_finite() {
+            None => true,
+            Some(what) => {
+                warnings.push(format!(
+                    "candidate {} left out of the report: its {what} is not a finite number",
+                    c.effect
+                ));
+                false
+            }
+        })
+        .collect()
+}
+
 /// How a nominal parameter moves once the verdict's effect is modelled.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ParamCorrection {

@@ -777,6 +777,9 @@ fn analyse(problem: &SweepProblem<'_>) -> Result<Analysis, String> {
         jac.column_mut(j).scale_mut(*rj);
     }
     let s2 = r.norm_squared() / (m.saturating_sub(q)).max(1) as f64;
+    if !jac.iter().all(|v| v.is_finite()) {
+        return Err("the scaled Jacobian is not finite at the solution".into());
+    }
     let svd = jac.svd(false, true);
     let v_t = svd.v_t.ok_or("SVD failed")?;
     let sv = svd.singular_values;

@@ -30,10 +30,13 @@ pub struct LeastSquares {
 }
 
 /// Solve `A·x ≈ b` (rows ≥ columns, full column rank) by SVD; intervals
-/// from the residual variance when there are more rows than columns.
+/// from the residual variance when there are more rows than columns;
+/// `None` for a rank-deficient or non-finite system.
 pub fn least_squares(a: &DMatrix<f64>, b: &DVector<f64>) -> Option<LeastSquares> {
     let (rows, cols) = a.shape();
-    if rows < cols {
+    // The SVD panics on a NaN ("Singular value was NaN"): data that made
+    // the system non-finite has no solution.
+    if rows < cols || !a.iter().chain(b.iter()).all(|v| v.is_finite()) {
         return None;
     }
     let svd = a.clone().svd(true, true);
@@ -74,6 +77,15 @@ mod tests {
         let ls = least_squares(&a, &b).unwrap();
         let hw = ls.half_width.unwrap();
         assert!((ls.x[1] - 0.5).abs() < hw[1] && hw[1] < 0.01);
+    }
+
+    #[test]
+    fn a_non_finite_system_is_refused_not_a_panic() {
+        let a = DMatrix::from_row_slice(3, 2, &[1.0, 2.0, f64::NAN, 4.0, 3.0, 7.0]);
+        assert!(least_squares(&a, &DVector::from_vec(vec![1.0, 2.0, 3.0])).is_none());
+        let a = DMatrix::from_row_slice(3, 2, &[1.0, 2.0, 2.0, 4.0, 3.0, 7.0]);
+        let b = DVector::from_vec(vec![1.0, f64::INFINITY, 3.0]);
+        assert!(least_squares(&a, &b).is_none());
     }
 
     #[test]

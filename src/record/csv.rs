@@ -16,7 +16,8 @@
 //!
 //! Refused with the file, the line and (where there is one) the column: a
 //! missing column, a field that is not a number, NaN or infinity, time not
-//! strictly increasing, a row whose number of fields differs from the
+//! strictly increasing, a time beyond ±10¹⁰ s, a step between rows outside
+//! 1 µs to 10 s (see [`crate::bounds`]), a row whose number of fields differs from the
 //! header's, a malformed declaration, a file without a header or data rows.
 //! `im_slip_sweep` files are read by [`super::read_im_csv`].
 
@@ -24,6 +25,8 @@ use std::path::Path;
 
 use super::error::RecordError;
 use super::types::{DcSegment, SegmentKind};
+use crate::bounds::{MAX_CSV_STEP_S, MAX_CSV_TIME_S, MIN_CSV_STEP_S};
+use crate::excerpt::{cut, quoted};
 
 /// Time column.
 pub const COL_TIME: &str = "time_s";
@@ -81,7 +84,7 @@ pub fn read_dc_csv(
             Some(name),
             format!(
                 "missing column{extra} (the header names: {})",
-                header.join(", ")
+                cut(&header.join(", "))
             ),
         )
     };
@@ -105,17 +108,7 @@ pub fn read_dc_csv(
         let row = CsvRow::split(path, header, no, line)?;
         let number = |col: usize| row.number(col);
         let t = number(time_col)?;
-        if let Some((prev, prev_no)) = previous_time {
-            if t <= prev {
-                return Err(err(
-                    no,
-                    Some(COL_TIME),
-                    format!(
-                        "time {t} is not after the previous row's {prev} (line {prev_no}); time must increase strictly"
-                    ),
-                ));
-            }
-        }
+        check_time(t, previous_time).map_err(|why| err(no, Some(COL_TIME), why))?;
         previous_time = Some((t, no));
         let voltage = number(voltage_col)?;
         let current = number(current_col)?;
@@ -132,6 +125,32 @@ pub fn read_dc_csv(
         return Err(err(header_no, None, "no data rows after the header".into()));
     }
     Ok(seg)
+}
+
+/// Time `t` of a row, after `previous` (the previous row's time and line):
+/// within ±[`MAX_CSV_TIME_S`] and a step of [`MIN_CSV_STEP_S`] to
+/// [`MAX_CSV_STEP_S`] after the previous row's.
+fn check_time(t: f64, previous: Option<(f64, usize)>) -> Result<(), String> {
+    if t.abs() > MAX_CSV_TIME_S {
+        return Err(format!(
+            "time {t} s is beyond ±{MAX_CSV_TIME_S} s (seconds since the start of the record, or a Unix time)"
+        ));
+    }
+    let Some((prev, prev_no)) = previous else {
+        return Ok(());
+    };
+    if t <= prev {
+        return Err(format!(
+            "time {t} is not after the previous row's {prev} (line {prev_no}); time must increase strictly"
+        ));
+    }
+    let step = t - prev;
+    if !(MIN_CSV_STEP_S..=MAX_CSV_STEP_S).contains(&step) {
+        return Err(format!(
+            "a step of {step:e} s after the previous row (line {prev_no}) is outside {MIN_CSV_STEP_S:e} to {MAX_CSV_STEP_S} s, the sampling steps a record can have"
+        ));
+    }
+    Ok(())
 }
 
 /// The file's text, without a leading byte-order mark.
@@ -254,13 +273,17 @@ pub(super) fn parse_declaration(text: &str) -> Result<Declaration, String> {
         return Err("segment declaration without a segment index".into());
     }
     decl.index = Some(index.parse().map_err(|_| {
-        format!("segment declaration: {index:?} is not a segment index (0, 1, 2, …)")
+        format!(
+            "segment declaration: {} is not a segment index (0, 1, 2, …)",
+            quoted(index)
+        )
     })?);
     if let Some(after) = rest.strip_prefix("kind=") {
         let (kind, tail) = split_word(after);
         decl.kind = Some(SegmentKind::parse(kind).ok_or_else(|| {
             format!(
-                "segment declaration: kind {kind:?} is not dc_step, dc_coastdown or im_slip_sweep"
+                "segment declaration: kind {} is not dc_step, dc_coastdown or im_slip_sweep",
+                quoted(kind)
             )
         })?);
         rest = tail;
@@ -269,7 +292,8 @@ pub(super) fn parse_declaration(text: &str) -> Result<Declaration, String> {
         decl.label = Some(label.trim().to_string());
     } else if !rest.is_empty() {
         return Err(format!(
-            "segment declaration: unexpected {rest:?} (want `<index> kind=<kind> label=<text>`)"
+            "segment declaration: unexpected {} (want `<index> kind=<kind> label=<text>`)",
+            quoted(rest)
         ));
     }
     Ok(decl)
@@ -329,7 +353,7 @@ impl<'a> CsvRow<'a> {
                 self.path,
                 self.no,
                 Some(name),
-                format!("{raw:?} is not {what}"),
+                format!("{} is not {what}", quoted(raw)),
             )
         };
         let v: f64 = raw.parse().map_err(|_| bad("a number"))?;

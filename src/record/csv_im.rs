@@ -17,6 +17,7 @@ use std::path::Path;
 use super::csv::{read_text, CsvLines, CsvRow};
 use super::error::RecordError;
 use super::types::{OperatingPoint, SegmentKind};
+use crate::excerpt::cut;
 
 /// Slip column.
 pub const COL_SLIP: &str = "slip";
@@ -73,7 +74,10 @@ pub fn read_im_csv(
             err(
                 header_no,
                 Some(name),
-                format!("missing column (the header names: {})", header.join(", ")),
+                format!(
+                    "missing column (the header names: {})",
+                    cut(&header.join(", "))
+                ),
             )
         })
     };

@@ -19,7 +19,7 @@ pub fn with_test_override(
 ) -> Result<Config, ConfigError> {
     let source = format!("{} with the request's [test]", cfg.source);
     let text = merged_text(&cfg.text, test, &source, &PLAN_KEYS)?;
-    Config::parse(&source, &text)
+    Config::parse_composed(&source, &text)
 }
 
 /// An induction-machine sweep configuration with `test` applied, as
@@ -34,7 +34,7 @@ pub fn with_im_test_override(
     let dir = std::path::Path::new(&cfg.source)
         .parent()
         .unwrap_or(std::path::Path::new("."));
-    ImRunConfig::parse_in(&source, dir, &text)
+    ImRunConfig::parse_composed(&source, dir, &text)
 }
 
 /// `text` (a configuration) with the keys of `test` merged into its
@@ -47,6 +47,7 @@ fn merged_text(
     plan_keys: &[&str],
 ) -> Result<String, ConfigError> {
     let invalid = |key: String, reason: String| ConfigError::Invalid {
+        line: None,
         path: source.to_string(),
         key,
         reason,

@@ -50,6 +50,11 @@ use serde::Deserialize;
 use super::register_map::{Access, ByteOrder, DataType, Register, RegisterKind, WordOrder};
 use crate::serial::port::Parity;
 
+/// Longest heartbeat period a profile may give, ms: a supply whose own
+/// keep-alive waits longer would hold its output that long after the bench
+/// stopped petting it.
+pub const MAX_HEARTBEAT_PERIOD_MS: u64 = 10_000;
+
 /// A profile that cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum ProfileError {
@@ -329,6 +334,14 @@ impl DeviceProfile {
                 }
                 let heartbeat = match (s.heartbeat, s.heartbeat_period_ms) {
                     (None, None) => None,
+                    (Some(_), Some(ms)) if ms > MAX_HEARTBEAT_PERIOD_MS => {
+                        return Err(invalid(
+                            "power_stage.heartbeat_period_ms",
+                            format!(
+                                "{ms} ms: at most {MAX_HEARTBEAT_PERIOD_MS}, or the device's own watchdog cannot hold the output"
+                            ),
+                        ))
+                    }
                     (Some(h), Some(ms)) if ms > 0 => Some((
                         writable("power_stage.heartbeat", &h)?,
                         Duration::from_millis(ms),
@@ -461,6 +474,23 @@ max_setpoint = 60
         .unwrap_err()
         .to_string();
         assert!(e.contains("bogus"), "{e}");
+    }
+
+    #[test]
+    fn a_heartbeat_too_slow_for_a_watchdog_is_refused() {
+        let with = |ms: u64| {
+            let text = GOOD.replace(
+                "max_setpoint = 60",
+                &format!("max_setpoint = 60\nheartbeat = \"v_set\"\nheartbeat_period_ms = {ms}"),
+            );
+            DeviceProfile::parse("p.toml", &text)
+        };
+        assert!(with(500).unwrap().power_stage.unwrap().heartbeat.is_some());
+        let e = with(10_000_000_000).unwrap_err().to_string();
+        assert!(
+            e.starts_with("p.toml: power_stage.heartbeat_period_ms:") && e.contains("10000"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -261,8 +261,21 @@ impl<'d, 'a> OutputErrorProblem<'d, 'a> {
 /// from the eigen-decomposition `JᵀJ = V·Λ·Vᵀ`: `R = Λ^½·Vᵀ`; directions
 /// with no weight in `JᵀJ` get zero rows.
 fn reduce(jac: &OMatrix<f64, Dyn, U6>, r: &DVector<f64>) -> (SVector<f64, 7>, SMatrix<f64, 7, 6>) {
+    // A non-finite linearisation is refused like a refused `x` (the
+    // eigen-decomposition need not converge on a NaN).
     let g = jac.tr_mul(r);
-    let eig = jac.tr_mul(jac).symmetric_eigen();
+    let jtj = jac.tr_mul(jac);
+    if !jtj
+        .iter()
+        .chain(g.iter())
+        .chain(r.iter())
+        .all(|v| v.is_finite())
+    {
+        let mut refused = SVector::<f64, 7>::zeros();
+        refused[6] = REFUSED * (r.len() as f64).sqrt();
+        return (refused, SMatrix::zeros());
+    }
+    let eig = jtj.symmetric_eigen();
     let largest = eig.eigenvalues.max();
     let mut reduced_r = SVector::<f64, 7>::zeros();
     let mut reduced_j = SMatrix::<f64, 7, 6>::zeros();

@@ -93,9 +93,12 @@ pub fn uncertainty(
     let s2 = r.norm_squared() / dof as f64;
     let jtj: Matrix6<f64> = jac.tr_mul(jac);
     let scale: [f64; NP] = std::array::from_fn(|n| jtj[(n, n)].sqrt());
+    // A non-finite entry counts as no information (the eigen-decomposition
+    // need not converge on a NaN).
     let normalised = Matrix6::from_fn(|a, b| {
-        if scale[a] > 0.0 && scale[b] > 0.0 {
-            jtj[(a, b)] / (scale[a] * scale[b])
+        let v = jtj[(a, b)] / (scale[a] * scale[b]);
+        if scale[a] > 0.0 && scale[b] > 0.0 && v.is_finite() {
+            v
         } else {
             0.0
         }
