@@ -228,3 +228,54 @@ pub struct Diagnosis {
     /// Things a user should know about the data or the diagnosis.
     pub warnings: Vec<String>,
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn estimate(value: f64) -> ParamEstimate {
+        ParamEstimate {
+            value,
+            ci95: None,
+            unit: "A".into(),
+        }
+    }
+
+    fn candidate(effect: &str, isat: f64) -> Candidate {
+        Candidate {
+            effect: effect.into(),
+            params: BTreeMap::from([
+                ("s".into(), estimate(-2e-3)),
+                ("Isat".into(), estimate(isat)),
+            ]),
+            validation_nrmse: 0.01,
+            shrink: 0.1,
+            score: 1.0,
+            p_value: 0.5,
+            nominal_params: BTreeMap::new(),
+        }
+    }
+
+    /// A saturation fit with `s ≤ 0` has no saturation current: it once
+    /// reached the report as `"Isat": {"value": null}`.
+    #[test]
+    fn a_candidate_with_a_non_finite_number_is_left_out_with_a_warning() {
+        let mut warnings = Vec::new();
+        let kept = reportable(
+            [
+                candidate("inductance_saturation", f64::INFINITY),
+                candidate("brush_drop", 3.0),
+            ],
+            &mut warnings,
+        );
+        assert_eq!(kept.len(), 1);
+        assert_eq!(kept[0].effect, "brush_drop");
+        assert_eq!(warnings.len(), 1);
+        assert!(
+            warnings[0].contains("inductance_saturation") && warnings[0].contains("Isat = inf"),
+            "{warnings:?}"
+        );
+        let json = serde_json::to_string(&kept).unwrap();
+        assert!(!json.contains("\"value\":null"), "{json}");
+    }
+}

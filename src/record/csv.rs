@@ -133,7 +133,7 @@ pub fn read_dc_csv(
 fn check_time(t: f64, previous: Option<(f64, usize)>) -> Result<(), String> {
     if t.abs() > MAX_CSV_TIME_S {
         return Err(format!(
-            "time {t} s is beyond ±{MAX_CSV_TIME_S} s (seconds since the start of the record, or a Unix time)"
+            "time {t:e} s is beyond ±{MAX_CSV_TIME_S:e} s (seconds since the start of the record, or a Unix time)"
         ));
     }
     let Some((prev, prev_no)) = previous else {
@@ -403,6 +403,39 @@ mod tests {
         }
         assert!(!s.contains('\n'), "{s}");
         s
+    }
+
+    #[test]
+    fn times_the_numerics_cannot_take_are_refused_with_line_and_column() {
+        let header = "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n";
+        let rows = |times: &[&str]| {
+            let mut s = header.to_string();
+            for t in times {
+                s += &format!("{t},60,0.1,40\n");
+            }
+            s
+        };
+        let e = error(&rows(&["0", "1e-300", "2e-300"]), 3, Some(COL_TIME));
+        assert!(e.contains("1e-6"), "{e}");
+        let e = error(&rows(&["1e300", "1.0000001e300"]), 2, Some(COL_TIME));
+        assert!(e.contains("1e300 s is beyond"), "{e}");
+        let e = error(&rows(&["0", "0.001", "1e308"]), 4, Some(COL_TIME));
+        assert!(e.contains("1e308"), "{e}");
+        let e = error(&rows(&["0", "0.001", "60"]), 4, Some(COL_TIME));
+        assert!(e.contains("10 s"), "{e}");
+        // A Unix time at 1 kHz is fine.
+        let seg = read(&rows(&["1764547200.000", "1764547200.001"])).unwrap();
+        assert_eq!(seg.time.len(), 2);
+    }
+
+    #[test]
+    fn a_long_bad_field_is_cut_in_the_message() {
+        let field = "7".repeat(100_000) + "x";
+        let text =
+            format!("time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,60,{field},40\n");
+        let e = error(&text, 2, Some(COL_CURRENT));
+        assert!(e.len() < 200, "{} bytes", e.len());
+        assert!(e.contains("…(100001 bytes) is not a number"), "{e}");
     }
 
     #[test]
