@@ -99,7 +99,7 @@ pub fn wait_s(v: f64, zero_ok: bool) -> Result<f64, String> {
 
 /// `n` samples of a settle window or an average.
 pub fn window_samples(n: f64) -> Result<usize, String> {
-    if !(n.is_finite() && n >= 0.0 && n <= MAX_WINDOW_SAMPLES as f64) {
+    if !(0.0..=MAX_WINDOW_SAMPLES as f64).contains(&n) {
         return Err(format!(
             "{n} samples is beyond {MAX_WINDOW_SAMPLES}, the most one window holds"
         ));

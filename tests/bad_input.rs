@@ -237,20 +237,20 @@ fn csv_times_that_break_the_numerics_are_refused_at_import() {
         &dc_csv(400, |k| format!("{}", k as f64 * 1e-3)),
     );
     // Each made `identify` or `diagnose` panic ("Singular value was NaN").
-    let cases: [(&str, Box<dyn Fn(usize) -> String>, usize); 3] = [
+    let cases = [
         (
             "tiny_step.csv",
-            Box::new(|k| format!("{:e}", k as f64 * 1e-300)),
+            dc_csv(400, |k| format!("{:e}", k as f64 * 1e-300)),
             3,
         ),
         (
             "huge.csv",
-            Box::new(|k| format!("{:e}", 1e300 + k as f64 * 1e290)),
+            dc_csv(400, |k| format!("{:e}", 1e300 + k as f64 * 1e290)),
             2,
         ),
         (
             "one_huge.csv",
-            Box::new(|k| {
+            dc_csv(400, |k| {
                 if k == 399 {
                     "1e308".into()
                 } else {
@@ -260,8 +260,8 @@ fn csv_times_that_break_the_numerics_are_refused_at_import() {
             401,
         ),
     ];
-    for (name, t, line) in cases {
-        let bad = write(dir.path(), name, &dc_csv(400, t));
+    for (name, text, line) in cases {
+        let bad = write(dir.path(), name, &text);
         for command in ["identify", "diagnose"] {
             let err = run_bad(&[command, "--kind", "dc_step", &good, &bad]);
             assert!(
