@@ -7,7 +7,7 @@
 //! SIGKILL mid-test leaving a record that replays and is marked
 //! interrupted on the next start; SIGTERM stopping a test safely with the
 //! MCAP finished; the token off loopback; the Unix socket; emergency stop
-//! and reset.
+//! and reset; a speed trip the sequencer sees first latching the rig.
 //!
 //! The simulated rig behind Modbus (and the abort timed at the supply's
 //! registers) is in `tests/daemon_modbus.rs`.
@@ -437,6 +437,69 @@ async fn hostile_test_overrides_get_400_naming_the_field_and_the_daemon_stays_up
         listed["records"].as_array().map(Vec::len),
         Some(0),
         "{listed}"
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_speed_trip_latches_the_rig_names_the_cause_and_shows_it_safe() {
+    // 60 V turns the shaft at about 45 rad/s: a 30 rad/s limit trips on the
+    // way up to the first level, seen first by the sequencer's one-period
+    // speed estimate.
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    let config =
+        motorbench::config::DEFAULT_CONFIG.replace("max_speed_rad_s = 230", "max_speed_rad_s = 30");
+    assert_ne!(config, motorbench::config::DEFAULT_CONFIG);
+    std::fs::write(dir.path().join("rig.toml"), config).unwrap();
+    let served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+
+    let plan = json!({"levels_V": [60, 100], "coastdown": false});
+    let r = start(&c, Some(plan.clone())).await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    let s = wait_test(&c, &id, finished).await;
+    assert_eq!(s["outcome"], "aborted", "{s}");
+    let stop = &s["stop"];
+    assert_eq!(stop["kind"], "limit", "{s}");
+    assert!(
+        stop["message"].as_str().unwrap().contains("speed"),
+        "{stop}"
+    );
+    assert_eq!(stop["safe_state_ok"], true);
+    let requested = stop["requested_t_s"].as_f64().unwrap();
+    let first_safe = stop["first_safe_sample_t_s"]
+        .as_f64()
+        .unwrap_or_else(|| panic!("a sample after the safe state: {stop}"));
+    assert!(first_safe > requested, "{stop}");
+
+    // The record holds that sample, with the armature open.
+    let rec = read_mcap(&records.join(format!("{id}.mcap"))).unwrap();
+    let at_safe = rec
+        .segments
+        .iter()
+        .flat_map(|s| s.time.iter().zip(&s.current))
+        .find(|(t, _)| (*t - first_safe).abs() < 1e-7)
+        .map(|(_, i)| *i)
+        .expect("the first safe sample is recorded");
+    assert!(
+        at_safe.abs() < 0.02,
+        "current after the safe state {at_safe}"
+    );
+
+    // Latched, as for a voltage trip: refused until reset.
+    assert_eq!(get(&c, "/v1/rigs/rig").await["state"], "tripped");
+    let refused = start(&c, Some(plan.clone())).await;
+    assert_eq!(refused.status, 409);
+    assert_eq!(refused.json()["error"], "tripped");
+    let out = served.ctl(&["reset"]);
+    assert!(out.status.success(), "{:?}", common::text(&out));
+    let again = start(&c, Some(plan)).await;
+    assert_eq!(
+        again.status,
+        201,
+        "{}",
+        String::from_utf8_lossy(&again.body)
     );
 }
 

@@ -7,7 +7,7 @@ mod common;
 use motorbench::bench::{commission, CommissionOptions, NoProgress, Outcome};
 use motorbench::config::Config;
 use motorbench::identify::identify_dc;
-use motorbench::record::{read_mcap, SegmentKind};
+use motorbench::record::{read_mcap, EventLevel, SegmentKind, SupplyLimitKind};
 
 fn param(report: &motorbench::report::IdentificationReport, key: &str) -> f64 {
     report.methods["steady_state"].params.as_ref().unwrap()[key].value
@@ -188,4 +188,103 @@ fn cli_text_report_shows_the_truth_beside_the_estimate() {
     assert!(stdout.contains("gap:    "), "{stdout}");
     assert!(stdout.contains("simulated 1.32300"), "{stdout}");
     assert!(stdout.contains("record: "), "{stdout}");
+}
+
+#[test]
+fn a_supply_current_limit_below_the_steps_peak_is_recorded_reported_and_named() {
+    // The 60 V → 248 V step peaks at about 4.1 A. With `max_current_A` 2
+    // (0.5) the supply is set to 1.8 A (0.45 A) and holds the step's
+    // current there: the record, the report and identification say so.
+    for (limit, spoiled) in [("2", vec![1u32]), ("0.5", vec![0, 1])] {
+        let dir = tempfile::tempdir().unwrap();
+        let config = motorbench::config::DEFAULT_CONFIG
+            .replace("max_current_A = 6 ", &format!("max_current_A = {limit} "))
+            .replace(
+                "levels_V = [60, 248, 60, 154, 248, 107, 201, 60]",
+                "levels_V = [60, 248]",
+            )
+            .replace("coastdown = true ", "coastdown = false ");
+        let path = dir.path().join("rig.toml");
+        std::fs::write(&path, &config).unwrap();
+        let out = dir.path().join("records");
+        let run = common::motorbench(&[
+            "run",
+            "--config",
+            path.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+            "--quiet",
+            "--no-diagnose",
+        ]);
+        let (json, stderr) = common::text(&run);
+        assert!(run.status.success(), "{stderr}");
+        let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+
+        // The record: one /bench/supply_limit stretch and one warning per
+        // limited segment.
+        let mcap = std::fs::read_dir(&out)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .find(|p| p.extension().is_some_and(|e| e == "mcap"))
+            .expect("run wrote an MCAP");
+        let rec = read_mcap(&mcap).unwrap();
+        let segments: Vec<u32> = rec.supply_limits.iter().map(|l| l.segment).collect();
+        assert_eq!(
+            segments, spoiled,
+            "limit {limit} A: {:?}",
+            rec.supply_limits
+        );
+        let set = 0.9 * limit.parse::<f64>().unwrap();
+        for l in &rec.supply_limits {
+            assert_eq!(l.kind, SupplyLimitKind::CurrentLimit);
+            assert_eq!(l.current_limit, Some(set));
+            assert!(l.to > l.from && (l.peak_current - set).abs() < 0.02 * set + 0.01);
+            // The supply lowered its voltage to hold the current.
+            assert!(l.measured_voltage < 0.9 * l.commanded_voltage, "{l:?}");
+            let said = format!("current-limiting (held at its {set:.3} A limit");
+            assert!(
+                rec.events.iter().any(|(_, e)| e.level == EventLevel::Warn
+                    && e.message.contains(&said)
+                    && e.message.contains(&format!("in segment {}", l.segment))),
+                "{:?}",
+                rec.events
+            );
+        }
+
+        // The report names each segment; the step fits leave them out.
+        let warnings = report["warnings"].as_array().unwrap();
+        for s in &spoiled {
+            assert!(
+                warnings.iter().any(|w| {
+                    let w = w.as_str().unwrap();
+                    w.contains("current-limiting") && w.contains(&format!("in segment {s} "))
+                }),
+                "limit {limit} A: {warnings:?}"
+            );
+        }
+        for method in ["pasek", "moments"] {
+            assert_eq!(report["methods"][method]["applies"], false, "{method}");
+        }
+        // The fit driven by the measured voltage is not misled.
+        let best = report["best"].as_str().unwrap();
+        let ra = report["methods"][best]["params"]["Ra"]["value"]
+            .as_f64()
+            .unwrap();
+        assert!(
+            (ra / 30.9 - 1.0).abs() < 0.05,
+            "limit {limit} A: {best} Ra {ra}"
+        );
+        // A replay reads the stretches back and gives the same report.
+        let replay = common::motorbench(&[
+            "replay",
+            "--json",
+            "--check",
+            "--no-diagnose",
+            mcap.to_str().unwrap(),
+        ]);
+        let (replayed, stderr) = common::text(&replay);
+        assert!(replay.status.success(), "{stderr}");
+        assert_eq!(replayed, json);
+    }
 }

@@ -152,7 +152,6 @@ async fn run(
         });
     }
     let mut sink = RecordSink::new(None, None, record_channels(&channels, "sim-supply"));
-    let (_tx, rx) = tokio::sync::watch::channel(false);
     let steps = plan_steps(&cfg.plan);
     let outcome = run_test(
         cfg,
@@ -162,7 +161,8 @@ async fn run(
         counts_per_rev,
         &mut sink,
         &NoProgress,
-        &rx,
+        // As the daemon does: the sequencer's own trips go to the supervisor.
+        &handle,
     )
     .await
     .unwrap();
@@ -267,6 +267,66 @@ async fn a_limit_only_the_supervisor_knows_trips_the_test() {
     assert!(stop.cause.latches());
     assert!(!ran.supply.output_enabled());
     assert!(current_at(&ran.record, stop.first_safe_t_ns.unwrap()).abs() < 0.02);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_speed_limit_the_sequencer_sees_first_latches_through_the_supervisor() {
+    // The sequencer estimates speed over one encoder period and trips on
+    // the first estimate beyond the limit; the supervisor wants two in a
+    // row over four periods, so the sequencer sees the rising 60 V → 248 V
+    // shaft cross 100 rad/s first. It hands the trip to the supervisor.
+    let ran = run(
+        &config(|c| c.limits.max_speed = 100.0),
+        Sensors::Sim,
+        false,
+        None,
+    )
+    .await;
+    let stop = ran.stop.expect("the supervisor took the sequencer's trip");
+    assert!(
+        matches!(&stop.cause, StopCause::Limit(t) if t.quantity == "speed"),
+        "{:?}",
+        stop.cause
+    );
+    assert!(stop.cause.latches());
+    assert_eq!(stop.safe_state, Ok(()));
+    assert!(!ran.supply.output_enabled());
+    let reason = abort_message(&ran.record);
+    assert!(
+        reason.contains("stopped by the safety supervisor: limit tripped: speed"),
+        "{reason}"
+    );
+    // The record goes on to a sample read in the safe state.
+    let t_safe = stop.first_safe_t_ns.expect("a sample after the safe state");
+    assert!(t_safe > stop.requested_t_ns);
+    assert!(current_at(&ran.record, t_safe).abs() < 0.02);
+    assert!(current_at(&ran.record, stop.requested_t_ns).abs() > 0.05);
+}
+
+#[tokio::test(start_paused = true)]
+async fn a_limit_both_checks_see_in_one_batch_leaves_the_rig_shown_safe() {
+    // Held at exactly the voltage limit, the first 248 V reading above it
+    // trips the supervisor and the sequencer on the same batch: the
+    // record still goes on to the first sample read in the safe state.
+    let ran = run(
+        &config(|c| c.limits.max_voltage = 248.0),
+        Sensors::Sim,
+        false,
+        None,
+    )
+    .await;
+    let stop = ran.stop.expect("a supervisor stop");
+    assert!(
+        matches!(&stop.cause, StopCause::Limit(t) if t.quantity == "voltage"),
+        "{:?}",
+        stop.cause
+    );
+    let t_safe = stop.first_safe_t_ns.expect("a sample after the safe state");
+    assert!(t_safe > stop.requested_t_ns);
+    assert!(current_at(&ran.record, t_safe).abs() < 0.02);
+    assert!(ran.record.events.iter().any(|(_, e)| e
+        .message
+        .contains("stopped by the safety supervisor: limit tripped: voltage")));
 }
 
 #[tokio::test(start_paused = true)]

@@ -65,9 +65,14 @@ struct Ran {
 /// current limit at `max_current`; `stop_at_s` asks for `cause` once the
 /// test time passes it.
 async fn run(max_current: f64, stop_at: Option<(f64, StopCause)>) -> Ran {
+    run_with(|cfg| cfg.limits.max_current = max_current, stop_at).await
+}
+
+/// [`run`] with the configuration edited by `edit`.
+async fn run_with(edit: impl FnOnce(&mut ImRunConfig), stop_at: Option<(f64, StopCause)>) -> Ran {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-im.toml");
     let mut cfg = ImRunConfig::load(std::path::Path::new(path)).unwrap();
-    cfg.limits.max_current = max_current;
+    edit(&mut cfg);
     cfg.plan.slips.truncate(12);
     cfg.plan.voltages.truncate(1);
     let sim = cfg.simulated.clone().unwrap();
@@ -113,7 +118,6 @@ async fn run(max_current: f64, stop_at: Option<(f64, StopCause)>) -> Ran {
     let [mut supply, mut dynamometer]: [_; 2] = s.stages.try_into().ok().unwrap();
     let mut sensors = s.sensors;
     let mut sink = RecordSink::new(None, None, record_channels);
-    let (_tx, never) = tokio::sync::watch::channel(false);
     let stopper = stop_at.map(|(at_s, cause)| {
         let h = handle.clone();
         tokio::spawn(async move {
@@ -129,7 +133,8 @@ async fn run(max_current: f64, stop_at: Option<(f64, StopCause)>) -> Ran {
         &mut sensors,
         &mut sink,
         &NoProgress,
-        &never,
+        // As the daemon does: the sweep's own trips go to the supervisor.
+        &handle,
     )
     .await
     .unwrap();
@@ -182,6 +187,22 @@ async fn a_current_trip_makes_both_stages_safe_before_the_cause_is_recorded() {
     let r = run(30.0, None).await;
     assert_eq!(r.stop_kind, Some("limit"));
     assert_both_safe_first(&r);
+}
+
+#[tokio::test(start_paused = true)]
+async fn the_sweeps_own_heating_budget_trips_through_the_supervisor() {
+    // Only the sweep counts I²t: spent, it hands the stop to the
+    // supervisor, which makes both stages safe and latches the rig.
+    let r = run_with(|cfg| cfg.plan.max_i2t_s = 0.5, None).await;
+    assert_eq!(r.stop_kind, Some("heating_budget"), "{:?}", r.events);
+    assert_both_safe_first(&r);
+    assert!(
+        r.events.iter().any(|(l, m)| *l == EventLevel::Abort
+            && m.contains("safety-supervisor")
+            && m.contains("heating budget spent")),
+        "{:?}",
+        r.events
+    );
 }
 
 #[tokio::test(start_paused = true)]

@@ -10,22 +10,23 @@
 //! the line current passes `max_current`, when the winding's heating budget
 //! (`∫ max(0, (I/I_rated)² − 1) dt` with a recovery time constant, an I²t
 //! limit) is spent, on a driver
-//! error or on an operator stop. A point whose current exceeds
+//! error or on an operator stop. Under the daemon's safety supervisor the
+//! current and I²t trips are handed to the supervisor (see
+//! [`super::StopPath`]), which latches the rig. A point whose current exceeds
 //! `hot_current` (towards locked rotor) is held at most `hot_point_max_s`
 //! and followed by a cool-down with the supply off: a real rig burns the
 //! winding otherwise.
 
-use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
-use tokio::sync::watch;
-
 use super::{
     BenchError, Outcome, Progress, RecordSink, SamplingEvents, SettleDetector, SpeedFromEncoder,
+    StopCause, StopPath, Trip,
 };
 use crate::identify::slip_grid;
 use crate::record::{
     ChannelSpec, Entry, Event, EventLevel, OperatingPoint, RecordError, SegmentKind, SegmentMarker,
     SegmentPhase,
 };
+use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
 
 /// The plan of a slip sweep.
 #[derive(Debug, Clone, PartialEq)]
@@ -185,6 +186,8 @@ struct Indices {
 
 enum Fault {
     Stop(String),
+    /// A limit of the sweep's own: handed to the supervisor when there is one.
+    Trip(StopCause),
     Record(RecordError),
 }
 
@@ -206,7 +209,10 @@ struct Sweep<'a> {
     dyno: &'a mut dyn PowerStage,
     sensors: &'a mut dyn SensorStream,
     sink: &'a mut RecordSink,
-    shutdown: &'a watch::Receiver<bool>,
+    stops: StopPath<'a>,
+    /// The supervisor has taken a trip of ours: record on, check nothing,
+    /// until it ends the stream.
+    tripped: bool,
     progress: &'a dyn Progress,
     ix: Indices,
     encoder: SpeedFromEncoder,
@@ -244,10 +250,28 @@ impl Sweep<'_> {
     /// made of the latest value of each quantity when a batch brings a
     /// new line current (with a rig whose meter and encoder are polled
     /// separately, batches carrying only the encoder update the speed),
-    /// and checked against the limits.
+    /// and checked against the limits. A limit crossed under the
+    /// supervisor is handed to it; the batches up to the end of the stream
+    /// it then delivers are recorded, and its stop is returned.
     async fn read(&mut self) -> Result<Reading, Fault> {
         loop {
-            if *self.shutdown.borrow() {
+            match self.read_checked().await {
+                Err(Fault::Trip(cause)) => {
+                    if !self.stops.trip(cause.clone(), self.t_ns).await {
+                        return Err(Fault::Trip(cause));
+                    }
+                    self.tripped = true;
+                }
+                Ok(_) if self.tripped => {}
+                other => return other,
+            }
+        }
+    }
+
+    /// The next reading, checked unless tripped.
+    async fn read_checked(&mut self) -> Result<Reading, Fault> {
+        loop {
+            if self.stops.operator_stop() {
                 return Err(Fault::Stop("stopped by the operator".into()));
             }
             let batch = self.sensors.next_batch().await?;
@@ -289,19 +313,25 @@ impl Sweep<'_> {
             h.current = current;
             h.t_ns = batch.t_ns;
             let r = *h;
+            if self.tripped {
+                return Ok(r);
+            }
             if !(r.current.is_finite() && r.current <= self.plan.max_current) {
-                return Err(Fault::Stop(format!(
-                    "line_current {:.3} A beyond the limit {} A",
-                    r.current, self.plan.max_current
-                )));
+                return Err(Fault::Trip(StopCause::Limit(Trip {
+                    quantity: "line_current",
+                    value: r.current,
+                    limit: self.plan.max_current,
+                    unit: "A",
+                })));
             }
             let excess = ((r.current / self.plan.rated_current).powi(2) - 1.0).max(0.0);
             self.i2t += (excess - self.i2t / self.plan.i2t_time_constant_s.max(1e-9)) * dt;
             if self.i2t > self.plan.max_i2t_s {
-                return Err(Fault::Stop(format!(
-                    "winding heating budget spent: I²t {:.1} s beyond {} s (rated current {} A)",
-                    self.i2t, self.plan.max_i2t_s, self.plan.rated_current
-                )));
+                return Err(Fault::Trip(StopCause::HeatingBudget {
+                    i2t_s: self.i2t,
+                    limit_s: self.plan.max_i2t_s,
+                    rated_current: self.plan.rated_current,
+                }));
             }
             return Ok(r);
         }
@@ -479,15 +509,16 @@ impl Sweep<'_> {
 
 /// Run `plan` on the rig; every reading goes to `sink`, progress
 /// (segments, test time) to `progress`. The stages are left in their safe
-/// state however the test ends.
-pub async fn run_im_sweep(
+/// state however the test ends. `stops` is an operator-stop flag, or the
+/// supervisor's handle when the rig is supervised (see [`StopPath`]).
+pub async fn run_im_sweep<'s>(
     plan: &ImSweepPlan,
     vfd: &mut dyn PowerStage,
     dyno: &mut dyn PowerStage,
     sensors: &mut dyn SensorStream,
     sink: &mut RecordSink,
     progress: &dyn Progress,
-    shutdown: &watch::Receiver<bool>,
+    stops: impl Into<StopPath<'s>>,
 ) -> Result<Outcome, BenchError> {
     let channels = sensors.channels().to_vec();
     let find = |q: &'static str| {
@@ -513,7 +544,8 @@ pub async fn run_im_sweep(
         dyno,
         sensors,
         sink,
-        shutdown,
+        stops: stops.into(),
+        tripped: false,
         progress,
         ix,
         encoder: SpeedFromEncoder::new(plan.encoder_counts_per_rev),
@@ -534,10 +566,15 @@ pub async fn run_im_sweep(
     // Safe state first, whatever happened: both stages at once.
     let (vfd_safe, dyno_safe) =
         futures_util::join!(sweep.vfd.safe_state(), sweep.dyno.safe_state());
-    let outcome = match result {
-        Ok(()) => Outcome::Completed,
+    let stopped = match result {
+        Ok(()) => None,
         Err(Fault::Record(e)) => return Err(BenchError::Record(e)),
-        Err(Fault::Stop(reason)) => {
+        Err(Fault::Stop(reason)) => Some(reason),
+        Err(Fault::Trip(cause)) => Some(cause.to_string()),
+    };
+    let outcome = match stopped {
+        None => Outcome::Completed,
+        Some(reason) => {
             sweep
                 .event(
                     EventLevel::Abort,

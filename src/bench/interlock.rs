@@ -19,8 +19,10 @@
 //! - a [`SupervisorHandle`] for the daemon: operator stops, the trip,
 //!   health, the latest readings.
 //!
-//! Operator stops ([`SupervisorHandle::stop`]) take the same path as
-//! trips; the reply comes once the safe-state command has returned. With
+//! Operator stops ([`SupervisorHandle::stop`]) and the trips the sequencer
+//! sees before the supervisor does ([`SupervisorHandle::trip`], through
+//! [`super::StopPath`]) take the same path as the supervisor's own trips;
+//! the reply comes once the safe-state command has returned. With
 //! several stages every stage is commanded to its safe state at once (the
 //! commands go out in the order the stages were given: the supply first),
 //! and the stop is recorded once all have returned.
@@ -110,7 +112,9 @@ fn lock<T>(m: &StdMutex<T>) -> std::sync::MutexGuard<'_, T> {
 
 /// Commands to the supervisor task.
 enum Command {
-    Stop(StopCause, Instant, oneshot::Sender<StopReport>),
+    /// The cause, when it was requested, the data time of the reading
+    /// that showed it (for a trip seen by the sequencer), the reply.
+    Stop(StopCause, Instant, Option<u64>, oneshot::Sender<StopReport>),
     Finish,
 }
 
@@ -151,10 +155,21 @@ impl SupervisorHandle {
     /// supervisor has already finished. A second stop returns the first
     /// one's report.
     pub async fn stop(&self, cause: StopCause) -> Option<StopReport> {
+        self.request(cause, None).await
+    }
+
+    /// A trip the sequencer saw first, in the reading at data time `t_ns`:
+    /// the same path as [`SupervisorHandle::stop`] (safe state, latch,
+    /// record), with the stop dated at that reading.
+    pub async fn trip(&self, cause: StopCause, t_ns: u64) -> Option<StopReport> {
+        self.request(cause, Some(t_ns)).await
+    }
+
+    async fn request(&self, cause: StopCause, t_ns: Option<u64>) -> Option<StopReport> {
         let (tx, rx) = oneshot::channel();
         let requested = Instant::now();
         self.commands
-            .send(Command::Stop(cause, requested, tx))
+            .send(Command::Stop(cause, requested, t_ns, tx))
             .await
             .ok()?;
         rx.await.ok()
@@ -507,8 +522,8 @@ impl Task {
             tokio::select! {
                 biased;
                 cmd = commands.recv() => match cmd {
-                    Some(Command::Stop(cause, requested, reply)) => {
-                        let report = self.stop(cause, requested).await;
+                    Some(Command::Stop(cause, requested, t_ns, reply)) => {
+                        let report = self.stop_at(cause, requested, t_ns).await;
                         let _ = reply.send(report);
                         if !reading {
                             self.deliver_stop().await;
@@ -646,6 +661,17 @@ impl Task {
     /// The safe state first, then the cause recorded. A second stop keeps
     /// the first report.
     async fn stop(&mut self, cause: StopCause, requested: Instant) -> StopReport {
+        self.stop_at(cause, requested, None).await
+    }
+
+    /// [`Task::stop`], dated at `t_ns` (data time) when given, else at the
+    /// latest batch checked.
+    async fn stop_at(
+        &mut self,
+        cause: StopCause,
+        requested: Instant,
+        t_ns: Option<u64>,
+    ) -> StopReport {
         if let Some(first) = lock(&self.shared.stop).clone() {
             return first;
         }
@@ -677,7 +703,7 @@ impl Task {
         }
         let report = StopReport {
             cause,
-            requested_t_ns: self.monitor.last_t_ns(),
+            requested_t_ns: t_ns.unwrap_or_else(|| self.monitor.last_t_ns()),
             safe_state,
             safe_after,
             first_safe_t_ns: None,

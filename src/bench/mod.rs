@@ -25,7 +25,9 @@ mod served_im;
 mod settle;
 mod sim_im_rig;
 mod sim_rig;
+mod stop_path;
 mod supervisor;
+mod supply_limits;
 mod thermal;
 
 pub use commission::{commission, record_name, CommissionError, CommissionOptions, Commissioned};
@@ -54,5 +56,7 @@ pub use served_im::{ServedImRig, ServedVfd};
 pub use settle::SettleDetector;
 pub use sim_im_rig::{sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd, COPPER_ALPHA};
 pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};
+pub use stop_path::StopPath;
 pub use supervisor::{Readings, SafetyMonitor, StopCause, SUPERVISOR_ID};
+pub use supply_limits::SupplyLimitDetector;
 pub use thermal::WindingTemperature;

@@ -4,15 +4,20 @@
 //!
 //! On any fault (a limit crossed, a driver error, a stale sensor, an
 //! operator stop) the power stage is commanded to its safe state *first*;
-//! only then is the cause recorded and the test ended as aborted.
+//! only then is the cause recorded and the test ended as aborted. Under
+//! the safety supervisor a limit this sequencer sees first is handed to
+//! the supervisor (see [`StopPath`]), so it latches like the supervisor's
+//! own trips and the record goes on to a sample read in the safe state.
 
 use std::time::Duration;
 
 use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
 use thiserror::Error;
-use tokio::sync::watch;
 
-use super::{check_limits, PlanStep, Progress, SamplingEvents, SettleDetector, SpeedFromEncoder};
+use super::{
+    check_limits, PlanStep, Progress, SamplingEvents, SettleDetector, SpeedFromEncoder, StopCause,
+    StopPath, SupplyLimitDetector,
+};
 use crate::config::Config;
 use crate::record::{
     ChannelSpec, Entry, Event, EventLevel, Record, RecordBuilder, RecordError, Recorder,
@@ -152,18 +157,31 @@ enum Stop {
     Fault(String),
 }
 
+/// What one batch of readings brought.
+enum Checked {
+    Reading(Reading),
+    Stop(Stop),
+    /// A limit crossed: handed to the supervisor when there is one.
+    Trip(StopCause),
+}
+
 struct Bench<'a> {
     cfg: &'a Config,
     stage: &'a mut dyn PowerStage,
     sensors: &'a mut dyn SensorStream,
     sink: &'a mut RecordSink,
     progress: &'a dyn Progress,
-    shutdown: &'a watch::Receiver<bool>,
+    stops: StopPath<'a>,
+    /// The supervisor has taken a trip of ours: record on, check nothing,
+    /// until it ends the stream.
+    tripped: bool,
     ch: Channels,
     encoder: SpeedFromEncoder,
     t_ns: u64,
     stale: Duration,
     sampling: SamplingEvents,
+    /// Whether the supply follows its set point, level by level.
+    supply: SupplyLimitDetector,
     /// Latest armature voltage and current, and when each was read (a
     /// batch carries the channels read at its instant, which need not be
     /// all of them when channels have their own rates or links).
@@ -244,19 +262,39 @@ impl Bench<'_> {
     }
 
     /// Next batch of readings, recorded and checked against the limits.
+    /// A limit crossed under the supervisor is handed to it; the batches
+    /// up to the end of the stream it then delivers (the last one read in
+    /// the safe state) are recorded, and its stop is returned.
     async fn read(&mut self) -> Result<Result<Reading, Stop>, RecordError> {
-        if *self.shutdown.borrow() {
-            return Ok(Err(Stop::Fault("operator stop".into())));
+        loop {
+            match self.read_batch().await? {
+                Checked::Trip(cause) => {
+                    if !self.stops.trip(cause.clone(), self.t_ns).await {
+                        return Ok(Err(Stop::Fault(cause.to_string())));
+                    }
+                    self.tripped = true;
+                }
+                Checked::Reading(_) if self.tripped => {}
+                Checked::Reading(r) => return Ok(Ok(r)),
+                Checked::Stop(stop) => return Ok(Err(stop)),
+            }
+        }
+    }
+
+    /// One batch, recorded and (unless tripped) checked.
+    async fn read_batch(&mut self) -> Result<Checked, RecordError> {
+        if self.stops.operator_stop() {
+            return Ok(Checked::Stop(Stop::Fault("operator stop".into())));
         }
         let batch = match tokio::time::timeout(self.stale, self.sensors.next_batch()).await {
             Err(_) => {
-                return Ok(Err(Stop::Fault(format!(
+                return Ok(Checked::Stop(Stop::Fault(format!(
                     "sensor stream {} delivered nothing for {} ms",
                     self.sensors.id(),
                     self.stale.as_millis()
                 ))))
             }
-            Ok(Err(e)) => return Ok(Err(Stop::Fault(sensor_stop_reason(&e)))),
+            Ok(Err(e)) => return Ok(Checked::Stop(Stop::Fault(sensor_stop_reason(&e)))),
             Ok(Ok(b)) => b,
         };
         self.t_ns = batch.t_ns;
@@ -271,6 +309,8 @@ impl Bench<'_> {
         if let Some(i) = get(self.ch.current) {
             self.latest.current = Some((t, i));
         }
+        self.supply
+            .reading(t, get(self.ch.voltage), get(self.ch.current));
         let count = get(self.ch.encoder);
         if count.is_some() {
             self.latest.encoder_t_ns = Some(t);
@@ -291,16 +331,19 @@ impl Bench<'_> {
         }
         let voltage = self.latest.voltage.map_or(0.0, |v| v.1);
         let current = self.latest.current.map_or(0.0, |v| v.1);
+        if self.tripped {
+            return Ok(Checked::Reading(Reading { current, speed }));
+        }
         if let Some(trip) = check_limits(&self.cfg.limits, voltage, current, speed) {
-            return Ok(Err(Stop::Fault(format!("limit tripped: {trip}"))));
+            return Ok(Checked::Trip(StopCause::Limit(trip)));
         }
         if let Some((quantity, silent_ns)) = self.latest.silent(t, self.stale) {
-            return Ok(Err(Stop::Fault(format!(
+            return Ok(Checked::Stop(Stop::Fault(format!(
                 "sensor fault: no {quantity} reading for {} ms",
                 silent_ns / 1_000_000
             ))));
         }
-        Ok(Ok(Reading { current, speed }))
+        Ok(Checked::Reading(Reading { current, speed }))
     }
 
     async fn command(&mut self, volts: f64) -> Result<Result<(), Stop>, RecordError> {
@@ -405,10 +448,10 @@ impl Bench<'_> {
         // The supply limits its current a little below the trip limit, so a
         // transient peak is held by the supply rather than ending the test.
         let supply_limit = SUPPLY_LIMIT_FRACTION * self.cfg.limits.max_current;
-        if let Err(e) = self.stage.set_current_limit(supply_limit).await {
-            if !matches!(e, DriverError::Unsupported { .. }) {
-                return self.abort(None, format!("power stage fault: {e}")).await;
-            }
+        match self.stage.set_current_limit(supply_limit).await {
+            Ok(()) => self.supply = SupplyLimitDetector::new(Some(supply_limit)),
+            Err(DriverError::Unsupported { .. }) => {}
+            Err(e) => return self.abort(None, format!("power stage fault: {e}")).await,
         }
         let start = async {
             self.stage.set_setpoint(0.0).await?;
@@ -420,12 +463,20 @@ impl Bench<'_> {
         for (index, step) in steps.iter().enumerate() {
             self.progress.segment(index, steps.len(), step.label());
             self.marker(index, step, SegmentPhase::Start).await?;
+            let commanded = match step {
+                PlanStep::Level { volts, .. } => Some(*volts),
+                PlanStep::Coastdown { .. } => None,
+            };
+            self.supply.start(index as u32, commanded);
             let result = match step {
                 PlanStep::Level { volts, .. } => self.level(*volts).await?,
                 PlanStep::Coastdown { .. } => self.coastdown().await?,
             };
             match result {
-                Ok(()) => self.marker(index, step, SegmentPhase::End).await?,
+                Ok(()) => {
+                    self.supply_limits(step).await?;
+                    self.marker(index, step, SegmentPhase::End).await?;
+                }
                 Err(Stop::Fault(reason)) => return self.abort(Some((index, step)), reason).await,
             }
         }
@@ -442,6 +493,25 @@ impl Bench<'_> {
         };
         self.event(level, message).await?;
         Ok(Outcome::Completed)
+    }
+
+    /// Where the supply did not follow its set point in the segment of
+    /// `step`: one `/bench/supply_limit` entry and one warning each.
+    async fn supply_limits(&mut self, step: &PlanStep) -> Result<(), RecordError> {
+        for limit in self.supply.finish() {
+            let message = format!(
+                "{}: the segment's voltage is not the commanded step",
+                limit.describe(step.label())
+            );
+            self.sink
+                .push(Entry::SupplyLimit {
+                    t_ns: self.t_ns,
+                    limit,
+                })
+                .await?;
+            self.event(EventLevel::Warn, message).await?;
+        }
+        Ok(())
     }
 
     /// The sensors' sampling statistics, one event per channel.
@@ -467,6 +537,7 @@ impl Bench<'_> {
         };
         self.event(EventLevel::Abort, message.clone()).await?;
         if let Some((index, step)) = open {
+            self.supply_limits(step).await?;
             self.marker(index, step, SegmentPhase::End).await?;
         }
         self.sampling_summary().await?;
@@ -488,8 +559,10 @@ fn sensor_stop_reason(e: &DriverError) -> String {
 
 /// Run the plan's `steps` on a rig. Returns how the test ended; an `Err`
 /// only when recording failed (the stage is then in its safe state too).
+/// `stops` is an operator-stop flag, or the supervisor's handle when the
+/// rig is supervised (see [`StopPath`]).
 #[allow(clippy::too_many_arguments)]
-pub async fn run_test(
+pub async fn run_test<'s>(
     cfg: &Config,
     steps: &[PlanStep],
     stage: &mut dyn PowerStage,
@@ -497,7 +570,7 @@ pub async fn run_test(
     counts_per_rev: f64,
     sink: &mut RecordSink,
     progress: &dyn Progress,
-    shutdown: &watch::Receiver<bool>,
+    stops: impl Into<StopPath<'s>>,
 ) -> Result<Outcome, BenchError> {
     let ch = match Channels::find(sensors.channels()) {
         Ok(ch) => ch,
@@ -520,12 +593,14 @@ pub async fn run_test(
         sensors,
         sink,
         progress,
-        shutdown,
+        stops: stops.into(),
+        tripped: false,
         ch,
         encoder: SpeedFromEncoder::new(counts_per_rev),
         t_ns: 0,
         stale,
         sampling: SamplingEvents::new(),
+        supply: SupplyLimitDetector::new(None),
         latest: Latest::default(),
     };
     match bench.run(steps).await {

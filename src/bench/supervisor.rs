@@ -37,6 +37,16 @@ pub enum StopCause {
         /// The limit, °C.
         limit: f64,
     },
+    /// The induction-machine sweep's winding heating budget (I²t above
+    /// rated current) is spent.
+    HeatingBudget {
+        /// The budget used, s.
+        i2t_s: f64,
+        /// The budget, s.
+        limit_s: f64,
+        /// The rated current it is counted above, A.
+        rated_current: f64,
+    },
     /// A channel delivered no new reading for too long (data time).
     StaleChannel {
         /// The channel's quantity.
@@ -76,12 +86,13 @@ impl StopCause {
     }
 
     /// A short machine-readable name: `limit`, `winding_temperature`,
-    /// `stale_channel`, `bus_loss`, `device_fault`, `sequencer_stalled`,
+    /// `heating_budget`, `stale_channel`, `bus_loss`, `device_fault`, `sequencer_stalled`,
     /// `emergency_stop`, `operator_abort`, `shutdown`.
     pub fn kind(&self) -> &'static str {
         match self {
             StopCause::Limit(_) => "limit",
             StopCause::WindingTemperature { .. } => "winding_temperature",
+            StopCause::HeatingBudget { .. } => "heating_budget",
             StopCause::StaleChannel { .. } => "stale_channel",
             StopCause::BusLoss { .. } => "bus_loss",
             StopCause::DeviceFault(_) => "device_fault",
@@ -100,6 +111,14 @@ impl std::fmt::Display for StopCause {
             StopCause::WindingTemperature { celsius, limit } => write!(
                 f,
                 "estimated winding temperature {celsius:.1} °C beyond the limit {limit} °C"
+            ),
+            StopCause::HeatingBudget {
+                i2t_s,
+                limit_s,
+                rated_current,
+            } => write!(
+                f,
+                "winding heating budget spent: I²t {i2t_s:.1} s beyond {limit_s} s (rated current {rated_current} A)"
             ),
             StopCause::StaleChannel {
                 quantity,

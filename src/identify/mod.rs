@@ -282,7 +282,10 @@ pub fn identify_dc(record: &Record) -> Identification {
     report.methods.insert("steady_state".into(), method);
 
     // Pasek and moments, on every usable step; fitted on the largest rise.
-    let steps = step::voltage_steps(record, &levels);
+    // A step the supply did not follow is not the step they assume.
+    let mut steps = step::voltage_steps(record, &levels);
+    let spoiled = supply_limited(record, &mut report.warnings);
+    steps.retain(|st| !spoiled.contains(&st.segment));
     let fit_at = step::fit_step(&steps);
     let segment = |index: u32| record.segments.iter().find(|s| s.index == index);
     let mut pasek_steps = Vec::new();
@@ -410,6 +413,25 @@ pub fn identify_dc(record: &Record) -> Identification {
         coastdown,
         output_error,
     }
+}
+
+/// The segments where the record says the supply did not follow its set
+/// point (`/bench/supply_limit`), each named in a warning.
+fn supply_limited(record: &Record, warnings: &mut Vec<String>) -> Vec<u32> {
+    let mut out = Vec::new();
+    for limit in &record.supply_limits {
+        let label = record
+            .segments
+            .iter()
+            .find(|s| s.index == limit.segment)
+            .map_or("", |s| s.label.as_str());
+        warnings.push(format!(
+            "{}: its step is left out of the pasek and moments fits, which assume the commanded voltage step",
+            limit.describe(label)
+        ));
+        out.push(limit.segment);
+    }
+    out
 }
 
 /// The per-step parameters of the steps where a method gave numbers.

@@ -33,7 +33,7 @@ use std::collections::BTreeMap;
 use super::schema::SENSOR_PREFIX;
 use super::types::{
     ChannelSpec, DcSegment, Entry, Event, OperatingPoint, Record, SegmentKind, SegmentPhase,
-    TestMeta,
+    SupplyLimit, TestMeta,
 };
 
 /// Appended to the label of a segment that has no end marker.
@@ -68,6 +68,7 @@ pub struct RecordBuilder {
     events: Vec<(u64, Event)>,
     result: Option<serde_json::Value>,
     points: Vec<OperatingPoint>,
+    supply_limits: Vec<SupplyLimit>,
 }
 
 impl Series {
@@ -116,6 +117,7 @@ impl RecordBuilder {
             events: Vec::new(),
             result: None,
             points: Vec::new(),
+            supply_limits: Vec::new(),
         }
     }
 
@@ -151,6 +153,7 @@ impl RecordBuilder {
             Entry::Event { t_ns, event } => self.events.push((*t_ns, event.clone())),
             Entry::Result { report, .. } => self.result = Some(report.clone()),
             Entry::OperatingPoint { point, .. } => self.points.push(*point),
+            Entry::SupplyLimit { limit, .. } => self.supply_limits.push(*limit),
         }
     }
 
@@ -163,6 +166,7 @@ impl RecordBuilder {
             mut events,
             result,
             points,
+            supply_limits,
             ..
         } = self;
         for s in &mut samples {
@@ -204,6 +208,7 @@ impl RecordBuilder {
             segments,
             events,
             operating_points: points,
+            supply_limits,
             recorded_result: result,
             recovery: None,
         }

@@ -28,7 +28,7 @@ use super::builder::RecordBuilder;
 use super::error::RecordError;
 use super::schema::{
     is_sample_topic_for, COMMAND_PREFIX, MESSAGE_ENCODING, METADATA_NAME, SENSOR_PREFIX,
-    TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT,
+    TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT, TOPIC_SUPPLY_LIMIT,
 };
 use super::types::{ChannelSpec, Entry, Record, Recovery, SegmentKind, TestMeta, SCHEMA_VERSION};
 
@@ -46,6 +46,7 @@ enum Route {
     OperatingPoint,
     Event,
     Result,
+    SupplyLimit,
     Ignore,
 }
 
@@ -206,6 +207,10 @@ impl<'p> Reading<'p> {
                         t_ns,
                         point: decode(&data).map_err(bad)?,
                     }),
+                    Route::SupplyLimit => Some(Entry::SupplyLimit {
+                        t_ns,
+                        limit: decode(&data).map_err(bad)?,
+                    }),
                     Route::Sample(_) | Route::Ignore => None,
                 };
                 if let Some(entry) = entry {
@@ -255,6 +260,7 @@ fn route_of(
         TOPIC_OPERATING_POINT => Route::OperatingPoint,
         TOPIC_EVENT => Route::Event,
         TOPIC_RESULT => Route::Result,
+        TOPIC_SUPPLY_LIMIT => Route::SupplyLimit,
         _ => return Ok(Route::Ignore),
     };
     if c.message_encoding != MESSAGE_ENCODING {

@@ -36,6 +36,9 @@ pub const TOPIC_OPERATING_POINT: &str = "/bench/operating_point";
 pub const TOPIC_EVENT: &str = "/bench/event";
 /// Topic of the identification (and diagnosis) report.
 pub const TOPIC_RESULT: &str = "/bench/result";
+/// Topic of the stretches where the supply could not follow its set
+/// point (an additive extension of the contract).
+pub const TOPIC_SUPPLY_LIMIT: &str = "/bench/supply_limit";
 
 /// Schema of `/sensor/*` and `/command/*` messages.
 pub const SCHEMA_SAMPLE: &str = "motorbench.Sample";
@@ -47,6 +50,8 @@ pub const SCHEMA_OPERATING_POINT: &str = "motorbench.OperatingPoint";
 pub const SCHEMA_EVENT: &str = "motorbench.Event";
 /// Schema of `/bench/result` messages.
 pub const SCHEMA_RESULT: &str = "motorbench.Result";
+/// Schema of `/bench/supply_limit` messages.
+pub const SCHEMA_SUPPLY_LIMIT: &str = "motorbench.SupplyLimit";
 
 /// JSON Schema of `motorbench.Sample`: `{"value": number}`. (A non-finite
 /// reading, which JSON cannot carry, is reported on `/bench/event`.)
@@ -121,9 +126,29 @@ pub const RESULT_JSON_SCHEMA: &str = r#"{
   "type": "object"
 }"#;
 
+/// JSON Schema of `motorbench.SupplyLimit`. Readers ignore keys they do
+/// not know, so keys may be added.
+pub const SUPPLY_LIMIT_JSON_SCHEMA: &str = r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "motorbench.SupplyLimit",
+  "description": "A stretch of a segment where the supply did not follow its set point: it held its current limit (current_limit) or did not reach the commanded voltage (voltage_compliance). Times in s since the start of the test.",
+  "type": "object",
+  "properties": {
+    "segment": {"type": "integer", "minimum": 0},
+    "kind": {"enum": ["current_limit", "voltage_compliance"]},
+    "from": {"type": "number"},
+    "to": {"type": "number"},
+    "commanded_voltage": {"type": "number"},
+    "measured_voltage": {"type": "number"},
+    "current_limit": {"type": ["number", "null"]},
+    "peak_current": {"type": "number"}
+  },
+  "required": ["segment", "kind", "from", "to", "commanded_voltage", "measured_voltage", "current_limit", "peak_current"]
+}"#;
+
 /// The `/bench/*` topics with their schema names and schema texts, in the
 /// order the recorder declares them.
-pub const BENCH_TOPICS: [(&str, &str, &str); 4] = [
+pub const BENCH_TOPICS: [(&str, &str, &str); 5] = [
     (TOPIC_SEGMENT, SCHEMA_SEGMENT, SEGMENT_JSON_SCHEMA),
     (
         TOPIC_OPERATING_POINT,
@@ -132,6 +157,11 @@ pub const BENCH_TOPICS: [(&str, &str, &str); 4] = [
     ),
     (TOPIC_EVENT, SCHEMA_EVENT, EVENT_JSON_SCHEMA),
     (TOPIC_RESULT, SCHEMA_RESULT, RESULT_JSON_SCHEMA),
+    (
+        TOPIC_SUPPLY_LIMIT,
+        SCHEMA_SUPPLY_LIMIT,
+        SUPPLY_LIMIT_JSON_SCHEMA,
+    ),
 ];
 
 /// Whether `topic` is the contract's topic for a sample channel of
@@ -155,6 +185,7 @@ mod tests {
             (SCHEMA_OPERATING_POINT, OPERATING_POINT_JSON_SCHEMA),
             (SCHEMA_EVENT, EVENT_JSON_SCHEMA),
             (SCHEMA_RESULT, RESULT_JSON_SCHEMA),
+            (SCHEMA_SUPPLY_LIMIT, SUPPLY_LIMIT_JSON_SCHEMA),
         ];
         for (name, text) in all {
             let v: serde_json::Value = serde_json::from_str(text).unwrap();

@@ -177,6 +177,13 @@ pub enum Entry {
         /// The point.
         point: OperatingPoint,
     },
+    /// A stretch where the supply did not follow its set point.
+    SupplyLimit {
+        /// When the stretch was reported (at the latest its segment's end).
+        t_ns: u64,
+        /// The stretch.
+        limit: SupplyLimit,
+    },
     /// The final identification (and diagnosis) report.
     Result {
         /// When it was produced.
@@ -230,6 +237,68 @@ impl OperatingPoint {
     }
 }
 
+/// How a supply failed to follow its set point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SupplyLimitKind {
+    /// It held its current limit (constant-current mode), its voltage
+    /// below the command.
+    CurrentLimit,
+    /// It did not reach the commanded voltage, its current below the limit.
+    VoltageCompliance,
+}
+
+/// A `/bench/supply_limit` message: a stretch of a segment where the
+/// supply did not follow its set point, so the segment's voltage is not
+/// the step that was commanded. Times in s since the start of the test.
+/// (An additive extension of the contract; unknown keys are ignored.)
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SupplyLimit {
+    /// Segment index.
+    pub segment: u32,
+    /// How the supply limited.
+    pub kind: SupplyLimitKind,
+    /// First reading of the stretch, s.
+    pub from: f64,
+    /// Last reading of the stretch, s.
+    pub to: f64,
+    /// The commanded voltage, V.
+    pub commanded_voltage: f64,
+    /// The measured voltage furthest from the command in the stretch
+    /// (current limit) or settled at the segment's end (compliance), V.
+    pub measured_voltage: f64,
+    /// The current limit the supply was set to, A, when it has one.
+    pub current_limit: Option<f64>,
+    /// The largest current magnitude read in the stretch (current limit)
+    /// or in the segment (compliance), A.
+    pub peak_current: f64,
+}
+
+impl SupplyLimit {
+    /// One line for a person, e.g. for the record's events and the
+    /// report's warnings.
+    pub fn describe(&self, label: &str) -> String {
+        let what = match (self.kind, self.current_limit) {
+            (SupplyLimitKind::CurrentLimit, Some(limit)) => format!(
+                "current-limiting (held at its {limit:.3} A limit, peak {:.3} A; measured voltage {:.2} V at its furthest from the {:.2} V commanded)",
+                self.peak_current, self.measured_voltage, self.commanded_voltage
+            ),
+            (SupplyLimitKind::CurrentLimit, None) => format!(
+                "current-limiting (peak {:.3} A; measured voltage {:.2} V at its furthest from the {:.2} V commanded)",
+                self.peak_current, self.measured_voltage, self.commanded_voltage
+            ),
+            (SupplyLimitKind::VoltageCompliance, _) => format!(
+                "short of its commanded voltage (settled at {:.2} V against {:.2} V commanded)",
+                self.measured_voltage, self.commanded_voltage
+            ),
+        };
+        format!(
+            "the supply was {what} in segment {} ({label}) from {:.4} s to {:.4} s",
+            self.segment, self.from, self.to
+        )
+    }
+}
+
 impl Entry {
     /// The entry's time, ns since the start of the test.
     pub fn t_ns(&self) -> u64 {
@@ -238,6 +307,7 @@ impl Entry {
             | Entry::OperatingPoint { t_ns, .. }
             | Entry::Segment { t_ns, .. }
             | Entry::Event { t_ns, .. }
+            | Entry::SupplyLimit { t_ns, .. }
             | Entry::Result { t_ns, .. } => *t_ns,
         }
     }
@@ -285,6 +355,8 @@ pub struct Record {
     pub operating_points: Vec<OperatingPoint>,
     /// Bench events in time order.
     pub events: Vec<(u64, Event)>,
+    /// Where the supply did not follow its set point, in recording order.
+    pub supply_limits: Vec<SupplyLimit>,
     /// The `/bench/result` found in the file, if any.
     pub recorded_result: Option<serde_json::Value>,
     /// Set when the file was damaged and only partly read.

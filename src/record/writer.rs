@@ -41,7 +41,7 @@ use super::error::RecordError;
 use super::schema::{
     is_sample_topic_for, BENCH_TOPICS, MESSAGE_ENCODING, METADATA_NAME, SAMPLE_JSON_SCHEMA,
     SCHEMA_ENCODING, SCHEMA_SAMPLE, TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT,
-    TOPIC_SEGMENT,
+    TOPIC_SEGMENT, TOPIC_SUPPLY_LIMIT,
 };
 use super::types::{ChannelSpec, Entry, Event, EventLevel, TestMeta, SCHEMA_VERSION};
 
@@ -440,6 +440,12 @@ fn run(
                 write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
                 (*t_ns, true)
             }
+            Entry::SupplyLimit { t_ns, limit } => {
+                let pos = table.position_of_bench(TOPIC_SUPPLY_LIMIT);
+                let data = serde_json::to_vec(limit).expect("a supply limit serializes");
+                write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
+                (*t_ns, true)
+            }
             Entry::Result { t_ns, report } => {
                 let pos = table.position_of_bench(TOPIC_RESULT);
                 let data = serde_json::to_vec(report).expect("a JSON value serializes");
@@ -566,7 +572,8 @@ mod tests {
         });
         assert_eq!(stats.messages, 201);
         assert_eq!(stats.path, path);
-        assert_eq!(stats.per_topic.len(), 6);
+        assert_eq!(stats.per_topic.len(), 7);
+        assert_eq!(stats.per_topic["/bench/supply_limit"], 0);
         assert_eq!(stats.per_topic["/sensor/armature_current"], 100);
         assert_eq!(stats.per_topic["/bench/event"], 1);
         assert_eq!(stats.per_topic["/bench/result"], 0);

@@ -168,8 +168,7 @@ impl ImJob {
             vec![point_max * p.slips.len() as f64; p.voltages.len()],
             vec![SegmentKind::ImSlipSweep; p.voltages.len()],
         );
-        // Stops come through the supervisor; this one never fires.
-        let (_never_tx, never) = watch::channel(false);
+        // Every stop goes through the supervisor, the sweep's own too.
         let outcome = run_im_sweep(
             p,
             &mut supply,
@@ -177,7 +176,7 @@ impl ImJob {
             &mut sensors,
             &mut sink,
             &progress,
-            &never,
+            &handle,
         )
         .await;
         drop(sensors);

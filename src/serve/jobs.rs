@@ -327,8 +327,7 @@ impl Job {
             _served,
         } = self;
         let progress = FeedProgress::new(run.clone(), &cfg, &steps);
-        // Stops come through the supervisor; this one never fires.
-        let (_never_tx, never) = watch::channel(false);
+        // Every stop goes through the supervisor, the sequencer's own too.
         let outcome = run_test(
             &cfg,
             &steps,
@@ -337,7 +336,7 @@ impl Job {
             counts_per_rev,
             &mut sink,
             &progress,
-            &never,
+            &supervised.handle,
         )
         .await;
         let ending = Ending {

@@ -40,7 +40,11 @@ BENCH_SCHEMAS = {
     "/bench/operating_point": "motorbench.OperatingPoint",
     "/bench/event": "motorbench.Event",
     "/bench/result": "motorbench.Result",
+    # motorbench's additive extension: where the supply did not follow its
+    # set point (docs/connect-your-rig.md).
+    "/bench/supply_limit": "motorbench.SupplyLimit",
 }
+SUPPLY_LIMIT_KINDS = ("current_limit", "voltage_compliance")
 SAMPLE_SCHEMA = "motorbench.Sample"
 SAMPLE_PREFIXES = ("/sensor/", "/command/")
 RFC3339 = re.compile(
@@ -128,6 +132,21 @@ def shape_problem(schema_name, msg):
                 return f"{k} {msg[k]!r} is not a number"
         if msg["torque"] is not None and not is_number(msg["torque"]):
             return f"torque {msg['torque']!r} is not a number or null"
+        return None
+    if schema_name == "motorbench.SupplyLimit":
+        keys = {"segment", "kind", "from", "to", "commanded_voltage",
+                "measured_voltage", "current_limit", "peak_current"}
+        if not keys <= set(msg):
+            return f"keys {sorted(msg)}, want at least {sorted(keys)}"
+        if not is_int(msg["segment"]) or msg["segment"] < 0:
+            return "segment is not a non-negative integer"
+        if msg["kind"] not in SUPPLY_LIMIT_KINDS:
+            return f"kind {msg['kind']!r} is not one of {SUPPLY_LIMIT_KINDS}"
+        for k in ("from", "to", "commanded_voltage", "measured_voltage", "peak_current"):
+            if not is_number(msg[k]):
+                return f"{k} {msg[k]!r} is not a number"
+        if msg["current_limit"] is not None and not is_number(msg["current_limit"]):
+            return f"current_limit {msg['current_limit']!r} is not a number or null"
         return None
     if schema_name == "motorbench.Result":
         return None  # any JSON object
