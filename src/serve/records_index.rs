@@ -6,7 +6,11 @@
 //!
 //! On open, entries still marked `running` belong to a daemon that died
 //! mid-test: they become `interrupted`, with what the MCAP reader could
-//! recover. MCAP files the index does not know are added the same way.
+//! recover, or `unanalysed` when the plan had ended and only the analysis
+//! was cut short (`data_complete`). MCAP files the index does not know (a
+//! new or a cut index) are added from the records themselves: metadata,
+//! result and abort event; [`RecordsIndex::adopt_orphans`] gives them
+//! their rig.
 //! [`RecordsIndex::apply_retention`] deletes a rig's oldest finished
 //! records beyond its size and age limits.
 
