@@ -520,28 +520,31 @@ fn signal(served: &Served, signal: rustix::process::Signal) {
     rustix::process::kill_process(pid, signal).unwrap();
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn the_watchdog_is_petted_while_tests_are_identified() {
-    let dir = tempfile::tempdir().unwrap();
-    let records = dir.path().join("records");
-    std::fs::write(
-        dir.path().join("rig.toml"),
-        motorbench::config::DEFAULT_CONFIG,
-    )
-    .unwrap();
-    let notify = common::daemon::NotifySocket::bind(dir.path());
-    // systemd would kill the daemon after 1 s without a `WATCHDOG=1`.
-    let interval = Duration::from_secs(1);
+/// The daemon on the default configuration with a fake systemd
+/// notification socket and a watchdog of `interval`.
+fn start_with_watchdog(dir: &Path, interval: Duration) -> (Served, common::daemon::NotifySocket) {
+    std::fs::write(dir.join("rig.toml"), motorbench::config::DEFAULT_CONFIG).unwrap();
+    let notify = common::daemon::NotifySocket::bind(dir);
+    let usec = interval.as_micros().to_string();
     let served = Served::start_with_env(
-        &dir.path().join("rig.toml"),
-        &records,
-        dir.path(),
+        &dir.join("rig.toml"),
+        &dir.join("records"),
+        dir,
         &["--listen", "127.0.0.1:0"],
         &[
             ("NOTIFY_SOCKET", notify.path.as_os_str()),
-            ("WATCHDOG_USEC", "1000000".as_ref()),
+            ("WATCHDOG_USEC", usec.as_ref()),
         ],
     );
+    (served, notify)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_watchdog_is_petted_while_tests_are_identified() {
+    let dir = tempfile::tempdir().unwrap();
+    // systemd would kill the daemon after 1 s without a `WATCHDOG=1`.
+    let interval = Duration::from_secs(1);
+    let (served, notify) = start_with_watchdog(dir.path(), interval);
     let c = served.client(None);
     let r = start(&c, Some(one_step())).await;
     assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
@@ -575,24 +578,8 @@ async fn measure_watchdog_gaps_over_many_full_plan_tests() {
         .and_then(|n| n.parse().ok())
         .unwrap_or(50);
     let dir = tempfile::tempdir().unwrap();
-    let records = dir.path().join("records");
-    std::fs::write(
-        dir.path().join("rig.toml"),
-        motorbench::config::DEFAULT_CONFIG,
-    )
-    .unwrap();
-    let notify = common::daemon::NotifySocket::bind(dir.path());
     // The shipped unit's WatchdogSec=5s.
-    let served = Served::start_with_env(
-        &dir.path().join("rig.toml"),
-        &records,
-        dir.path(),
-        &["--listen", "127.0.0.1:0"],
-        &[
-            ("NOTIFY_SOCKET", notify.path.as_os_str()),
-            ("WATCHDOG_USEC", "5000000".as_ref()),
-        ],
-    );
+    let (served, notify) = start_with_watchdog(dir.path(), Duration::from_secs(5));
     let c = served.client(None);
     let mut worst = Vec::new();
     for k in 0..tests {
