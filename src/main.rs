@@ -325,8 +325,9 @@ async fn run(args: RunArgs) -> Result<(), Failure> {
     }
     let cfg = load_or_default(config.as_ref()).map_err(bad_input)?;
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let stop = stop_signal();
     tokio::spawn(async move {
-        wait_for_stop_signal().await;
+        stop.await;
         let _ = stop_tx.send(true);
     });
     let progress = Bar::new(quiet || json);
@@ -379,8 +380,9 @@ async fn run_im(
 ) -> Result<(), Failure> {
     let cfg = ImRunConfig::load(path).map_err(bad_input)?;
     let (stop_tx, stop_rx) = tokio::sync::watch::channel(false);
+    let stop = stop_signal();
     tokio::spawn(async move {
-        wait_for_stop_signal().await;
+        stop.await;
         let _ = stop_tx.send(true);
     });
     if !json && !quiet {
@@ -421,25 +423,36 @@ async fn run_im(
     identified
 }
 
-async fn wait_for_stop_signal() {
+/// SIGTERM or SIGINT. The handlers are installed when this is called, not
+/// when the future is first polled: a signal that arrives right after the
+/// daemon has announced its address is then a clean stop, never the
+/// default (fatal) disposition. Must be called on the runtime.
+fn stop_signal() -> impl std::future::Future<Output = ()> {
     #[cfg(unix)]
     {
         use tokio::signal::unix::{signal, SignalKind};
-        match signal(SignalKind::terminate()) {
-            Ok(mut term) => {
-                tokio::select! {
-                    _ = tokio::signal::ctrl_c() => {},
-                    _ = term.recv() => {},
+        let term = signal(SignalKind::terminate());
+        let int = signal(SignalKind::interrupt());
+        async move {
+            match (term, int) {
+                (Ok(mut term), Ok(mut int)) => {
+                    tokio::select! {
+                        _ = term.recv() => {},
+                        _ = int.recv() => {},
+                    }
                 }
-            }
-            Err(_) => {
-                let _ = tokio::signal::ctrl_c().await;
+                (Ok(mut one), Err(_)) | (Err(_), Ok(mut one)) => {
+                    one.recv().await;
+                }
+                (Err(_), Err(_)) => std::future::pending().await,
             }
         }
     }
     #[cfg(not(unix))]
     {
-        let _ = tokio::signal::ctrl_c().await;
+        async {
+            let _ = tokio::signal::ctrl_c().await;
+        }
     }
 }
 
@@ -723,10 +736,11 @@ fn main() -> ExitCode {
         }
         Command::Blind(args) => return ExitCode::from(motorbench::diagnose::cli::run_blind(args)),
         Command::Serve(args) => {
-            return block_on(motorbench::serve::cli::run_serve(
-                args,
-                wait_for_stop_signal(),
-            ))
+            return block_on(async {
+                // Before anything is bound or announced.
+                let stop = stop_signal();
+                motorbench::serve::cli::run_serve(args, stop).await
+            });
         }
         Command::Ctl(args) => return block_on(motorbench::serve::cli::run_ctl(args)),
     };

@@ -614,3 +614,357 @@ async fn tells_systemd_it_is_ready_and_pets_the_watchdog() {
     }
     assert!(rest.iter().any(|m| m.contains("STOPPING=1")), "{rest:?}");
 }
+
+/// A short test (one step, no coast-down): a second or so at the wall clock.
+fn one_step() -> Value {
+    json!({"levels_V": [60, 248], "coastdown": false})
+}
+
+/// Send `signal` to the daemon at once (no `kill` process in between).
+fn signal(served: &Served, signal: rustix::process::Signal) {
+    let pid = rustix::process::Pid::from_raw(served.child.id() as i32).unwrap();
+    rustix::process::kill_process(pid, signal).unwrap();
+}
+
+/// The daemon on the default configuration with a fake systemd
+/// notification socket and a watchdog of `interval`.
+fn start_with_watchdog(dir: &Path, interval: Duration) -> (Served, common::daemon::NotifySocket) {
+    std::fs::write(dir.join("rig.toml"), motorbench::config::DEFAULT_CONFIG).unwrap();
+    let notify = common::daemon::NotifySocket::bind(dir);
+    let usec = interval.as_micros().to_string();
+    let served = Served::start_with_env(
+        &dir.join("rig.toml"),
+        &dir.join("records"),
+        dir,
+        &["--listen", "127.0.0.1:0"],
+        &[
+            ("NOTIFY_SOCKET", notify.path.as_os_str()),
+            ("WATCHDOG_USEC", usec.as_ref()),
+        ],
+    );
+    (served, notify)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_watchdog_is_petted_while_tests_are_identified() {
+    let dir = tempfile::tempdir().unwrap();
+    // systemd would kill the daemon after 1 s without a `WATCHDOG=1`.
+    let interval = Duration::from_secs(1);
+    let (served, notify) = start_with_watchdog(dir.path(), interval);
+    let c = served.client(None);
+    let r = start(&c, Some(one_step())).await;
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let id = r.json()["id"].as_str().unwrap().to_string();
+    // Identification and diagnosis run once the plan has ended and its
+    // supervisor's task is gone: the pets must go on meanwhile.
+    wait_test(&c, &id, |s| s["state"] != "running").await;
+    let pets = notify.pets();
+    let t0 = Instant::now();
+    loop {
+        let s = get(&c, &format!("/v1/tests/{id}")).await;
+        if notify.pets() >= pets + 3 || finished(&s) {
+            break;
+        }
+        assert!(t0.elapsed() < common::daemon::PATIENCE, "{s}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let gap = notify.largest_gap();
+    assert!(
+        gap < interval,
+        "{gap:?} without a WATCHDOG=1 (systemd kills at {interval:?}); {}",
+        served.log()
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+#[ignore = "a measurement: MOTORBENCH_WATCHDOG_TESTS full-plan tests (default 50), minutes"]
+async fn measure_watchdog_gaps_over_many_full_plan_tests() {
+    let tests: usize = std::env::var("MOTORBENCH_WATCHDOG_TESTS")
+        .ok()
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(50);
+    let dir = tempfile::tempdir().unwrap();
+    // The shipped unit's WatchdogSec=5s.
+    let (served, notify) = start_with_watchdog(dir.path(), Duration::from_secs(5));
+    let c = served.client(None);
+    let mut worst = Vec::new();
+    for k in 0..tests {
+        let before = notify.gaps().len();
+        let r = start(&c, None).await;
+        assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+        let id = r.json()["id"].as_str().unwrap().to_string();
+        let s = wait_test(&c, &id, finished).await;
+        assert_eq!(s["outcome"], "completed", "{s}");
+        let gaps = notify.gaps();
+        let test_worst = gaps[before..].iter().max().copied().unwrap_or_default();
+        println!("test {k}: largest gap {:.3} s", test_worst.as_secs_f64());
+        worst.push(test_worst);
+    }
+    let gaps = notify.gaps();
+    let over = |limit: f64| gaps.iter().filter(|g| g.as_secs_f64() > limit).count();
+    println!(
+        "WATCHDOG GAPS over {tests} full-plan tests (petting every 2.5 s, WatchdogSec=5s): \
+         {} pets, largest gap {:.3} s, gaps over 2.6 s: {}, over 5 s: {}",
+        gaps.len() + 1,
+        notify.largest_gap().as_secs_f64(),
+        over(2.6),
+        over(5.0),
+    );
+    assert_eq!(over(5.0), 0, "systemd would have killed the daemon");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_record_killed_during_its_analysis_is_unanalysed_and_a_cut_index_is_rebuilt() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    let mut served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+    // Killed while identifying: the plan's data is all on disk.
+    let r = start(&c, Some(one_step())).await;
+    let cut = r.json()["id"].as_str().unwrap().to_string();
+    wait_test(&c, &cut, |s| s["state"] != "running").await;
+    served.child.kill().unwrap();
+    served.child.wait().unwrap();
+
+    let served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+    let entry = record_entry(&c, &cut).await;
+    // Unless the analysis had finished before the kill landed.
+    if entry["outcome"] != "completed" {
+        assert_eq!(entry["outcome"], "unanalysed", "{entry}");
+        let reason = entry["reason"].as_str().unwrap();
+        assert!(reason.contains("motorbench replay"), "{reason}");
+        let rec = read_mcap(&records.join(format!("{cut}.mcap"))).unwrap();
+        assert!(rec.recorded_result.is_none());
+        assert_eq!(rec.segments.len(), 2, "every segment was recorded");
+    }
+    // A whole record: a test aborted at once (little to analyse).
+    let r = start(&c, Some(one_step())).await;
+    let whole = r.json()["id"].as_str().unwrap().to_string();
+    let abort = c
+        .post(&format!("/v1/tests/{whole}/abort"), None)
+        .await
+        .unwrap();
+    assert_eq!(
+        abort.status,
+        200,
+        "{}",
+        String::from_utf8_lossy(&abort.body)
+    );
+    let s = wait_test(&c, &whole, finished).await;
+    assert_eq!(s["outcome"], "aborted", "{s}");
+    drop(served);
+
+    // A cut index: rebuilt from the records' own metadata and results.
+    let index = records.join("index.json");
+    let text = std::fs::read(&index).unwrap();
+    std::fs::write(&index, &text[..text.len() / 2]).unwrap();
+    let served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+    assert!(records.join("index.json.corrupt").exists());
+    let entry = record_entry(&c, &whole).await;
+    assert_eq!(entry["outcome"], "aborted", "{entry}");
+    assert!(
+        entry["reason"].as_str().unwrap().contains("operator abort"),
+        "{entry}"
+    );
+    // The rig whose motor it recorded: retention applies to it again.
+    assert_eq!(entry["rig"], "rig", "{entry}");
+    assert_eq!(entry["motor_id"], "seed-table4-dc", "{entry}");
+    assert_eq!(entry["kind"], "dc_step", "{entry}");
+    assert!(entry["bytes"].as_u64().unwrap() > 0, "{entry}");
+    let rec = read_mcap(&records.join(format!("{whole}.mcap"))).unwrap();
+    let best = rec
+        .recorded_result
+        .as_ref()
+        .and_then(|r| r["best"].as_str());
+    assert_eq!(entry["key_results"]["method"].as_str(), best, "{entry}");
+    let entry = record_entry(&c, &cut).await;
+    assert_eq!(entry["rig"], "rig", "{entry}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_right_after_listening_is_a_clean_stop() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    for _ in 0..10 {
+        let mut served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+        signal(&served, rustix::process::Signal::TERM);
+        let status = served.child.wait().unwrap();
+        assert_eq!(status.code(), Some(0), "{status:?}: {}", served.log());
+        assert!(served.log().contains("stopped"), "{}", served.log());
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_second_daemon_does_not_take_over_a_live_unix_socket() {
+    use std::io::BufRead;
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    let socket = dir.path().join("api.sock");
+    let mut served = start_daemon(dir.path(), &records, &["--unix", socket.to_str().unwrap()]);
+    let mode = std::fs::metadata(&socket).unwrap().permissions().mode();
+    assert_eq!(mode & 0o777, 0o660, "{mode:o}");
+
+    let mut second = Command::new(BIN)
+        .args(["serve", "--unix", socket.to_str().unwrap(), "--config"])
+        .arg(dir.path().join("rig.toml"))
+        .arg("--records")
+        .arg(dir.path().join("records2"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    std::io::BufReader::new(second.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    if !line.is_empty() {
+        let _ = second.kill();
+    }
+    let out = second.wait_with_output().unwrap();
+    assert_eq!(line, "", "the second daemon took the socket over");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("another daemon is listening"), "{err}");
+    // The first still answers on it.
+    assert_eq!(
+        get(&served.client(None), "/v1/rigs").await["rigs"][0]["state"],
+        "idle"
+    );
+
+    // A socket nobody answers on (its daemon was killed) is replaced.
+    served.child.kill().unwrap();
+    served.child.wait().unwrap();
+    assert!(socket.exists());
+    let served = start_daemon(dir.path(), &records, &["--unix", socket.to_str().unwrap()]);
+    assert_eq!(
+        get(&served.client(None), "/v1/rigs").await["rigs"][0]["state"],
+        "idle"
+    );
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with('.'))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+/// Read from `stream` until the peer closes it; what was read.
+async fn read_to_close(stream: &mut tokio::net::TcpStream) -> Vec<u8> {
+    use tokio::io::AsyncReadExt;
+    let mut got = Vec::new();
+    tokio::time::timeout(common::daemon::PATIENCE, stream.read_to_end(&mut got))
+        .await
+        .expect("the daemon closed the connection")
+        .unwrap();
+    got
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn partial_and_idle_connections_are_closed_after_the_header_timeout() {
+    use tokio::io::AsyncWriteExt;
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    let served = start_daemon(
+        dir.path(),
+        &records,
+        &["--listen", "127.0.0.1:0", "--header-timeout", "300ms"],
+    );
+    let addr = served.url.strip_prefix("http://").unwrap().to_string();
+    // Headers never finished.
+    let mut partial = tokio::net::TcpStream::connect(&addr).await.unwrap();
+    partial
+        .write_all(b"GET /v1/health HTTP/1.1\r\nHost: x\r\n")
+        .await
+        .unwrap();
+    // Nothing sent at all.
+    let mut silent = tokio::net::TcpStream::connect(&addr).await.unwrap();
+    // One whole request, then idle on the kept-alive connection.
+    let mut idle = tokio::net::TcpStream::connect(&addr).await.unwrap();
+    idle.write_all(b"GET /v1/health HTTP/1.1\r\nHost: x\r\n\r\n")
+        .await
+        .unwrap();
+    // A body that never comes.
+    let mut body = tokio::net::TcpStream::connect(&addr).await.unwrap();
+    body.write_all(b"POST /v1/rigs/rig/tests HTTP/1.1\r\nHost: x\r\ncontent-length: 100\r\n\r\n{")
+        .await
+        .unwrap();
+    assert!(read_to_close(&mut partial).await.is_empty());
+    assert!(read_to_close(&mut silent).await.is_empty());
+    let answered = String::from_utf8_lossy(&read_to_close(&mut idle).await).into_owned();
+    assert!(answered.starts_with("HTTP/1.1 200"), "{answered}");
+    let timed_out = String::from_utf8_lossy(&read_to_close(&mut body).await).into_owned();
+    assert!(timed_out.starts_with("HTTP/1.1 408"), "{timed_out}");
+    // Nothing was started by the cut request.
+    assert_eq!(
+        get(&served.client(None), "/v1/tests").await["tests"],
+        json!([])
+    );
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn at_the_connection_limit_emergency_stop_still_works() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    let served = start_daemon(
+        dir.path(),
+        &records,
+        &[
+            "--listen",
+            "127.0.0.1:0",
+            "--max-connections",
+            "3",
+            "--header-timeout",
+            "120s",
+        ],
+    );
+    let addr = served.url.strip_prefix("http://").unwrap().to_string();
+    let c = served.client(None);
+    // Three idle connections fill the table.
+    let mut idle = Vec::new();
+    for _ in 0..3 {
+        idle.push(tokio::net::TcpStream::connect(&addr).await.unwrap());
+    }
+    // A reserved connection serves the stop endpoints and nothing else.
+    let r = c.get("/v1/rigs").await.unwrap();
+    assert_eq!(r.status, 503, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(r.json()["error"], "too_many_connections");
+    let r = c.post("/v1/rigs/rig/estop", None).await.unwrap();
+    assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+    assert_eq!(r.json()["state"], "tripped");
+
+    // The signal needs no connection at all.
+    signal(&served, rustix::process::Signal::USR1);
+    let t0 = Instant::now();
+    while !served.log().contains("SIGUSR1") {
+        assert!(t0.elapsed() < common::daemon::PATIENCE, "{}", served.log());
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+
+    // With the reserve taken too, a connection is answered 503 and closed.
+    for _ in 0..4 {
+        idle.push(tokio::net::TcpStream::connect(&addr).await.unwrap());
+    }
+    let mut refused = tokio::net::TcpStream::connect(&addr).await.unwrap();
+    let got = String::from_utf8_lossy(&read_to_close(&mut refused).await).into_owned();
+    assert!(
+        got.starts_with("HTTP/1.1 503") && got.contains("too_many_connections"),
+        "{got}"
+    );
+
+    // Once they close, the whole API is back, and the rig is latched.
+    drop(idle);
+    let t0 = Instant::now();
+    let rig = loop {
+        let r = c.get("/v1/rigs/rig").await.unwrap();
+        if r.status == 200 {
+            break r.json();
+        }
+        assert!(t0.elapsed() < common::daemon::PATIENCE, "{}", r.status);
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    };
+    assert_eq!(rig["state"], "tripped", "{rig}");
+    assert!(served.log().contains("too many") || served.log().contains("the limit"));
+}

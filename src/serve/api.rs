@@ -110,6 +110,29 @@ pub fn router(daemon: Arc<Daemon>, token: Option<Token>) -> Router {
         .route("/v1/records/{name}/mcap", get(mcap))
         .fallback(|| async { ApiError::not_found("no such endpoint") })
         .with_state(daemon);
+    with_token(api, token)
+}
+
+/// The stop endpoints alone (emergency stop and abort), for the reserved
+/// connections served once the connection limit is reached; every other
+/// request gets `503`.
+pub fn stop_router(daemon: Arc<Daemon>, token: Option<Token>) -> Router {
+    let api = Router::new()
+        .route("/v1/rigs/{rig}/estop", post(estop))
+        .route("/v1/tests/{id}/abort", post(abort))
+        .fallback(|| async {
+            ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "too_many_connections",
+                "every API connection is in use: this reserved connection serves only \
+                 POST /v1/rigs/{rig}/estop and POST /v1/tests/{id}/abort",
+            )
+        })
+        .with_state(daemon);
+    with_token(api, token)
+}
+
+fn with_token(api: Router, token: Option<Token>) -> Router {
     match token {
         Some(t) => api.layer(axum::middleware::from_fn_with_state(t, require_token)),
         None => api,

@@ -28,6 +28,20 @@ pub struct ServeArgs {
     /// File holding the API token; every request must then send `Authorization: Bearer <token>`.
     #[arg(long)]
     pub token_file: Option<PathBuf>,
+    /// Most API connections open at once (lowered to fit the descriptor limit) [default: 256].
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    pub max_connections: Option<u32>,
+    /// Time a client has to send a request's headers (and body), also the idle timeout of a kept-alive connection.
+    #[arg(long, default_value = "10s", value_parser = parse_timeout)]
+    pub header_timeout: std::time::Duration,
+}
+
+fn parse_timeout(text: &str) -> Result<std::time::Duration, String> {
+    let d = humantime::parse_duration(text).map_err(|e| e.to_string())?;
+    if d < std::time::Duration::from_millis(10) || d > std::time::Duration::from_secs(3600) {
+        return Err("must be between 10ms and 1h".into());
+    }
+    Ok(d)
 }
 
 /// Run `serve` until SIGTERM or SIGINT; the exit code.
@@ -47,6 +61,8 @@ pub async fn run_serve(args: ServeArgs, stop: impl std::future::Future<Output = 
         records: args.records,
         listen,
         token_file: args.token_file,
+        max_connections: args.max_connections.map(|n| n as usize),
+        header_timeout: args.header_timeout,
     };
     let announce = |address: &str| {
         use std::io::Write;

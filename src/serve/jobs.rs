@@ -183,9 +183,13 @@ impl TestRun {
         self.supervisor.stop(cause).await
     }
 
-    /// Healthy while running: see [`SupervisorHandle::healthy`].
+    /// Not stuck: while the plan runs, its supervisor task keeps its own
+    /// heartbeat and has not failed a safe-state command
+    /// ([`SupervisorHandle::healthy`]). Once the sequencer has returned
+    /// the rig is safe and the supervisor has ended on purpose, so the
+    /// analysis (on a blocking thread) and a finished test are healthy.
     pub fn healthy(&self) -> bool {
-        self.finished() || self.supervisor.healthy()
+        self.status.borrow().state != TestState::Running || self.supervisor.healthy()
     }
 }
 
@@ -436,6 +440,12 @@ pub async fn conclude(
     }
     handle.finish().await;
     let summary = task.await.ok();
+    // Every segment is on disk (the recorder flushes at each marker): a
+    // daemon killed from here on leaves a record that only lacks its
+    // analysis, marked so on the next start.
+    if let Err(e) = index.lock().await.update(&name, |e| e.data_complete = true) {
+        tracing::error!("{name}: updating the index failed: {e}");
+    }
     run.status.send_modify(|s| s.state = TestState::Identifying);
 
     let (outcome, reason) = match &outcome {
@@ -478,14 +488,23 @@ pub async fn conclude(
     }
     let report_name = format!("{name}.report.json");
     let svg_name = format!("{name}.svg");
-    let report_ok = std::fs::write(dir.join(&report_name), report.to_json_pretty() + "\n")
+    // File writing, like the analysis, stays off the reactor.
+    let report_path = dir.join(&report_name);
+    let report_text = report.to_json_pretty() + "\n";
+    let svg_path = dir.join(&svg_name);
+    let written = tokio::task::spawn_blocking(move || {
+        (
+            std::fs::write(report_path, report_text).map_err(|e| e.to_string()),
+            write_svg(&svg_path),
+        )
+    })
+    .await;
+    let (report_written, svg_written) =
+        written.unwrap_or_else(|e| (Err(e.to_string()), Err(e.to_string())));
+    let report_ok = report_written
         .map_err(|e| tracing::error!("{name}: writing the report failed: {e}"))
         .is_ok();
-    let svg_path = dir.join(&svg_name);
-    let svg_ok = tokio::task::spawn_blocking(move || write_svg(&svg_path))
-        .await
-        .map_err(|e| e.to_string())
-        .and_then(|r| r)
+    let svg_ok = svg_written
         .map_err(|e| tracing::error!("{name}: writing the plot failed: {e}"))
         .is_ok();
     let key_results = report.best.as_ref().and_then(|best| {

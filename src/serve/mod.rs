@@ -17,6 +17,7 @@ pub mod api;
 pub mod auth;
 pub mod cli;
 pub mod client;
+pub mod connections;
 pub mod ctl;
 pub mod im_jobs;
 pub mod jobs;
@@ -62,6 +63,11 @@ pub struct ServeOptions {
     pub listen: Listen,
     /// File holding the API token.
     pub token_file: Option<PathBuf>,
+    /// Most API connections open at once (lowered below the descriptor
+    /// limit; default [`connections::DEFAULT_MAX_CONNECTIONS`]).
+    pub max_connections: Option<usize>,
+    /// Header, idle and body timeout of an API connection.
+    pub header_timeout: Duration,
 }
 
 /// Why the daemon could not start or stopped with an error.
@@ -148,14 +154,10 @@ pub async fn serve(
         None => None,
     };
     check_listen_policy(&opts.listen, token.as_ref())?;
-    let daemon =
-        Arc::new(Daemon::new(rigs, &opts.records).map_err(|e| ServeError::Io(e.to_string()))?);
-    let app = api::router(daemon.clone(), token.clone());
-    let (stop_http, stop_http_rx) = tokio::sync::oneshot::channel::<()>();
-    let graceful = async move {
-        let _ = stop_http_rx.await;
-    };
-    let (address, mut server) = match &opts.listen {
+    let nofile = connections::descriptor_limit();
+    let limits =
+        connections::ConnectionLimits::new(opts.max_connections, opts.header_timeout, nofile);
+    let (listener, address) = match &opts.listen {
         Listen::Tcp(addr) => {
             let listener = tokio::net::TcpListener::bind(addr)
                 .await
@@ -163,33 +165,47 @@ pub async fn serve(
             let bound = listener
                 .local_addr()
                 .map_err(|e| ServeError::Io(e.to_string()))?;
-            let server = tokio::spawn(async move {
-                axum::serve(listener, app)
-                    .with_graceful_shutdown(graceful)
-                    .await
-            });
-            (format!("http://{bound}"), server)
+            (
+                connections::Listener::Tcp(listener),
+                format!("http://{bound}"),
+            )
         }
-        Listen::Unix(path) => {
-            let listener = bind_unix(path)?;
-            let server = tokio::spawn(async move {
-                axum::serve(listener, app)
-                    .with_graceful_shutdown(graceful)
-                    .await
-            });
-            (format!("unix:{}", path.display()), server)
-        }
+        Listen::Unix(path) => (
+            connections::Listener::Unix(bind_unix(path)?),
+            format!("unix:{}", path.display()),
+        ),
     };
+    // Opened after binding: a daemon refused its address leaves the records alone.
+    let daemon =
+        Arc::new(Daemon::new(rigs, &opts.records).map_err(|e| ServeError::Io(e.to_string()))?);
+    let apps = connections::Apps {
+        full: api::router(daemon.clone(), token.clone()),
+        stops: api::stop_router(daemon.clone(), token.clone()),
+    };
+    let (stop_http, stop_http_rx) = tokio::sync::watch::channel(false);
+    let mut server = tokio::spawn(connections::serve_connections(
+        listener,
+        apps,
+        limits,
+        stop_http_rx,
+        // Live feeds end with their tests; give open connections a moment.
+        Duration::from_secs(3),
+    ));
     let auth = if token.is_some() {
         "token required"
     } else {
         "no token"
     };
     tracing::info!(
-        "listening on {address} ({auth}); rigs: {}; records in {}",
+        "listening on {address} ({auth}); rigs: {}; records in {}; at most {} API connections \
+         (descriptor limit {}), header and idle timeout {:?}",
         daemon.rig_names().join(", "),
-        opts.records.display()
+        opts.records.display(),
+        limits.max,
+        nofile.map_or_else(|| "none".to_string(), |n| n.to_string()),
+        limits.header_timeout,
     );
+    let estop_signal = estop_signal(daemon.clone())?;
     announce(&address);
     systemd::notify_ready(&format!("listening on {address}"));
     let watchdog = systemd::spawn_watchdog(daemon.clone());
@@ -198,8 +214,7 @@ pub async fn serve(
         _ = shutdown => tracing::info!("stop requested: making the rigs safe and finishing records"),
         r = &mut server => {
             let why = match r {
-                Ok(Ok(())) => "it ended".to_string(),
-                Ok(Err(e)) => e.to_string(),
+                Ok(()) => "it ended".to_string(),
                 Err(e) => e.to_string(),
             };
             return Err(ServeError::Io(format!("the API server stopped: {why}")));
@@ -207,17 +222,12 @@ pub async fn serve(
     }
     systemd::notify_stopping();
     daemon.shutdown().await;
+    estop_signal.abort();
     if let Some(w) = watchdog {
         w.abort();
     }
-    let _ = stop_http.send(());
-    // Live feeds end with their tests; give open connections a moment.
-    if tokio::time::timeout(Duration::from_secs(3), server)
-        .await
-        .is_err()
-    {
-        tracing::warn!("closing API connections that were still open");
-    }
+    let _ = stop_http.send(true);
+    let _ = server.await;
     if let Listen::Unix(path) = &opts.listen {
         let _ = std::fs::remove_file(path);
     }
@@ -225,25 +235,80 @@ pub async fn serve(
     Ok(())
 }
 
+/// `SIGUSR1`: an emergency stop on every rig (safe state first, then the
+/// latch), the path that needs no API connection. The handler is
+/// installed before the daemon announces itself.
+fn estop_signal(daemon: Arc<Daemon>) -> Result<tokio::task::JoinHandle<()>, ServeError> {
+    use tokio::signal::unix::{signal, SignalKind};
+    let mut usr1 = signal(SignalKind::user_defined1())
+        .map_err(|e| ServeError::Io(format!("cannot handle SIGUSR1: {e}")))?;
+    Ok(tokio::spawn(async move {
+        while usr1.recv().await.is_some() {
+            for rig in daemon.rig_names() {
+                if let Err(e) = daemon.emergency_stop(&rig, "SIGUSR1").await {
+                    tracing::error!("SIGUSR1: emergency stop on rig {rig}: {e:?}");
+                }
+            }
+        }
+    }))
+}
+
+/// Bind the API's Unix socket at `path`. A socket already there that
+/// answers belongs to a live daemon: refused. One nobody answers on was
+/// left by a daemon that did not stop cleanly: replaced. The socket is
+/// bound in a private directory (mode 0700) beside `path`, given mode 0660
+/// and then linked into place, so it is never reachable with a wider mode
+/// whatever the umask.
 fn bind_unix(path: &Path) -> Result<tokio::net::UnixListener, ServeError> {
-    use std::os::unix::fs::{FileTypeExt, PermissionsExt};
+    use std::os::unix::fs::{DirBuilderExt, FileTypeExt, PermissionsExt};
+    let shown = path.display();
     if let Ok(m) = std::fs::symlink_metadata(path) {
-        if m.file_type().is_socket() {
-            // A socket left by a daemon that did not stop cleanly.
-            let _ = std::fs::remove_file(path);
-        } else {
+        if !m.file_type().is_socket() {
             return Err(ServeError::Refused(format!(
-                "{}: exists and is not a socket",
-                path.display()
+                "{shown}: exists and is not a socket"
             )));
         }
+        match std::os::unix::net::UnixStream::connect(path) {
+            Ok(_) => {
+                return Err(ServeError::Refused(format!(
+                    "{shown}: another daemon is listening on this socket; stop it first"
+                )))
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionRefused => {
+                tracing::info!("{shown}: removing a stale socket nobody listens on");
+                std::fs::remove_file(path).map_err(|e| ServeError::Io(format!("{shown}: {e}")))?;
+            }
+            Err(e) => {
+                return Err(ServeError::Refused(format!(
+                    "{shown}: a socket is there and cannot be checked ({e}); remove it if no \
+                     daemon uses it"
+                )))
+            }
+        }
     }
-    let listener = tokio::net::UnixListener::bind(path)
-        .map_err(|e| ServeError::Io(format!("cannot listen on {}: {e}", path.display())))?;
-    // Owner and group only: the socket's permissions are its access control.
-    std::fs::set_permissions(path, std::fs::Permissions::from_mode(0o660))
-        .map_err(|e| ServeError::Io(format!("{}: {e}", path.display())))?;
-    Ok(listener)
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let private = parent.join(format!(".{}", std::process::id()));
+    std::fs::DirBuilder::new()
+        .mode(0o700)
+        .create(&private)
+        .map_err(|e| ServeError::Io(format!("{}: {e}", private.display())))?;
+    let staged = private.join("s");
+    let bound = (|| {
+        let listener = tokio::net::UnixListener::bind(&staged)
+            .map_err(|e| format!("cannot listen on {shown}: {e}"))?;
+        // Owner and group only: the socket's permissions are its access control.
+        std::fs::set_permissions(&staged, std::fs::Permissions::from_mode(0o660))
+            .map_err(|e| format!("{}: {e}", staged.display()))?;
+        // A link fails if the path exists: a daemon that bound it meanwhile keeps it.
+        std::fs::hard_link(&staged, path).map_err(|e| format!("cannot listen on {shown}: {e}"))?;
+        Ok(listener)
+    })();
+    let _ = std::fs::remove_file(&staged);
+    let _ = std::fs::remove_dir(&private);
+    bound.map_err(ServeError::Io)
 }
 
 #[cfg(test)]

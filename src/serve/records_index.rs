@@ -6,7 +6,11 @@
 //!
 //! On open, entries still marked `running` belong to a daemon that died
 //! mid-test: they become `interrupted`, with what the MCAP reader could
-//! recover. MCAP files the index does not know are added the same way.
+//! recover, or `unanalysed` when the plan had ended and only the analysis
+//! was cut short (`data_complete`). MCAP files the index does not know (a
+//! new or a cut index) are added from the records themselves: metadata,
+//! result and abort event; [`RecordsIndex::adopt_orphans`] gives them
+//! their rig.
 //! [`RecordsIndex::apply_retention`] deletes a rig's oldest finished
 //! records beyond its size and age limits.
 
@@ -18,7 +22,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::config::Retention;
-use crate::record::{read_entries, Entry};
+use crate::record::{read_entries, Entry, EventLevel};
 
 /// File name of the index in the records directory.
 pub const INDEX_FILE: &str = "index.json";
@@ -38,6 +42,10 @@ pub enum RecordOutcome {
     Aborted,
     /// The daemon died during the test (found `running` on the next start).
     Interrupted,
+    /// The plan ended and its data is recorded (every segment flushed),
+    /// but the daemon stopped before the analysis finished: the record has
+    /// no result; `motorbench replay NAME.mcap` reruns the analysis.
+    Unanalysed,
     /// The daemon could not finish the test (a recording error).
     Failed,
 }
@@ -107,6 +115,10 @@ pub struct IndexEntry {
     /// For an interrupted record: what the reader recovered.
     #[serde(default)]
     pub recovered: Option<Recovered>,
+    /// The plan has ended (the rig is safe) and the data is recorded; set
+    /// when the analysis starts.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub data_complete: bool,
 }
 
 impl IndexEntry {
@@ -137,6 +149,7 @@ impl IndexEntry {
             svg: None,
             bytes: 0,
             recovered: None,
+            data_complete: false,
         }
     }
 
@@ -228,8 +241,21 @@ impl RecordsIndex {
         let mut interrupted = Vec::new();
         for e in &mut index.entries {
             if e.outcome == RecordOutcome::Running {
-                e.outcome = RecordOutcome::Interrupted;
-                e.reason = Some("the daemon stopped during the test (killed or crashed)".into());
+                (e.outcome, e.reason) = if e.data_complete {
+                    (
+                        RecordOutcome::Unanalysed,
+                        Some(format!(
+                            "the plan ended and its data is recorded, but the daemon stopped \
+                             during the analysis; `motorbench replay {}` reruns it",
+                            e.mcap
+                        )),
+                    )
+                } else {
+                    (
+                        RecordOutcome::Interrupted,
+                        Some("the daemon stopped during the test (killed or crashed)".into()),
+                    )
+                };
                 e.recovered = Some(recover(&dir.join(&e.mcap)));
                 e.bytes = files_size(dir, e);
                 interrupted.push(e.name.clone());
@@ -272,6 +298,24 @@ impl RecordsIndex {
     /// The entry named `name`.
     pub fn get(&self, name: &str) -> Option<&IndexEntry> {
         self.entries.iter().find(|e| e.name == name)
+    }
+
+    /// Give rig-less entries (rebuilt from their files) to the rig whose
+    /// motor they recorded, when exactly one of `rigs` (name, motor id)
+    /// has that motor; saves when any changed. Returns the names adopted.
+    pub fn adopt_orphans(&mut self, rigs: &[(String, String)]) -> Result<Vec<String>, IndexError> {
+        let mut adopted = Vec::new();
+        for e in self.entries.iter_mut().filter(|e| e.rig.is_empty()) {
+            let mut owners = rigs.iter().filter(|(_, motor)| *motor == e.motor_id);
+            if let (Some((rig, _)), None) = (owners.next(), owners.next()) {
+                e.rig = rig.clone();
+                adopted.push(e.name.clone());
+            }
+        }
+        if !adopted.is_empty() {
+            self.save()?;
+        }
+        Ok(adopted)
     }
 
     /// A record name from the motor id and the start time, used by no
@@ -419,7 +463,12 @@ fn recover(path: &Path) -> Recovered {
     }
 }
 
-/// An entry for an MCAP file the index did not know.
+/// An entry for an MCAP file the index did not know (a new or a cut
+/// index), rebuilt from the record itself: its metadata (motor, kind,
+/// start), its `/bench/result` (key results: the file was finished), its
+/// abort event. A whole file with a result is `completed` (`aborted` with
+/// an abort event); an unfinished one is `interrupted`. The rig is left
+/// empty here; [`RecordsIndex::adopt_orphans`] gives it one.
 fn entry_from_file(dir: &Path, path: &Path) -> IndexEntry {
     let name = path
         .file_stem()
@@ -427,11 +476,12 @@ fn entry_from_file(dir: &Path, path: &Path) -> IndexEntry {
         .unwrap_or("unnamed")
         .to_string();
     let mcap = format!("{name}.mcap");
-    let meta = read_entries(path).ok().map(|(m, ..)| m);
+    let read = read_entries(path).ok();
+    let meta = read.as_ref().map(|(m, ..)| m);
     let modified = std::fs::metadata(path)
         .and_then(|m| m.modified())
         .unwrap_or(UNIX_EPOCH);
-    let started_at = meta.as_ref().map_or_else(
+    let started_at = meta.map_or_else(
         || humantime::format_rfc3339_seconds(modified).to_string(),
         |m| m.started_at.clone(),
     );
@@ -440,30 +490,79 @@ fn entry_from_file(dir: &Path, path: &Path) -> IndexEntry {
         .unwrap_or_else(|_| unix_s(modified));
     let report = format!("{name}.report.json");
     let svg = format!("{name}.svg");
+    let (outcome, reason, key_results) = match &read {
+        Some((_, _, entries, None)) => outcome_of(entries),
+        _ => (
+            RecordOutcome::Interrupted,
+            Some("found in the records directory without an index entry".into()),
+            None,
+        ),
+    };
+    let recovered = (outcome == RecordOutcome::Interrupted).then(|| recover(path));
+    let kind = meta.map_or_else(String::new, |m| m.kind.to_string());
     let mut e = IndexEntry {
         rig: String::new(),
-        motor_id: meta
-            .as_ref()
-            .map_or_else(String::new, |m| m.motor_id.clone()),
-        kind: meta
-            .as_ref()
-            .map_or_else(String::new, |m| m.kind.to_string()),
-        plan: String::new(),
+        motor_id: meta.map_or_else(String::new, |m| m.motor_id.clone()),
+        plan: kind.clone(),
+        kind,
         started_at,
         started_unix_s,
         finished_at: None,
-        outcome: RecordOutcome::Interrupted,
-        reason: Some("found in the records directory without an index entry".into()),
-        key_results: None,
+        outcome,
+        reason,
+        key_results,
         report: dir.join(&report).exists().then_some(report),
         svg: dir.join(&svg).exists().then_some(svg),
         mcap,
         bytes: 0,
-        recovered: Some(recover(path)),
+        recovered,
+        data_complete: false,
         name,
     };
     e.bytes = files_size(dir, &e);
     e
+}
+
+/// How a whole record ended, from its entries: its abort event, its
+/// result and the result's headline parameters.
+fn outcome_of(entries: &[Entry]) -> (RecordOutcome, Option<String>, Option<KeyResults>) {
+    let abort = entries.iter().find_map(|e| match e {
+        Entry::Event { event, .. } if event.level == EventLevel::Abort => {
+            Some(event.message.clone())
+        }
+        _ => None,
+    });
+    let result = entries.iter().rev().find_map(|e| match e {
+        Entry::Result { report, .. } => Some(report),
+        _ => None,
+    });
+    let Some(report) = result else {
+        return (
+            RecordOutcome::Failed,
+            Some("the record is whole but has no result".into()),
+            None,
+        );
+    };
+    let key_results = key_results_of(report);
+    match abort {
+        Some(reason) => (RecordOutcome::Aborted, Some(reason), key_results),
+        None => (RecordOutcome::Completed, None, key_results),
+    }
+}
+
+/// The best method's parameter values of a report (`best`, then
+/// `methods[best].params[key].value`).
+fn key_results_of(report: &serde_json::Value) -> Option<KeyResults> {
+    let method = report.get("best")?.as_str()?.to_string();
+    let params = report
+        .get("methods")?
+        .get(&method)?
+        .get("params")?
+        .as_object()?
+        .iter()
+        .filter_map(|(k, p)| Some((k.clone(), p.get("value")?.as_f64()?)))
+        .collect();
+    Some(KeyResults { method, params })
 }
 
 #[cfg(test)]
@@ -488,6 +587,7 @@ mod tests {
             svg: None,
             bytes: 0,
             recovered: None,
+            data_complete: false,
         }
     }
 

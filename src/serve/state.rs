@@ -161,10 +161,22 @@ impl Daemon {
     pub fn new(rigs: Vec<(String, RigConfig)>, records: &Path) -> Result<Daemon, IndexError> {
         let (mut index, interrupted) = RecordsIndex::open(records)?;
         for name in &interrupted {
-            let r = index.get(name).and_then(|e| e.recovered.clone());
-            tracing::warn!(
-                "record {name} was interrupted (the daemon stopped during the test); recovered: {r:?}"
-            );
+            if let Some(e) = index.get(name) {
+                tracing::warn!(
+                    "record {name} is {} ({}); recovered: {:?}",
+                    serde_json::to_string(&e.outcome).unwrap_or_default(),
+                    e.reason.as_deref().unwrap_or(""),
+                    e.recovered
+                );
+            }
+        }
+        let owners: Vec<(String, String)> = rigs
+            .iter()
+            .map(|(name, cfg)| (name.clone(), cfg.motor_id().to_string()))
+            .collect();
+        for name in index.adopt_orphans(&owners)? {
+            let rig = index.get(&name).map_or("", |e| e.rig.as_str());
+            tracing::info!("record {name} rebuilt from its file belongs to rig {rig} (its motor)");
         }
         for (name, cfg) in &rigs {
             index.apply_retention(name, &cfg.retention(), SystemTime::now())?;

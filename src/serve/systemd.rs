@@ -1,7 +1,15 @@
 //! systemd integration: logging to journald when run as a service (plain
 //! text on stderr otherwise), readiness and status notifications, and the
-//! watchdog, petted only while every running test's supervisor is
-//! healthy.
+//! watchdog.
+//!
+//! The watchdog answers one question: is the daemon stuck? It is petted by
+//! a task of its own on the runtime, so it stops when the runtime cannot
+//! schedule it, and it stops on purpose when a running test's supervisor
+//! has missed its own heartbeat or failed a safe-state command
+//! ([`Daemon::healthy`]). Nothing else stops it: identification,
+//! diagnosis and report writing run on blocking threads while the rig is
+//! already safe, and a latched trip or a full connection table is a state
+//! the API reports, not a reason for systemd to restart the daemon.
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -63,9 +71,9 @@ pub fn notify_stopping() {
 }
 
 /// When systemd set `WatchdogSec=`, pet it at half the interval while
-/// the daemon is healthy ([`Daemon::healthy`]); when it is not, stop
-/// petting, so systemd restarts the service (and each power stage's own
-/// heartbeat has already made it safe).
+/// the daemon is not stuck ([`Daemon::healthy`], see the module docs);
+/// when it is, stop petting, so systemd restarts the service (and each
+/// power stage's own heartbeat has already made it safe).
 pub fn spawn_watchdog(daemon: Arc<Daemon>) -> Option<tokio::task::JoinHandle<()>> {
     let interval = sd_notify::watchdog_enabled()?;
     let period = (interval / 2).max(Duration::from_millis(10));
@@ -78,9 +86,15 @@ pub fn spawn_watchdog(daemon: Arc<Daemon>) -> Option<tokio::task::JoinHandle<()>
             let healthy = daemon.healthy();
             if healthy {
                 let _ = sd_notify::notify(&[NotifyState::Watchdog]);
+                if !was_healthy {
+                    tracing::info!(
+                        "every running supervisor is healthy again: petting the watchdog"
+                    );
+                }
             } else if was_healthy {
                 tracing::error!(
-                    "a safety supervisor is not healthy: no longer petting the watchdog"
+                    "a running test's safety supervisor is stuck or failed a safe-state \
+                     command: no longer petting the watchdog"
                 );
             }
             was_healthy = healthy;

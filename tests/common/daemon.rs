@@ -39,6 +39,17 @@ impl Served {
     /// arguments, its log in `log_dir`; returns once it has announced its
     /// address.
     pub fn start(config: &Path, records: &Path, log_dir: &Path, extra: &[&str]) -> Served {
+        Served::start_with_env(config, records, log_dir, extra, &[])
+    }
+
+    /// [`Served::start`] with environment variables set for the daemon.
+    pub fn start_with_env(
+        config: &Path,
+        records: &Path,
+        log_dir: &Path,
+        extra: &[&str],
+        env: &[(&str, &std::ffi::OsStr)],
+    ) -> Served {
         let log = log_dir.join(format!(
             "serve-{}.log",
             std::process::id() as u128 + unique_suffix()
@@ -50,6 +61,7 @@ impl Served {
             .arg("--records")
             .arg(records)
             .args(extra)
+            .envs(env.iter().copied())
             .stdout(Stdio::piped())
             .stderr(std::fs::File::create(&log).unwrap())
             .spawn()
@@ -139,4 +151,76 @@ pub fn shipped(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("config")
         .join(name)
+}
+
+/// A stand-in for systemd's notification socket (`NOTIFY_SOCKET`): a Unix
+/// datagram socket bound by the test, with a thread noting when each
+/// `WATCHDOG=1` arrives.
+pub struct NotifySocket {
+    /// The socket's path, for `NOTIFY_SOCKET`.
+    pub path: PathBuf,
+    pets: std::sync::Arc<std::sync::Mutex<Vec<Instant>>>,
+    done: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl NotifySocket {
+    /// Bind `dir/notify.sock` and start listening.
+    pub fn bind(dir: &Path) -> NotifySocket {
+        use std::sync::atomic::Ordering;
+        let path = dir.join("notify.sock");
+        let socket = std::os::unix::net::UnixDatagram::bind(&path).unwrap();
+        // Wakes the thread now and then to see whether it should end.
+        socket
+            .set_read_timeout(Some(Duration::from_millis(200)))
+            .unwrap();
+        let pets = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+        let done = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let (p, d) = (pets.clone(), done.clone());
+        let thread = std::thread::spawn(move || {
+            let mut buf = [0u8; 512];
+            while !d.load(Ordering::Relaxed) {
+                if let Ok(n) = socket.recv(&mut buf) {
+                    if String::from_utf8_lossy(&buf[..n]).contains("WATCHDOG=1") {
+                        p.lock().unwrap().push(Instant::now());
+                    }
+                }
+            }
+        });
+        NotifySocket {
+            path,
+            pets,
+            done,
+            thread: Some(thread),
+        }
+    }
+
+    /// `WATCHDOG=1` messages so far.
+    pub fn pets(&self) -> usize {
+        self.pets.lock().unwrap().len()
+    }
+
+    /// The largest time between two `WATCHDOG=1` messages so far.
+    pub fn largest_gap(&self) -> Duration {
+        let pets = self.pets.lock().unwrap();
+        pets.windows(2)
+            .map(|w| w[1] - w[0])
+            .max()
+            .unwrap_or_default()
+    }
+
+    /// The gaps between consecutive `WATCHDOG=1` messages so far.
+    pub fn gaps(&self) -> Vec<Duration> {
+        let pets = self.pets.lock().unwrap();
+        pets.windows(2).map(|w| w[1] - w[0]).collect()
+    }
+}
+
+impl Drop for NotifySocket {
+    fn drop(&mut self) {
+        self.done.store(true, std::sync::atomic::Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
 }
