@@ -515,14 +515,7 @@ fn replay(
     diagnose: Option<Option<&Path>>,
 ) -> Result<(), Failure> {
     let record = read_mcap(log).map_err(bad_input)?;
-    if let Some(r) = &record.recovery {
-        eprintln!(
-            "motorbench: {} is damaged (truncated or unfinished): recovered {} messages before: {}",
-            log.display(),
-            r.messages,
-            r.reason
-        );
-    }
+    warn_if_damaged(log, &record);
     if !record.operating_points.is_empty() {
         // An induction-machine record: the circuit its configuration named
         // (else single-fe), the nameplate's connection.
@@ -604,7 +597,17 @@ fn load_record(
     nameplate: Option<&Path>,
     frequency: Option<f64>,
 ) -> Result<Record, Failure> {
-    load_record_files(kind, files, nameplate, frequency).map_err(bad_input)
+    let record = load_record_files(kind, files, nameplate, frequency).map_err(bad_input)?;
+    warn_if_damaged(&files[0], &record);
+    Ok(record)
+}
+
+/// Say on stderr how much of a damaged record was recovered, and where
+/// the damage is.
+fn warn_if_damaged(path: &Path, record: &Record) {
+    if let Some(r) = &record.recovery {
+        eprintln!("motorbench: {} is damaged: {r}", path.display());
+    }
 }
 
 /// Options of induction-machine identification from the command line.

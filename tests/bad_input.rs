@@ -2,8 +2,11 @@
 //! and field where there is one), exit code 2, never a panic.
 
 mod common;
+mod mcap_corpus;
 
 use std::path::Path;
+
+use motorbench::record::{read_mcap, RecordError};
 
 fn run_bad(args: &[&str]) -> String {
     let out = common::motorbench(args);
@@ -288,4 +291,138 @@ fn a_huge_bad_csv_field_is_cut_in_the_message() {
     );
     assert!(err.len() < 300, "{} bytes: {}", err.len(), &err[..300]);
     assert!(err.contains(&format!("…({} bytes)", 10 << 20)), "{err}");
+}
+
+/// What reading a corrupted copy gave: the offset the reader names, and
+/// the record when it recovered one.
+fn read_corrupted(path: &Path) -> (u64, Option<motorbench::record::Record>) {
+    let name = path.file_name().unwrap().to_str().unwrap();
+    match read_mcap(path) {
+        Ok(record) => {
+            let r = record
+                .recovery
+                .clone()
+                .unwrap_or_else(|| panic!("{name}: read as intact"));
+            assert!(r.messages > 0, "{name}: {r:?}");
+            assert!(
+                r.reason.contains(&format!("byte {} of", r.offset)),
+                "{name}: {r:?}"
+            );
+            (r.offset, Some(record))
+        }
+        Err(e) => {
+            let text = e.to_string();
+            let RecordError::Damaged { offset, .. } = e else {
+                panic!("{name}: not refused as damaged: {text}");
+            };
+            assert!(
+                text.contains(name) && text.contains(&format!("byte {offset} of")),
+                "{name}: {text}"
+            );
+            assert_eq!(text.lines().count(), 1, "{text}");
+            (offset, None)
+        }
+    }
+}
+
+#[test]
+fn corrupted_mcap_corpus_is_recovered_up_to_the_damage_or_refused_with_its_offset() {
+    let seed = mcap_corpus::seed();
+    let dir = tempfile::tempdir().unwrap();
+    let cases = mcap_corpus::write(mcap_corpus::corpus(&seed, 40, 15), dir.path());
+    // Recovered records by how many messages they kept (many cases keep
+    // the same prefix): one of each is identified.
+    let mut recovered = std::collections::BTreeMap::new();
+    let mut refused = 0;
+    for (case, path) in &cases {
+        let (offset, record) = read_corrupted(path);
+        assert!(offset <= case.bytes.len() as u64, "{}", case.name);
+        if let Some(at) = case.damaged_record {
+            assert_eq!(offset, at, "{}: the damaged record", case.name);
+        }
+        if let Some(record) = record {
+            let messages = record.recovery.as_ref().unwrap().messages;
+            recovered.insert(messages, (case.name.clone(), record));
+        } else {
+            refused += 1;
+        }
+    }
+    assert!(
+        refused > 0 && recovered.len() > 1,
+        "{refused} {:?}",
+        recovered.keys()
+    );
+    for (name, record) in recovered.values() {
+        // Identification of what was recovered runs and says the record
+        // was damaged, and where.
+        let id = motorbench::identify::identify_dc(record);
+        assert!(
+            id.report
+                .warnings
+                .iter()
+                .any(|w| w.contains("damaged at byte")),
+            "{name}: {:?}",
+            id.report.warnings
+        );
+    }
+}
+
+#[test]
+fn a_chunk_with_a_wrong_crc_is_reported_not_replayed_as_identical() {
+    let seed = mcap_corpus::seed();
+    let dir = tempfile::tempdir().unwrap();
+    let intact = dir.path().join("intact.mcap");
+    std::fs::write(&intact, &seed).unwrap();
+    let out = common::motorbench(&["replay", "--no-diagnose", intact.to_str().unwrap()]);
+    let (_, stderr) = common::text(&out);
+    assert!(stderr.contains("identical"), "the seed replays: {stderr}");
+
+    let cases = mcap_corpus::forged(&seed)
+        .into_iter()
+        .filter(|c| c.name.starts_with("chunk-crc-") || c.name.starts_with("chunk-content-"));
+    for (case, path) in mcap_corpus::write(cases.collect(), dir.path()) {
+        let at = case.damaged_record.unwrap();
+        let out = common::motorbench(&["replay", "--no-diagnose", path.to_str().unwrap()]);
+        let (_, stderr) = common::text(&out);
+        assert!(!stderr.contains("panicked"), "{stderr}");
+        assert!(
+            stderr.contains("damaged") && stderr.contains(&format!("byte {at} of")),
+            "{}: {stderr}",
+            case.name
+        );
+        assert!(!stderr.contains("identical"), "{}: {stderr}", case.name);
+        assert!(matches!(out.status.code(), Some(0 | 4)), "{stderr}");
+    }
+}
+
+#[test]
+fn huge_lengths_in_an_mcap_are_refused_or_recovered_by_every_command() {
+    let seed = mcap_corpus::seed();
+    let dir = tempfile::tempdir().unwrap();
+    let cases = mcap_corpus::forged(&seed)
+        .into_iter()
+        .filter(|c| c.name.starts_with("message-len-") || c.name.starts_with("len-max-op06"));
+    for (case, path) in mcap_corpus::write(cases.collect(), dir.path()) {
+        let at = case.damaged_record.unwrap();
+        let file = path.to_str().unwrap();
+        for args in [
+            &["replay", "--no-diagnose", file][..],
+            &["identify", "--kind", "dc_step", file],
+            &["diagnose", "--kind", "dc_step", file],
+        ] {
+            let out = common::motorbench(args);
+            let (_, stderr) = common::text(&out);
+            assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+            // Refused (2), or recovered and identified (0) or not (4).
+            assert!(
+                matches!(out.status.code(), Some(0 | 2 | 4)),
+                "{args:?}: {:?} {stderr}",
+                out.status
+            );
+            assert!(
+                stderr.contains(&format!("byte {at} of")),
+                "{args:?}: {stderr}"
+            );
+        }
+    }
 }

@@ -60,6 +60,9 @@ pub fn run_diagnose(args: DiagnoseArgs) -> u8 {
         Ok(r) => r,
         Err(e) => return fail(2, &e),
     };
+    if let Some(r) = &record.recovery {
+        eprintln!("motorbench: {} is damaged: {r}", args.files[0].display());
+    }
     let options = DiagnoseOptions {
         connection: args.connection,
     };

@@ -42,6 +42,19 @@ pub enum RecordError {
         reason: String,
     },
 
+    /// An MCAP file is damaged (cut, a flipped bit, a length or CRC that
+    /// does not match) where nothing usable can be read before the damage.
+    #[error("{}: {reason}", path.display())]
+    Damaged {
+        /// The file.
+        path: PathBuf,
+        /// The byte offset of the record (or chunk) found damaged.
+        offset: u64,
+        /// Where the damage is and what is wrong there, e.g. `damaged at
+        /// byte 8 of 1200 (0.7 % read): …`.
+        reason: String,
+    },
+
     /// A message in an MCAP file does not decode as its topic's schema.
     #[error("{}: topic {topic} at log_time {log_time}: {reason}", path.display())]
     BadMessage {

@@ -14,6 +14,7 @@ mod csv;
 mod csv_im;
 mod error;
 mod files;
+mod mcap_walk;
 mod reader;
 pub mod schema;
 mod types;

@@ -1,10 +1,16 @@
 //! Reads a motorbench MCAP file back into entries and a [`Record`].
 //!
 //! The file is read in one linear pass over its records (chunks are
-//! decompressed on the way), so a truncated file, e.g. from a killed
-//! process, still yields everything before the damage: the read error there
-//! is taken as the end of the data and reported in [`Record::recovery`].
-//! No index or summary is needed.
+//! decompressed on the way, see [`super::mcap_walk`]: every length is
+//! bounded by the file's size, every chunk's CRC is checked before its
+//! records are used), so a damaged file, e.g. cut by a killed process or
+//! with a flipped bit, still yields everything before the damage: the
+//! damage is taken as the end of the data and reported, with its byte
+//! offset, in [`Record::recovery`]. No index or summary is needed.
+//!
+//! Refused as damaged ([`RecordError::Damaged`], naming the offset): a
+//! file damaged before its MCAP header or its `motorbench.test` metadata,
+//! and (by [`read_mcap`]) one with not a single message before the damage.
 //!
 //! Refused: files without the `motorbench.test` metadata record, with a
 //! `schema_version` other than [`SCHEMA_VERSION`], with a missing metadata
@@ -26,6 +32,7 @@ use serde::Deserialize;
 
 use super::builder::RecordBuilder;
 use super::error::RecordError;
+use super::mcap_walk::{walk_records, Damage};
 use super::schema::{
     is_sample_topic_for, COMMAND_PREFIX, MESSAGE_ENCODING, METADATA_NAME, SENSOR_PREFIX,
     TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT, TOPIC_SUPPLY_LIMIT,
@@ -57,8 +64,18 @@ struct SamplePayload {
 
 /// Reads a record file into a [`Record`] (through [`RecordBuilder`], like
 /// the live bench).
+///
+/// A damaged file with not one message before the damage is refused
+/// ([`RecordError::Damaged`]): there is nothing to identify.
 pub fn read_mcap(path: &Path) -> Result<Record, RecordError> {
     let (meta, channels, entries, recovery) = read_entries(path)?;
+    if let Some(r) = recovery.as_ref().filter(|r| r.messages == 0) {
+        return Err(RecordError::Damaged {
+            path: path.to_path_buf(),
+            offset: r.offset,
+            reason: format!("{}; not one message before the damage", r.reason),
+        });
+    }
     let mut builder = RecordBuilder::new(Some(meta), channels);
     for e in &entries {
         builder.push(e);
@@ -72,58 +89,72 @@ pub fn read_mcap(path: &Path) -> Result<Record, RecordError> {
 /// See the module docs for what is refused.
 pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
     let bytes = std::fs::read(path).map_err(|e| RecordError::io(path, e))?;
-    let records =
-        mcap::read::ChunkFlattener::new(&bytes).map_err(|e| RecordError::mcap(path, e))?;
 
     let mut state = Reading::new(path);
     let mut header_seen = false;
-    let mut past_data_end = false;
     let mut metadata: Option<BTreeMap<String, String>> = None;
-    let mut damage: Option<String> = None;
     // The first content error; reported only if the metadata is in order
     // (a file of another schema_version is refused as such).
     let mut failure: Option<RecordError> = None;
-
-    for record in records {
-        let record = match record {
-            Ok(r) => r,
-            Err(e) if !header_seen => return Err(RecordError::mcap(path, e)),
-            Err(e) => {
-                damage = Some(e.to_string());
-                break;
-            }
-        };
-        match record {
-            McapRecord::Header(_) => header_seen = true,
-            McapRecord::Metadata(m) if m.name == METADATA_NAME && metadata.is_none() => {
-                metadata = Some(m.metadata);
-            }
-            // The summary repeats schemas and channels; read on only to
-            // notice damage at the end of the file.
-            _ if past_data_end || failure.is_some() => {}
-            McapRecord::DataEnd(_) => past_data_end = true,
-            other => {
-                if let Err(e) = state.take(other) {
-                    failure = Some(e);
-                }
+    let damage = walk_records(&bytes, &mut |record| match record {
+        McapRecord::Header(_) => header_seen = true,
+        McapRecord::Metadata(m) if m.name == METADATA_NAME && metadata.is_none() => {
+            metadata = Some(m.metadata);
+        }
+        _ if failure.is_some() => {}
+        other => {
+            if let Err(e) = state.take(other) {
+                failure = Some(e);
             }
         }
+    });
+    let file_len = bytes.len() as u64;
+    drop(bytes);
+    let damaged = |d: &Damage, context: &str| RecordError::Damaged {
+        path: path.to_path_buf(),
+        offset: d.offset,
+        reason: format!("{}{context}", damage_text(d, file_len)),
+    };
+    if let (Some(d), false) = (&damage, header_seen) {
+        return Err(damaged(d, " (not an MCAP file?)"));
     }
 
     let Some(metadata) = metadata else {
-        let reason = match &damage {
-            Some(d) => format!("no {METADATA_NAME} metadata record (the file is damaged: {d})"),
-            None => format!("no {METADATA_NAME} metadata record"),
-        };
-        return Err(RecordError::not_motorbench(path, reason));
+        return Err(match &damage {
+            Some(d) => damaged(d, &format!(" (no {METADATA_NAME} metadata before it)")),
+            None => {
+                RecordError::not_motorbench(path, format!("no {METADATA_NAME} metadata record"))
+            }
+        });
     };
-    let meta = meta_from(path, &metadata)?;
-    if let Some(e) = failure {
-        return Err(e);
-    }
+    // Damage may be what broke the metadata or a message: say both.
+    let meta = match (meta_from(path, &metadata), failure, &damage) {
+        (Ok(meta), None, _) => meta,
+        (Err(e), _, Some(d)) | (Ok(_), Some(e), Some(d)) => {
+            let text = e.to_string();
+            let prefix = format!("{}: ", path.display());
+            let what = text.strip_prefix(&prefix).unwrap_or(&text);
+            return Err(damaged(d, &format!(" (and before it: {what})")));
+        }
+        (Err(e), _, None) | (Ok(_), Some(e), None) => return Err(e),
+    };
     let (channels, entries, messages) = state.finish();
-    let recovery = damage.map(|reason| Recovery { messages, reason });
+    let recovery = damage.map(|d| Recovery {
+        messages,
+        offset: d.offset,
+        reason: damage_text(&d, file_len),
+    });
     Ok((meta, channels, entries, recovery))
+}
+
+/// `damaged at byte 8 of 1200 (0.7 % read): <reason>`.
+fn damage_text(d: &Damage, file_len: u64) -> String {
+    format!(
+        "damaged at byte {} of {file_len} ({:.1} % read): {}",
+        d.offset,
+        100.0 * d.offset as f64 / file_len.max(1) as f64,
+        d.reason
+    )
 }
 
 /// Channels and entries read so far.

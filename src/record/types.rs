@@ -335,13 +335,24 @@ pub struct DcSegment {
     pub speed: Vec<f64>,
 }
 
-/// How much of a damaged (truncated) file could be read.
+/// How much of a damaged (truncated, bit-flipped) file could be read.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Recovery {
     /// Messages read before the damage.
     pub messages: u64,
-    /// What the reader reported at the damage.
+    /// The byte offset in the file of the record (or chunk) found damaged;
+    /// nothing from there on was read.
+    pub offset: u64,
+    /// Where the damage is, how much of the file was read and what the
+    /// reader found there, on one line.
     pub reason: String,
+}
+
+impl std::fmt::Display for Recovery {
+    /// `1234 messages recovered; damaged at byte 5678 of 9000 (63.1 % read): …`
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{} messages recovered; {}", self.messages, self.reason)
+    }
 }
 
 /// A whole record, ready for identification.
