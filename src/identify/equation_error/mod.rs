@@ -33,8 +33,8 @@ mod rows;
 use nalgebra::{SMatrix, SVector};
 
 use super::levels::white_noise;
-use super::{is_coastdown, nrmse, SimulatedSegment, SpeedReading};
 use super::output_error::{simulate_series, SegmentInput, SegmentStart};
+use super::{is_coastdown, nrmse, SimulatedSegment, SpeedReading};
 use crate::model::DcParams;
 use crate::record::{DcSegment, Record, SegmentKind};
 use crate::report::{MethodReport, ParamEstimate};
