@@ -36,6 +36,42 @@ pub struct CaseScore {
     pub reaches_noise_floor: bool,
     /// Why the diagnosis failed, if it did.
     pub error: Option<String>,
+    /// Who simulated the case (the truth's `source`).
+    #[serde(default)]
+    pub source: String,
+    /// The case's plan (the truth's `plan`).
+    #[serde(default)]
+    pub plan: String,
+}
+
+/// The bar's figures over a group of cases.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Tally {
+    /// Cases.
+    pub cases: usize,
+    /// Right verdicts.
+    pub right: usize,
+    /// `none` cases.
+    pub nones: usize,
+    /// `none` cases that got an effect named.
+    pub false_alarms: usize,
+    /// Right verdicts with gap_after within twice the noise floor.
+    pub floor_reached: usize,
+    /// Cases the diagnosis refused (an error instead of a verdict).
+    pub refused: usize,
+}
+
+impl Tally {
+    fn add(&mut self, c: &CaseScore) {
+        self.cases += 1;
+        self.right += usize::from(c.right);
+        if c.truth == "none" {
+            self.nones += 1;
+            self.false_alarms += usize::from(c.verdict != "none" && c.error.is_none());
+        }
+        self.floor_reached += usize::from(c.right && c.reaches_noise_floor);
+        self.refused += usize::from(c.error.is_some());
+    }
 }
 
 /// A whole suite's score.
@@ -58,11 +94,20 @@ impl SuiteScore {
         self.right() as f64 / self.cases.len().max(1) as f64
     }
 
-    /// `none` cases, and how many of them got an effect named (false alarms).
+    /// `none` cases, and how many of them got an effect named (false
+    /// alarms; a refused record names none and counts under [`Self::refused`]).
     pub fn false_alarms(&self) -> (usize, usize) {
         let nones: Vec<_> = self.cases.iter().filter(|c| c.truth == "none").collect();
-        let alarms = nones.iter().filter(|c| c.verdict != "none").count();
+        let alarms = nones
+            .iter()
+            .filter(|c| c.verdict != "none" && c.error.is_none())
+            .count();
         (alarms, nones.len())
+    }
+
+    /// Cases the diagnosis refused (an error instead of a verdict).
+    pub fn refused(&self) -> usize {
+        self.cases.iter().filter(|c| c.error.is_some()).count()
     }
 
     /// Right verdicts with gap_after within twice the noise floor, of right verdicts.
@@ -78,6 +123,26 @@ impl SuiteScore {
     pub fn region_agreement(&self) -> (usize, usize) {
         let compared: Vec<_> = self.cases.iter().filter_map(|c| c.region_agrees).collect();
         (compared.iter().filter(|a| **a).count(), compared.len())
+    }
+
+    /// The bar's figures per source (`"<source> all"`) and per source
+    /// and plan (`"<source> <plan>"`), plans named `<machine>:<plan>`.
+    pub fn per_source_and_plan(&self) -> BTreeMap<(String, String), Tally> {
+        let mut table: BTreeMap<(String, String), Tally> = BTreeMap::new();
+        for c in &self.cases {
+            let source = if c.source.is_empty() {
+                super::OWN_SOURCE.to_string()
+            } else {
+                c.source.clone()
+            };
+            let plan = format!("{} {}", machine(&c.kind), c.plan);
+            table
+                .entry((source.clone(), " all".to_string()))
+                .or_default()
+                .add(c);
+            table.entry((source, plan)).or_default().add(c);
+        }
+        table
     }
 
     /// Per withheld effect: (cases, right, what was named instead).
@@ -119,6 +184,7 @@ impl fmt::Display for SuiteScore {
         )?;
         let (alarms, nones) = self.false_alarms();
         writeln!(f, "false alarms on none:     {alarms}/{nones}")?;
+        writeln!(f, "refused records:          {}/{n}", self.refused())?;
         let (agree, compared) = self.region_agreement();
         writeln!(
             f,
@@ -131,6 +197,23 @@ impl fmt::Display for SuiteScore {
             "gap_after ≤ 2×noise floor: {floor}/{right} right verdicts ({:.1} %)",
             pct(floor, right)
         )?;
+        writeln!(
+            f,
+            "\n{:<20} {:<18} {:>5} {:>5} {:>11} {:>11} {:>7}",
+            "source", "plan", "cases", "right", "alarms/none", "floor/right", "refused"
+        )?;
+        for ((source, plan), t) in self.per_source_and_plan() {
+            writeln!(
+                f,
+                "{source:<20} {:<18} {:>5} {:>5} {:>11} {:>11} {:>7}",
+                plan.trim(),
+                t.cases,
+                t.right,
+                format!("{}/{}", t.false_alarms, t.nones),
+                format!("{}/{}", t.floor_reached, t.right),
+                t.refused
+            )?;
+        }
         writeln!(
             f,
             "\n{:<28} {:>5} {:>5}  named instead",
@@ -147,8 +230,11 @@ impl fmt::Display for SuiteScore {
         for c in failed {
             writeln!(
                 f,
-                "{}: diagnosis failed: {}",
+                "{} ({} {}, {}): diagnosis failed: {}",
                 c.id,
+                c.source,
+                c.plan,
+                c.truth,
                 c.error.as_deref().unwrap_or("")
             )?;
         }
@@ -213,6 +299,8 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
                     noise_floor: t.noise_floor,
                     reaches_noise_floor: d.verdict.gap_after <= 2.0 * t.noise_floor,
                     error: None,
+                    source: t.source.clone(),
+                    plan: t.plan.clone(),
                 }
             }
             Err(e) => CaseScore {
@@ -226,6 +314,8 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
                 noise_floor: t.noise_floor,
                 reaches_noise_floor: false,
                 error: Some(e.to_string()),
+                source: t.source.clone(),
+                plan: t.plan.clone(),
             },
         });
     }
@@ -233,4 +323,58 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
         seed: manifest.seed,
         cases,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn case(source: &str, plan: &str, truth: &str, verdict: &str, floor: bool) -> CaseScore {
+        let refused = verdict == "error";
+        CaseScore {
+            id: format!("{source}-{plan}-{truth}"),
+            kind: SegmentKind::DcStep.as_str().to_string(),
+            truth: truth.into(),
+            verdict: verdict.into(),
+            right: truth == verdict,
+            region_agrees: None,
+            gap_after: if refused { f64::NAN } else { 0.01 },
+            noise_floor: 0.01,
+            reaches_noise_floor: floor,
+            error: refused.then(|| "no start values".to_string()),
+            source: source.into(),
+            plan: plan.into(),
+        }
+    }
+
+    #[test]
+    fn the_table_keeps_sources_and_plans_apart_and_counts_refusals() {
+        let score = SuiteScore {
+            seed: 1,
+            cases: vec![
+                case("motorbench", "staircase", "brush_drop", "brush_drop", true),
+                case("motorbench", "staircase", "none", "error", false),
+                case("motorbench", "ramp", "none", "sensor_lag", false),
+                case("gym-electric-motor", "prbs", "none", "none", true),
+                case("gym-electric-motor", "prbs", "brush_drop", "none", false),
+            ],
+        };
+        let t = score.per_source_and_plan();
+        let own = t[&("motorbench".to_string(), " all".to_string())];
+        assert_eq!((own.cases, own.right, own.refused), (3, 1, 1));
+        assert_eq!((own.false_alarms, own.nones), (1, 2));
+        let stairs = t[&("motorbench".to_string(), "DC staircase".to_string())];
+        assert_eq!(
+            (stairs.cases, stairs.floor_reached, stairs.refused),
+            (2, 1, 1)
+        );
+        let gem = t[&("gym-electric-motor".to_string(), "DC prbs".to_string())];
+        assert_eq!((gem.cases, gem.right, gem.false_alarms), (2, 1, 0));
+        // A refusal is no false alarm, but it is not right either.
+        assert_eq!(score.false_alarms(), (1, 3));
+        assert_eq!(score.refused(), 1);
+        let text = score.to_string();
+        assert!(text.contains("gym-electric-motor   DC prbs"), "{text}");
+        assert!(text.contains("refused records:          1/5"), "{text}");
+    }
 }
