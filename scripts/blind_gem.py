@@ -206,7 +206,6 @@ def simulate(rng, m, plan, t_il, hold, sensors):
             else:
                 u = 0.0
             applied = u
-            w_start = state["w"]
             theta0 = state["theta"]
             for _ in range(SUB):
                 i0, w0 = state["i"], state["w"]
@@ -217,7 +216,6 @@ def simulate(rng, m, plan, t_il, hold, sensors):
                 state["i_f"] = filt(state["i_f"], i0, i1, tau_i, TAU)
                 state["w_f"] = filt(state["w_f"], w0, w1, tau_w, TAU) if tau_w else w1
                 state["i"], state["w"] = i1, w1
-            del w_start
             t += DT
             w_mean = (state["theta"] - theta0) / DT
             if q_theta:

@@ -9,6 +9,8 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::suite::{read_json, Manifest, TruthFile};
+use super::CaseTruth;
+use crate::diagnose::report::Diagnosis;
 use crate::diagnose::{diagnose, DiagnoseOptions};
 use crate::record::{load_record_files, SegmentKind};
 
@@ -42,7 +44,14 @@ pub struct CaseScore {
     /// The case's plan (the truth's `plan`).
     #[serde(default)]
     pub plan: String,
+    /// Relative error of the DC model's K and Ra (the verdict's refitted
+    /// values, the nominal fit's for `none`) against the truth's nominal.
+    #[serde(default)]
+    pub param_error: BTreeMap<String, f64>,
 }
+
+/// Bounds of the parameter check: K within 1 %, Ra within 3 % of the truth.
+pub const PARAM_BOUNDS: [(&str, f64); 2] = [("K", 0.01), ("Ra", 0.03)];
 
 /// The bar's figures over a group of cases.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -59,6 +68,10 @@ pub struct Tally {
     pub floor_reached: usize,
     /// Cases the diagnosis refused (an error instead of a verdict).
     pub refused: usize,
+    /// DC cases with K and Ra compared.
+    pub params_compared: usize,
+    /// Of those, K within 1 % and Ra within 3 % of the truth.
+    pub params_within: usize,
 }
 
 impl Tally {
@@ -71,6 +84,14 @@ impl Tally {
         }
         self.floor_reached += usize::from(c.right && c.reaches_noise_floor);
         self.refused += usize::from(c.error.is_some());
+        if !c.param_error.is_empty() {
+            self.params_compared += 1;
+            self.params_within += usize::from(
+                PARAM_BOUNDS
+                    .iter()
+                    .all(|(k, b)| c.param_error.get(*k).is_some_and(|e| e.abs() <= *b)),
+            );
+        }
     }
 }
 
@@ -199,19 +220,20 @@ impl fmt::Display for SuiteScore {
         )?;
         writeln!(
             f,
-            "\n{:<20} {:<18} {:>5} {:>5} {:>11} {:>11} {:>7}",
-            "source", "plan", "cases", "right", "alarms/none", "floor/right", "refused"
+            "\n{:<20} {:<18} {:>5} {:>5} {:>11} {:>11} {:>7} {:>11}",
+            "source", "plan", "cases", "right", "alarms/none", "floor/right", "refused", "K1%,Ra3%"
         )?;
         for ((source, plan), t) in self.per_source_and_plan() {
             writeln!(
                 f,
-                "{source:<20} {:<18} {:>5} {:>5} {:>11} {:>11} {:>7}",
+                "{source:<20} {:<18} {:>5} {:>5} {:>11} {:>11} {:>7} {:>11}",
                 plan.trim(),
                 t.cases,
                 t.right,
                 format!("{}/{}", t.false_alarms, t.nones),
                 format!("{}/{}", t.floor_reached, t.right),
-                t.refused
+                t.refused,
+                format!("{}/{}", t.params_within, t.params_compared)
             )?;
         }
         writeln!(
@@ -240,6 +262,27 @@ impl fmt::Display for SuiteScore {
         }
         Ok(())
     }
+}
+
+/// K's and Ra's relative error (DC cases; empty for IM): the verdict's
+/// refitted value where it has one, else the nominal fit's.
+fn param_error(d: &Diagnosis, t: &CaseTruth) -> BTreeMap<String, f64> {
+    if d.kind == SegmentKind::ImSlipSweep.as_str() {
+        return BTreeMap::new();
+    }
+    PARAM_BOUNDS
+        .iter()
+        .filter_map(|(key, _)| {
+            let fitted = d
+                .verdict
+                .corrected_params
+                .get(*key)
+                .map(|c| c.corrected)
+                .or_else(|| d.nominal.params.get(*key).map(|p| p.value))?;
+            let truth = *t.nominal.get(*key)?;
+            Some((key.to_string(), fitted / truth - 1.0))
+        })
+        .collect()
 }
 
 /// Diagnose every case of the suite in `dir`, then score against its
@@ -301,6 +344,7 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
                     error: None,
                     source: t.source.clone(),
                     plan: t.plan.clone(),
+                    param_error: param_error(&d, t),
                 }
             }
             Err(e) => CaseScore {
@@ -316,6 +360,7 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
                 error: Some(e.to_string()),
                 source: t.source.clone(),
                 plan: t.plan.clone(),
+                param_error: BTreeMap::new(),
             },
         });
     }
@@ -344,6 +389,11 @@ mod tests {
             error: refused.then(|| "no start values".to_string()),
             source: source.into(),
             plan: plan.into(),
+            param_error: if refused {
+                BTreeMap::new()
+            } else {
+                BTreeMap::from([("K".to_string(), 0.005), ("Ra".to_string(), 0.05)])
+            },
         }
     }
 
