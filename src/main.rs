@@ -634,6 +634,7 @@ fn identify(
         let id = identify_im(&record, im.connection, im.model);
         return print_im(&id, json, svg);
     }
+    motorbench::identify::check_plausible_files(&record, kind, files).map_err(bad_input)?;
     let id = identify_dc(&record);
     print_identification(&id, json, None);
     write_svg(svg, &record, &id)?;

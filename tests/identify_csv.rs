@@ -2,6 +2,8 @@
 //! as on the MCAP of the same data.
 
 mod common;
+#[path = "common/dc_shapes.rs"]
+mod dc_shapes;
 
 use std::fmt::Write;
 
@@ -63,4 +65,35 @@ async fn csv_files_identify_like_the_mcap_they_came_from() {
         assert!(v["methods"].get(method).is_some(), "{method} missing");
     }
     assert_eq!(v["methods"]["moments"]["applies"], true);
+}
+
+#[test]
+fn the_seed_papers_table2_test_is_identified_from_csv() {
+    // 60 V → 248 V, 0.31 s per level: no level settles, yet K and Ra come
+    // out (before, every method refused and the command exited 4).
+    let dir = tempfile::tempdir().unwrap();
+    let (name, truth, drive) = dc_shapes::shapes().swap_remove(0);
+    assert_eq!(name, "table2");
+    let record = dc_shapes::record(&truth, &drive, 1);
+    let files = dc_shapes::write_csvs(&record, dir.path());
+    let mut args = vec!["identify", "--kind", "dc_step", "--json"];
+    args.extend(files.iter().map(|f| f.to_str().unwrap()));
+    let out = common::motorbench(&args);
+    let (stdout, stderr) = common::text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    // The same report as identifying the record in memory.
+    let direct = motorbench::identify::identify_dc(&record);
+    assert_eq!(v, serde_json::to_value(&direct.report).unwrap());
+    for method in ["equation_error", "output_error"] {
+        let m = &v["methods"][method];
+        assert_eq!(m["applies"], true, "{method}: {m}");
+        let k = m["params"]["K"]["value"].as_f64().unwrap();
+        let ra = m["params"]["Ra"]["value"].as_f64().unwrap();
+        assert!(((k - truth.k) / truth.k).abs() < 0.01, "{method} K {k}");
+        assert!(
+            ((ra - truth.ra) / truth.ra).abs() < 0.03,
+            "{method} Ra {ra}"
+        );
+    }
 }

@@ -212,3 +212,41 @@ async fn real_poles_pasek_and_moments_agree_with_the_truth() {
         }
     }
 }
+
+#[path = "common/dc_shapes.rs"]
+mod dc_shapes;
+
+mod shapes {
+    //! Records motorbench's bench does not make (short holds, a ringing
+    //! motor, a ramp, a PRBS, a closed speed loop; 12-bit ADC, 1024-line
+    //! encoder): equation error applies to each and recovers K and Ra.
+    //! (The whole identification and the diagnosis of the same records run
+    //! on the release binary in tests/diagnose_cli.rs.)
+
+    use super::dc_shapes;
+
+    use motorbench::identify::{equation_error, SpeedReading};
+
+    #[test]
+    fn equation_error_gets_k_within_1_percent_and_ra_within_3_on_every_shape() {
+        let mut failures = Vec::new();
+        for (name, truth, drive) in dc_shapes::shapes() {
+            let record = dc_shapes::record(&truth, &drive, 7);
+            let fit = equation_error(&record, SpeedReading::IntervalMean)
+                .unwrap_or_else(|e| panic!("{name}: {e}"));
+            let p = fit.params;
+            p.validate().unwrap_or_else(|e| panic!("{name}: {e:?}"));
+            let (k, ra) = ((p.k - truth.k) / truth.k, (p.ra - truth.ra) / truth.ra);
+            eprintln!("{name:>15}: K {:+.3} %, Ra {:+.3} %", 100.0 * k, 100.0 * ra);
+            if k.abs() > 0.01 || ra.abs() > 0.03 {
+                failures.push(format!(
+                    "{name}: K {:+.2} %, Ra {:+.2} %",
+                    100.0 * k,
+                    100.0 * ra
+                ));
+            }
+            assert!(fit.validation_nrmse.is_some(), "{name}: several segments");
+        }
+        assert!(failures.is_empty(), "{failures:?}");
+    }
+}

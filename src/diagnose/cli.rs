@@ -60,6 +60,11 @@ pub fn run_diagnose(args: DiagnoseArgs) -> u8 {
         Ok(r) => r,
         Err(e) => return fail(2, &e),
     };
+    if args.kind != SegmentKind::ImSlipSweep {
+        if let Err(e) = crate::identify::check_plausible_files(&record, args.kind, &args.files) {
+            return fail(2, &e);
+        }
+    }
     let options = DiagnoseOptions {
         connection: args.connection,
     };

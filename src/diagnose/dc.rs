@@ -637,7 +637,13 @@ fn prepare_runs<'a>(
         let at_rest = seg.speed[0].abs() <= 0.01 * speed_scale;
         let start = match prev {
             Some(p) if !prev_coast && p.voltage.len() >= 4 && !at_rest => {
-                Start::Settled(tail_mean(&p.voltage))
+                match crate::identify::settled_level(p) {
+                    Some(level) if !level.settled => {
+                        let (i0, w0) = crate::identify::state_at_end(p);
+                        Start::State(i0, w0)
+                    }
+                    _ => Start::Settled(tail_mean(&p.voltage)),
+                }
             }
             Some(_) if coast => {
                 warnings.push(format!(

@@ -60,6 +60,9 @@ pub enum Start {
     /// Settled at the given voltage (the level before); the first sample
     /// is that steady state.
     Settled(f64),
+    /// In a measured state (current, A; speed, rad/s) at the first sample:
+    /// after a level that had not settled.
+    State(f64, f64),
 }
 
 /// One recorded segment ready to simulate.
@@ -290,10 +293,15 @@ impl AugModel {
                 out(if run.coast { 0.0 } else { s.0 }, s.1);
                 s
             }
+            Start::State(i0, w0) => {
+                let i0 = if run.coast { 0.0 } else { i0 };
+                out(i0, w0);
+                (i0, w0)
+            }
         };
         let first = match run.start {
             Start::Rest => 0,
-            Start::Settled(_) => 1,
+            Start::Settled(_) | Start::State(..) => 1,
         };
         if run.coast {
             for _ in first..u.len() {
@@ -416,6 +424,12 @@ impl AugModel {
                     twist,
                     0.0,
                 );
+                out(x[0], x[1]);
+                1
+            }
+            Start::State(i0, w0) => {
+                let twist = (p.f * w0 + p.tst * w0.signum()) / ks;
+                x = SVector::<f64, 5>::new(if run.coast { 0.0 } else { i0 }, w0, w0, twist, 0.0);
                 out(x[0], x[1]);
                 1
             }

@@ -34,19 +34,8 @@ pub fn settled_level(seg: &DcSegment) -> Option<SettledLevel> {
     {
         return None;
     }
-    let t_end = seg.time[n - 1];
-    let by_count = n - (n / 4).max(MIN_TAIL);
-    let by_time = seg.time.partition_point(|&t| t < t_end - 1.0);
-    let start = by_count.max(by_time).min(n - MIN_TAIL);
+    let start = tail_start(seg);
     let mean = |x: &[f64]| x.iter().sum::<f64>() / x.len() as f64;
-    let half_agree = |x: &[f64]| {
-        let (a, b) = x.split_at(x.len() / 2);
-        let (ma, mb) = (mean(a), mean(b));
-        let m = mean(x);
-        let var = x.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (x.len() - 1) as f64;
-        let stderr = (var * (1.0 / a.len() as f64 + 1.0 / b.len() as f64)).sqrt();
-        (ma - mb).abs() <= 0.01 * m.abs() + 4.0 * stderr
-    };
     let (v, i, w) = (
         &seg.voltage[start..],
         &seg.current[start..],
@@ -64,8 +53,121 @@ pub fn settled_level(seg: &DcSegment) -> Option<SettledLevel> {
         // instants would set its error; the slope averages every reading.
         speed: super::step::counter_speed(&seg.time[start..], w),
         samples: n - start,
-        settled: half_agree(v) && half_agree(i) && half_agree(w),
+        settled: unsettled_channel(seg).is_none(),
     })
+}
+
+/// The tail's first index (see [`settled_level`]).
+fn tail_start(seg: &DcSegment) -> usize {
+    let n = seg.time.len();
+    let t_end = seg.time[n - 1];
+    let by_count = n - (n / 4).max(MIN_TAIL);
+    let by_time = seg.time.partition_point(|&t| t < t_end - 1.0);
+    by_count.max(by_time).min(n - MIN_TAIL)
+}
+
+/// Why the level at the end of `seg` cannot stand for its steady state
+/// (the channel and how far it still moves), `None` when it can.
+///
+/// Judged from each signal's own fit over the tail, not by comparing its
+/// halves: a straight line through the tail gives the drift between the
+/// tail's mean and its end. A decaying ringing about the level leaves the
+/// line flat, so the mean is the level; an exponential approach still
+/// under way tilts it. The level stands when the drift is within 1 % of
+/// the level, plus three standard errors of the drift (from batch means
+/// of the residual, which stay right for ringing and correlated noise),
+/// plus half the reading's resolution (a quantised reading flips between
+/// two codes).
+pub fn unsettled_channel(seg: &DcSegment) -> Option<String> {
+    let n = seg.time.len();
+    let start = tail_start(seg);
+    let t = &seg.time[start..];
+    for (name, y) in [
+        ("voltage", &seg.voltage),
+        ("current", &seg.current),
+        ("speed", &seg.speed),
+    ] {
+        let y = &y[start..n];
+        let m = t.len() as f64;
+        let tm = t.iter().sum::<f64>() / m;
+        let ym = y.iter().sum::<f64>() / m;
+        let sxx: f64 = t.iter().map(|ti| (ti - tm).powi(2)).sum();
+        if !(sxx > 0.0) {
+            continue;
+        }
+        let slope = t
+            .iter()
+            .zip(y)
+            .map(|(ti, yi)| (ti - tm) * (yi - ym))
+            .sum::<f64>()
+            / sxx;
+        let half_span = t[t.len() - 1] - tm;
+        let drift = slope * half_span;
+        // Batch means of the residual about the line: the drift's standard
+        // error for correlated residuals (ringing, filtered noise).
+        let batches = 10usize.min(y.len() / 2).max(2);
+        let size = y.len() / batches;
+        let means: Vec<f64> = (0..batches)
+            .map(|b| {
+                let r = b * size..(b + 1) * size;
+                r.clone()
+                    .map(|k| y[k] - ym - slope * (t[k] - tm))
+                    .sum::<f64>()
+                    / size as f64
+            })
+            .collect();
+        let var_b = means.iter().map(|v| v * v).sum::<f64>() / (batches - 1) as f64;
+        let bt: Vec<f64> = (0..batches)
+            .map(|b| t[b * size..(b + 1) * size].iter().sum::<f64>() / size as f64 - tm)
+            .collect();
+        let sbt: f64 = bt.iter().map(|v| v * v).sum();
+        let se_drift = if sbt > 0.0 {
+            (var_b / sbt).sqrt() * half_span
+        } else {
+            0.0
+        };
+        let step = super::level_error::resolution(y);
+        if name == "voltage" {
+            let rms = (y
+                .iter()
+                .zip(t)
+                .map(|(yi, ti)| (yi - ym - slope * (ti - tm)).powi(2))
+                .sum::<f64>()
+                / m)
+                .sqrt();
+            if rms > 0.02 * ym.abs() && rms > 4.0 * white_noise(y) && rms > step {
+                return Some(format!(
+                    "its voltage does not hold a level (scatter {rms:.3e} V about {ym:.3} V)"
+                ));
+            }
+        }
+        let tolerance = 0.01 * ym.abs() + 3.0 * se_drift + 0.5 * step;
+        if drift.abs() > tolerance {
+            return Some(format!(
+                "its {name} still moves by {:.3e} over the last half of its tail ({:.2} % of its level; \
+                 tolerance {:.3e})",
+                drift,
+                100.0 * drift.abs() / ym.abs().max(f64::MIN_POSITIVE),
+                tolerance
+            ));
+        }
+    }
+    None
+}
+
+/// Robust white-noise level of a reading: the median absolute second
+/// difference, `σ·√6·0.6745` for white noise, blind to slow signals and to
+/// rare jumps.
+pub(crate) fn white_noise(y: &[f64]) -> f64 {
+    let mut d: Vec<f64> = y
+        .windows(3)
+        .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+        .collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    d.sort_by(f64::total_cmp);
+    d[d.len() / 2] / (0.6745 * 6f64.sqrt())
 }
 
 /// Recognise a coast-down in a segment not marked as one (the contract

@@ -3,8 +3,12 @@
 //! Methods (report keys): `steady_state` (the seed paper's Eqs. 7, 9, 39
 //! and 44, generalised to a least-squares fit over every settled level of
 //! a staircase, with propagated uncertainty), `pasek` (Eqs. 10–20, on an
-//! abacus computed from the exact response), `moments` (Eqs. 21–44) and
-//! `coastdown` (J and Coulomb friction from the open-armature decay).
+//! abacus computed from the exact response), `moments` (Eqs. 21–44),
+//! `coastdown` (J and Coulomb friction from the open-armature decay),
+//! `equation_error` (the model's equations on filtered data, from any
+//! voltage excitation) and `output_error` (the full model simulated and
+//! fitted). Channel values no motor produces are refused first
+//! ([`check_plausible`]).
 //! Identification is a pure function of the record, so a replayed record
 //! gives the same report, bit for bit.
 //!
@@ -13,6 +17,7 @@
 
 mod abacus;
 mod coastdown;
+mod equation_error;
 mod im;
 mod im_classical;
 mod im_identifiability;
@@ -25,6 +30,7 @@ mod moments;
 mod nrmse;
 mod output_error;
 mod pasek;
+mod plausibility;
 mod simulate;
 mod stats;
 mod steady_state;
@@ -35,6 +41,7 @@ pub use abacus::{
     invert_delta, paper_delta, paper_t1_over_tau_e, real_pole_threshold, AbacusError, CurrentStep,
 };
 pub use coastdown::{fit_decay, DecayFit};
+pub use equation_error::{equation_error, EquationErrorFit};
 pub use im::{identify_im, sweep_of, ImIdentification};
 pub use im_classical::{classical_single, classical_starts};
 pub use im_identifiability::{weak_directions, Identifiability, WeakDirection, STRUCTURAL_LIMIT};
@@ -51,14 +58,17 @@ pub use im_sweep::{
     SweepNoise, SweepPoint, MAX_PARAMS,
 };
 pub use level_error::LevelError;
-pub use levels::{is_coastdown, settled_level, SettledLevel};
+pub use levels::{is_coastdown, settled_level, unsettled_channel, SettledLevel};
 pub use moments::{MomentsEstimate, TransferCoefficients};
 pub use nrmse::nrmse;
 pub use output_error::{
-    output_error, ChannelNoise, HeldOut, OutputErrorFit, OutputErrorOptions, SegmentStart,
-    SpeedReading, Uncertainty, PARAM_KEYS, PARAM_UNITS,
+    output_error, state_at_end, ChannelNoise, HeldOut, OutputErrorFit, OutputErrorOptions,
+    SegmentStart, SpeedReading, Uncertainty, PARAM_KEYS, PARAM_UNITS,
 };
 pub use pasek::{PasekEstimate, PasekReading};
+pub use plausibility::{
+    check_plausible, check_plausible_files, ImplausibleInput, MAX_CURRENT, MAX_SPEED, MAX_VOLTAGE,
+};
 pub use simulate::simulate_segment;
 pub use steady_state::{PairEstimate, SteadyStateEstimate, SteadyStateFit};
 pub(crate) use step::running_angle;
@@ -104,6 +114,8 @@ pub struct Identification {
     pub coastdown: Option<CoastdownFit>,
     /// The output-error fit of the full model, when it applied.
     pub output_error: Option<OutputErrorFit>,
+    /// The equation-error fit of the full model, when it applied.
+    pub equation_error: Option<EquationErrorFit>,
 }
 
 /// The coast-down method's result.
@@ -242,7 +254,11 @@ impl CoastdownFit {
 /// Identify a DC motor from a `dc_step` / `dc_coastdown` record.
 pub fn identify_dc(record: &Record) -> Identification {
     let mut report = IdentificationReport::new(SegmentKind::DcStep.as_str());
+    if let Err(e) = check_plausible(record) {
+        return implausible(report, &e);
+    }
     let mut levels = Vec::new();
+    let mut level_notes = Vec::new();
     for seg in &record.segments {
         if seg.time.is_empty() {
             report.warnings.push(format!(
@@ -255,13 +271,27 @@ pub fn identify_dc(record: &Record) -> Identification {
             continue;
         }
         match settled_level(seg) {
-            Some(level) if level.settled => levels.push(level),
+            Some(level) if level.settled => {
+                level_notes.push(format!("{} ({})", level.segment, level.label));
+                levels.push(level)
+            }
             Some(level) => report.warnings.push(format!(
-                "segment {} ({}) had not settled at its end (current or speed still moving): its level is not used",
-                level.segment, level.label
+                "segment {} ({}) had not settled at its end: {}; its level is not used",
+                level.segment,
+                level.label,
+                unsettled_channel(seg).unwrap_or_default()
             )),
-            None => report.warnings.push(format!("segment {} ({}) is too short to find a level", seg.index, seg.label)),
+            None => report.warnings.push(format!(
+                "segment {} ({}) is too short to find a level",
+                seg.index, seg.label
+            )),
         }
+    }
+    if !level_notes.is_empty() {
+        report.warnings.push(format!(
+            "steady_state: settled levels used: segment {}",
+            level_notes.join(", ")
+        ));
     }
     if let Some(r) = &record.recovery {
         report.warnings.push(format!(
@@ -373,6 +403,24 @@ pub fn identify_dc(record: &Record) -> Identification {
         }
     };
 
+    let equation_error = match equation_error(record, SpeedReading::default()) {
+        Ok(fit) => {
+            report.warnings.extend(fit.warnings.iter().cloned());
+            simulated.extend(fit.simulated.iter().cloned());
+            report
+                .methods
+                .insert("equation_error".into(), fit.method_report());
+            Some(fit)
+        }
+        Err(reason) => {
+            report.methods.insert(
+                "equation_error".into(),
+                MethodReport::not_applicable(reason),
+            );
+            None
+        }
+    };
+
     // The full model, fitted to every step at once, started from the
     // transient method that validated best (moments or Pasek) when one
     // applied, else from its own steady-state and transient estimates.
@@ -409,6 +457,38 @@ pub fn identify_dc(record: &Record) -> Identification {
         transient,
         coastdown,
         output_error,
+        equation_error,
+    }
+}
+
+/// The identification of a record whose values no motor produces: every
+/// method says why it does not apply.
+fn implausible(mut report: IdentificationReport, e: &ImplausibleInput) -> Identification {
+    let reason = format!("the input is not physically plausible: {e}");
+    for key in [
+        "steady_state",
+        "pasek",
+        "moments",
+        "coastdown",
+        "equation_error",
+        "output_error",
+    ] {
+        report
+            .methods
+            .insert(key.into(), MethodReport::not_applicable(reason.clone()));
+    }
+    report.warnings.push(reason);
+    Identification {
+        report,
+        levels: Vec::new(),
+        steady_state: None,
+        simulated: Vec::new(),
+        pasek_steps: Vec::new(),
+        moments_steps: Vec::new(),
+        transient: Vec::new(),
+        coastdown: None,
+        output_error: None,
+        equation_error: None,
     }
 }
 
@@ -424,7 +504,8 @@ fn collect_params<E>(
 }
 
 /// The applying method with the lowest validation NRMSE; without any
-/// NRMSE, the steady state if it applies.
+/// NRMSE (a single segment), the first that applies of the steady state,
+/// output error and equation error.
 fn best_method(report: &IdentificationReport) -> Option<String> {
     report
         .methods
@@ -434,10 +515,9 @@ fn best_method(report: &IdentificationReport) -> Option<String> {
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map(|(k, _)| k.clone())
         .or_else(|| {
-            report
-                .methods
-                .get("steady_state")
-                .filter(|m| m.applies)
-                .map(|_| "steady_state".to_string())
+            ["steady_state", "output_error", "equation_error"]
+                .into_iter()
+                .find(|k| report.methods.get(*k).is_some_and(|m| m.applies))
+                .map(str::to_string)
         })
 }

@@ -34,6 +34,15 @@ pub enum SegmentStart {
     /// reading is the first voltage applied (a start from a disabled
     /// supply or after a coast-down).
     FromRest,
+    /// In a measured state at the first sample: current, A, and speed,
+    /// rad/s (a segment after a level that had not settled, or a record
+    /// that starts in motion away from any steady state).
+    State {
+        /// Armature current, A.
+        current: f64,
+        /// Speed, rad/s.
+        speed: f64,
+    },
 }
 
 /// A step segment ready to simulate.
@@ -147,6 +156,10 @@ pub fn simulate(
             let (i, w, dth) = step.step(0.0, 0.0, u[0]);
             out(i, if interval { dth * inv_dt } else { w });
             (i, w)
+        }
+        SegmentStart::State { current, speed } => {
+            out(current, speed);
+            (current, speed)
         }
     };
     for &uk in &u[1..] {

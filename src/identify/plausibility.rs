@@ -1,0 +1,228 @@
+//! Physical plausibility of a DC record's channel values, checked before
+//! any method runs: a reading no real motor or rig produces (1e308 A, a
+//! voltage above any real supply, a current that never changes sign while
+//! the voltage does) is a wrong file, column or unit, and the user needs
+//! to hear that, not that no method applies.
+//!
+//! The bounds are far beyond any DC machine, so they never refuse a real
+//! record: 20 kV (traction supplies are at most 3 kV), 100 kA (the largest
+//! mill motors draw some 10 kA), 2·10⁵ rad/s (1.9 million r/min; the
+//! fastest electrical machines turn at some 500 000 r/min).
+
+use std::path::PathBuf;
+
+use crate::record::{load_record_files, DcSegment, Record, SegmentKind};
+
+/// Largest armature voltage magnitude accepted, V.
+pub const MAX_VOLTAGE: f64 = 2e4;
+/// Largest armature current magnitude accepted, A.
+pub const MAX_CURRENT: f64 = 1e5;
+/// Largest speed magnitude accepted, rad/s.
+pub const MAX_SPEED: f64 = 2e5;
+
+/// Voltage fraction of its largest magnitude that counts as a reversal.
+const REVERSAL: f64 = 0.2;
+/// Share of samples the voltage must spend at each sign to count as
+/// reversing.
+const REVERSAL_SHARE: f64 = 0.05;
+
+/// A channel whose values no real DC motor produces.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("segment {segment} ({label}), column {column}: {reason}")]
+pub struct ImplausibleInput {
+    /// Segment index.
+    pub segment: u32,
+    /// Segment label.
+    pub label: String,
+    /// The contract's column name, e.g. `armature_current_A`.
+    pub column: &'static str,
+    /// What is wrong, with the value.
+    pub reason: String,
+}
+
+/// Check every segment's channels, then the record as a whole.
+pub fn check_plausible(record: &Record) -> Result<(), ImplausibleInput> {
+    for seg in &record.segments {
+        check_segment(seg)?;
+    }
+    check_current_reverses(record)
+}
+
+/// [`check_plausible`] on a record loaded from `files`, the error naming
+/// the file that holds the segment (or every file, for a record-wide
+/// finding), as the command line reports it.
+pub fn check_plausible_files(
+    record: &Record,
+    kind: SegmentKind,
+    files: &[PathBuf],
+) -> Result<(), String> {
+    let Err(e) = check_plausible(record) else {
+        return Ok(());
+    };
+    let holder = files.iter().find(|f| {
+        files.len() == 1
+            || load_record_files(kind, std::slice::from_ref(*f), None, None)
+                .is_ok_and(|r| r.segments.iter().any(|s| s.index == e.segment))
+    });
+    Err(match holder {
+        Some(f) => format!("{}: {e}", f.display()),
+        None => e.to_string(),
+    })
+}
+
+fn check_segment(seg: &DcSegment) -> Result<(), ImplausibleInput> {
+    for (column, values, limit, unit) in [
+        ("armature_voltage_V", &seg.voltage, MAX_VOLTAGE, "V"),
+        ("armature_current_A", &seg.current, MAX_CURRENT, "A"),
+        ("speed_rad_s", &seg.speed, MAX_SPEED, "rad/s"),
+    ] {
+        let bad = values
+            .iter()
+            .enumerate()
+            .find(|(_, v)| !(v.is_finite() && v.abs() <= limit));
+        if let Some((k, v)) = bad {
+            let reason = if v.is_finite() {
+                format!(
+                    "sample {k} reads {v:e} {unit}, beyond any real DC motor (|value| ≤ {limit:e} {unit}); \
+                     check the column order and the unit"
+                )
+            } else {
+                format!("sample {k} is {v}, not a number")
+            };
+            return Err(ImplausibleInput {
+                segment: seg.index,
+                label: seg.label.clone(),
+                column,
+                reason,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The armature current must take the voltage's sign somewhere when the
+/// voltage reverses for a while: a motor's current follows a reversed
+/// supply. One that never does is read as a magnitude (a rectified or
+/// unsigned sensor) or belongs to another channel.
+fn check_current_reverses(record: &Record) -> Result<(), ImplausibleInput> {
+    let u_peak = record
+        .segments
+        .iter()
+        .flat_map(|s| s.voltage.iter())
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let n: usize = record.segments.iter().map(|s| s.voltage.len()).sum();
+    if n == 0 || u_peak == 0.0 {
+        return Ok(());
+    }
+    let share = |pred: &dyn Fn(f64) -> bool| {
+        record
+            .segments
+            .iter()
+            .flat_map(|s| s.voltage.iter())
+            .filter(|v| pred(**v))
+            .count() as f64
+            / n as f64
+    };
+    let pos = share(&|v| v > REVERSAL * u_peak);
+    let neg = share(&|v| v < -REVERSAL * u_peak);
+    if pos < REVERSAL_SHARE || neg < REVERSAL_SHARE {
+        return Ok(());
+    }
+    let i_peak = record
+        .segments
+        .iter()
+        .flat_map(|s| s.current.iter())
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let noise = record
+        .segments
+        .iter()
+        .map(|s| super::levels::white_noise(&s.current))
+        .fold(0.0f64, f64::max);
+    let margin = (3.0 * noise).max(1e-3 * i_peak);
+    let (lo, hi) = record
+        .segments
+        .iter()
+        .flat_map(|s| s.current.iter())
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(*v), b.max(*v))
+        });
+    if lo < -margin && hi > margin {
+        return Ok(());
+    }
+    let seg = record
+        .segments
+        .iter()
+        .find(|s| !s.current.is_empty())
+        .unwrap_or(&record.segments[0]);
+    Err(ImplausibleInput {
+        segment: seg.index,
+        label: seg.label.clone(),
+        column: "armature_current_A",
+        reason: format!(
+            "the current never changes sign ({lo:.4} … {hi:.4} A over the record) while the voltage \
+             reverses ({:.0} % of the samples above +{:.3} V, {:.0} % below −{:.3} V): a motor's current \
+             follows a reversed supply; is the current read as a magnitude (an unsigned or rectified \
+             sensor), or is this another channel?",
+            100.0 * pos,
+            REVERSAL * u_peak,
+            100.0 * neg,
+            REVERSAL * u_peak
+        ),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(u: impl Fn(usize) -> f64, i: impl Fn(usize) -> f64) -> Record {
+        let n = 400;
+        Record {
+            segments: vec![DcSegment {
+                index: 2,
+                label: "x".into(),
+                time: (0..n).map(|k| k as f64 * 1e-3).collect(),
+                voltage: (0..n).map(&u).collect(),
+                current: (0..n).map(&i).collect(),
+                speed: (0..n).map(|k| u(k) / 1.3).collect(),
+                ..Default::default()
+            }],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn a_huge_current_names_the_column_and_sample() {
+        let r = record(|_| 60.0, |k| if k == 7 { 1e308 } else { 0.1 });
+        let e = check_plausible(&r).unwrap_err();
+        assert_eq!(e.column, "armature_current_A");
+        assert_eq!(e.segment, 2);
+        let text = e.to_string();
+        assert!(
+            text.contains("sample 7") && text.contains("1e308"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn a_voltage_above_any_supply_is_refused() {
+        let r = record(|_| 5e5, |_| 0.1);
+        assert_eq!(
+            check_plausible(&r).unwrap_err().column,
+            "armature_voltage_V"
+        );
+    }
+
+    #[test]
+    fn an_unsigned_current_under_a_reversing_voltage_is_refused() {
+        let u = |k: usize| if (k / 100) % 2 == 0 { 60.0 } else { -60.0 };
+        let signed = record(u, |k| 0.1 * u(k).signum());
+        assert!(check_plausible(&signed).is_ok());
+        let unsigned = record(u, |_| 0.1);
+        let e = check_plausible(&unsigned).unwrap_err();
+        assert_eq!(e.column, "armature_current_A");
+        assert!(e.reason.contains("never changes sign"), "{}", e.reason);
+        // One polarity only: a current of one sign is normal.
+        assert!(check_plausible(&record(|_| 60.0, |_| 0.1)).is_ok());
+    }
+}
