@@ -2,7 +2,7 @@
 //! right in at least 90 % of cases, never an effect on a `none` case, and
 //! `gap_after` within twice the noise floor where the verdict is right.
 
-use motorbench::diagnose::blind::simulate_dc_case;
+use motorbench::diagnose::blind::{simulate_dc_case, simulate_dc_case_with, DcSetup, PlanKind};
 use motorbench::diagnose::{diagnose_dc, DiagnoseOptions};
 use motorbench::model::Effect;
 use rand::rngs::StdRng;
@@ -29,16 +29,32 @@ fn name(e: Option<Effect>) -> String {
     })
 }
 
-/// Run `per_effect` cases of every effect (and `nones` of none); returns
-/// (right, total, false alarms, right cases whose gap_after exceeds twice the floor).
-fn run(seed: u64, per_effect: usize, nones: usize) -> (usize, usize, usize, usize) {
+/// Run `per_effect` cases of every effect (and `nones` of none), on the
+/// classic settled staircase or (`wide`) on the wide plans in turn;
+/// returns (right, total, false alarms, right cases whose gap_after
+/// exceeds twice the floor). A refused record counts as a wrong verdict.
+fn run(seed: u64, per_effect: usize, nones: usize, wide: bool) -> (usize, usize, usize, usize) {
     let mut rng = StdRng::seed_from_u64(seed);
+    let mut setup_rng = StdRng::seed_from_u64(seed ^ 0x5eed);
     let (mut right, mut total, mut alarms, mut far) = (0, 0, 0, 0);
     for e in EFFECTS {
         let count = if e.is_none() { nones } else { per_effect };
         for _ in 0..count {
-            let case = simulate_dc_case(e, &mut rng);
-            let run = diagnose_dc(&case.record, &DiagnoseOptions::default()).expect("diagnosis");
+            let (case, plan) = if wide {
+                let plan = PlanKind::ALL[total % PlanKind::ALL.len()];
+                let setup = DcSetup::draw(plan, &mut setup_rng);
+                (simulate_dc_case_with(e, &setup, &mut rng), plan.name())
+            } else {
+                (simulate_dc_case(e, &mut rng), "classic")
+            };
+            let run = match diagnose_dc(&case.record, &DiagnoseOptions::default()) {
+                Ok(run) => run,
+                Err(err) => {
+                    eprintln!("truth {:<22} plan {plan:<13} refused: {err}", name(e));
+                    total += 1;
+                    continue;
+                }
+            };
             let v = &run.report.verdict;
             let ok = v.effect == name(e);
             total += 1;
@@ -52,7 +68,7 @@ fn run(seed: u64, per_effect: usize, nones: usize) -> (usize, usize, usize, usiz
                 alarms += 1;
             }
             eprintln!(
-                "truth {:<22} verdict {:<22} p {:.2e} gap {:.4} -> {:.4} floor {:.4} {}",
+                "truth {:<22} plan {plan:<13} verdict {:<22} p {:.2e} gap {:.4} -> {:.4} floor {:.4} {}",
                 name(e),
                 v.effect,
                 1.0 - v.confidence,
@@ -71,8 +87,8 @@ fn run(seed: u64, per_effect: usize, nones: usize) -> (usize, usize, usize, usiz
     (right, total, alarms, far)
 }
 
-fn check(seed: u64, per_effect: usize, nones: usize) {
-    let (right, total, alarms, far) = run(seed, per_effect, nones);
+fn check(seed: u64, per_effect: usize, nones: usize, wide: bool) {
+    let (right, total, alarms, far) = run(seed, per_effect, nones, wide);
     eprintln!("right {right}/{total}, false alarms {alarms}, gap_after > 2·floor in {far}");
     assert_eq!(alarms, 0, "false alarms on none");
     assert!(right as f64 >= 0.9 * total as f64, "{right}/{total} right");
@@ -82,11 +98,17 @@ fn check(seed: u64, per_effect: usize, nones: usize) {
 #[test]
 #[ignore = "slow in debug; run with --release (last measured 9/9 right, every gap within twice the floor: docs/diagnosis-dc.md)"]
 fn one_case_per_effect_and_two_nones() {
-    check(7, 1, 2);
+    check(7, 1, 2, false);
 }
 
 #[test]
 #[ignore = "long: run with --release (last measured 24/27 right, one false alarm, one gap at 4.1x the floor: fails the bar; docs/diagnosis-dc.md)"]
 fn three_cases_per_effect_and_six_nones() {
-    check(2024, 3, 6);
+    check(2024, 3, 6, false);
+}
+
+#[test]
+#[ignore = "long: run with --release; fails the bar until the DC methods apply to records whose levels do not settle (docs/diagnosis-dc.md, Status)"]
+fn wide_plans_two_cases_per_effect_and_four_nones() {
+    check(7, 2, 4, true);
 }

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use clap::{Args, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::blind::{generate_suite, score_suite, DEFAULT_SEED};
+use super::blind::{generate_suite, score_suite, SuitePlans, DEFAULT_SEED};
 use super::{diagnose, render_diagnosis_text, write_residual_svg, DiagnoseOptions};
 use crate::model::Connection;
 use crate::record::{load_record_files, SegmentKind};
@@ -111,6 +111,10 @@ pub enum BlindCommand {
         /// Seed of the random draws; the default is the one CI scores.
         #[arg(long, default_value_t = DEFAULT_SEED)]
         seed: u64,
+        /// The DC cases' test plans: `wide` (ramps, PRBS, closed loops,
+        /// short holds, varied sensors) or `classic` (settled staircases).
+        #[arg(long, value_enum, default_value_t = SuitePlans::Wide)]
+        plans: SuitePlans,
     },
     /// Diagnose every case of a suite from its files, then score the
     /// verdicts against the truth file.
@@ -126,13 +130,13 @@ pub enum BlindCommand {
 /// Run `blind`; the exit code (0 done, 2 bad input or output failure).
 pub fn run_blind(args: BlindArgs) -> u8 {
     match args.command {
-        BlindCommand::Generate { out, seed } => {
+        BlindCommand::Generate { out, seed, plans } => {
             let bar = bar("simulating");
             let tick = |n: usize, total: usize| {
                 bar.set_length(total as u64);
                 bar.set_position(n as u64);
             };
-            match generate_suite(&out, seed, &tick) {
+            match generate_suite(&out, seed, plans, &tick) {
                 Ok(m) => {
                     bar.finish_and_clear();
                     println!(

@@ -28,6 +28,7 @@ use rand::rngs::StdRng;
 use rand::RngExt;
 use rand_distr::{Distribution, Normal};
 
+use super::dc_plan::{drives, Coast, Controller, DcSetup, Drive, PlanKind, SpeedSensor};
 use super::{BlindRecord, CaseTruth};
 use crate::identify::nrmse;
 use crate::model::{DcParams, Effect};
@@ -138,11 +139,23 @@ fn around(rng: &mut StdRng, v: f64, spread: f64) -> f64 {
     v * rng.random_range(-spread..spread).exp()
 }
 
-/// Simulate one DC staircase record with `effect` withheld (None: no effect).
+/// Simulate one DC staircase record with `effect` withheld (None: no
+/// effect): the classic settled staircase ([`DcSetup::classic`]).
 pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord {
+    simulate_dc_case_with(effect, &DcSetup::classic(), rng)
+}
+
+/// Simulate one DC record with `effect` withheld under `setup`'s plan and
+/// sensors. The draws from `rng` are the same for every setup, so a case
+/// differs from its classic twin only by what the setup changes.
+pub fn simulate_dc_case_with(
+    effect: Option<Effect>,
+    setup: &DcSetup,
+    rng: &mut StdRng,
+) -> BlindRecord {
     let fams = families();
     let fam = &fams[rng.random_range(0..fams.len())];
-    let p = DcParams {
+    let mut p = DcParams {
         ra: around(rng, fam.p.ra, 0.3),
         la: around(rng, fam.p.la, 0.3),
         k: around(rng, fam.p.k, 0.2),
@@ -150,6 +163,10 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         f: around(rng, fam.p.f, 0.4),
         tst: around(rng, fam.p.tst, 0.4),
     };
+    if let Some(zeta) = setup.zeta {
+        // ζ = ½·√(τm/τe): the inductance sets it; τe at least one sample.
+        p.la = p.ra * (p.tau_m() / (4.0 * zeta * zeta)).clamp(DT, 0.2);
+    }
     let volts = fam.volts * (p.k / fam.p.k);
     let amps = fam.amps;
 
@@ -177,14 +194,8 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
     };
     // Each level is held until the slowest mode has decayed some twelve
     // times (complex poles decay with 2·τe).
-    let (tm, te) = (p.tau_m(), p.tau_e());
-    let disc = tm * tm - 4.0 * tm * te;
-    let tau_slow = if disc < 0.0 {
-        2.0 * te
-    } else {
-        2.0 * tm * te / (tm - disc.sqrt())
-    };
-    let mut hold = (12.0 * tau_slow).clamp(0.3, 1.5);
+    let tau_slow = slowest_tau(&p);
+    let mut hold = setup.hold(tau_slow);
     let slew = volts * rng.random_range(20.0..200.0); // V/s per rated volt: 5–50 ms full swing
 
     let peak_current = {
@@ -197,6 +208,34 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         m
     };
     let w_top = levels.iter().fold(0.0f64, |m, l| m.max(*l)) / p.k;
+    // A closed loop designed from the datasheet: the family's values.
+    let controller = Controller::new(
+        fam.p.k,
+        fam.p.ra,
+        fam.p.j,
+        fam.p.tau_m(),
+        setup.loop_gain,
+        1.2 * volts,
+    );
+    let plan_of = |hold: f64| Plan {
+        drives: drives(setup, &levels, p.k, hold, DT),
+        hold,
+        slew,
+        coast: setup.has_coast().then_some(setup.coast),
+        q_theta: match setup.speed {
+            SpeedSensor::Encoder(Some(lines)) => Some(TAU / (4.0 * lines)),
+            _ => None,
+        },
+        current_tau: setup.current_bw.map(|bw| {
+            // A current sensor slower than 3 % of τe would be a sensor lag.
+            (1.0 / (TAU * bw)).min(0.03 * p.tau_e())
+        }),
+        tach_tau: match setup.speed {
+            SpeedSensor::Tachometer { tau, .. } => Some(tau.min(0.01 * p.tau_m())),
+            _ => None,
+        },
+        controller: controller.clone(),
+    };
     let mut params = BTreeMap::new();
     let mut regions: Vec<&str> = Vec::new();
     let truth = match effect {
@@ -246,12 +285,7 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
             regions = vec!["settled", "transient"];
             // Heat capacity from the nominal record's I²R energy so that
             // the rise at the end is about `rise`.
-            let plan = Plan {
-                levels: &levels,
-                hold,
-                slew,
-            };
-            let energy = simulate(&p, Truth::None, &plan).energy;
+            let energy = simulate(&p, Truth::None, &plan_of(hold)).energy;
             let cth = ALPHA_CU * energy / rise;
             Truth::Thermal {
                 cth,
@@ -287,8 +321,10 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
             let fr = (rng.random_range(10f64.ln()..50f64.ln())).exp();
             let r = rng.random_range(0.3..0.7);
             let zeta: f64 = rng.random_range(0.03..0.1);
-            // The bench holds a level until it settles: the ringing too.
-            hold = hold.max((6.0 / (zeta * TAU * fr)).min(3.0));
+            // The classic bench holds a level until it settles: the ringing too.
+            if setup.hold_tau.is_none() {
+                hold = hold.max((6.0 / (zeta * TAU * fr)).min(3.0));
+            }
             params.insert("fr".into(), fr);
             params.insert("r_motor".into(), r);
             params.insert("zeta".into(), zeta);
@@ -297,20 +333,26 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         }
         Some(other) => panic!("{other:?} is not a DC effect"),
     };
-    let plan = Plan {
-        levels: &levels,
-        hold,
-        slew,
-    };
-    let clean = simulate(&p, truth, &plan);
 
     // Readings.
     let sigma_u = fam.volts * rng.random_range(0.0005..0.003);
-    let q_u = 1.5 * fam.volts / 4096.0;
+    let adc = 2f64.powi(setup.adc_bits.unwrap_or(12) as i32);
+    let q_u = 1.5 * fam.volts / adc;
     let sigma_i = amps * rng.random_range(0.002..0.01);
-    let q_i = 4.0 * amps / 4096.0 * rng.random_range(0.5..2.0);
-    let lines = [1000.0, 2048.0, 2500.0, 4096.0][rng.random_range(0..4)];
+    let q_i = 4.0 * amps / adc * rng.random_range(0.5..2.0);
+    let classic_lines = [1000.0, 2048.0, 2500.0, 4096.0][rng.random_range(0..4)];
+    let lines = match setup.speed {
+        SpeedSensor::Encoder(Some(lines)) => lines,
+        _ => classic_lines,
+    };
     let q_theta = TAU / (4.0 * lines);
+    let tach = match setup.speed {
+        SpeedSensor::Tachometer { tau, noise } => Some((tau, noise * w_top, 1.5 * w_top / adc)),
+        _ => None,
+    };
+    let plan = plan_of(hold);
+    let clean = simulate(&p, truth, &plan);
+    let nw = Normal::new(0.0, tach.map_or(1.0, |t| t.1)).expect("σ > 0");
     let nu = Normal::new(0.0, sigma_u).expect("σ > 0");
     let ni = Normal::new(0.0, sigma_i).expect("σ > 0");
     let quant = |v: f64, q: f64| (v / q).round() * q;
@@ -365,11 +407,19 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
                 continue;
             }
             let count = (s.theta[k] / q_theta).floor();
-            let w_enc = (count - last_count) * q_theta / DT;
+            let w_sensor = match tach {
+                Some((_, _, q_w)) => quant(s.w_tach[k] + nw.sample(rng), q_w),
+                None => (count - last_count) * q_theta / DT,
+            };
             last_count = count;
-            let i_true = lag_i.as_mut().map_or(s.i[k], |l| l.push(s.i[k]));
-            let w_clean = lag_wc.as_mut().map_or(s.w[k], |l| l.push(s.w[k]));
-            let w_read = lag_w.as_mut().map_or(w_enc, |l| l.push(w_enc));
+            let i_true = lag_i
+                .as_mut()
+                .map_or(s.i_sensed[k], |l| l.push(s.i_sensed[k]));
+            let w_noise_free = if tach.is_some() { s.w_tach[k] } else { s.w[k] };
+            let w_clean = lag_wc
+                .as_mut()
+                .map_or(w_noise_free, |l| l.push(w_noise_free));
+            let w_read = lag_w.as_mut().map_or(w_sensor, |l| l.push(w_sensor));
             let u_read = if s.coast { s.emf[k] } else { s.u[k] };
             seg.time.push((t0 + k) as f64 * DT);
             seg.voltage.push(quant(u_read + nu.sample(rng), q_u));
@@ -418,36 +468,107 @@ pub fn simulate_dc_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
             noise: BTreeMap::from([
                 ("armature_voltage".to_string(), sigma_u),
                 ("armature_current".to_string(), sigma_i),
-                ("speed".to_string(), 0.0),
+                ("speed".to_string(), tach.map_or(0.0, |t| t.1)),
             ]),
             quantisation: BTreeMap::from([
                 ("armature_voltage".to_string(), q_u),
                 ("armature_current".to_string(), q_i),
-                ("speed".to_string(), q_theta / DT),
+                ("speed".to_string(), tach.map_or(q_theta / DT, |t| t.2)),
             ]),
             noise_floor,
             regions: regions.into_iter().map(str::to_string).collect(),
+            source: super::OWN_SOURCE.to_string(),
+            plan: setup.plan.name().to_string(),
+            setup: setup_record(setup, &p, hold, lines, &plan),
         },
     }
 }
 
-struct Plan<'a> {
-    levels: &'a [f64],
+/// A plan as the simulator runs it.
+/// The setup as the truth file lists it.
+fn setup_record(
+    setup: &DcSetup,
+    p: &DcParams,
+    hold: f64,
+    lines: f64,
+    plan: &Plan,
+) -> BTreeMap<String, f64> {
+    let tau_slow = slowest_tau(p);
+    let mut m = BTreeMap::from([
+        ("hold_s".to_string(), hold),
+        ("hold_tau".to_string(), hold / tau_slow),
+        ("zeta".to_string(), 0.5 * (p.tau_m() / p.tau_e()).sqrt()),
+        ("adc_bits".to_string(), setup.adc_bits.unwrap_or(12) as f64),
+        (
+            "coast_short".to_string(),
+            f64::from(u8::from(plan.coast == Some(Coast::Short))),
+        ),
+    ]);
+    match plan.tach_tau {
+        Some(tau) => m.insert("tach_tau_s".to_string(), tau),
+        None => m.insert("encoder_lines".to_string(), lines),
+    };
+    if let Some(tau) = plan.current_tau {
+        m.insert("current_bw_hz".to_string(), 1.0 / (TAU * tau));
+    }
+    if matches!(setup.plan, PlanKind::SpeedLoop | PlanKind::PositionLoop) {
+        m.insert("loop_gain".to_string(), setup.loop_gain);
+    }
+    m
+}
+
+/// The slowest mode's time constant (complex poles decay with 2·τe).
+fn slowest_tau(p: &DcParams) -> f64 {
+    let (tm, te) = (p.tau_m(), p.tau_e());
+    let disc = tm * tm - 4.0 * tm * te;
+    if disc < 0.0 {
+        2.0 * te
+    } else {
+        2.0 * tm * te / (tm - disc.sqrt())
+    }
+}
+
+struct Plan {
+    drives: Vec<Drive>,
     hold: f64,
     slew: f64,
+    /// How the record ends; None: it ends with the last drive.
+    coast: Option<Coast>,
+    /// The encoder step a closed loop reads the speed with (None: the
+    /// tachometer's filtered speed, or the true speed).
+    q_theta: Option<f64>,
+    /// Current sensor time constant, s.
+    current_tau: Option<f64>,
+    /// Tachometer filter time constant, s.
+    tach_tau: Option<f64>,
+    controller: Controller,
 }
 
 /// One simulated segment, noise-free: the applied voltage over each
-/// interval, the current, the clean speed reading (interval mean), the
-/// motor angle at each sample and the back-EMF.
+/// interval, the current, the current sensor's output, the clean speed
+/// reading (interval mean), the tachometer filter's output, the motor
+/// angle at each sample and the back-EMF.
 struct CleanSegment {
     label: String,
     coast: bool,
     u: Vec<f64>,
     i: Vec<f64>,
+    i_sensed: Vec<f64>,
     w: Vec<f64>,
+    w_tach: Vec<f64>,
     theta: Vec<f64>,
     emf: Vec<f64>,
+}
+
+/// What the simulator carries from sample to sample besides the state:
+/// the sensors' filter outputs, the last encoder count and the speed the
+/// controller reads.
+struct Sensing {
+    i_f: f64,
+    w_f: f64,
+    count: f64,
+    feedback: f64,
+    controller: Controller,
 }
 
 /// A delay line of `delay` samples followed by a first-order lag.
@@ -562,106 +683,181 @@ fn simulate(p: &DcParams, truth: Truth, plan: &Plan) -> Clean {
         Truth::Armature { iar } => 1.0 / (1.0 + (i / iar).powi(2)).sqrt(),
         _ => 1.0,
     };
-    let mut run =
-        |target: Option<f64>, n: usize, label: String, x: &mut State, applied: &mut f64| {
-            let open = target.is_none();
-            let mut seg = CleanSegment {
-                label,
-                coast: open,
-                u: Vec::with_capacity(n),
-                i: Vec::with_capacity(n),
-                w: Vec::with_capacity(n),
-                theta: Vec::with_capacity(n),
-                emf: Vec::with_capacity(n),
+    let filter = |tau: Option<f64>| tau.map_or(1.0, |t| 1.0 - (-h / t).exp());
+    let (ci, cw) = (filter(plan.current_tau), filter(plan.tach_tau));
+    let mut run = |drive: &Drive,
+                   n: usize,
+                   label: String,
+                   x: &mut State,
+                   applied: &mut f64,
+                   sense: &mut Sensing| {
+        let open = matches!(drive, Drive::Open);
+        let mut seg = CleanSegment {
+            label,
+            coast: open,
+            u: Vec::with_capacity(n),
+            i: Vec::with_capacity(n),
+            i_sensed: Vec::with_capacity(n),
+            w: Vec::with_capacity(n),
+            w_tach: Vec::with_capacity(n),
+            theta: Vec::with_capacity(n),
+            emf: Vec::with_capacity(n),
+        };
+        let slew_to = |applied: &mut f64, t: f64| {
+            *applied += (t - *applied).clamp(-plan.slew * DT, plan.slew * DT);
+            *applied
+        };
+        for step in 0..n {
+            let t = (step + 1) as f64 * DT;
+            let u = match drive {
+                Drive::Level(t) => slew_to(applied, *t),
+                Drive::Ramp { from, to, samples } => {
+                    *applied = from + (to - from) * ((step + 1) as f64 / *samples as f64).min(1.0);
+                    *applied
+                }
+                Drive::Prbs { lo, hi, bits, bit } => {
+                    slew_to(applied, if bits[step / bit] { *hi } else { *lo })
+                }
+                Drive::Speed(w_ref) => {
+                    *applied = sense.controller.speed(*w_ref, sense.feedback, DT);
+                    *applied
+                }
+                Drive::Move { from, to, speed } => {
+                    let th_ref = from + (to - from).signum() * (speed * t).min((to - from).abs());
+                    *applied = sense.controller.position(th_ref, x[4], sense.feedback, DT);
+                    *applied
+                }
+                Drive::Open | Drive::Short => {
+                    *applied = 0.0;
+                    0.0
+                }
             };
-            for _ in 0..n {
-                if let Some(t) = target {
-                    *applied += (t - *applied).clamp(-plan.slew * DT, plan.slew * DT);
-                }
-                let u = if open { 0.0 } else { *applied };
-                if open {
-                    x[0] = 0.0;
-                }
-                let th0 = x[4];
-                let moving_speed = if shaft { x[2] } else { x[1] };
-                let at_rest = x[1] == 0.0 && x[2] == 0.0;
-                let dir = if moving_speed != 0.0 {
-                    Some(moving_speed.signum())
-                } else if !at_rest {
-                    Some(x[1].signum())
-                } else if (p.k * kf_of(x[0]) * x[0]).abs() > breakaway {
-                    Some((x[0]).signum())
-                } else {
-                    None
+            if open {
+                x[0] = 0.0;
+                sense.i_f = 0.0;
+            }
+            let th0 = x[4];
+            let moving_speed = if shaft { x[2] } else { x[1] };
+            let at_rest = x[1] == 0.0 && x[2] == 0.0;
+            let dir = if moving_speed != 0.0 {
+                Some(moving_speed.signum())
+            } else if !at_rest {
+                Some(x[1].signum())
+            } else if (p.k * kf_of(x[0]) * x[0]).abs() > breakaway {
+                Some((x[0]).signum())
+            } else {
+                None
+            };
+            for _ in 0..SUBSTEPS {
+                let k1 = deriv(x, u, open, dir);
+                let add = |a: &State, k: &State, c: f64| -> State {
+                    std::array::from_fn(|n| a[n] + c * k[n])
                 };
-                for _ in 0..SUBSTEPS {
-                    let k1 = deriv(x, u, open, dir);
-                    let add = |a: &State, k: &State, c: f64| -> State {
-                        std::array::from_fn(|n| a[n] + c * k[n])
-                    };
-                    let k2 = deriv(&add(x, &k1, h / 2.0), u, open, dir);
-                    let k3 = deriv(&add(x, &k2, h / 2.0), u, open, dir);
-                    let k4 = deriv(&add(x, &k3, h), u, open, dir);
-                    for n in 0..6 {
-                        x[n] += h / 6.0 * (k1[n] + 2.0 * k2[n] + 2.0 * k3[n] + k4[n]);
-                    }
-                    if !shaft {
-                        x[2] = x[1];
-                    }
-                    if let Some(d) = dir {
-                        let s = if shaft { x[2] } else { x[1] };
-                        if s * d < 0.0 {
-                            if shaft && moving_speed == 0.0 {
-                                // The load is still held by its friction.
-                                x[2] = 0.0;
-                            } else {
-                                x[1] = 0.0;
-                                x[2] = 0.0;
-                                x[3] = 0.0;
-                            }
+                let k2 = deriv(&add(x, &k1, h / 2.0), u, open, dir);
+                let k3 = deriv(&add(x, &k2, h / 2.0), u, open, dir);
+                let k4 = deriv(&add(x, &k3, h), u, open, dir);
+                for n in 0..6 {
+                    x[n] += h / 6.0 * (k1[n] + 2.0 * k2[n] + 2.0 * k3[n] + k4[n]);
+                }
+                if !shaft {
+                    x[2] = x[1];
+                }
+                if let Some(d) = dir {
+                    let s = if shaft { x[2] } else { x[1] };
+                    if s * d < 0.0 {
+                        if shaft && moving_speed == 0.0 {
+                            // The load is still held by its friction.
+                            x[2] = 0.0;
+                        } else {
+                            x[1] = 0.0;
+                            x[2] = 0.0;
+                            x[3] = 0.0;
                         }
                     }
-                    energy += h * x[0] * x[0] * p.ra;
                 }
-                seg.u.push(u);
-                seg.i.push(x[0]);
-                seg.w.push((x[4] - th0) / DT);
-                seg.theta.push(x[4]);
-                seg.emf.push(p.k * x[1]);
+                energy += h * x[0] * x[0] * p.ra;
+                sense.i_f += ci * (x[0] - sense.i_f);
+                sense.w_f += cw * (x[1] - sense.w_f);
             }
-            seg
+            let w_mean = (x[4] - th0) / DT;
+            sense.feedback = match plan.q_theta {
+                Some(q) => {
+                    let count = (x[4] / q).floor();
+                    let w = (count - sense.count) * q / DT;
+                    sense.count = count;
+                    w
+                }
+                None if plan.tach_tau.is_some() => sense.w_f,
+                None => w_mean,
+            };
+            seg.u.push(u);
+            seg.i.push(x[0]);
+            seg.i_sensed.push(if plan.current_tau.is_some() {
+                sense.i_f
+            } else {
+                x[0]
+            });
+            seg.w.push(w_mean);
+            seg.w_tach.push(sense.w_f);
+            seg.theta.push(x[4]);
+            seg.emf.push(p.k * x[1]);
+        }
+        seg
+    };
+    let mut sense = Sensing {
+        i_f: 0.0,
+        w_f: 0.0,
+        count: 0.0,
+        feedback: 0.0,
+        controller: plan.controller.clone(),
+    };
+    let samples = (plan.hold / DT).round() as usize;
+    let mut prev = "0 V".to_string();
+    for drive in &plan.drives {
+        let this = match drive {
+            Drive::Level(l) => format!("{l:.1} V"),
+            Drive::Ramp { to, .. } => format!("ramp to {to:.1} V"),
+            Drive::Prbs { lo, hi, .. } => format!("PRBS {lo:.1}/{hi:.1} V"),
+            Drive::Speed(w) => format!("speed loop to {w:.1} rad/s"),
+            Drive::Move { to, .. } => format!("position loop to {to:.1} rad"),
+            Drive::Open => "coast-down".to_string(),
+            Drive::Short => "0 V short".to_string(),
         };
-    let mut prev_level = 0.0;
-    for (n, &level) in plan.levels.iter().enumerate() {
-        let label = if n == 0 {
-            format!("0 V → {level:.1} V")
-        } else {
-            format!("{prev_level:.1} V → {level:.1} V")
-        };
-        let samples = (plan.hold / DT).round() as usize;
-        let mut seg = run(Some(level), samples, label, &mut x, &mut applied);
-        if n > 0 {
-            // The boundary sample (the previous level's last) comes first.
-            let prev: &CleanSegment = &segments[n - 1];
+        let label = format!("{prev} → {this}");
+        let mut seg = run(drive, samples, label, &mut x, &mut applied, &mut sense);
+        if let Some(prev) = segments.last() {
+            // The boundary sample (the previous segment's last) comes first.
             prepend(&mut seg, prev);
         }
         segments.push(seg);
-        prev_level = level;
+        prev = this;
     }
-    // Coast-down until the rotor stops (plus a little), at most 8 s.
-    let w0 = x[1];
-    let decel = (p.f * w0 + p.tst) / p.j;
-    let t_stop = (p.j / p.f * (1.0 + w0 * p.f / p.tst).ln()).min(w0 / decel * 3.0);
-    let samples = (((t_stop + 0.2).min(8.0)) / DT).round() as usize;
-    let mut seg = run(
-        None,
-        samples,
-        format!("{prev_level:.1} V → coast-down"),
-        &mut x,
-        &mut applied,
-    );
-    prepend(&mut seg, &segments[segments.len() - 1]);
-    segments.push(seg);
+    if let Some(coast) = plan.coast {
+        // Until the rotor stops (plus a little), at most 8 s; a short
+        // brakes with the electrical damping K²/Ra too.
+        let w0 = x[1];
+        let f = match coast {
+            Coast::Open => p.f,
+            Coast::Short => p.f + p.k * p.k / p.ra,
+        };
+        let decel = (f * w0 + p.tst) / p.j;
+        let t_stop = (p.j / f * (1.0 + w0 * f / p.tst).ln()).min(w0 / decel * 3.0);
+        let samples = (((t_stop + 0.2).min(8.0)) / DT).round() as usize;
+        let (drive, this) = match coast {
+            Coast::Open => (Drive::Open, "coast-down"),
+            Coast::Short => (Drive::Short, "0 V short"),
+        };
+        let mut seg = run(
+            &drive,
+            samples,
+            format!("{prev} → {this}"),
+            &mut x,
+            &mut applied,
+            &mut sense,
+        );
+        prepend(&mut seg, &segments[segments.len() - 1]);
+        segments.push(seg);
+    }
 
     Clean { segments, energy }
 }
@@ -671,7 +867,9 @@ fn prepend(seg: &mut CleanSegment, prev: &CleanSegment) {
     let last = prev.u.len() - 1;
     seg.u.insert(0, prev.u[last]);
     seg.i.insert(0, prev.i[last]);
+    seg.i_sensed.insert(0, prev.i_sensed[last]);
     seg.w.insert(0, prev.w[last]);
+    seg.w_tach.insert(0, prev.w_tach[last]);
     seg.theta.insert(0, prev.theta[last]);
     seg.emf.insert(0, prev.emf[last]);
 }
@@ -702,6 +900,55 @@ mod tests {
             assert!(end.abs() < 0.1 * top, "{end} vs {top}");
             assert!(case.truth.noise_floor > 0.0 && case.truth.noise_floor < 0.2);
             assert_eq!(case.truth.effect_params.is_empty(), effect.is_none());
+        }
+    }
+
+    #[test]
+    fn every_wide_plan_makes_a_continuous_record_of_its_kind() {
+        for (n, plan) in PlanKind::ALL.into_iter().enumerate() {
+            let mut setup = DcSetup::draw(plan, &mut StdRng::seed_from_u64(n as u64));
+            setup.coast = Coast::Short;
+            let case = simulate_dc_case_with(None, &setup, &mut StdRng::seed_from_u64(11));
+            assert_eq!(case.truth.plan, plan.name());
+            let segs = &case.record.segments;
+            let drives = if matches!(plan, PlanKind::Prbs | PlanKind::PositionLoop) {
+                4
+            } else {
+                5
+            };
+            let coast = usize::from(setup.has_coast());
+            assert_eq!(segs.len(), drives + coast, "{plan:?}");
+            for w in segs.windows(2) {
+                let last = w[0].time.len() - 1;
+                assert_eq!(w[0].time[last], w[1].time[0]);
+                assert_eq!(w[0].current[last], w[1].current[0]);
+            }
+            let hold = case.truth.setup["hold_tau"];
+            let hold_s = case.truth.setup["hold_s"];
+            assert!(
+                (2.0 - 1e-9..=12.0 + 1e-9).contains(&hold) || hold_s == 0.05 || hold_s == 1.5,
+                "{hold}"
+            );
+            // A 0 V short is a step the power stage holds: braking current.
+            if setup.has_coast() {
+                let short = &segs[segs.len() - 1];
+                assert_eq!(short.kind, Some(SegmentKind::DcStep));
+                assert!(short.label.ends_with("0 V short"), "{}", short.label);
+                let braking = short.current.iter().take(20).fold(0.0f64, |m, i| m.min(*i));
+                assert!(braking < 0.0, "{plan:?}: no braking current");
+            }
+            // A closed loop's voltage is the controller's: it varies while
+            // a staircase's is held.
+            let seg = &segs[2];
+            let tail = &seg.voltage[seg.voltage.len() / 2..];
+            let spread = tail.iter().fold(f64::MIN, |m, v| m.max(*v))
+                - tail.iter().fold(f64::MAX, |m, v| m.min(*v));
+            let top = seg.voltage.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            match plan {
+                PlanKind::Staircase => assert!(spread < 0.05 * top, "{spread} of {top}"),
+                PlanKind::SpeedLoop => assert!(spread > 0.01 * top, "{spread} of {top}"),
+                _ => {}
+            }
         }
     }
 }

@@ -518,6 +518,9 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         ]),
         noise_floor: floor,
         regions,
+        source: super::OWN_SOURCE.to_string(),
+        plan: "sweep".to_string(),
+        setup: BTreeMap::new(),
     };
     BlindRecord { record, truth }
 }

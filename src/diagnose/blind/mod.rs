@@ -3,21 +3,27 @@
 //! truth kept apart from the record so that the diagnosis never sees it.
 //!
 //! - `dc_case` / `im_case`: simulate one record of each machine.
+//! - `dc_plan`: a DC case's test plan and sensors (the classic settled
+//!   staircase, or a wide draw of plans, holds, damping and sensors).
 //! - [`CaseTruth`]: what was withheld; written to a separate truth file.
 //! - `suite`: the case plan, the suite directory, the truth file.
 //! - `score`: diagnose every case from its files, then compare with the truth.
 
 mod dc_case;
+mod dc_plan;
 mod files;
 mod im_case;
 mod score;
 mod suite;
 
-pub use dc_case::simulate_dc_case;
+pub use dc_case::{simulate_dc_case, simulate_dc_case_with};
+pub use dc_plan::{Coast, DcSetup, PlanKind, SpeedSensor};
 pub use files::write_case_files;
 pub use im_case::simulate_im_case;
-pub use score::{score_suite, CaseScore, SuiteScore};
-pub use suite::{case_plan, generate_suite, CaseEntry, Manifest, TruthFile, DEFAULT_SEED};
+pub use score::{score_suite, CaseScore, SuiteScore, Tally};
+pub use suite::{
+    case_plan, generate_suite, CaseEntry, Manifest, SuitePlans, TruthFile, DEFAULT_SEED,
+};
 
 use std::collections::BTreeMap;
 
@@ -45,6 +51,29 @@ pub struct CaseTruth {
     /// Region labels (the contract's gap-region labels) where the effect
     /// should show most; empty for `none`.
     pub regions: Vec<String>,
+    /// Who simulated the record: `motorbench` (this crate's generator) or
+    /// a third-party simulator (e.g. `gym-electric-motor`).
+    #[serde(default = "own_source")]
+    pub source: String,
+    /// The plan's name (`staircase`, `ramp`, `prbs`, `speed_loop`,
+    /// `position_loop`; `sweep` for an IM slip sweep).
+    #[serde(default = "staircase")]
+    pub plan: String,
+    /// The plan's and sensors' settings (hold in slowest time constants,
+    /// damping ratio, encoder lines, ADC bits, ...), for reading a miss.
+    #[serde(default)]
+    pub setup: BTreeMap<String, f64>,
+}
+
+/// The source of this crate's own cases.
+pub const OWN_SOURCE: &str = "motorbench";
+
+fn own_source() -> String {
+    OWN_SOURCE.to_string()
+}
+
+fn staircase() -> String {
+    "staircase".to_string()
 }
 
 /// One simulated case: the record (all the diagnosis may read) and its truth.

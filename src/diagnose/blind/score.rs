@@ -9,6 +9,8 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::suite::{read_json, Manifest, TruthFile};
+use super::CaseTruth;
+use crate::diagnose::report::Diagnosis;
 use crate::diagnose::{diagnose, DiagnoseOptions};
 use crate::record::{load_record_files, SegmentKind};
 
@@ -36,6 +38,61 @@ pub struct CaseScore {
     pub reaches_noise_floor: bool,
     /// Why the diagnosis failed, if it did.
     pub error: Option<String>,
+    /// Who simulated the case (the truth's `source`).
+    #[serde(default)]
+    pub source: String,
+    /// The case's plan (the truth's `plan`).
+    #[serde(default)]
+    pub plan: String,
+    /// Relative error of the DC model's K and Ra (the verdict's refitted
+    /// values, the nominal fit's for `none`) against the truth's nominal.
+    #[serde(default)]
+    pub param_error: BTreeMap<String, f64>,
+}
+
+/// Bounds of the parameter check: K within 1 %, Ra within 3 % of the truth.
+pub const PARAM_BOUNDS: [(&str, f64); 2] = [("K", 0.01), ("Ra", 0.03)];
+
+/// The bar's figures over a group of cases.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Tally {
+    /// Cases.
+    pub cases: usize,
+    /// Right verdicts.
+    pub right: usize,
+    /// `none` cases.
+    pub nones: usize,
+    /// `none` cases that got an effect named.
+    pub false_alarms: usize,
+    /// Right verdicts with gap_after within twice the noise floor.
+    pub floor_reached: usize,
+    /// Cases the diagnosis refused (an error instead of a verdict).
+    pub refused: usize,
+    /// DC cases with K and Ra compared.
+    pub params_compared: usize,
+    /// Of those, K within 1 % and Ra within 3 % of the truth.
+    pub params_within: usize,
+}
+
+impl Tally {
+    fn add(&mut self, c: &CaseScore) {
+        self.cases += 1;
+        self.right += usize::from(c.right);
+        if c.truth == "none" {
+            self.nones += 1;
+            self.false_alarms += usize::from(c.verdict != "none" && c.error.is_none());
+        }
+        self.floor_reached += usize::from(c.right && c.reaches_noise_floor);
+        self.refused += usize::from(c.error.is_some());
+        if !c.param_error.is_empty() {
+            self.params_compared += 1;
+            self.params_within += usize::from(
+                PARAM_BOUNDS
+                    .iter()
+                    .all(|(k, b)| c.param_error.get(*k).is_some_and(|e| e.abs() <= *b)),
+            );
+        }
+    }
 }
 
 /// A whole suite's score.
@@ -58,11 +115,20 @@ impl SuiteScore {
         self.right() as f64 / self.cases.len().max(1) as f64
     }
 
-    /// `none` cases, and how many of them got an effect named (false alarms).
+    /// `none` cases, and how many of them got an effect named (false
+    /// alarms; a refused record names none and counts under [`Self::refused`]).
     pub fn false_alarms(&self) -> (usize, usize) {
         let nones: Vec<_> = self.cases.iter().filter(|c| c.truth == "none").collect();
-        let alarms = nones.iter().filter(|c| c.verdict != "none").count();
+        let alarms = nones
+            .iter()
+            .filter(|c| c.verdict != "none" && c.error.is_none())
+            .count();
         (alarms, nones.len())
+    }
+
+    /// Cases the diagnosis refused (an error instead of a verdict).
+    pub fn refused(&self) -> usize {
+        self.cases.iter().filter(|c| c.error.is_some()).count()
     }
 
     /// Right verdicts with gap_after within twice the noise floor, of right verdicts.
@@ -78,6 +144,26 @@ impl SuiteScore {
     pub fn region_agreement(&self) -> (usize, usize) {
         let compared: Vec<_> = self.cases.iter().filter_map(|c| c.region_agrees).collect();
         (compared.iter().filter(|a| **a).count(), compared.len())
+    }
+
+    /// The bar's figures per source (`"<source> all"`) and per source
+    /// and plan (`"<source> <plan>"`), plans named `<machine>:<plan>`.
+    pub fn per_source_and_plan(&self) -> BTreeMap<(String, String), Tally> {
+        let mut table: BTreeMap<(String, String), Tally> = BTreeMap::new();
+        for c in &self.cases {
+            let source = if c.source.is_empty() {
+                super::OWN_SOURCE.to_string()
+            } else {
+                c.source.clone()
+            };
+            let plan = format!("{} {}", machine(&c.kind), c.plan);
+            table
+                .entry((source.clone(), " all".to_string()))
+                .or_default()
+                .add(c);
+            table.entry((source, plan)).or_default().add(c);
+        }
+        table
     }
 
     /// Per withheld effect: (cases, right, what was named instead).
@@ -119,6 +205,7 @@ impl fmt::Display for SuiteScore {
         )?;
         let (alarms, nones) = self.false_alarms();
         writeln!(f, "false alarms on none:     {alarms}/{nones}")?;
+        writeln!(f, "refused records:          {}/{n}", self.refused())?;
         let (agree, compared) = self.region_agreement();
         writeln!(
             f,
@@ -131,6 +218,24 @@ impl fmt::Display for SuiteScore {
             "gap_after ≤ 2×noise floor: {floor}/{right} right verdicts ({:.1} %)",
             pct(floor, right)
         )?;
+        writeln!(
+            f,
+            "\n{:<20} {:<18} {:>5} {:>5} {:>11} {:>11} {:>7} {:>11}",
+            "source", "plan", "cases", "right", "alarms/none", "floor/right", "refused", "K1%,Ra3%"
+        )?;
+        for ((source, plan), t) in self.per_source_and_plan() {
+            writeln!(
+                f,
+                "{source:<20} {:<18} {:>5} {:>5} {:>11} {:>11} {:>7} {:>11}",
+                plan.trim(),
+                t.cases,
+                t.right,
+                format!("{}/{}", t.false_alarms, t.nones),
+                format!("{}/{}", t.floor_reached, t.right),
+                t.refused,
+                format!("{}/{}", t.params_within, t.params_compared)
+            )?;
+        }
         writeln!(
             f,
             "\n{:<28} {:>5} {:>5}  named instead",
@@ -147,13 +252,37 @@ impl fmt::Display for SuiteScore {
         for c in failed {
             writeln!(
                 f,
-                "{}: diagnosis failed: {}",
+                "{} ({} {}, {}): diagnosis failed: {}",
                 c.id,
+                c.source,
+                c.plan,
+                c.truth,
                 c.error.as_deref().unwrap_or("")
             )?;
         }
         Ok(())
     }
+}
+
+/// K's and Ra's relative error (DC cases; empty for IM): the verdict's
+/// refitted value where it has one, else the nominal fit's.
+fn param_error(d: &Diagnosis, t: &CaseTruth) -> BTreeMap<String, f64> {
+    if d.kind == SegmentKind::ImSlipSweep.as_str() {
+        return BTreeMap::new();
+    }
+    PARAM_BOUNDS
+        .iter()
+        .filter_map(|(key, _)| {
+            let fitted = d
+                .verdict
+                .corrected_params
+                .get(*key)
+                .map(|c| c.corrected)
+                .or_else(|| d.nominal.params.get(*key).map(|p| p.value))?;
+            let truth = *t.nominal.get(*key)?;
+            Some((key.to_string(), fitted / truth - 1.0))
+        })
+        .collect()
 }
 
 /// Diagnose every case of the suite in `dir`, then score against its
@@ -213,6 +342,9 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
                     noise_floor: t.noise_floor,
                     reaches_noise_floor: d.verdict.gap_after <= 2.0 * t.noise_floor,
                     error: None,
+                    source: t.source.clone(),
+                    plan: t.plan.clone(),
+                    param_error: param_error(&d, t),
                 }
             }
             Err(e) => CaseScore {
@@ -226,6 +358,9 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
                 noise_floor: t.noise_floor,
                 reaches_noise_floor: false,
                 error: Some(e.to_string()),
+                source: t.source.clone(),
+                plan: t.plan.clone(),
+                param_error: BTreeMap::new(),
             },
         });
     }
@@ -233,4 +368,63 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
         seed: manifest.seed,
         cases,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn case(source: &str, plan: &str, truth: &str, verdict: &str, floor: bool) -> CaseScore {
+        let refused = verdict == "error";
+        CaseScore {
+            id: format!("{source}-{plan}-{truth}"),
+            kind: SegmentKind::DcStep.as_str().to_string(),
+            truth: truth.into(),
+            verdict: verdict.into(),
+            right: truth == verdict,
+            region_agrees: None,
+            gap_after: if refused { f64::NAN } else { 0.01 },
+            noise_floor: 0.01,
+            reaches_noise_floor: floor,
+            error: refused.then(|| "no start values".to_string()),
+            source: source.into(),
+            plan: plan.into(),
+            param_error: if refused {
+                BTreeMap::new()
+            } else {
+                BTreeMap::from([("K".to_string(), 0.005), ("Ra".to_string(), 0.05)])
+            },
+        }
+    }
+
+    #[test]
+    fn the_table_keeps_sources_and_plans_apart_and_counts_refusals() {
+        let score = SuiteScore {
+            seed: 1,
+            cases: vec![
+                case("motorbench", "staircase", "brush_drop", "brush_drop", true),
+                case("motorbench", "staircase", "none", "error", false),
+                case("motorbench", "ramp", "none", "sensor_lag", false),
+                case("gym-electric-motor", "prbs", "none", "none", true),
+                case("gym-electric-motor", "prbs", "brush_drop", "none", false),
+            ],
+        };
+        let t = score.per_source_and_plan();
+        let own = t[&("motorbench".to_string(), " all".to_string())];
+        assert_eq!((own.cases, own.right, own.refused), (3, 1, 1));
+        assert_eq!((own.false_alarms, own.nones), (1, 2));
+        let stairs = t[&("motorbench".to_string(), "DC staircase".to_string())];
+        assert_eq!(
+            (stairs.cases, stairs.floor_reached, stairs.refused),
+            (2, 1, 1)
+        );
+        let gem = t[&("gym-electric-motor".to_string(), "DC prbs".to_string())];
+        assert_eq!((gem.cases, gem.right, gem.false_alarms), (2, 1, 0));
+        // A refusal is no false alarm, but it is not right either.
+        assert_eq!(score.false_alarms(), (1, 3));
+        assert_eq!(score.refused(), 1);
+        let text = score.to_string();
+        assert!(text.contains("gym-electric-motor   DC prbs"), "{text}");
+        assert!(text.contains("refused records:          1/5"), "{text}");
+    }
 }

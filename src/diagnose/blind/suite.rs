@@ -16,8 +16,9 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
 
+use super::dc_plan::{DcSetup, PlanKind};
 use super::files::write_case_files;
-use super::{simulate_dc_case, simulate_im_case, CaseTruth};
+use super::{simulate_dc_case_with, simulate_im_case, CaseTruth};
 use crate::model::{Effect, Machine};
 use crate::record::SegmentKind;
 
@@ -29,6 +30,18 @@ pub const CASES_PER_EFFECT: usize = 3;
 
 /// Cases with no effect: DC, IM.
 pub const NONE_CASES: [usize; 2] = [4, 3];
+
+/// Which test plans a suite's DC cases use.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum SuitePlans {
+    /// The settled staircase only (12 time constants per level, an open
+    /// coast-down, the classic sensors): the suite before plans varied.
+    Classic,
+    /// Every plan in turn (staircase, ramp, PRBS, speed loop, position
+    /// loop), with holds, damping, coasts and sensors drawn per case.
+    #[default]
+    Wide,
+}
 
 /// One case of the public manifest: what a user would know of a record.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -87,6 +100,7 @@ pub fn case_plan(rng: &mut StdRng) -> Vec<(Machine, Option<Effect>)> {
 pub fn generate_suite(
     dir: &Path,
     seed: u64,
+    plans: SuitePlans,
     progress: &dyn Fn(usize, usize),
 ) -> Result<Manifest, String> {
     if dir.exists() {
@@ -97,6 +111,7 @@ pub fn generate_suite(
     }
     let mut rng = StdRng::seed_from_u64(seed);
     let plan = case_plan(&mut rng);
+    let mut dc_cases = 0usize;
     let mut manifest = Manifest {
         seed,
         cases: Vec::new(),
@@ -111,10 +126,24 @@ pub fn generate_suite(
         let mut case_rng =
             StdRng::seed_from_u64(seed ^ (0x9e37_79b9_7f4a_7c15_u64.wrapping_mul(n as u64 + 1)));
         let (blind, kind) = match machine {
-            Machine::Dc => (
-                simulate_dc_case(*effect, &mut case_rng),
-                SegmentKind::DcStep,
-            ),
+            Machine::Dc => {
+                // Plans in turn, so every plan meets a mix of effects; the
+                // setup from a stream of its own, so the motor and the
+                // effect are those of the case's classic twin.
+                let kind = PlanKind::ALL[dc_cases % PlanKind::ALL.len()];
+                dc_cases += 1;
+                let mut setup_rng = StdRng::seed_from_u64(
+                    seed ^ (0x2545_f491_4f6c_dd1d_u64.wrapping_mul(n as u64 + 1)),
+                );
+                let setup = match plans {
+                    SuitePlans::Classic => DcSetup::classic(),
+                    SuitePlans::Wide => DcSetup::draw(kind, &mut setup_rng),
+                };
+                (
+                    simulate_dc_case_with(*effect, &setup, &mut case_rng),
+                    SegmentKind::DcStep,
+                )
+            }
             Machine::Induction => (
                 simulate_im_case(*effect, &mut case_rng),
                 SegmentKind::ImSlipSweep,
