@@ -4,6 +4,7 @@
 //! sensors are a 12-bit ADC on voltage and current (with half a code of
 //! analog noise) and a 1024-line quadrature encoder whose count
 //! difference per sample is the speed reading.
+#![allow(dead_code)]
 
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
