@@ -92,7 +92,7 @@ pub fn unsettled_channel(seg: &DcSegment) -> Option<String> {
         let tm = t.iter().sum::<f64>() / m;
         let ym = y.iter().sum::<f64>() / m;
         let sxx: f64 = t.iter().map(|ti| (ti - tm).powi(2)).sum();
-        if !(sxx > 0.0) {
+        if sxx.is_nan() || sxx <= 0.0 {
             continue;
         }
         let slope = t

@@ -164,7 +164,7 @@ pub fn equation_error(record: &Record, reading: SpeedReading) -> Result<Equation
             warnings.push(format!(
                 "equation_error: {key} came out negative and is set to 0 (the record does not resolve it)"
             ));
-        } else if !(rel <= 0.5) {
+        } else if rel.is_nan() || rel > 0.5 {
             warnings.push(format!(
                 "equation_error: {key} is poorly determined (standard error {:.0} % of its value): \
                  the excitation does not separate it from the other parameters",
