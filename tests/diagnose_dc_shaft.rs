@@ -22,6 +22,8 @@ fn every_shaft_case_of_seed_7_is_named_and_closed_to_the_noise_floor() {
         suite.to_str().unwrap(),
         "--seed",
         "7",
+        "--plans",
+        "classic",
     ]);
     assert!(out.status.success(), "{}", text(&out).1);
     let read = |name: &str| -> Value {
