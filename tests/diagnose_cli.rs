@@ -170,18 +170,18 @@ fn identify_and_diagnose_every_shape() -> Vec<String> {
         let dir = tempfile::tempdir().unwrap();
         let record = dc_shapes::record(&truth, &drive, 5);
         let files = dc_shapes::write_csvs(&record, dir.path());
+        // `motorbench COMMAND --kind dc_step --json FILES…`, its JSON.
+        let json_of = |command: &str| -> Value {
+            let mut args = vec![command.to_string(), "--kind".into(), "dc_step".into()];
+            args.push("--json".into());
+            args.extend(args_of(&files, None));
+            let out = motorbench(&args.iter().map(String::as_str).collect::<Vec<_>>());
+            let (stdout, stderr) = text(&out);
+            assert!(out.status.success(), "{name} {command}: {stderr}");
+            serde_json::from_str(&stdout).unwrap()
+        };
         // Identification: equation error and output error both apply.
-        let mut args = vec![
-            "identify".to_string(),
-            "--kind".into(),
-            "dc_step".into(),
-            "--json".into(),
-        ];
-        args.extend(args_of(&files, None));
-        let out = motorbench(&args.iter().map(String::as_str).collect::<Vec<_>>());
-        let (stdout, stderr) = text(&out);
-        assert!(out.status.success(), "{name}: {stderr}");
-        let id: Value = serde_json::from_str(&stdout).unwrap();
+        let id = json_of("identify");
         for method in ["equation_error", "output_error"] {
             let m = &id["methods"][method];
             assert_eq!(m["applies"], true, "{name} {method}: {m}");
@@ -203,17 +203,7 @@ fn identify_and_diagnose_every_shape() -> Vec<String> {
                 ));
             }
         }
-        let mut args = vec![
-            "diagnose".to_string(),
-            "--kind".into(),
-            "dc_step".into(),
-            "--json".into(),
-        ];
-        args.extend(args_of(&files, None));
-        let out = motorbench(&args.iter().map(String::as_str).collect::<Vec<_>>());
-        let (stdout, stderr) = text(&out);
-        assert!(out.status.success(), "{name}: {stderr}");
-        let d: Value = serde_json::from_str(&stdout).unwrap();
+        let d = json_of("diagnose");
         check_contract(&d);
         let verdict = d["verdict"]["effect"].as_str().unwrap_or("?").to_string();
         eprintln!("{name:>15} diagnosis: {verdict}");
