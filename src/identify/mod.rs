@@ -153,12 +153,7 @@ impl CoastdownFit {
         ]
         .into_iter()
         .collect();
-        MethodReport {
-            applies: true,
-            params: Some(params),
-            validation_nrmse: self.validation_nrmse,
-            reason: None,
-        }
+        MethodReport::fitted(params, self.validation_nrmse)
     }
 }
 

@@ -401,12 +401,7 @@ impl SteadyStateFit {
                 )
             })
             .collect();
-        MethodReport {
-            applies: true,
-            params: Some(params),
-            validation_nrmse: self.validation_nrmse,
-            reason: None,
-        }
+        MethodReport::fitted(params, self.validation_nrmse)
     }
 }
 

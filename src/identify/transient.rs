@@ -187,12 +187,7 @@ impl TransientFit {
                 )
             })
             .collect();
-        MethodReport {
-            applies: true,
-            params: Some(params),
-            validation_nrmse: self.validation_nrmse,
-            reason: None,
-        }
+        MethodReport::fitted(params, self.validation_nrmse)
     }
 
     /// The range of each parameter over the steps, in [`KEYS`] order.

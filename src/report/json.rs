@@ -39,6 +39,19 @@ pub struct MethodReport {
 }
 
 impl MethodReport {
+    /// A method that applies: its parameters and its held-out score.
+    pub fn fitted(
+        params: BTreeMap<String, ParamEstimate>,
+        validation_nrmse: Option<f64>,
+    ) -> MethodReport {
+        MethodReport {
+            applies: true,
+            params: Some(params),
+            validation_nrmse,
+            reason: None,
+        }
+    }
+
     /// A method that does not apply, and why.
     pub fn not_applicable(reason: impl Into<String>) -> MethodReport {
         MethodReport {

@@ -230,12 +230,7 @@ impl EquationErrorFit {
                 )
             })
             .collect();
-        MethodReport {
-            applies: true,
-            params: Some(params),
-            validation_nrmse: self.validation_nrmse,
-            reason: None,
-        }
+        MethodReport::fitted(params, self.validation_nrmse)
     }
 }
 

@@ -631,12 +631,7 @@ impl OutputErrorFit {
                 )
             })
             .collect();
-        MethodReport {
-            applies: true,
-            params: Some(params),
-            validation_nrmse: self.validation_nrmse,
-            reason: None,
-        }
+        MethodReport::fitted(params, self.validation_nrmse)
     }
 
     /// The 95 % interval of the parameter with contract key `key` (`None`
