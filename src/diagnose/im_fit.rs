@@ -289,10 +289,9 @@ pub fn intervals(
         .collect()
 }
 
-/// The 97.5 % quantile of Student's t with `dof` degrees of freedom.
+/// The 97.5 % quantile of Student's t (at least one degree of freedom).
 fn t975(dof: usize) -> f64 {
-    use statrs::distribution::{ContinuousCDF, StudentsT};
-    StudentsT::new(0.0, 1.0, dof.max(1) as f64).map_or(1.96, |d| d.inverse_cdf(0.975))
+    crate::identify::stats::t975(dof.max(1))
 }
 
 /// Which entries of the vector are logarithms.

@@ -32,7 +32,7 @@ mod output_error;
 mod pasek;
 mod plausibility;
 mod simulate;
-mod stats;
+pub(crate) mod stats;
 mod steady_state;
 mod step;
 mod transient;
