@@ -222,6 +222,19 @@ impl<'a> CsvLines<'a> {
             let reason = "no header row (the file is empty)";
             return Err(RecordError::csv(path, self.last_line, None, reason));
         };
+        if !line.contains(',') {
+            if let Some((sep, name)) = [(';', "semicolon"), ('\t', "tab")]
+                .into_iter()
+                .find(|(c, _)| line.contains(*c))
+            {
+                let reason = format!(
+                    "the header is {name}-separated ({sep:?}); motorbench reads comma-separated \
+                     CSV with a decimal point: export with ',' as the delimiter (a spreadsheet's \
+                     \"CSV (comma delimited)\"), or convert the file"
+                );
+                return Err(RecordError::csv(path, no, None, reason));
+            }
+        }
         let names = line.split(',').map(unquote).collect();
         Ok((CsvHeader { no, names }, rows))
     }
@@ -456,6 +469,25 @@ mod tests {
         assert_eq!(seg.voltage, vec![24.0, 24.0]);
         assert_eq!(seg.current, vec![1.25, 1.5]);
         assert_eq!(seg.speed, vec![10.5, 11.0]);
+    }
+
+    #[test]
+    fn a_semicolon_or_tab_separated_file_is_named_as_such() {
+        let e = error(
+            "time_s;armature_voltage_V;armature_current_A;speed_rad_s\n0;60;0,1;40\n",
+            1,
+            None,
+        );
+        assert!(
+            e.contains("semicolon-separated") && e.contains("','"),
+            "{e}"
+        );
+        let e = error(
+            "time_s\tarmature_voltage_V\tarmature_current_A\tspeed_rad_s\n0\t60\t0.1\t40\n",
+            1,
+            None,
+        );
+        assert!(e.contains("tab-separated"), "{e}");
     }
 
     #[test]
