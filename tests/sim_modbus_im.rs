@@ -148,3 +148,58 @@ async fn modbus_sweep_identifies_the_machine_as_the_direct_rig_does() {
         .count();
     assert_eq!(stats, 4, "line voltage, current, power, encoder count");
 }
+
+/// The values `probe` printed for `quantity` at `step` (`idle`, `on`, `safe`).
+fn probed(stdout: &str, step: &str, quantity: &str) -> Vec<f64> {
+    let prefix = format!("[{step:>4}] {quantity} ");
+    let values: Vec<f64> = stdout
+        .lines()
+        .filter(|l| l.starts_with(&prefix))
+        .map(|l| {
+            l[prefix.len()..]
+                .split_whitespace()
+                .next()
+                .unwrap()
+                .parse()
+                .unwrap_or_else(|e| panic!("{l}: {e}"))
+        })
+        .collect();
+    assert!(!values.is_empty(), "no {step} {quantity} in:\n{stdout}");
+    values
+}
+
+#[test]
+fn probe_exercises_the_served_induction_machine_rig_through_modbus() {
+    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-modbus-im.toml");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_motorbench"))
+        .args(["probe", "--config", config, "--actuate"])
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stderr.contains("Modbus TCP"), "{stderr}");
+    for q in [
+        "line_voltage",
+        "line_current",
+        "input_power",
+        "encoder_count",
+    ] {
+        let idle = probed(&stdout, "idle", q);
+        assert!(idle[0].abs() < 1.0 || q == "encoder_count", "{q}: {idle:?}");
+    }
+    for cmd in [
+        "[cmd ] supply: set point 22.000: ok",
+        "[cmd ] supply: safe state: ok",
+        "[cmd ] dynamometer: set point 9.425: ok",
+        "[cmd ] dynamometer: safe state: ok",
+    ] {
+        assert!(stdout.contains(cmd), "{cmd}:\n{stdout}");
+    }
+    // The meter sees the supply's 22 V (0.5 % noise), then nothing once it
+    // is safe again.
+    let on = probed(&stdout, "on", "line_voltage");
+    assert!((on[0] / 22.0 - 1.0).abs() < 0.05, "{on:?}\n{stdout}");
+    let safe = probed(&stdout, "safe", "line_voltage");
+    assert!(safe[0].abs() < 1.0, "{safe:?}\n{stdout}");
+}
