@@ -4,7 +4,7 @@
 //! Every error names the file and, for syntax or type errors, the line and
 //! the key; validation errors name the key path (`limits.max_current_A`).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::Deserialize;
 use thiserror::Error;
@@ -680,14 +680,6 @@ impl Config {
             supervision,
             retention,
         })
-    }
-}
-
-/// The path a user gave, or the embedded default when none.
-pub fn load_or_default(path: Option<&PathBuf>) -> Result<Config, ConfigError> {
-    match path {
-        Some(p) => Config::load(p),
-        None => Ok(Config::embedded_default()),
     }
 }
 

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{motorbench, text};
+use common::{motorbench, probed, text};
 
 #[test]
 fn run_sim_im_then_replay_gives_the_same_report() {
@@ -74,25 +74,6 @@ fn run_sim_im_then_replay_gives_the_same_report() {
     v.as_object_mut().unwrap().remove("diagnosis");
     r.as_object_mut().unwrap().remove("diagnosis");
     assert_eq!(r, v);
-}
-
-/// The value `probe` printed for `quantity` at `step` (`idle`, `on`, `safe`).
-fn probed(stdout: &str, step: &str, quantity: &str) -> Vec<f64> {
-    let prefix = format!("[{step:>4}] {quantity} ");
-    let values: Vec<f64> = stdout
-        .lines()
-        .filter(|l| l.starts_with(&prefix))
-        .map(|l| {
-            l[prefix.len()..]
-                .split_whitespace()
-                .next()
-                .unwrap()
-                .parse()
-                .unwrap_or_else(|e| panic!("{l}: {e}"))
-        })
-        .collect();
-    assert!(!values.is_empty(), "no {step} {quantity} in:\n{stdout}");
-    values
 }
 
 #[test]

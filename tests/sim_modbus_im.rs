@@ -16,7 +16,11 @@
 //! which moves the outer-cage resistance by a few tenths of a per cent. The differences are printed (run with
 //! `--nocapture`).
 
+mod common;
+
 use std::path::Path;
+
+use common::{motorbench, probed, text};
 
 use motorbench::bench::{commission_im, CommissionOptions, ImRunConfig, Outcome};
 
@@ -149,34 +153,11 @@ async fn modbus_sweep_identifies_the_machine_as_the_direct_rig_does() {
     assert_eq!(stats, 4, "line voltage, current, power, encoder count");
 }
 
-/// The values `probe` printed for `quantity` at `step` (`idle`, `on`, `safe`).
-fn probed(stdout: &str, step: &str, quantity: &str) -> Vec<f64> {
-    let prefix = format!("[{step:>4}] {quantity} ");
-    let values: Vec<f64> = stdout
-        .lines()
-        .filter(|l| l.starts_with(&prefix))
-        .map(|l| {
-            l[prefix.len()..]
-                .split_whitespace()
-                .next()
-                .unwrap()
-                .parse()
-                .unwrap_or_else(|e| panic!("{l}: {e}"))
-        })
-        .collect();
-    assert!(!values.is_empty(), "no {step} {quantity} in:\n{stdout}");
-    values
-}
-
 #[test]
 fn probe_exercises_the_served_induction_machine_rig_through_modbus() {
     let config = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-modbus-im.toml");
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_motorbench"))
-        .args(["probe", "--config", config, "--actuate"])
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let out = motorbench(&["probe", "--config", config, "--actuate"]);
+    let (stdout, stderr) = text(&out);
     assert!(out.status.success(), "{stdout}\n{stderr}");
     assert!(stderr.contains("Modbus TCP"), "{stderr}");
     for q in [

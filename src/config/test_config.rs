@@ -8,6 +8,11 @@
 //! `dc_step` / `dc_coastdown`) or an induction machine's ([`ImRunConfig`],
 //! `im_slip_sweep`). Errors are [`ConfigError`]s for both, naming the
 //! file, the line and the key.
+//!
+//! A third machine would add a [`PlanKind`] variant per plan, a
+//! [`TestConfig`] variant holding its validated configuration, and its
+//! schema's parser; the compiler then lists every place that must say
+//! what the new machine does.
 
 use std::path::Path;
 
