@@ -1,5 +1,5 @@
 //! `motorbench probe`: check a rig's wiring (DC or induction machine)
-//! before a test; see [`crate::bench::probe`] for what is driven.
+//! before a test; see [`crate::bench::probe()`] for what is driven.
 
 use std::path::PathBuf;
 
