@@ -2,7 +2,7 @@
 //! diagnosis, or the contract's JSON), its plot, where a run's files went,
 //! and the damage of a recovered record.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use super::Failure;
 use crate::diagnose::render_diagnosis_text;
@@ -70,20 +70,20 @@ fn print_diagnosis_text(report: &IdentificationReport) {
 }
 
 /// The files a run wrote.
-pub(crate) struct RunFiles<'a> {
+pub(crate) struct RunFiles {
     /// The MCAP record.
-    pub mcap: &'a Path,
+    pub mcap: PathBuf,
     /// Messages in it.
     pub messages: u64,
     /// `report.json`.
-    pub report: &'a Path,
+    pub report: PathBuf,
     /// The measured-vs-model plot.
-    pub svg: &'a Path,
+    pub svg: PathBuf,
     /// The diagnosis' residual plot, when diagnosed.
-    pub residuals_svg: Option<&'a Path>,
+    pub residuals_svg: Option<PathBuf>,
 }
 
-impl RunFiles<'_> {
+impl RunFiles {
     /// Say where the files went (after the text report).
     pub(crate) fn print(&self) {
         println!(
@@ -93,7 +93,7 @@ impl RunFiles<'_> {
         );
         println!("report: {}", self.report.display());
         println!("plot:   {}", self.svg.display());
-        if let Some(path) = self.residuals_svg {
+        if let Some(path) = &self.residuals_svg {
             println!("gap:    {}", path.display());
         }
     }

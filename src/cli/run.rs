@@ -46,7 +46,7 @@ pub async fn run(args: RunArgs) -> Result<(), Failure> {
         diagnose: !args.no_diagnose,
     };
     let chatty = !args.json && !args.quiet;
-    let (identified, outcome) = match &cfg {
+    let (identified, outcome, files) = match &cfg {
         TestConfig::Dc(cfg) => {
             let progress = Bar::new(args.quiet || args.json);
             if chatty {
@@ -67,17 +67,14 @@ pub async fn run(args: RunArgs) -> Result<(), Failure> {
                 None,
                 done.truth.as_ref(),
             );
-            if !args.json {
-                RunFiles {
-                    mcap: &done.mcap_path,
-                    messages: done.stats.messages,
-                    report: &done.report_path,
-                    svg: &done.svg_path,
-                    residuals_svg: done.residuals_svg_path.as_deref(),
-                }
-                .print();
-            }
-            (identified, done.outcome)
+            let files = RunFiles {
+                mcap: done.mcap_path,
+                messages: done.stats.messages,
+                report: done.report_path,
+                svg: done.svg_path,
+                residuals_svg: done.residuals_svg_path,
+            };
+            (identified, done.outcome, files)
         }
         TestConfig::Im(cfg) => {
             if chatty {
@@ -92,19 +89,19 @@ pub async fn run(args: RunArgs) -> Result<(), Failure> {
                 .await
                 .map_err(Failure::runtime)?;
             let identified = print_im(&done.identification, args.json, None);
-            if !args.json {
-                RunFiles {
-                    mcap: &done.mcap_path,
-                    messages: done.stats.messages,
-                    report: &done.report_path,
-                    svg: &done.svg_path,
-                    residuals_svg: done.residuals_svg_path.as_deref(),
-                }
-                .print();
-            }
-            (identified, done.outcome)
+            let files = RunFiles {
+                mcap: done.mcap_path,
+                messages: done.stats.messages,
+                report: done.report_path,
+                svg: done.svg_path,
+                residuals_svg: done.residuals_svg_path,
+            };
+            (identified, done.outcome, files)
         }
     };
+    if !args.json {
+        files.print();
+    }
     if let Outcome::Aborted { reason } = &outcome {
         return Err(Failure::aborted(reason));
     }
