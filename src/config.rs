@@ -4,7 +4,7 @@
 //! Every error names the file and, for syntax or type errors, the line and
 //! the key; validation errors name the key path (`limits.max_current_A`).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use serde::Deserialize;
 use thiserror::Error;
@@ -22,8 +22,10 @@ pub use can::{CanLink, CanTransport};
 pub use key_line::key_line;
 pub use modbus::{LinkSpec, ModbusDeviceLink, ModbusRig, SensorLink, SimulatedTransport};
 pub use sensor_channels::SensorChannel;
+pub use test_config::{recorded_im_model, PlanKind, TestConfig};
 mod retention;
 mod supervision;
+mod test_config;
 
 pub(crate) use modbus::{call_policy, merge_window, simulated_transport, RawLink};
 pub(crate) use retention::RawRetention;
@@ -82,13 +84,36 @@ pub enum ConfigError {
 }
 
 /// `checked` with its error as an invalid value of `key` in `source`.
-fn bounded<T>(source: &str, key: &str, checked: Result<T, String>) -> Result<T, ConfigError> {
-    checked.map_err(|reason| ConfigError::Invalid {
+pub(crate) fn bounded<T>(
+    source: &str,
+    key: &str,
+    checked: Result<T, String>,
+) -> Result<T, ConfigError> {
+    checked.map_err(|reason| invalid(source, key, reason))
+}
+
+/// An invalid value of `key` in `source` (its line filled in later by
+/// [`ConfigError::located`]).
+pub(crate) fn invalid(source: &str, key: &str, reason: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid {
         path: source.to_string(),
         line: None,
         key: key.to_string(),
-        reason,
-    })
+        reason: reason.into(),
+    }
+}
+
+/// A TOML syntax, type or unknown-key error in `text` (from `source`),
+/// with its line.
+pub(crate) fn syntax_error(source: &str, text: &str, e: &toml::de::Error) -> ConfigError {
+    let start = e.span().map(|s| s.start).unwrap_or(0).min(text.len());
+    let line = text[..start].matches('\n').count() + 1;
+    ConfigError::Parse {
+        path: source.to_string(),
+        line,
+        text: cut(text.lines().nth(line - 1).unwrap_or("").trim()),
+        message: e.message().replace('\n', " ").trim().to_string(),
+    }
 }
 
 /// `:line` when the line is known.
@@ -387,22 +412,8 @@ impl Config {
     /// configuration with a request's `[test]`): errors name the key, not
     /// a line of the composed text.
     pub(crate) fn parse_composed(source: &str, text: &str) -> Result<Config, ConfigError> {
-        let raw: RawConfig = toml::from_str(text).map_err(|e| {
-            let start = e.span().map(|s| s.start).unwrap_or(0).min(text.len());
-            let line = text[..start].matches('\n').count() + 1;
-            ConfigError::Parse {
-                path: source.to_string(),
-                line,
-                text: cut(text.lines().nth(line - 1).unwrap_or("").trim()),
-                message: e.message().replace('\n', " ").trim().to_string(),
-            }
-        })?;
-        let invalid = |key: &str, reason: String| ConfigError::Invalid {
-            path: source.to_string(),
-            line: None,
-            key: key.to_string(),
-            reason,
-        };
+        let raw: RawConfig = toml::from_str(text).map_err(|e| syntax_error(source, text, &e))?;
+        let invalid = |key: &str, reason: String| invalid(source, key, reason);
         let positive = |key: &str, v: f64| {
             if v.is_finite() && v > 0.0 {
                 Ok(())
@@ -672,14 +683,6 @@ impl Config {
     }
 }
 
-/// The path a user gave, or the embedded default when none.
-pub fn load_or_default(path: Option<&PathBuf>) -> Result<Config, ConfigError> {
-    match path {
-        Some(p) => Config::load(p),
-        None => Ok(Config::embedded_default()),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -710,14 +713,7 @@ mod tests {
         for entry in std::fs::read_dir(dir).unwrap() {
             let path = entry.unwrap().path();
             if path.extension().is_some_and(|e| e == "toml") {
-                let text = std::fs::read_to_string(&path).unwrap();
-                if crate::bench::is_im_sweep_config(&text) {
-                    // Induction-machine sweeps have their own schema.
-                    crate::bench::ImRunConfig::parse(&path.display().to_string(), &text)
-                        .unwrap_or_else(|e| panic!("{e}"));
-                } else {
-                    Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
-                }
+                TestConfig::load(&path).unwrap_or_else(|e| panic!("{e}"));
                 n += 1;
             }
         }

@@ -2,7 +2,10 @@
 //!
 //! Map of the crate (data flows top to bottom):
 //!
-//! - [`config`]: rig and test configuration (TOML), validated.
+//! - [`config`]: rig and test configuration (TOML), validated;
+//!   [`config::TestConfig`] is the one place a test plan
+//!   ([`config::PlanKind`], `test.plan`) is mapped to its machine (DC or
+//!   induction), for the CLI, the daemon and the tests alike.
 //! - [`bounds`]: the practical bounds on every number from outside that
 //!   sizes an allocation, a loop or a wait.
 //! - [`excerpt`]: user input quoted in error messages, long values cut.
@@ -14,14 +17,18 @@
 //! - [`identify`]: parameter identification from a [`record::Record`]
 //!   (DC; induction machine: the seed paper's recursive estimator and LM).
 //! - [`report`]: JSON, text and SVG output.
+//! - [`cli`]: the bodies of the `run`, `probe`, `replay` and `identify`
+//!   subcommands and their exit codes.
 //! - [`serve`]: the daemon (`motorbench serve`): control API, one test at
 //!   a time per rig under the safety supervisor, records index, systemd;
 //!   and its client (`motorbench ctl`).
 //!
-//! The binary (`src/main.rs`) is a thin CLI over these modules.
+//! The binary (`src/main.rs`) only parses the command line (clap) and
+//! dispatches to [`cli`], [`diagnose::cli`] and [`serve::cli`].
 
 pub mod bench;
 pub mod bounds;
+pub mod cli;
 pub mod config;
 pub mod diagnose;
 pub mod excerpt;

@@ -161,6 +161,17 @@ fn cli_run_then_replay_prints_the_same_json_to_the_last_digit() {
     assert!(replay.status.success(), "{stderr}");
     assert!(stderr.contains("identical to the recorded"), "{stderr}");
     assert_eq!(run_json, replay_json);
+    // Without the diagnosis: the rest of the recorded result still matches.
+    let replay = common::motorbench_release(&[
+        "replay",
+        "--json",
+        "--check",
+        "--no-diagnose",
+        mcap.to_str().unwrap(),
+    ]);
+    let (_, stderr) = common::text(&replay);
+    assert!(replay.status.success(), "{stderr}");
+    assert!(stderr.contains("identical to the recorded"), "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&run_json).unwrap();
     assert_eq!(v["schema_version"], "1");
     // The seed motor has complex poles: Pasek does not apply; the full

@@ -16,7 +16,11 @@
 //! which moves the outer-cage resistance by a few tenths of a per cent. The differences are printed (run with
 //! `--nocapture`).
 
+mod common;
+
 use std::path::Path;
+
+use common::{motorbench, probed, text};
 
 use motorbench::bench::{commission_im, CommissionOptions, ImRunConfig, Outcome};
 
@@ -147,4 +151,36 @@ async fn modbus_sweep_identifies_the_machine_as_the_direct_rig_does() {
         .filter(|(_, e)| e.message.starts_with("sampling statistics"))
         .count();
     assert_eq!(stats, 4, "line voltage, current, power, encoder count");
+}
+
+#[test]
+fn probe_exercises_the_served_induction_machine_rig_through_modbus() {
+    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-modbus-im.toml");
+    let out = motorbench(&["probe", "--config", config, "--actuate"]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stdout}\n{stderr}");
+    assert!(stderr.contains("Modbus TCP"), "{stderr}");
+    for q in [
+        "line_voltage",
+        "line_current",
+        "input_power",
+        "encoder_count",
+    ] {
+        let idle = probed(&stdout, "idle", q);
+        assert!(idle[0].abs() < 1.0 || q == "encoder_count", "{q}: {idle:?}");
+    }
+    for cmd in [
+        "[cmd ] supply: set point 22.000: ok",
+        "[cmd ] supply: safe state: ok",
+        "[cmd ] dynamometer: set point 9.425: ok",
+        "[cmd ] dynamometer: safe state: ok",
+    ] {
+        assert!(stdout.contains(cmd), "{cmd}:\n{stdout}");
+    }
+    // The meter sees the supply's 22 V (0.5 % noise), then nothing once it
+    // is safe again.
+    let on = probed(&stdout, "on", "line_voltage");
+    assert!((on[0] / 22.0 - 1.0).abs() < 0.05, "{on:?}\n{stdout}");
+    let safe = probed(&stdout, "safe", "line_voltage");
+    assert!(safe[0].abs() < 1.0, "{safe:?}\n{stdout}");
 }

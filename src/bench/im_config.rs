@@ -5,7 +5,8 @@
 //! The file has the DC configuration's layout (`[motor]`, `[rig]`,
 //! `[limits]`, `[test]`, and for the daemon the optional `[supervisor]`
 //! and `[records]`) with the induction machine's keys; a file whose
-//! `test.plan` is `"im_slip_sweep"` is one of these ([`is_im_sweep_config`]).
+//! `test.plan` is `"im_slip_sweep"` is one of these (the one place that
+//! tells is [`crate::config::TestConfig`]).
 //! `rig.backend` is `"simulated"` or `"modbus"` (see
 //! [`super::ImModbusRig`]). Unknown keys are refused; every error names the
 //! file and the line or the key.
@@ -14,30 +15,13 @@ use serde::Deserialize;
 
 use super::{ImModbusRig, ImSweepPlan, SimImRigConfig};
 use crate::bounds;
-use crate::config::{key_line, Limits, RawRetention, RawSupervisor, Retention, Supervision};
+use crate::config::{
+    bounded, invalid, syntax_error, ConfigError, Limits, RawRetention, RawSupervisor, Retention,
+    Supervision,
+};
 use crate::excerpt::quoted;
 use crate::identify::slip_grid;
 use crate::model::{Connection, ImCircuit, ImModel, ImParam, ImSupply};
-
-/// Whether `text` is an induction-machine sweep configuration (its
-/// `test.plan` is `"im_slip_sweep"`).
-pub fn is_im_sweep_config(text: &str) -> bool {
-    toml::from_str::<toml::Table>(text)
-        .ok()
-        .and_then(|t| {
-            t.get("test")?
-                .get("plan")?
-                .as_str()
-                .map(|p| p == "im_slip_sweep")
-        })
-        .unwrap_or(false)
-}
-
-/// The circuit to identify named in a recorded configuration (`test.model`).
-pub fn im_model_of_config(text: &str) -> Option<ImModel> {
-    let t = toml::from_str::<toml::Table>(text).ok()?;
-    ImModel::parse(t.get("test")?.get("model")?.as_str()?)
-}
 
 /// A validated sweep configuration.
 #[derive(Debug, Clone, PartialEq)]
@@ -189,35 +173,19 @@ fn number(t: &toml::Table, key: &str) -> Option<f64> {
     }
 }
 
-/// An error naming `key` of `source` and, where `lines_of` (the text)
-/// has it, its line.
-fn keyed_error(source: &str, lines_of: Option<&str>, key: &str, why: &str) -> String {
-    match lines_of.and_then(|text| key_line(text, key)) {
-        Some(line) => format!("{source}:{line}: {key}: {why}"),
-        None => format!("{source}: {key}: {why}"),
-    }
-}
-
-/// `checked` with its error named by [`keyed_error`].
-fn bounded<T>(
-    source: &str,
-    lines_of: Option<&str>,
-    key: &str,
-    checked: Result<T, String>,
-) -> Result<T, String> {
-    checked.map_err(|why| keyed_error(source, lines_of, key, &why))
-}
-
 impl ImRunConfig {
     /// Read and validate a file.
-    pub fn load(path: &std::path::Path) -> Result<ImRunConfig, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    pub fn load(path: &std::path::Path) -> Result<ImRunConfig, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+            path: path.display().to_string(),
+            source,
+        })?;
         ImRunConfig::parse(&path.display().to_string(), &text)
     }
 
     /// Parse and validate `text`; `source` names it in errors, and its
     /// directory resolves relative profile paths.
-    pub fn parse(source: &str, text: &str) -> Result<ImRunConfig, String> {
+    pub fn parse(source: &str, text: &str) -> Result<ImRunConfig, ConfigError> {
         let dir = std::path::Path::new(source)
             .parent()
             .unwrap_or(std::path::Path::new("."));
@@ -230,8 +198,8 @@ impl ImRunConfig {
         source: &str,
         dir: &std::path::Path,
         text: &str,
-    ) -> Result<ImRunConfig, String> {
-        ImRunConfig::parse_with(source, dir, text, Some(text))
+    ) -> Result<ImRunConfig, ConfigError> {
+        ImRunConfig::parse_composed(source, dir, text).map_err(|e| e.located(Some(text)))
     }
 
     /// As [`ImRunConfig::parse_in`], for a text the program composed (the
@@ -241,68 +209,64 @@ impl ImRunConfig {
         source: &str,
         dir: &std::path::Path,
         text: &str,
-    ) -> Result<ImRunConfig, String> {
-        ImRunConfig::parse_with(source, dir, text, None)
-    }
-
-    /// Parse and validate `text`; validation errors name the line of
-    /// their key in `lines_of`, when given.
-    fn parse_with(
-        source: &str,
-        dir: &std::path::Path,
-        text: &str,
-        lines_of: Option<&str>,
-    ) -> Result<ImRunConfig, String> {
-        let raw: Raw = toml::from_str(text).map_err(|e| {
-            let start = e.span().map(|s| s.start).unwrap_or(0).min(text.len());
-            let line = text[..start].matches('\n').count() + 1;
-            format!("{source}:{line}: {}", e.message())
-        })?;
-        let bad = |what: String| format!("{source}: {what}");
-        let bad_key = |key: &str, why: String| keyed_error(source, lines_of, key, &why);
+    ) -> Result<ImRunConfig, ConfigError> {
+        let raw: Raw = toml::from_str(text).map_err(|e| syntax_error(source, text, &e))?;
+        let bad = |key: &str, why: String| invalid(source, key, why);
         let modbus = match (raw.rig.backend.as_str(), raw.rig.modbus) {
             ("simulated", None) => None,
             ("simulated", Some(_)) => {
-                return Err(bad("rig.modbus is for rig.backend = \"modbus\"".into()))
+                return Err(bad("rig.modbus", "is for rig.backend = \"modbus\"".into()))
             }
             ("modbus", Some(m)) => Some(
                 ImModbusRig::parse(m, dir, raw.rig.simulated.is_some())
-                    .map_err(|(key, reason)| bad_key(&key, reason))?,
+                    .map_err(|(key, reason)| bad(&key, reason))?,
             ),
-            ("modbus", None) => return Err(bad("rig.modbus: missing".into())),
+            ("modbus", None) => {
+                return Err(bad(
+                    "rig.modbus",
+                    "missing: backend \"modbus\" needs it".into(),
+                ))
+            }
             (other, _) => {
-                return Err(bad(format!(
-                    "rig.backend {}: want \"simulated\" or \"modbus\"",
-                    quoted(other)
-                )))
+                return Err(bad(
+                    "rig.backend",
+                    format!("{}: want \"simulated\" or \"modbus\"", quoted(other)),
+                ))
             }
         };
         let served = modbus.as_ref().is_some_and(|m| m.simulate.is_some());
         if (modbus.is_none() || served) && raw.rig.simulated.is_none() {
-            return Err(bad("rig.simulated: missing".into()));
+            return Err(bad("rig.simulated", "missing".into()));
         }
         if !(modbus.is_none() || served) && raw.rig.simulated.is_some() {
             return Err(bad(
-                "rig.simulated is only used with rig.modbus.simulate: leave it out on a real rig"
-                    .into(),
+                "rig.simulated",
+                "is only used with rig.modbus.simulate: leave it out on a real rig".into(),
             ));
         }
         if raw.test.plan != "im_slip_sweep" {
-            return Err(bad(format!(
-                "test.plan {} is not im_slip_sweep",
-                quoted(&raw.test.plan)
-            )));
+            return Err(bad(
+                "test.plan",
+                format!("{} is not im_slip_sweep", quoted(&raw.test.plan)),
+            ));
         }
         let model = ImModel::parse(&raw.test.model).ok_or_else(|| {
-            bad(format!(
-                "test.model {}: want single, single-fe, double or double-fe",
-                quoted(&raw.test.model)
-            ))
+            bad(
+                "test.model",
+                format!(
+                    "{}: want single, single-fe, double or double-fe",
+                    quoted(&raw.test.model)
+                ),
+            )
         })?;
         let plate = &raw.motor.nameplate;
         let need = |key: &str| {
-            number(plate, key)
-                .ok_or_else(|| bad(format!("motor.nameplate.{key} is missing or not a number")))
+            number(plate, key).ok_or_else(|| {
+                bad(
+                    &format!("motor.nameplate.{key}"),
+                    "is missing or not a number".into(),
+                )
+            })
         };
         let (voltage, current, frequency, poles) = (
             need("voltage_V")?,
@@ -314,24 +278,27 @@ impl ImRunConfig {
             .get("connection")
             .and_then(|v| v.as_str())
             .and_then(Connection::parse)
-            .ok_or_else(
-                || bad("motor.nameplate.connection must be \"star\" or \"delta\"".into()),
-            )?;
+            .ok_or_else(|| {
+                bad(
+                    "motor.nameplate.connection",
+                    "must be \"star\" or \"delta\"".into(),
+                )
+            })?;
         if poles < 2.0 || poles % 2.0 != 0.0 {
-            return Err(bad(format!(
-                "motor.nameplate.poles = {poles} must be an even number ≥ 2"
-            )));
+            return Err(bad(
+                "motor.nameplate.poles",
+                format!("{poles} must be an even number ≥ 2"),
+            ));
         }
         let positive = |name: &str, v: f64| {
             if v.is_finite() && v > 0.0 {
                 Ok(v)
             } else {
-                Err(bad_key(name, format!("{v} must be a finite number > 0")))
+                Err(bad(name, format!("{v} must be a finite number > 0")))
             }
         };
         let rate = bounded(
             source,
-            lines_of,
             "rig.sample_rate_Hz",
             bounds::sample_rate(raw.rig.sample_rate_hz),
         )?;
@@ -344,25 +311,24 @@ impl ImRunConfig {
                 .iter()
                 .any(|v| !(v.is_finite() && *v > 0.0 && *v <= voltage * 1.1))
         {
-            return Err(bad(format!(
-                "test.voltages_V must be a non-empty list in (0, {:.0}] V",
-                voltage * 1.1
-            )));
-        }
-        if !(raw.test.points >= 5 && raw.test.min_slip > 0.0 && raw.test.min_slip < 0.2) {
             return Err(bad(
-                "test.points must be ≥ 5 and test.min_slip in (0, 0.2)".into()
+                "test.voltages_V",
+                format!("must be a non-empty list in (0, {:.0}] V", voltage * 1.1),
             ));
+        }
+        if raw.test.points < 5 {
+            return Err(bad("test.points", "must be ≥ 5".into()));
+        }
+        if !(raw.test.min_slip > 0.0 && raw.test.min_slip < 0.2) {
+            return Err(bad("test.min_slip", "must be in (0, 0.2)".into()));
         }
         bounded(
             source,
-            lines_of,
             "test.voltages_V",
             bounds::count(raw.test.voltages.len(), bounds::MAX_LEVELS),
         )?;
         bounded(
             source,
-            lines_of,
             "test.points",
             bounds::count(raw.test.points, bounds::MAX_SWEEP_POINTS),
         )?;
@@ -371,29 +337,25 @@ impl ImRunConfig {
             ("test.settle.window_samples", st.window_samples),
             ("test.settle.average_samples", st.average_samples),
         ] {
-            bounded(source, lines_of, key, bounds::window_samples(n as f64))?;
+            bounded(source, key, bounds::window_samples(n as f64))?;
         }
         let point_s = bounded(
             source,
-            lines_of,
             "test.settle.timeout_s",
             bounds::wait_s(st.timeout_s, false),
         )?;
         let hot_s = bounded(
             source,
-            lines_of,
             "test.hot_point_max_s",
             bounds::wait_s(raw.test.hot_point_max_s, false),
         )?;
         let cooldown_s = bounded(
             source,
-            lines_of,
             "test.cooldown_s",
             bounds::wait_s(raw.test.cooldown_s.max(0.0), true),
         )?;
         let average_s = bounded(
             source,
-            lines_of,
             "test.settle.average_samples",
             bounds::wait_s(st.average_samples as f64 / rate, true),
         )?;
@@ -403,7 +365,6 @@ impl ImRunConfig {
             * (point_s.max(hot_s) + average_s + cooldown_s);
         bounded(
             source,
-            lines_of,
             "test.settle.timeout_s",
             bounds::test_length(longest, rate),
         )?;
@@ -422,27 +383,32 @@ impl ImRunConfig {
                     ImModel::parse(m.get("model").and_then(|v| v.as_str()).unwrap_or(""))
                         .ok_or_else(|| {
                             bad(
-                        "rig.simulated.motor.model must be single, single-fe, double or double-fe"
-                            .into(),
-                    )
+                                "rig.simulated.motor.model",
+                                "must be single, single-fe, double or double-fe".into(),
+                            )
                         })?;
                 for key in m.keys() {
                     if key != "model" && !truth_model.params().iter().any(|p| p.key() == key) {
-                        return Err(bad(format!(
-                            "rig.simulated.motor.{key} is not a {truth_model} parameter"
-                        )));
+                        return Err(bad(
+                            &format!("rig.simulated.motor.{key}"),
+                            format!("is not a {truth_model} parameter"),
+                        ));
                     }
                 }
-                let values: Result<Vec<f64>, String> = truth_model
+                let values: Result<Vec<f64>, ConfigError> = truth_model
                     .params()
                     .iter()
                     .map(|p: &ImParam| {
-                        number(m, p.key())
-                            .ok_or_else(|| bad(format!("rig.simulated.motor.{p} (ohm) is missing")))
+                        number(m, p.key()).ok_or_else(|| {
+                            bad(
+                                &format!("rig.simulated.motor.{p}"),
+                                "(ohm) is missing".into(),
+                            )
+                        })
                     })
                     .collect();
                 let circuit = ImCircuit::from_values(truth_model, &values?)
-                    .map_err(|e| bad(format!("rig.simulated.motor: {e}")))?;
+                    .map_err(|e| bad("rig.simulated.motor", e.to_string()))?;
                 Some(SimImRigConfig {
                     circuit,
                     supply,
@@ -471,10 +437,13 @@ impl ImRunConfig {
         };
         let encoder_lines = match (&modbus, &simulated) {
             (Some(m), Some(sim)) if m.encoder_lines != sim.encoder_lines => {
-                return Err(bad(format!(
-                    "rig.modbus.encoder.encoder_lines = {} must equal rig.simulated.sensors.encoder_lines = {}: the served counter counts the simulated encoder",
-                    m.encoder_lines, sim.encoder_lines
-                )))
+                return Err(bad(
+                    "rig.modbus.encoder.encoder_lines",
+                    format!(
+                        "{} must equal rig.simulated.sensors.encoder_lines = {}: the served counter counts the simulated encoder",
+                        m.encoder_lines, sim.encoder_lines
+                    ),
+                ))
             }
             (Some(m), _) => m.encoder_lines,
             (None, Some(sim)) => sim.encoder_lines,
@@ -514,15 +483,9 @@ impl ImRunConfig {
             encoder_counts_per_rev: 4.0 * f64::from(encoder_lines),
         };
         let nameplate =
-            serde_json::to_value(plate).map_err(|e| bad(format!("motor.nameplate: {e}")))?;
-        let supervision = raw
-            .supervisor
-            .validate(source, &limits, &nameplate)
-            .map_err(|e| e.located(lines_of).to_string())?;
-        let retention = raw
-            .records
-            .validate(source)
-            .map_err(|e| e.located(lines_of).to_string())?;
+            serde_json::to_value(plate).map_err(|e| bad("motor.nameplate", e.to_string()))?;
+        let supervision = raw.supervisor.validate(source, &limits, &nameplate)?;
+        let retention = raw.records.validate(source)?;
         Ok(ImRunConfig {
             source: source.into(),
             text: text.into(),
@@ -556,8 +519,6 @@ mod tests {
 
     #[test]
     fn shipped_config_parses() {
-        assert!(is_im_sweep_config(SIM_IM));
-        assert_eq!(im_model_of_config(SIM_IM), Some(ImModel::Double));
         let c = ImRunConfig::parse("sim-im.toml", SIM_IM).unwrap();
         assert_eq!(
             c.simulated.as_ref().unwrap().circuit.model(),
@@ -569,9 +530,6 @@ mod tests {
         assert!((c.limits.max_speed - 1.2 * std::f64::consts::PI * 50.0).abs() < 1e-9);
         assert_eq!(c.plan.pole_pairs, 2);
         assert_eq!(c.nameplate["connection"], "star");
-        assert!(!is_im_sweep_config(include_str!(
-            "../../config/sim-dc.toml"
-        )));
     }
 
     #[test]
@@ -580,7 +538,12 @@ mod tests {
             assert!(SIM_IM.contains(from), "{from}");
             let text = SIM_IM.replacen(from, to, 1);
             let line = text.lines().position(|l| l.starts_with(to)).unwrap() + 1;
-            (line, ImRunConfig::parse("im.toml", &text).unwrap_err())
+            (
+                line,
+                ImRunConfig::parse("im.toml", &text)
+                    .unwrap_err()
+                    .to_string(),
+            )
         };
         for (from, to, key) in [
             ("points = 30", "points = 100000", "test.points"),
@@ -665,7 +628,9 @@ mod tests {
     #[test]
     fn modbus_errors_name_the_key() {
         let bad = |from: &str, to: &str| {
-            ImRunConfig::parse(&modbus_source(), &SIM_MODBUS_IM.replace(from, to)).unwrap_err()
+            ImRunConfig::parse(&modbus_source(), &SIM_MODBUS_IM.replace(from, to))
+                .unwrap_err()
+                .to_string()
         };
         let e = bad("\"motor_rated_voltage\"", "\"volts\"");
         assert!(
@@ -717,16 +682,16 @@ mod tests {
 
     #[test]
     fn errors_name_the_file_and_the_key_or_line() {
-        let e = ImRunConfig::parse("x.toml", &SIM_IM.replace("Rr2 =", "Rq2 =")).unwrap_err();
+        let bad = |from: &str, to: &str| {
+            ImRunConfig::parse("x.toml", &SIM_IM.replace(from, to))
+                .unwrap_err()
+                .to_string()
+        };
+        let e = bad("Rr2 =", "Rq2 =");
         assert!(e.contains("x.toml") && e.contains("Rq2"), "{e}");
-        let e =
-            ImRunConfig::parse("x.toml", &SIM_IM.replace("points = ", "pointz = ")).unwrap_err();
+        let e = bad("points = ", "pointz = ");
         assert!(e.starts_with("x.toml:") && e.contains("pointz"), "{e}");
-        let e = ImRunConfig::parse(
-            "x.toml",
-            &SIM_IM.replace("connection = \"star\"", "connection = \"zigzag\""),
-        )
-        .unwrap_err();
+        let e = bad("connection = \"star\"", "connection = \"zigzag\"");
         assert!(e.contains("connection"), "{e}");
     }
 }

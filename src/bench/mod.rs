@@ -33,7 +33,7 @@ mod thermal;
 pub use commission::{commission, record_name, CommissionError, CommissionOptions, Commissioned};
 pub use encoder::SpeedFromEncoder;
 pub use im_commission::{commission_im, ImCommissioned};
-pub use im_config::{im_model_of_config, is_im_sweep_config, ImRunConfig};
+pub use im_config::ImRunConfig;
 pub use im_modbus_config::ImModbusRig;
 pub use im_rig::{build_im_rig, ImRig, SERVED_IM_PLANT_RATE_HZ};
 pub use im_stages::{VfdDyno, VfdSupply};
@@ -44,7 +44,9 @@ pub use interlock::{
 };
 pub use limits::{check_limits, Trip};
 pub use plan::{plan_steps, PlanStep};
-pub use probe::{probe, ProbeLine, ProbeReport, PROBE_CURRENT_FRACTION, PROBE_SETPOINT_FRACTION};
+pub use probe::{
+    probe, probe_im, ProbeLine, ProbeReport, PROBE_CURRENT_FRACTION, PROBE_SETPOINT_FRACTION,
+};
 pub use progress::{NoProgress, Progress};
 pub use rig::{build_rig, ModbusProbe, Rig, RigError, SERVED_PLANT_RATE_HZ};
 pub use runner::{

@@ -1,23 +1,34 @@
 //! `motorbench probe`: check a rig's wiring before a test. Reads every
-//! sensor channel once; with `actuate`, also drives the power stage at a
-//! harmless set point (5 % of the test's voltage limit, with the supply's
-//! current limit at 10 % of the test's current limit), reads again, and
-//! puts the stage in its safe state, whatever happened, then reads once
-//! more so the user sees the output gone.
+//! sensor channel once; with `actuate`, also drives each power stage in
+//! turn at a harmless set point, reads again, and puts that stage in its
+//! safe state, whatever happened; then reads once more so the user sees
+//! the outputs gone.
+//!
+//! Harmless set points: a DC supply or an induction machine's supply VFD
+//! at 5 % of the test's voltage limit, its current limit (where it has
+//! one) at 10 % of the test's current limit; a dynamometer at 5 % of the
+//! test's speed limit, with the supply off.
 
 use std::time::Duration;
 
-use motorbench_drivers::{ChannelInfo, DriverError};
+use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
 
-use super::rig::Rig;
+use super::im_rig::ImRig;
+use super::rig::{ModbusProbe, Rig};
+use super::ImRunConfig;
 use crate::config::Config;
 
-/// Fraction of `limits.max_voltage_V` used as the harmless set point.
+/// Fraction of `limits.max_voltage_V` used as the harmless set point
+/// of a supply (and of `limits.max_speed_rad_s` of a dynamometer).
 pub const PROBE_SETPOINT_FRACTION: f64 = 0.05;
 /// Fraction of `limits.max_current_A` the supply's limit is set to.
 pub const PROBE_CURRENT_FRACTION: f64 = 0.1;
 /// How long the output stays on before the channels are read again.
 pub const PROBE_HOLD: Duration = Duration::from_millis(500);
+/// The most batches a stream's queue is drained of before a read (more
+/// than a merged stream queues; an unpaced simulated rig, always ready,
+/// stops there).
+const MAX_QUEUED_BATCHES: usize = 10_000;
 
 /// One line of a probe.
 #[derive(Debug, Clone, PartialEq)]
@@ -77,9 +88,16 @@ impl ProbeReport {
     }
 }
 
-async fn read_all(rig: &mut Rig, step: &'static str, out: &mut Vec<ProbeLine>) {
-    match &rig.modbus_sensors {
-        Some(probe) => {
+/// Where a probe reads the channels: one at a time where the rig can
+/// (Modbus sensors), else from the stream's batches.
+struct Channels<'a> {
+    modbus: Option<&'a ModbusProbe>,
+    stream: &'a mut dyn SensorStream,
+}
+
+impl Channels<'_> {
+    async fn read_all(&mut self, step: &'static str, out: &mut Vec<ProbeLine>) {
+        if let Some(probe) = self.modbus {
             for (info, value) in probe.read_each().await {
                 out.push(ProbeLine::Channel {
                     step,
@@ -87,42 +105,51 @@ async fn read_all(rig: &mut Rig, step: &'static str, out: &mut Vec<ProbeLine>) {
                     value: value.map_err(|e| e.to_string()),
                 });
             }
+            return;
         }
-        None => {
-            // A batch carries the channels read at one instant, which need
-            // not be all of them (channels of several links or rates): read
-            // batches until every channel has a value, for at most 2 s.
-            let channels = rig.sensors.channels().to_vec();
-            let mut values: Vec<Option<f64>> = vec![None; channels.len()];
-            let deadline = tokio::time::Instant::now() + Duration::from_secs(2);
-            let mut failure = None;
-            while values.iter().any(Option::is_none) {
-                match tokio::time::timeout_at(deadline, rig.sensors.next_batch()).await {
-                    Ok(Ok(batch)) => {
-                        for s in batch.samples {
-                            if let Some(v) = values.get_mut(s.channel) {
-                                *v = Some(s.value);
-                            }
+        // A stream that merges several links polls them in the background
+        // and queues the readings: drop what is queued (at most
+        // MAX_QUEUED_BATCHES) so that the values are read after the last
+        // command, not before it.
+        for _ in 0..MAX_QUEUED_BATCHES {
+            match tokio::time::timeout(Duration::ZERO, self.stream.next_batch()).await {
+                Ok(Ok(_)) => {}
+                Ok(Err(_)) | Err(_) => break,
+            }
+        }
+        // A batch carries the channels read at one instant, which need
+        // not be all of them (channels of several links or rates): read
+        // batches until every channel has a value, for at most 2 s.
+        let channels = self.stream.channels().to_vec();
+        let mut values: Vec<Option<f64>> = vec![None; channels.len()];
+        let deadline = tokio::time::Instant::now() + Duration::from_secs(2);
+        let mut failure = None;
+        while values.iter().any(Option::is_none) {
+            match tokio::time::timeout_at(deadline, self.stream.next_batch()).await {
+                Ok(Ok(batch)) => {
+                    for s in batch.samples {
+                        if let Some(v) = values.get_mut(s.channel) {
+                            *v = Some(s.value);
                         }
                     }
-                    Ok(Err(e)) => {
-                        failure = Some(e.to_string());
-                        break;
-                    }
-                    Err(_) => break,
                 }
+                Ok(Err(e)) => {
+                    failure = Some(e.to_string());
+                    break;
+                }
+                Err(_) => break,
             }
-            if let (Some(why), true) = (&failure, values.iter().all(Option::is_none)) {
-                return fail_all(channels, step, why, out);
-            }
-            for (info, value) in channels.into_iter().zip(values) {
-                let value = value.ok_or_else(|| {
-                    failure
-                        .clone()
-                        .unwrap_or_else(|| "no reading within 2 s".to_string())
-                });
-                out.push(ProbeLine::Channel { step, info, value });
-            }
+        }
+        if let (Some(why), true) = (&failure, values.iter().all(Option::is_none)) {
+            return fail_all(channels, step, why, out);
+        }
+        for (info, value) in channels.into_iter().zip(values) {
+            let value = value.ok_or_else(|| {
+                failure
+                    .clone()
+                    .unwrap_or_else(|| "no reading within 2 s".to_string())
+            });
+            out.push(ProbeLine::Channel { step, info, value });
         }
     }
 }
@@ -146,39 +173,105 @@ fn command(out: &mut Vec<ProbeLine>, what: String, r: Result<(), DriverError>) -
     ok
 }
 
-/// Probe `rig` (built from `cfg`).
-pub async fn probe(cfg: &Config, rig: &mut Rig, actuate: bool) -> ProbeReport {
+/// A power stage a probe exercises, and its harmless set point.
+struct ProbedStage<'a> {
+    /// Put before each command (`supply: `), empty for a rig's only stage.
+    label: &'static str,
+    stage: &'a mut dyn PowerStage,
+    setpoint: f64,
+    /// The current limit to set first, where one is asked for.
+    current_limit: Option<f64>,
+}
+
+impl ProbedStage<'_> {
+    /// Drive the stage at its set point, read, and put it in its safe
+    /// state whatever happened.
+    async fn exercise(&mut self, channels: &mut Channels<'_>, out: &mut Vec<ProbeLine>) {
+        let label = self.label;
+        let mut ok = match self.current_limit {
+            None => true,
+            Some(amps) => match self.stage.set_current_limit(amps).await {
+                Err(DriverError::Unsupported { .. }) => true,
+                r => command(out, format!("{label}current limit {amps:.3} A"), r),
+            },
+        };
+        let volts = self.setpoint;
+        ok = ok
+            && command(
+                out,
+                format!("{label}set point {volts:.3}"),
+                self.stage.set_setpoint(volts).await,
+            );
+        ok = ok
+            && command(
+                out,
+                format!("{label}output on"),
+                self.stage.set_output_enabled(true).await,
+            );
+        if ok {
+            tokio::time::sleep(PROBE_HOLD).await;
+            channels.read_all("on", out).await;
+        }
+        let safe = self.stage.safe_state().await;
+        command(out, format!("{label}safe state"), safe);
+    }
+}
+
+/// Read every channel; with `actuate`, exercise each stage in turn, then
+/// read once more.
+async fn probe_stages(
+    mut channels: Channels<'_>,
+    stages: Vec<ProbedStage<'_>>,
+    actuate: bool,
+) -> ProbeReport {
     let mut lines = Vec::new();
-    read_all(rig, "idle", &mut lines).await;
+    channels.read_all("idle", &mut lines).await;
     if !actuate {
         return ProbeReport { lines };
     }
-    let volts = PROBE_SETPOINT_FRACTION * cfg.limits.max_voltage;
-    let amps = PROBE_CURRENT_FRACTION * cfg.limits.max_current;
-    let mut ok = match rig.stage.set_current_limit(amps).await {
-        Err(DriverError::Unsupported { .. }) => true,
-        r => command(&mut lines, format!("current limit {amps:.3} A"), r),
-    };
-    ok = ok
-        && command(
-            &mut lines,
-            format!("set point {volts:.3}"),
-            rig.stage.set_setpoint(volts).await,
-        );
-    ok = ok
-        && command(
-            &mut lines,
-            "output on".into(),
-            rig.stage.set_output_enabled(true).await,
-        );
-    if ok {
-        tokio::time::sleep(PROBE_HOLD).await;
-        read_all(rig, "on", &mut lines).await;
+    for mut stage in stages {
+        stage.exercise(&mut channels, &mut lines).await;
     }
-    // Whatever happened: safe state, then read once more.
-    let safe = rig.stage.safe_state().await;
-    command(&mut lines, "safe state".into(), safe);
     tokio::time::sleep(PROBE_HOLD).await;
-    read_all(rig, "safe", &mut lines).await;
+    channels.read_all("safe", &mut lines).await;
     ProbeReport { lines }
+}
+
+/// Probe a DC `rig` (built from `cfg`).
+pub async fn probe(cfg: &Config, rig: &mut Rig, actuate: bool) -> ProbeReport {
+    let channels = Channels {
+        modbus: rig.modbus_sensors.as_ref(),
+        stream: rig.sensors.as_mut(),
+    };
+    let stage = ProbedStage {
+        label: "",
+        stage: rig.stage.as_mut(),
+        setpoint: PROBE_SETPOINT_FRACTION * cfg.limits.max_voltage,
+        current_limit: Some(PROBE_CURRENT_FRACTION * cfg.limits.max_current),
+    };
+    probe_stages(channels, vec![stage], actuate).await
+}
+
+/// Probe an induction-machine `rig` (built from `cfg`): the supply VFD,
+/// then the dynamometer.
+pub async fn probe_im(cfg: &ImRunConfig, rig: &mut ImRig, actuate: bool) -> ProbeReport {
+    let channels = Channels {
+        modbus: None,
+        stream: rig.sensors.as_mut(),
+    };
+    let stages = vec![
+        ProbedStage {
+            label: "supply: ",
+            stage: rig.supply.as_mut(),
+            setpoint: PROBE_SETPOINT_FRACTION * cfg.limits.max_voltage,
+            current_limit: Some(PROBE_CURRENT_FRACTION * cfg.limits.max_current),
+        },
+        ProbedStage {
+            label: "dynamometer: ",
+            stage: rig.dynamometer.as_mut(),
+            setpoint: PROBE_SETPOINT_FRACTION * cfg.limits.max_speed,
+            current_limit: None,
+        },
+    ];
+    probe_stages(channels, stages, actuate).await
 }

@@ -36,10 +36,21 @@ pub struct ServeArgs {
     pub header_timeout: std::time::Duration,
 }
 
-fn parse_timeout(text: &str) -> Result<std::time::Duration, String> {
-    let d = humantime::parse_duration(text).map_err(|e| e.to_string())?;
+/// A `--header-timeout` that cannot be used.
+#[derive(Debug, thiserror::Error)]
+enum TimeoutError {
+    /// Not a duration.
+    #[error(transparent)]
+    Parse(#[from] humantime::DurationError),
+    /// Out of range.
+    #[error("must be between 10ms and 1h")]
+    Range,
+}
+
+fn parse_timeout(text: &str) -> Result<std::time::Duration, TimeoutError> {
+    let d = humantime::parse_duration(text)?;
     if d < std::time::Duration::from_millis(10) || d > std::time::Duration::from_secs(3600) {
-        return Err("must be between 10ms and 1h".into());
+        return Err(TimeoutError::Range);
     }
     Ok(d)
 }

@@ -37,7 +37,7 @@ use thiserror::Error;
 
 use crate::config::ConfigError;
 use auth::Token;
-use rig_config::{RigConfig, RigConfigError};
+use rig_config::RigConfig;
 use state::Daemon;
 
 /// Default address of the control API.
@@ -76,9 +76,6 @@ pub enum ServeError {
     /// A configuration is not usable.
     #[error(transparent)]
     Config(#[from] ConfigError),
-    /// An induction-machine configuration is not usable.
-    #[error("{0}")]
-    ImConfig(String),
     /// The options are refused (e.g. no token off loopback).
     #[error("{0}")]
     Refused(String),
@@ -91,7 +88,7 @@ impl ServeError {
     /// Exit code: 2 for bad input, 1 for runtime failures.
     pub fn exit_code(&self) -> u8 {
         match self {
-            ServeError::Config(_) | ServeError::ImConfig(_) | ServeError::Refused(_) => 2,
+            ServeError::Config(_) | ServeError::Refused(_) => 2,
             ServeError::Io(_) => 1,
         }
     }
@@ -106,10 +103,7 @@ pub fn load_rigs(configs: &[PathBuf]) -> Result<Vec<(String, RigConfig)>, ServeE
     }
     let mut rigs: Vec<(String, RigConfig)> = Vec::new();
     for path in configs {
-        let cfg = RigConfig::load(path).map_err(|e| match e {
-            RigConfigError::Dc(e) => ServeError::Config(e),
-            RigConfigError::Im(e) => ServeError::ImConfig(e),
-        })?;
+        let cfg = RigConfig::load(path)?;
         let name = path
             .file_stem()
             .and_then(|s| s.to_str())

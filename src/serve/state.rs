@@ -290,7 +290,10 @@ impl Daemon {
             return Err(StartError::Tripped(latch.clone()));
         }
         let cfg = match test {
-            Some(t) => rig.cfg.with_test(t).map_err(StartError::BadRequest)?,
+            Some(t) => rig
+                .cfg
+                .with_test(t)
+                .map_err(|e| StartError::BadRequest(e.to_string()))?,
             None => rig.cfg.clone(),
         };
         let rise = Rig::rise_now(&rt, &rig.cfg);

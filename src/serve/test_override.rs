@@ -28,9 +28,9 @@ pub fn with_test_override(
 pub fn with_im_test_override(
     cfg: &ImRunConfig,
     test: &serde_json::Map<String, serde_json::Value>,
-) -> Result<ImRunConfig, String> {
+) -> Result<ImRunConfig, ConfigError> {
     let source = format!("{} with the request's [test]", cfg.source);
-    let text = merged_text(&cfg.text, test, &source, &[]).map_err(|e| e.to_string())?;
+    let text = merged_text(&cfg.text, test, &source, &[])?;
     let dir = std::path::Path::new(&cfg.source)
         .parent()
         .unwrap_or(std::path::Path::new("."));
@@ -137,10 +137,13 @@ mod tests {
             c.modbus.is_some(),
             "profiles found beside the configuration"
         );
-        let e = with_im_test_override(&cfg, json!({"points": 2}).as_object().unwrap()).unwrap_err();
+        let e = with_im_test_override(&cfg, json!({"points": 2}).as_object().unwrap())
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("test.points") && e.contains("request"), "{e}");
         let e = with_im_test_override(&cfg, json!({"plan": "dc_step"}).as_object().unwrap())
-            .unwrap_err();
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("im_slip_sweep"), "{e}");
     }
 

@@ -15,6 +15,26 @@ pub fn motorbench(args: &[&str]) -> Output {
         .expect("motorbench runs")
 }
 
+/// The values `motorbench probe` printed for `quantity` at `step`
+/// (`idle`, `on`, `safe`), in order; panics when there is none.
+pub fn probed(stdout: &str, step: &str, quantity: &str) -> Vec<f64> {
+    let prefix = format!("[{step:>4}] {quantity} ");
+    let values: Vec<f64> = stdout
+        .lines()
+        .filter(|l| l.starts_with(&prefix))
+        .map(|l| {
+            l[prefix.len()..]
+                .split_whitespace()
+                .next()
+                .unwrap()
+                .parse()
+                .unwrap_or_else(|e| panic!("{l}: {e}"))
+        })
+        .collect();
+    assert!(!values.is_empty(), "no {step} {quantity} in:\n{stdout}");
+    values
+}
+
 /// Stdout and stderr as text.
 pub fn text(o: &Output) -> (String, String) {
     (

@@ -1,0 +1,27 @@
+//! The bodies of the `motorbench` subcommands that drive a test or read a
+//! record (`run`, `probe`, `replay`, `identify`), with their clap
+//! arguments; `src/main.rs` only parses the command line and dispatches.
+//! (`diagnose`, `blind`, `serve` and `ctl` live beside what they drive:
+//! [`crate::diagnose::cli`], [`crate::serve::cli`].)
+//!
+//! Exit codes: 0 success; 1 runtime failure (I/O, recording); 2 bad input
+//! (usage, configuration, CSV or MCAP); 3 the test was aborted (the rig
+//! was put in its safe state; the record is still written); 4 no
+//! identification method applied to the data; 5 `replay --check` found a
+//! result that differs from the recorded one.
+
+mod failure;
+mod identify;
+mod output;
+mod probe;
+mod progress_bar;
+mod replay;
+mod run;
+mod signal;
+
+pub use failure::Failure;
+pub use identify::{identify, IdentifyArgs};
+pub use probe::{probe, ProbeArgs};
+pub use replay::{replay, ReplayArgs};
+pub use run::{run, RunArgs};
+pub use signal::stop_signal;

@@ -1,0 +1,85 @@
+//! `motorbench probe`: check a rig's wiring (DC or induction machine)
+//! before a test; see [`crate::bench::probe()`] for what is driven.
+
+use std::path::PathBuf;
+
+use clap::Args;
+use motorbench_drivers::PowerStage;
+
+use super::Failure;
+use crate::bench::{build_im_rig, build_rig, probe_im, ProbeReport};
+use crate::config::TestConfig;
+
+/// `motorbench probe`.
+#[derive(Debug, Args)]
+pub struct ProbeArgs {
+    /// Rig configuration (TOML).
+    #[arg(long)]
+    pub config: PathBuf,
+    /// Exercise the power stage (off without it: nothing is driven).
+    #[arg(long)]
+    pub actuate: bool,
+}
+
+/// Probe the rig of `args.config`.
+pub async fn probe(args: ProbeArgs) -> Result<(), Failure> {
+    let cfg = TestConfig::load(&args.config).map_err(Failure::bad_input)?;
+    let actuate = args.actuate;
+    eprintln!(
+        "motorbench: probing {} ({}){}",
+        cfg.describe(),
+        cfg.source(),
+        match (actuate, cfg.stages().len()) {
+            (false, _) => ", reading only",
+            (true, 1) => ", with the power stage at a harmless set point",
+            (true, _) => ", with each power stage in turn at a harmless set point",
+        }
+    );
+    let report = match &cfg {
+        TestConfig::Dc(cfg) => {
+            let mut rig = build_rig(cfg, false).await.map_err(Failure::runtime)?;
+            print_stage("power stage", rig.stage.as_ref());
+            crate::bench::probe(cfg, &mut rig, actuate).await
+        }
+        TestConfig::Im(cfg) => {
+            let mut rig = build_im_rig(cfg, false).await.map_err(Failure::runtime)?;
+            print_stage("supply", rig.supply.as_ref());
+            print_stage("dynamometer", rig.dynamometer.as_ref());
+            probe_im(cfg, &mut rig, actuate).await
+        }
+    };
+    print_report(&report, actuate)
+}
+
+/// A stage's id and what it can do.
+fn print_stage(name: &str, stage: &dyn PowerStage) {
+    println!(
+        "{name}: {} (current limit: {}, largest set point {})",
+        stage.id(),
+        if stage.capabilities().current_limit {
+            "yes"
+        } else {
+            "no"
+        },
+        stage.capabilities().max_setpoint
+    );
+}
+
+/// The probe's lines and its verdict (exit code 1 when anything failed).
+fn print_report(report: &ProbeReport, actuate: bool) -> Result<(), Failure> {
+    for line in &report.lines {
+        println!("{line}");
+    }
+    if !report.passed() {
+        return Err(Failure::runtime("probe: something failed (see above)"));
+    }
+    println!(
+        "probe: every channel read{}",
+        if actuate {
+            ", every command accepted"
+        } else {
+            ""
+        }
+    );
+    Ok(())
+}

@@ -1,0 +1,160 @@
+//! `motorbench replay`: read a record (also a truncated one), identify
+//! and diagnose it again, and compare with the `/bench/result` the run
+//! recorded.
+
+use std::path::{Path, PathBuf};
+
+use clap::Args;
+
+use super::output::{print_dc, print_im, warn_if_damaged};
+use super::Failure;
+use crate::config::recorded_im_model;
+use crate::diagnose::{attach_diagnosis, write_residual_svg};
+use crate::identify::{identify_dc, identify_im};
+use crate::model::ImModel;
+use crate::record::{read_mcap, Record, SegmentKind};
+use crate::report::IdentificationReport;
+
+/// `motorbench replay`.
+#[derive(Debug, Args)]
+pub struct ReplayArgs {
+    /// The record.
+    pub log: PathBuf,
+    /// Print JSON instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Also write the measured-vs-model plot here (SVG).
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
+    /// Exit with code 5 when the result differs from the recorded one.
+    #[arg(long)]
+    pub check: bool,
+    /// Skip the sim-to-real diagnosis (the comparison with the recorded
+    /// result then leaves its diagnosis out).
+    #[arg(long)]
+    pub no_diagnose: bool,
+    /// Also write the diagnosis' held-out residuals, before and after, here (SVG).
+    #[arg(long)]
+    pub residuals_svg: Option<PathBuf>,
+}
+
+/// Replay `args.log`.
+pub fn replay(args: ReplayArgs) -> Result<(), Failure> {
+    let record = read_mcap(&args.log).map_err(Failure::bad_input)?;
+    warn_if_damaged(&args.log, &record);
+    let diagnose = (!args.no_diagnose).then_some(args.residuals_svg.as_deref());
+    let svg = args.svg.as_deref();
+    if !record.operating_points.is_empty() {
+        // An induction-machine record: the circuit its configuration named
+        // (else single-fe), the nameplate's connection.
+        let model = record
+            .meta
+            .as_ref()
+            .and_then(|m| recorded_im_model(&m.config))
+            .unwrap_or(ImModel::SingleFe);
+        let mut id = identify_im(&record, None, model);
+        diagnose_replay(&mut id.report, &record, SegmentKind::ImSlipSweep, diagnose)?;
+        let identified = print_im(&id, args.json, svg);
+        compare_with_recorded(&record, &id.report, diagnose.is_some(), args.check)?;
+        return identified;
+    }
+    let mut id = identify_dc(&record);
+    diagnose_replay(&mut id.report, &record, SegmentKind::DcStep, diagnose)?;
+    let identified = print_dc(&id, Some(&record), args.json, svg, None);
+    if let Err(f) = &identified {
+        if f.code != 4 {
+            return identified;
+        }
+    }
+    compare_with_recorded(&record, &id.report, diagnose.is_some(), args.check)?;
+    identified
+}
+
+/// Diagnose a replayed record into its report (unless `diagnose` is None)
+/// and write the residual plot where asked.
+fn diagnose_replay(
+    report: &mut IdentificationReport,
+    record: &Record,
+    kind: SegmentKind,
+    diagnose: Option<Option<&Path>>,
+) -> Result<(), Failure> {
+    let Some(svg) = diagnose else {
+        return Ok(());
+    };
+    let plot = attach_diagnosis(report, record, kind);
+    if let (Some(path), Some(plot)) = (svg, plot) {
+        write_residual_svg(&plot, path).map_err(Failure::runtime)?;
+    }
+    Ok(())
+}
+
+/// Say whether the replayed report equals the recorded `/bench/result`;
+/// with `check`, a difference is exit code 5.
+fn compare_with_recorded(
+    record: &Record,
+    replayed: &IdentificationReport,
+    diagnosed: bool,
+    check: bool,
+) -> Result<(), Failure> {
+    let Some(recorded) = &record.recorded_result else {
+        eprintln!("replay: the record holds no /bench/result to compare with");
+        return Ok(());
+    };
+    if same_result(recorded, replayed, diagnosed) {
+        eprintln!("replay: identical to the recorded /bench/result");
+        return Ok(());
+    }
+    eprintln!("replay: DIFFERS from the recorded /bench/result");
+    if check {
+        return Err(Failure {
+            code: 5,
+            message: "replayed identification differs from the recorded one".into(),
+        });
+    }
+    Ok(())
+}
+
+/// Whether `replayed` equals `recorded`. The diagnosis is compared only
+/// when both have one to compare: a replay with `--no-diagnose` (not
+/// `diagnosed`) leaves the record's out, and a record made with
+/// `--no-diagnose` (or before the diagnosis existed) has none.
+fn same_result(
+    recorded: &serde_json::Value,
+    replayed: &IdentificationReport,
+    diagnosed: bool,
+) -> bool {
+    let mut recorded = recorded.clone();
+    let mut now = serde_json::to_value(replayed).expect("a report always serialises");
+    if !diagnosed || recorded.get("diagnosis").is_none() {
+        for v in [&mut recorded, &mut now] {
+            if let Some(obj) = v.as_object_mut() {
+                obj.remove("diagnosis");
+            }
+        }
+    }
+    recorded == now
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_diagnosis_is_compared_only_when_both_sides_have_one() {
+        let replayed = IdentificationReport::new("dc_step");
+        let plain = serde_json::to_value(&replayed).unwrap();
+        let mut diagnosed = plain.clone();
+        diagnosed["diagnosis"] = serde_json::json!({"verdict": "none"});
+        // A default run's record, replayed with --no-diagnose.
+        assert!(same_result(&diagnosed, &replayed, false));
+        // A --no-diagnose record, replayed with the diagnosis.
+        assert!(same_result(&plain, &replayed, false));
+        assert!(same_result(&plain, &replayed, true));
+        // A diagnosed record whose replay lost its diagnosis differs.
+        assert!(!same_result(&diagnosed, &replayed, true));
+        // Anything else that differs still differs.
+        let mut other = diagnosed.clone();
+        other["best"] = "steady_state".into();
+        assert!(!same_result(&other, &replayed, false));
+    }
+}
