@@ -2,7 +2,7 @@
 //! simulated rig, recorded, identified, reported; then `replay --check`
 //! reproduces the recorded result exactly.
 
-mod common;
+use crate::common;
 
 use common::{motorbench, text};
 
