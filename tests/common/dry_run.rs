@@ -54,7 +54,10 @@ pub async fn commission_im(cfg: &ImRunConfig) -> (TempDir, ImCommissioned) {
 /// when `cfg` is not a simulated rig or its test does not complete.
 pub async fn record(cfg: &Config) -> Record {
     let Backend::Simulated(sim) = &cfg.backend else {
-        panic!("{}: a dry run to a record needs a simulated rig", cfg.motor_id)
+        panic!(
+            "{}: a dry run to a record needs a simulated rig",
+            cfg.motor_id
+        )
     };
     let (mut stage, mut sensors) = sim_rig(sim, cfg.sample_rate_hz, false).expect("a valid motor");
     let mut sink = RecordSink::new(None, None, record_channels(sensors.channels(), stage.id()));

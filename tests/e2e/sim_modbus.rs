@@ -12,8 +12,7 @@ use crate::common;
 use std::path::Path;
 
 use motorbench::bench::{
-    build_rig, plan_steps, record_channels, run_test, NoProgress,
-    Outcome, RecordSink,
+    build_rig, plan_steps, record_channels, run_test, NoProgress, Outcome, RecordSink,
 };
 use motorbench::config::{Backend, Config};
 use motorbench::record::EventLevel;

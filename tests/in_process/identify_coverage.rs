@@ -7,10 +7,10 @@
 
 use crate::common::rated_motor;
 
+use crate::common::dry_run;
 use motorbench::identify::{output_error, OutputErrorOptions, PARAM_KEYS};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-use crate::common::dry_run;
 use rated_motor::{config_for, random_motor, DEFAULT_STAIRCASE};
 
 /// Motors simulated.
