@@ -1,7 +1,7 @@
 //! The daemon under test: `motorbench serve` started as a child process on
 //! a configuration, its announced address, a client for its API, `ctl`
-//! against it, and polling helpers. Shared by `tests/daemon.rs`,
-//! `tests/daemon_modbus.rs` and `tests/daemon_im.rs`.
+//! against it, and polling helpers. Shared by `tests/e2e/daemon.rs`,
+//! `tests/e2e/daemon_modbus.rs` and `tests/daemon_im.rs`.
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};

@@ -2,7 +2,11 @@
 #![allow(dead_code)]
 
 pub mod daemon;
+pub mod dc_shapes;
+pub mod dry_run;
 pub mod peer;
+pub mod python;
+pub mod rated_motor;
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -48,12 +52,12 @@ pub fn text(o: &Output) -> (String, String) {
 /// reader fails the test rather than skipping it.
 pub fn python_check_mcap(file: &Path, expect: &[String]) -> serde_json::Value {
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_mcap.py");
-    let mut cmd = Command::new("python3");
+    let mut cmd = Command::new(python::interpreter());
     cmd.arg(script).arg(file);
     for e in expect {
         cmd.arg("--expect-topic").arg(e);
     }
-    let out = cmd.output().expect("python3 runs");
+    let out = cmd.output().expect("the test python runs");
     let (stdout, stderr) = text(&out);
     assert!(
         out.status.success(),

@@ -21,7 +21,7 @@ impl Peer {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("tests/python")
             .join(script);
-        let mut child = Command::new("python3")
+        let mut child = Command::new(super::python::interpreter())
             .arg("-u")
             .arg(&path)
             .args(args)
@@ -29,7 +29,7 @@ impl Peer {
             .stdout(Stdio::piped())
             .stderr(Stdio::piped())
             .spawn()
-            .expect("python3 runs");
+            .expect("the test python runs");
         let stdin = child.stdin.take();
         let stdout = BufReader::new(child.stdout.take().expect("piped"));
         Peer {

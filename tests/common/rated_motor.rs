@@ -28,12 +28,8 @@
 //! plan is the default staircase scaled to the rated voltage.
 #![allow(dead_code)]
 
-use motorbench::bench::Outcome;
-use motorbench::bench::{plan_steps, record_channels, run_test, sim_rig, NoProgress, RecordSink};
 use motorbench::config::{Backend, Config, Plan};
 use motorbench::model::DcParams;
-use motorbench::record::Record;
-use motorbench_drivers::SensorStream;
 use rand::rngs::StdRng;
 use rand::RngExt;
 
@@ -146,36 +142,4 @@ pub fn config_for(motor: &RatedMotor, levels: &[f64], seed: u64, rng: &mut StdRn
     s.current_noise = 2.0 * s.current_full_scale / 4096.0;
     s.encoder_lines = [1000, 2500, 5000][rng.random_range(0..3usize)];
     cfg
-}
-
-/// Run `cfg`'s plan on its simulated rig and return the record; panics
-/// when the test does not complete (the generator's rig is sized so it
-/// always does).
-pub async fn record_of(cfg: &Config) -> Record {
-    let Backend::Simulated(sim) = &cfg.backend else {
-        unreachable!("the embedded default is the simulated rig")
-    };
-    let (mut stage, mut sensors) = sim_rig(sim, cfg.sample_rate_hz, false).expect("a valid motor");
-    let mut sink = RecordSink::new(
-        None,
-        None,
-        record_channels(sensors.channels(), "sim-supply"),
-    );
-    let (_tx, rx) = tokio::sync::watch::channel(false);
-    let steps = plan_steps(&cfg.plan);
-    let counts_per_rev = f64::from(sim.sensors.encoder_lines) * 4.0;
-    let outcome = run_test(
-        cfg,
-        &steps,
-        &mut stage,
-        &mut sensors,
-        counts_per_rev,
-        &mut sink,
-        &NoProgress,
-        &rx,
-    )
-    .await
-    .expect("the record is written");
-    assert_eq!(outcome, Outcome::Completed, "{}", cfg.motor_id);
-    sink.into_parts().1
 }

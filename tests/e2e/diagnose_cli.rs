@@ -2,9 +2,8 @@
 //! records with a known withheld effect, the contract's diagnosis JSON,
 //! the residual SVG, and clear errors on data that cannot be diagnosed.
 
-mod common;
-#[path = "common/dc_shapes.rs"]
-mod dc_shapes;
+use crate::common;
+use crate::common::dc_shapes;
 
 use common::{motorbench_release as motorbench, text};
 use motorbench::diagnose::blind::{simulate_dc_case, simulate_im_case, write_case_files};

@@ -1,6 +1,7 @@
 //! End to end: the `dc_coastdown` plan on the simulated rig.
 
-use motorbench::bench::{commission, CommissionOptions, NoProgress, Outcome};
+use crate::common::dry_run;
+use motorbench::bench::Outcome;
 use motorbench::config::Config;
 use motorbench::record::SegmentKind;
 
@@ -9,14 +10,7 @@ async fn coastdown_plan_runs_up_then_decays_to_rest_with_no_current() {
     let path =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-dc-coastdown.toml");
     let cfg = Config::load(&path).unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let (_tx, rx) = tokio::sync::watch::channel(false);
-    let opts = CommissionOptions {
-        out_dir: dir.path().to_path_buf(),
-        realtime: false,
-        diagnose: false,
-    };
-    let done = commission(&cfg, &opts, &NoProgress, &rx).await.unwrap();
+    let (_dir, done) = dry_run::commission(&cfg).await;
     assert_eq!(done.outcome, Outcome::Completed);
     let segs = &done.record.segments;
     assert_eq!(segs.len(), 2);

@@ -10,9 +10,9 @@
 //! and reset; a speed trip the sequencer sees first latching the rig.
 //!
 //! The simulated rig behind Modbus (and the abort timed at the supply's
-//! registers) is in `tests/daemon_modbus.rs`.
+//! registers) is in `tests/e2e/daemon_modbus.rs`.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::process::{Command, Stdio};

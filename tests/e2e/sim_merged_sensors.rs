@@ -9,13 +9,12 @@
 //!
 //! These tests run on the wall clock, one at a time (a shared lock).
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 
 use motorbench::bench::{
-    build_rig, commission, plan_steps, record_channels, run_test, CommissionOptions, Commissioned,
-    NoProgress, Outcome, RecordSink,
+    build_rig, plan_steps, record_channels, run_test, Commissioned, NoProgress, Outcome, RecordSink,
 };
 use motorbench::config::{Backend, Config};
 use motorbench::report::IdentificationReport;
@@ -35,15 +34,7 @@ fn param(r: &IdentificationReport, key: &str) -> (f64, f64) {
 }
 
 async fn run(cfg: &Config) -> (tempfile::TempDir, Commissioned) {
-    let dir = tempfile::tempdir().unwrap();
-    let (_tx, rx) = tokio::sync::watch::channel(false);
-    let opts = CommissionOptions {
-        out_dir: dir.path().to_path_buf(),
-        realtime: false,
-        diagnose: false,
-    };
-    let done = commission(cfg, &opts, &NoProgress, &rx).await.unwrap();
-    (dir, done)
+    common::dry_run::commission(cfg).await
 }
 
 /// The final statistics event of `quantity`.

@@ -24,7 +24,7 @@
 //! registers (supply: run off, frequency 0; dynamometer: stop, frequency
 //! 0), timed from the API call.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};

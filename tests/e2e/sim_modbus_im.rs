@@ -16,13 +16,10 @@
 //! which moves the outer-cage resistance by a few tenths of a per cent. The differences are printed (run with
 //! `--nocapture`).
 
-mod common;
-
 use std::path::Path;
 
-use common::{motorbench, probed, text};
-
-use motorbench::bench::{commission_im, CommissionOptions, ImRunConfig, Outcome};
+use crate::common::{dry_run, motorbench, probed, text};
+use motorbench::bench::{ImRunConfig, Outcome};
 
 fn shipped() -> ImRunConfig {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-modbus-im.toml");
@@ -35,17 +32,8 @@ async fn modbus_sweep_identifies_the_machine_as_the_direct_rig_does() {
     assert!(cfg.modbus.as_ref().is_some_and(|m| m.simulate.is_some()));
     let mut direct_cfg = cfg.clone();
     direct_cfg.modbus = None;
-    let (_stop_tx, stop) = tokio::sync::watch::channel(false);
-    let dir = tempfile::tempdir().unwrap();
-    let opts = |sub: &str| CommissionOptions {
-        out_dir: dir.path().join(sub),
-        realtime: false,
-        diagnose: false,
-    };
-    let direct = commission_im(&direct_cfg, &opts("direct"), &stop)
-        .await
-        .unwrap();
-    let modbus = commission_im(&cfg, &opts("modbus"), &stop).await.unwrap();
+    let (_direct_dir, direct) = dry_run::commission_im(&direct_cfg).await;
+    let (_modbus_dir, modbus) = dry_run::commission_im(&cfg).await;
     assert_eq!(direct.outcome, Outcome::Completed);
     assert_eq!(modbus.outcome, Outcome::Completed);
 
@@ -87,9 +75,7 @@ async fn modbus_sweep_identifies_the_machine_as_the_direct_rig_does() {
     for seed in 2..=9 {
         let mut c = direct_cfg.clone();
         c.simulated.as_mut().unwrap().seed = seed;
-        let run = commission_im(&c, &opts(&format!("seed{seed}")), &stop)
-            .await
-            .unwrap();
+        let (_dir, run) = dry_run::commission_im(&c).await;
         reseeded.push(params(&run).1);
     }
     let sigma = |name: &str| {

@@ -7,13 +7,12 @@
 //! real time): about 7 s each, one at a time (a shared lock), so that they
 //! do not compete for the CPU and disturb each other's sampling.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 
 use motorbench::bench::{
-    build_rig, commission, plan_steps, record_channels, run_test, CommissionOptions, NoProgress,
-    Outcome, RecordSink,
+    build_rig, plan_steps, record_channels, run_test, NoProgress, Outcome, RecordSink,
 };
 use motorbench::config::{Backend, Config};
 use motorbench::record::EventLevel;
@@ -38,15 +37,7 @@ fn param(r: &IdentificationReport, key: &str) -> (f64, f64) {
 }
 
 async fn run(cfg: &Config) -> (tempfile::TempDir, motorbench::bench::Commissioned) {
-    let dir = tempfile::tempdir().unwrap();
-    let (_tx, rx) = tokio::sync::watch::channel(false);
-    let opts = CommissionOptions {
-        out_dir: dir.path().to_path_buf(),
-        realtime: false,
-        diagnose: false,
-    };
-    let done = commission(cfg, &opts, &NoProgress, &rx).await.unwrap();
-    (dir, done)
+    common::dry_run::commission(cfg).await
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -2,9 +2,9 @@
 //! recorded to MCAP, read by the Python `mcap` reader, identified, and
 //! replayed to the same result.
 
-mod common;
+use crate::common;
 
-use motorbench::bench::{commission, CommissionOptions, NoProgress, Outcome};
+use motorbench::bench::Outcome;
 use motorbench::config::Config;
 use motorbench::identify::identify_dc;
 use motorbench::record::{read_mcap, EventLevel, SegmentKind, SupplyLimitKind};
@@ -15,17 +15,10 @@ fn param(report: &motorbench::report::IdentificationReport, key: &str) -> f64 {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn default_run_identifies_the_seed_motor_and_replays_identically() {
-    let dir = tempfile::tempdir().unwrap();
     let cfg = Config::embedded_default();
     let sim = cfg.backend.simulated().expect("a simulated rig");
     let truth = sim.motor;
-    let (_tx, rx) = tokio::sync::watch::channel(false);
-    let opts = CommissionOptions {
-        out_dir: dir.path().to_path_buf(),
-        realtime: false,
-        diagnose: false,
-    };
-    let done = commission(&cfg, &opts, &NoProgress, &rx).await.unwrap();
+    let (_dir, done) = common::dry_run::commission(&cfg).await;
     assert_eq!(done.outcome, Outcome::Completed);
 
     // The acceptance: K within 1 %, Ra within 3 %.

@@ -3,7 +3,7 @@
 //! the contract JSON, the text report and the SVG out; bad input refused
 //! with file, line and column.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 

@@ -6,7 +6,7 @@
 //! leave (the record is insensitive to La that small), and the shaft fit
 //! stopped at 17 times the noise floor at 339 Hz.
 
-mod common;
+use crate::common;
 
 use common::{motorbench_release as motorbench, text};
 use serde_json::Value;

@@ -3,7 +3,7 @@
 //! reproduces the recorded result exactly (with and without the
 //! diagnosis); and `motorbench probe` checks that rig's wiring.
 
-mod common;
+use crate::common;
 
 use common::{motorbench, probed, text};
 

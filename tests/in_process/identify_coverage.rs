@@ -1,17 +1,17 @@
 //! Coverage of the output-error fit's 95 % intervals: random motors from
-//! 100 W to 2 kW (see `common/rated_motor.rs` for the generator), each
+//! 100 W to 2 kW (see `tests/common/rated_motor.rs` for the generator), each
 //! run through the default staircase on the simulated rig with noise and
 //! quantisation on, identified from the record. The truth must lie inside
 //! the reported interval in at least 90 % of the cases, for every
 //! parameter and overall. The seed is fixed; the test prints the coverage.
 
-#[path = "common/rated_motor.rs"]
-mod rated_motor;
+use crate::common::rated_motor;
 
+use crate::common::dry_run;
 use motorbench::identify::{output_error, OutputErrorOptions, PARAM_KEYS};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-use rated_motor::{config_for, random_motor, record_of, DEFAULT_STAIRCASE};
+use rated_motor::{config_for, random_motor, DEFAULT_STAIRCASE};
 
 /// Motors simulated.
 const MOTORS: usize = 60;
@@ -42,7 +42,7 @@ async fn output_error_intervals_cover_the_truth_for_random_motors() {
     for n in 0..MOTORS {
         let motor = random_motor(&mut rng);
         let cfg = config_for(&motor, &DEFAULT_STAIRCASE, 1000 + n as u64, &mut rng);
-        let record = record_of(&cfg).await;
+        let record = dry_run::record(&cfg).await;
         let options = OutputErrorOptions {
             validate: false,
             ..OutputErrorOptions::default()

@@ -16,7 +16,7 @@
 //! levels do not settle (docs/diagnosis-dc.md, Status), and scoring it
 //! would double this test's time.
 
-mod common;
+use crate::common;
 
 use common::{motorbench_release as motorbench, text};
 use motorbench::diagnose::blind::{Manifest, PlanKind, SuiteScore, TruthFile};

@@ -1,8 +1,8 @@
 //! Bad input through the CLI: a one-line error naming the file (and line
 //! and field where there is one), exit code 2, never a panic.
 
-mod common;
-mod mcap_corpus;
+use crate::common;
+use crate::mcap_corpus;
 
 use std::path::Path;
 
@@ -207,7 +207,7 @@ fn config_numbers_that_size_memory_loops_or_waits_are_bounded() {
             "{to}: {err}"
         );
     }
-    let im = include_str!("../config/sim-im.toml");
+    let im = include_str!("../../config/sim-im.toml");
     let from = "average_samples = 50";
     assert!(im.contains(from));
     let text = im.replacen(from, "average_samples = 100000000000", 1);

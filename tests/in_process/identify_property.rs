@@ -2,13 +2,10 @@
 //! real bench path (simulated rig, runner, record builder) with noise off
 //! and fine sensors; the steady-state method must recover K, Ra, f, Tst.
 
-use motorbench::bench::{
-    plan_steps, record_channels, run_test, sim_rig, NoProgress, Outcome, RecordSink,
-};
+use crate::common::dry_run;
 use motorbench::config::{Backend, Config, Plan};
 use motorbench::identify::identify_dc;
 use motorbench::model::DcParams;
-use motorbench_drivers::{PowerStage, SensorStream};
 use proptest::prelude::*;
 use proptest::test_runner::{Config as PropConfig, RngAlgorithm, TestRng, TestRunner};
 
@@ -61,29 +58,11 @@ fn run(p: DcParams, v: f64, i: f64) -> motorbench::identify::Identification {
         levels: [0.3, 1.0, 0.5, 0.8, 0.4].iter().map(|f| f * v).collect(),
         coastdown: false,
     };
-    let counts = 4.0 * f64::from(sim.sensors.encoder_lines);
-    let (mut stage, mut sensors) = sim_rig(sim, cfg.sample_rate_hz, false).unwrap();
-    let mut sink = RecordSink::new(None, None, record_channels(sensors.channels(), stage.id()));
-    let (_tx, rx) = tokio::sync::watch::channel(false);
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_time()
         .build()
         .unwrap();
-    let steps = plan_steps(&cfg.plan);
-    let outcome = rt
-        .block_on(run_test(
-            &cfg,
-            &steps,
-            &mut stage,
-            &mut sensors,
-            counts,
-            &mut sink,
-            &NoProgress,
-            &rx,
-        ))
-        .unwrap();
-    assert_eq!(outcome, Outcome::Completed);
-    identify_dc(&sink.into_parts().1)
+    identify_dc(&rt.block_on(dry_run::record(&cfg)))
 }
 
 #[test]

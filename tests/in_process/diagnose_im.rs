@@ -2,7 +2,7 @@
 //! verdict right in at least 90 % of cases, no false alarm on `none`, and
 //! gap_after within twice the noise floor where the verdict is right.
 //!
-//! `cargo test --release --test diagnose_im -- --ignored --nocapture`
+//! `cargo test --release --test in_process diagnose_im:: -- --ignored --nocapture`
 //! runs the larger set and prints its confusion matrix.
 
 use std::collections::BTreeMap;

@@ -1,27 +1,17 @@
 //! `motorbench identify --kind dc_step` on CSV files gives the same report
 //! as on the MCAP of the same data.
 
-mod common;
-#[path = "common/dc_shapes.rs"]
-mod dc_shapes;
+use crate::common;
+use crate::common::dc_shapes;
 
 use std::fmt::Write;
 
-use motorbench::bench::{commission, CommissionOptions, NoProgress, Outcome};
+use motorbench::bench::Outcome;
 use motorbench::config::Config;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn csv_files_identify_like_the_mcap_they_came_from() {
-    let dir = tempfile::tempdir().unwrap();
-    let (_tx, rx) = tokio::sync::watch::channel(false);
-    let opts = CommissionOptions {
-        out_dir: dir.path().to_path_buf(),
-        realtime: false,
-        diagnose: false,
-    };
-    let done = commission(&Config::embedded_default(), &opts, &NoProgress, &rx)
-        .await
-        .unwrap();
+    let (dir, done) = common::dry_run::commission(&Config::embedded_default()).await;
     assert_eq!(done.outcome, Outcome::Completed);
 
     // One CSV per segment, floats written in full (shortest round-trip)

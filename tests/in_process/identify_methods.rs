@@ -3,7 +3,8 @@
 //! simulated motor where their assumptions hold, and say they do not
 //! apply where they do not.
 
-use motorbench::bench::{commission, CommissionOptions, NoProgress, Outcome};
+use crate::common::dry_run;
+use motorbench::bench::Outcome;
 use motorbench::config::Config;
 use motorbench::identify::{nrmse, simulate_segment};
 use motorbench::model::DcParams;
@@ -19,7 +20,7 @@ fn config(
     current_scale: f64,
     current_bits: u32,
 ) -> Config {
-    let base = include_str!("../config/sim-dc.toml");
+    let base = include_str!("../../config/sim-dc.toml");
     let motor = format!(
         "[rig.simulated.motor]\nRa = {}\nLa = {}\nK = {}\nJ = {}\nf = {}\nTst = {}\n",
         p.ra, p.la, p.k, p.j, p.f, p.tst
@@ -61,14 +62,7 @@ async fn identify(cfg: &Config) -> IdentificationReport {
 
 /// The report and the record.
 async fn identify_record(cfg: &Config) -> (IdentificationReport, Record) {
-    let dir = tempfile::tempdir().unwrap();
-    let (_tx, rx) = tokio::sync::watch::channel(false);
-    let opts = CommissionOptions {
-        out_dir: dir.path().to_path_buf(),
-        realtime: false,
-        diagnose: false,
-    };
-    let done = commission(cfg, &opts, &NoProgress, &rx).await.unwrap();
+    let (_dir, done) = dry_run::commission(cfg).await;
     assert_eq!(done.outcome, Outcome::Completed);
     (done.identification.report, done.record)
 }
@@ -213,15 +207,14 @@ async fn real_poles_pasek_and_moments_agree_with_the_truth() {
     }
 }
 
-#[path = "common/dc_shapes.rs"]
-mod dc_shapes;
+use crate::common::dc_shapes;
 
 mod shapes {
     //! Records motorbench's bench does not make (short holds, a ringing
     //! motor, a ramp, a PRBS, a closed speed loop; 12-bit ADC, 1024-line
     //! encoder): equation error applies to each and recovers K and Ra.
     //! (The whole identification and the diagnosis of the same records run
-    //! on the release binary in tests/diagnose_cli.rs.)
+    //! on the release binary in tests/e2e/diagnose_cli.rs.)
 
     use super::dc_shapes;
 

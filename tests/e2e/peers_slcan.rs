@@ -1,7 +1,7 @@
 //! SLCAN over a pseudo-terminal against python-can's slcan interface (the
 //! host side of the Lawicel protocol, written by others).
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

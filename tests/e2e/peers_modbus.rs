@@ -2,7 +2,7 @@
 //! server nobody here wrote: over TCP on 127.0.0.1 (a port the peer's OS
 //! picked) and over RTU on a pseudo-terminal pair.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 use std::time::Duration;

@@ -2,7 +2,7 @@
 //! peer encodes records from the protocols' written definitions, with
 //! noise, corrupted records and one missing record.
 
-mod common;
+use crate::common;
 
 use std::time::Duration;
 

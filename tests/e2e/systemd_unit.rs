@@ -6,7 +6,7 @@
 use std::path::Path;
 use std::process::Command;
 
-const UNIT: &str = include_str!("../systemd/motorbench.service");
+const UNIT: &str = include_str!("../../systemd/motorbench.service");
 
 /// The unit with `ExecStart=` pointing at the binary under test (verify
 /// checks that the command exists), written to a temporary directory.

@@ -1,0 +1,80 @@
+//! Dry runs: a configuration's test on its rig (simulated, or simulated
+//! behind its protocols), not paced at the wall clock, to a record. The
+//! one place the tests turn a configuration into a record, so a change to
+//! how a test is run is made here and not in every test file.
+//!
+//! - [`commission`] and [`commission_im`] go the way `motorbench run`
+//!   goes (rig, sequencer, recorder, identification, report files) into a
+//!   fresh temporary directory, without the diagnosis;
+//! - [`record`] runs a DC configuration's plan on its simulated rig to an
+//!   in-memory record only (no files, no identification), for tests that
+//!   run many motors.
+
+use motorbench::bench::{
+    plan_steps, record_channels, run_test, sim_rig, CommissionOptions, Commissioned,
+    ImCommissioned, ImRunConfig, NoProgress, Outcome, RecordSink,
+};
+use motorbench::config::{Backend, Config};
+use motorbench::record::Record;
+use motorbench_drivers::{PowerStage, SensorStream};
+use tempfile::TempDir;
+
+/// Options for a dry run into `dir`: not paced, not diagnosed.
+fn options(dir: &TempDir) -> CommissionOptions {
+    CommissionOptions {
+        out_dir: dir.path().to_path_buf(),
+        realtime: false,
+        diagnose: false,
+    }
+}
+
+/// Commission `cfg` (a DC test) into a fresh temporary directory, kept
+/// alive by the returned handle; the outcome is the caller's to check.
+pub async fn commission(cfg: &Config) -> (TempDir, Commissioned) {
+    let dir = tempfile::tempdir().unwrap();
+    let (_tx, rx) = tokio::sync::watch::channel(false);
+    let done = motorbench::bench::commission(cfg, &options(&dir), &NoProgress, &rx)
+        .await
+        .unwrap();
+    (dir, done)
+}
+
+/// Commission `cfg` (an induction-machine slip sweep) into a fresh
+/// temporary directory, kept alive by the returned handle.
+pub async fn commission_im(cfg: &ImRunConfig) -> (TempDir, ImCommissioned) {
+    let dir = tempfile::tempdir().unwrap();
+    let (_tx, rx) = tokio::sync::watch::channel(false);
+    let done = motorbench::bench::commission_im(cfg, &options(&dir), &rx)
+        .await
+        .unwrap();
+    (dir, done)
+}
+
+/// Run `cfg`'s plan on its simulated rig and return the record; panics
+/// when `cfg` is not a simulated rig or its test does not complete.
+pub async fn record(cfg: &Config) -> Record {
+    let Backend::Simulated(sim) = &cfg.backend else {
+        panic!(
+            "{}: a dry run to a record needs a simulated rig",
+            cfg.motor_id
+        )
+    };
+    let (mut stage, mut sensors) = sim_rig(sim, cfg.sample_rate_hz, false).expect("a valid motor");
+    let mut sink = RecordSink::new(None, None, record_channels(sensors.channels(), stage.id()));
+    let (_tx, rx) = tokio::sync::watch::channel(false);
+    let counts_per_rev = f64::from(sim.sensors.encoder_lines) * 4.0;
+    let outcome = run_test(
+        cfg,
+        &plan_steps(&cfg.plan),
+        &mut stage,
+        &mut sensors,
+        counts_per_rev,
+        &mut sink,
+        &NoProgress,
+        &rx,
+    )
+    .await
+    .expect("the record is written");
+    assert_eq!(outcome, Outcome::Completed, "{}", cfg.motor_id);
+    sink.into_parts().1
+}
