@@ -287,13 +287,12 @@ fn print_diagnosis_text(report: &motorbench::report::IdentificationReport) {
 }
 
 fn identified_or_code(id: &Identification) -> Result<(), Failure> {
-    if id.report.best.is_some() {
-        Ok(())
-    } else {
-        Err(Failure {
+    match id.refusal() {
+        None => Ok(()),
+        Some(why) => Err(Failure {
             code: 4,
-            message: "no identification method applies to this data (see the warnings)".into(),
-        })
+            message: format!("nothing can be identified from this data: {why}"),
+        }),
     }
 }
 
