@@ -57,7 +57,7 @@ def pct(values):
         return "-"
     values = sorted(values)
     med = values[len(values) // 2]
-    return f"{100 * med:.2f}/{100 * values[-1]:.1f}"
+    return f"{100 * med:.2f}/{100 * values[-1]:.2f}"
 
 
 def main():
