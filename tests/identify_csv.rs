@@ -124,8 +124,15 @@ fn identify_csvs(dir: &std::path::Path, segments: &[Vec<(f64, f64, f64)>]) -> st
 #[test]
 fn nothing_identifiable_exits_4_saying_what_the_record_lacks() {
     let dir = tempfile::tempdir().unwrap();
-    // A small deterministic ripple: readings are never exactly constant.
-    let ripple = |k: usize| 1e-3 * ((k * 7919) % 13) as f64;
+    // Reading noise: a fixed pseudo-random sequence of ±0.5 mV/mA/mrad/s.
+    let ripple = |k: usize| {
+        // splitmix64's finaliser of the sample index.
+        let mut x = (k as u64).wrapping_add(0x9e37_79b9_7f4a_7c15);
+        x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        x ^= x >> 31;
+        1e-3 * ((x >> 11) as f64 / (1u64 << 53) as f64 - 0.5)
+    };
     // The voltage never changes: a motor running at a constant 12 V.
     let held: Vec<_> = (0..800)
         .map(|k| (12.0 + ripple(k), 0.5 + ripple(k + 3), 100.0 + ripple(k + 5)))

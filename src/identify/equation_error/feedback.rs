@@ -81,7 +81,7 @@ pub fn detect(segments: &[&DcSegment]) -> Option<Feedback> {
         let nf = n as f64;
         let cov = sxy - sx * sy / nf;
         let var = (sxx - sx * sx / nf) * (syy - sy * sy / nf);
-        if !(var > 0.0) {
+        if var.is_nan() || var <= 0.0 {
             continue;
         }
         let r = cov / var.sqrt();
