@@ -123,7 +123,7 @@ impl Identification {
     /// when a method applies. Equation error needs least of the record
     /// (any voltage that moves current and speed), so its reason says
     /// what the record lacks ("the voltage never changes", "the speed is
-    /// constant"); the other methods' reasons follow.
+    /// constant"); without it, the steady state's.
     pub fn refusal(&self) -> Option<String> {
         if self.report.best.is_some() {
             return None;
@@ -556,8 +556,8 @@ fn collect_params<E>(
 /// Why the report should use equation error whatever validates best, if
 /// it should: in a closed loop the voltage carries the speed reading's
 /// noise back into the input, which output error takes as exact (its
-/// start and its fit are then biased), while equation error's delayed
-/// instruments are not correlated with that noise; and when the full
+/// start and its fit are then biased), while equation error's
+/// instruments (simulated from the voltage) carry almost none of it; and when the full
 /// model's residuals are far above the noise (an unmodelled effect),
 /// output error spreads that misfit over every parameter, while the
 /// electrical equation `U = La·di/dt + Ra·i + K·ω` that gives equation
