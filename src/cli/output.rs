@@ -33,7 +33,13 @@ pub(crate) fn print_dc(
     if let (Some(path), Some(record)) = (svg, record) {
         write_segments_svg(path, &segment_plots(record, id)).map_err(Failure::runtime)?;
     }
-    identified(&id.report)
+    match id.refusal() {
+        None => Ok(()),
+        Some(why) => Err(Failure {
+            code: 4,
+            message: format!("nothing can be identified from this data: {why}"),
+        }),
+    }
 }
 
 /// Print an induction-machine identification as [`print_dc`] does.

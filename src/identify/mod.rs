@@ -118,6 +118,30 @@ pub struct Identification {
     pub equation_error: Option<EquationErrorFit>,
 }
 
+impl Identification {
+    /// Why nothing could be identified, in terms a user can act on; `None`
+    /// when a method applies. Equation error needs least of the record
+    /// (any voltage that moves current and speed), so its reason says
+    /// what the record lacks ("the voltage never changes", "the speed is
+    /// constant"); without it, the steady state's.
+    pub fn refusal(&self) -> Option<String> {
+        if self.report.best.is_some() {
+            return None;
+        }
+        let reason = |key: &str| {
+            self.report
+                .methods
+                .get(key)
+                .and_then(|m| m.reason.clone())
+                .filter(|r| !r.is_empty())
+        };
+        let first = reason("equation_error")
+            .or_else(|| reason("steady_state"))
+            .unwrap_or_else(|| "the record holds no usable segment".into());
+        Some(first.trim_start_matches("does not apply: ").to_string())
+    }
+}
+
 /// The coast-down method's result.
 #[derive(Debug, Clone, PartialEq)]
 pub struct CoastdownFit {
@@ -445,6 +469,15 @@ pub fn identify_dc(record: &Record) -> Identification {
     };
 
     report.best = best_method(&report);
+    if let Some(why) = prefer_equation_error(equation_error.as_ref(), output_error.as_ref()) {
+        if report.best.as_deref() != Some("equation_error") {
+            report.warnings.push(format!(
+                "best: equation_error rather than {} (which validates best): {why}",
+                report.best.as_deref().unwrap_or("none")
+            ));
+            report.best = Some("equation_error".into());
+        }
+    }
     Identification {
         report,
         levels,
@@ -518,6 +551,35 @@ fn collect_params<E>(
         .iter()
         .filter_map(|(s, r)| r.as_ref().ok().map(|e| (*s, params(e))))
         .collect()
+}
+
+/// Why the report should use equation error whatever validates best, if
+/// it should: in a closed loop the voltage carries the speed reading's
+/// noise back into the input, which output error takes as exact (its
+/// start and its fit are then biased), while equation error's
+/// instruments (simulated from the voltage) carry almost none of it; and when the full
+/// model's residuals are far above the noise (an unmodelled effect),
+/// output error spreads that misfit over every parameter, while the
+/// electrical equation `U = La·di/dt + Ra·i + K·ω` that gives equation
+/// error its K and Ra holds whatever the load and the friction do.
+fn prefer_equation_error(
+    ee: Option<&EquationErrorFit>,
+    oe: Option<&OutputErrorFit>,
+) -> Option<String> {
+    let ee = ee?;
+    if ee.closed_loop.is_some() {
+        return Some(
+            "the record is a closed loop's (the voltage follows the speed reading's noise): \
+             its instrumental-variable estimate is not biased by the fed-back noise"
+                .into(),
+        );
+    }
+    oe.filter(|o| o.misfit()).map(|_| {
+        "the full model's residuals are far above the noise (an unmodelled effect): output \
+         error spreads that misfit over every parameter, while equation error's K and Ra \
+         rest on the electrical equation, which holds whatever the load does"
+            .to_string()
+    })
 }
 
 /// The applying method with the lowest validation NRMSE; without any

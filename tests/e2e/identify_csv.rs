@@ -87,3 +87,61 @@ fn the_seed_papers_table2_test_is_identified_from_csv() {
         );
     }
 }
+
+/// Write `segments` (voltage, current, speed per sample, 1 kHz) as CSV
+/// files in `dir`; `motorbench identify` on them.
+fn identify_csvs(dir: &std::path::Path, segments: &[Vec<(f64, f64, f64)>]) -> std::process::Output {
+    let mut files = Vec::new();
+    let mut t = 0.0;
+    for (n, seg) in segments.iter().enumerate() {
+        let mut text = format!(
+            "# motorbench segment {n} kind=dc_step label={n}\n\
+             time_s,armature_voltage_V,armature_current_A,speed_rad_s\n"
+        );
+        for (u, i, w) in seg {
+            writeln!(text, "{t},{u},{i},{w}").unwrap();
+            t += 1e-3;
+        }
+        let path = dir.join(format!("segment-{n}.csv"));
+        std::fs::write(&path, text).unwrap();
+        files.push(path.to_str().unwrap().to_string());
+    }
+    let mut args = vec!["identify", "--kind", "dc_step"];
+    args.extend(files.iter().map(String::as_str));
+    common::motorbench(&args)
+}
+
+#[test]
+fn nothing_identifiable_exits_4_saying_what_the_record_lacks() {
+    let dir = tempfile::tempdir().unwrap();
+    // Reading noise: a fixed pseudo-random sequence of ±0.5 mV/mA/mrad/s.
+    let ripple = |k: usize| {
+        // splitmix64's finaliser of the sample index.
+        let mut x = (k as u64).wrapping_add(0x9e37_79b9_7f4a_7c15);
+        x = (x ^ (x >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        x = (x ^ (x >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        x ^= x >> 31;
+        1e-3 * ((x >> 11) as f64 / (1u64 << 53) as f64 - 0.5)
+    };
+    // The voltage never changes: a motor running at a constant 12 V.
+    let held: Vec<_> = (0..800)
+        .map(|k| (12.0 + ripple(k), 0.5 + ripple(k + 3), 100.0 + ripple(k + 5)))
+        .collect();
+    let out = identify_csvs(dir.path(), &[held]);
+    let (_, stderr) = common::text(&out);
+    assert_eq!(out.status.code(), Some(4), "{stderr}");
+    assert!(stderr.contains("the voltage never changes"), "{stderr}");
+
+    // A blocked rotor: the voltage steps, the current follows, the speed
+    // reads zero throughout.
+    let dir = tempfile::tempdir().unwrap();
+    let level = |u: f64, phase: usize| -> Vec<(f64, f64, f64)> {
+        (0..400)
+            .map(|k| (u + ripple(k + phase), u / 2.0 + ripple(k + phase + 1), 0.0))
+            .collect()
+    };
+    let out = identify_csvs(dir.path(), &[level(10.0, 0), level(20.0, 400)]);
+    let (_, stderr) = common::text(&out);
+    assert_eq!(out.status.code(), Some(4), "{stderr}");
+    assert!(stderr.contains("the speed is constant"), "{stderr}");
+}

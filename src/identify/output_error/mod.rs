@@ -616,6 +616,13 @@ fn segment_nrmse(params: &DcParams, input: &SegmentInput, reading: SpeedReading)
 }
 
 impl OutputErrorFit {
+    /// Whether the residuals exceed the noise level of the settled tails
+    /// enough to say the model does not describe the data (the warning
+    /// "the residuals are … times the noise level").
+    pub fn misfit(&self) -> bool {
+        self.uncertainty.residual_variance > MISFIT_VARIANCE
+    }
+
     /// The contract's view of this fit.
     pub fn method_report(&self) -> MethodReport {
         let values = to_array(&self.params);
