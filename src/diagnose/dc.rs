@@ -806,27 +806,18 @@ fn residual_weights(model: &AugModel, runs: &[SegmentRun]) -> Weights {
         .filter_map(|r| held_out(model, r).map(|s| (s, r)))
         .collect();
     let sigma = |current: bool| {
-        let pick = |s: &HeldOutSeries| -> Vec<f64> {
-            if current {
-                s.current.clone()
-            } else {
-                s.speed.clone()
-            }
-        };
-        let res: Vec<Vec<f64>> = series.iter().map(|(s, _)| pick(s)).collect();
-        let readings: Vec<&[f64]> = series
+        let (residuals, readings): (Vec<&[f64]>, Vec<&[f64]>) = series
             .iter()
             .filter(|(_, r)| !(current && r.coast))
-            .map(|(_, r)| {
+            .map(|(s, r)| {
                 if current {
-                    &r.seg.current[..]
+                    (&s.current[..], &r.seg.current[..])
                 } else {
-                    &r.seg.speed[..]
+                    (&s.speed[..], &r.seg.speed[..])
                 }
             })
-            .collect();
-        let res: Vec<&[f64]> = res.iter().map(|v| &v[..]).collect();
-        residual_noise_sigma(&res, &readings).max(f64::MIN_POSITIVE)
+            .unzip();
+        residual_noise_sigma(&residuals, &readings).max(f64::MIN_POSITIVE)
     };
     Weights {
         current: 1.0 / sigma(true),
