@@ -22,13 +22,15 @@ use std::sync::Mutex;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 use super::dc_candidates::{
-    candidates, effect_params, extra_params, physical, separating_plan, CandidateDef, RecordScales,
+    candidates, effect_params, extra_params, physical, separating_plan, undetermined, CandidateDef,
+    RecordScales,
 };
 use super::dc_fit::{fit, refit_spec, FitSpec, Fitted, Transform, Weights};
 use super::dc_gap::{locate, spectral_peak, HeldOutSeries, Measured};
 use super::dc_model::{AugModel, SegmentRun, Start};
 use super::decision::{
-    block_sums, effective_samples, held_out_test, median, penalised_score, HeldOutTest,
+    block_sums, effective_samples, held_out_test, median, penalised_score, residual_noise_sigma,
+    HeldOutTest,
 };
 use super::report::{
     reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
@@ -47,6 +49,12 @@ const MIN_SAMPLES: usize = 40;
 /// Samples per block of the held-out test: 16 ms at 2 kHz, long against
 /// the encoder noise's one-sample correlation.
 const BLOCK: usize = 32;
+
+/// Largest held-out NRMSE, in noise floors, of a model that explains the
+/// record: at twice the floor three quarters of the residual's power is
+/// already structure the model misses. A candidate that leaves more has
+/// shrunk the gap without explaining it, and naming it would be a guess.
+const EXPLAINED: f64 = 2.0;
 
 /// Optimiser patience (evaluations per parameter) of an all-segment fit
 /// and of a fold's refit (warm-started next to its optimum).
@@ -305,16 +313,42 @@ pub fn diagnose_dc(
         })
         .collect();
     scored.sort_by(|a, b| b.3.total_cmp(&a.3));
-    let winner = scored.iter().position(|(_, fam, test, score)| {
-        test.significant() && *score > 0.0 && physical(&fam.all.model)
-    });
-    for (e, fam, test, _) in &scored {
-        if test.significant() && !physical(&fam.all.model) {
-            warnings.push(format!(
-                "{}: shrinks the held-out gap but only with an unphysical sign of its parameter; \
-                 not taken as the verdict",
-                effect_name(*e)
+    let noise_floor = noise_floor(&runs, &residual_weights(&nominal_all.model, &runs));
+    // A candidate that passes the tests is the verdict only if its
+    // parameters are determined and physical, and if it explains the gap:
+    // its held-out NRMSE within `EXPLAINED` times the noise floor.
+    let refusal = |fam: &FamilyResult| -> Option<String> {
+        if !physical(&fam.all.model) {
+            return Some("only with an unphysical sign of its parameter".into());
+        }
+        if let Some(why) = undetermined(&fam.all.model, &scales) {
+            return Some(format!(
+                "with a parameter the record does not determine: {why}"
             ));
+        }
+        (fam.validation > EXPLAINED * noise_floor).then(|| {
+            format!(
+                "but leaves a held-out NRMSE of {:.4}, {:.1} times the noise floor {:.4}: \
+                 the gap is not this effect alone (another effect, or a nominal fit that \
+                 missed its optimum)",
+                fam.validation,
+                fam.validation / noise_floor,
+                noise_floor
+            )
+        })
+    };
+    let mut winner = None;
+    for (n, (e, fam, test, score)) in scored.iter().enumerate() {
+        if !(test.significant() && *score > 0.0) {
+            continue;
+        }
+        match refusal(fam) {
+            None if winner.is_none() => winner = Some(n),
+            None => {}
+            Some(why) => warnings.push(format!(
+                "{}: shrinks the held-out gap {why}; not taken as the verdict",
+                effect_name(*e)
+            )),
         }
     }
 
@@ -326,7 +360,6 @@ pub fn diagnose_dc(
         transient_seconds(&nominal_all.model.p),
         scales.dt,
     );
-    let noise_floor = noise_floor(&runs, &weights);
 
     let candidates_report = scored.iter().map(|(e, fam, test, score)| Candidate {
         effect: effect_name(*e),
@@ -349,7 +382,7 @@ pub fn diagnose_dc(
                     *n != wi
                         && t.significant()
                         && *s > 0.0
-                        && physical(&other.all.model)
+                        && refusal(other).is_none()
                         && !held_out_test(&other.blocks, &fam.blocks, 1).significant()
                 })
                 .map(|(_, (oe, other, _, _))| LookAlike {
@@ -761,6 +794,34 @@ fn channel_weights(runs: &[SegmentRun], warnings: &mut Vec<String>) -> Weights {
     Weights {
         current: 1.0 / sigma[0],
         speed: 1.0 / sigma[1],
+    }
+}
+
+/// Noise weights `1/σ` from the residuals of `model` on every segment
+/// (`decision::residual_noise_sigma`): unlike the settled tails of
+/// [`channel_weights`], they exist on ramps, PRBS and closed loops too.
+fn residual_weights(model: &AugModel, runs: &[SegmentRun]) -> Weights {
+    let series: Vec<(HeldOutSeries, &SegmentRun)> = runs
+        .iter()
+        .filter_map(|r| held_out(model, r).map(|s| (s, r)))
+        .collect();
+    let sigma = |current: bool| {
+        let (residuals, readings): (Vec<&[f64]>, Vec<&[f64]>) = series
+            .iter()
+            .filter(|(_, r)| !(current && r.coast))
+            .map(|(s, r)| {
+                if current {
+                    (&s.current[..], &r.seg.current[..])
+                } else {
+                    (&s.speed[..], &r.seg.speed[..])
+                }
+            })
+            .unzip();
+        residual_noise_sigma(&residuals, &readings).max(f64::MIN_POSITIVE)
+    };
+    Weights {
+        current: 1.0 / sigma(true),
+        speed: 1.0 / sigma(false),
     }
 }
 

@@ -157,6 +157,64 @@ pub fn physical(m: &AugModel) -> bool {
     }
 }
 
+/// Why the record cannot pin the fitted effect down, if it cannot: a
+/// parameter at the edge of what the record spans, where the effect turns
+/// into one the nominal model already has (or into no effect), or beyond
+/// its physical range. Such a fit may shrink the gap, but by freedom the
+/// data do not determine, so it is not a verdict.
+pub fn undetermined(m: &AugModel, s: &RecordScales) -> Option<String> {
+    let e = m.e;
+    match m.aug {
+        Augment::CoulombFriction if e[1] >= s.w_max => Some(format!(
+            "its decay speed ws = {:.3} rad/s exceeds every speed of the record ({:.3} rad/s): \
+             a constant torque there, the same as Tst",
+            e[1], s.w_max
+        )),
+        Augment::BrushDrop if e[1] >= s.i_max => Some(format!(
+            "its knee current i0 = {:.3} A lies above every current of the record ({:.3} A): \
+             a drop proportional to the current there, the same as a change of Ra",
+            e[1], s.i_max
+        )),
+        Augment::ArmatureReaction if e[0] * s.i_max * s.i_max >= 1.0 => {
+            Some("K would vanish at the record's peak current".into())
+        }
+        Augment::ThermalDrift if e[0] * s.heat_total > MAX_RESISTANCE_RISE => Some(format!(
+            "Ra would rise by {:.0} % over the record, beyond a winding that survives it",
+            100.0 * e[0] * s.heat_total
+        )),
+        Augment::ShaftCompliance if !(SHARE_BOUNDS.0..=SHARE_BOUNDS.1).contains(&e[1]) => {
+            Some(format!(
+                "its motor share of the inertia r = {:.4} leaves no second mass",
+                e[1]
+            ))
+        }
+        Augment::ShaftCompliance if !(ZETA_BOUNDS.0..=ZETA_BOUNDS.1).contains(&e[2]) => {
+            Some(format!(
+                "its damping ratio zeta = {:.4} sits at the bound of its range",
+                e[2]
+            ))
+        }
+        Augment::ShaftCompliance if e[0] * 4.0 * s.dt > 1.0 => Some(format!(
+            "its resonance fr = {:.1} Hz has a period shorter than four samples",
+            e[0]
+        )),
+        _ => None,
+    }
+}
+
+/// Largest relative rise of Ra over a record that physics allows: copper
+/// at +100 % is about 250 K above where it started.
+const MAX_RESISTANCE_RISE: f64 = 1.0;
+
+/// The interval the shaft's motor share of the inertia (a logit in
+/// (0, 1)) must lie in to be determined: within 1 % of either end the fit
+/// has run to the bound of its transform.
+const SHARE_BOUNDS: (f64, f64) = (0.01, 0.99);
+
+/// The same for the shaft's damping ratio: a steel coupling's is rarely
+/// below 0.005, so below 0.001 the fit has run to zero.
+const ZETA_BOUNDS: (f64, f64) = (0.001, 0.99);
+
 fn estimate(value: f64, ci: Option<[f64; 2]>, unit: &str) -> ParamEstimate {
     ParamEstimate {
         value,
@@ -286,4 +344,61 @@ pub fn separating_plan(a: Effect, b: Effect) -> String {
          coast-down from the highest level"
     }
     .into()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn scales() -> RecordScales {
+        RecordScales {
+            i_max: 10.0,
+            i_settled: 4.0,
+            u_max: 200.0,
+            w_max: 150.0,
+            heat_total: 50.0,
+            dt: 5e-4,
+            peaks_hz: Vec::new(),
+        }
+    }
+
+    fn with(aug: Augment, e: [f64; 3]) -> AugModel {
+        AugModel {
+            aug,
+            e,
+            ..AugModel::nominal(crate::model::DcParams::SEED_TABLE4_MOMENTS)
+        }
+    }
+
+    #[test]
+    fn effects_the_record_cannot_pin_down_are_named_and_the_rest_pass() {
+        let s = scales();
+        let undetermined_fits = [
+            // A resonance fit that ran to all inertia on the motor, no damping.
+            with(Augment::ShaftCompliance, [276.0, 0.9999, 0.2]),
+            with(Augment::ShaftCompliance, [40.0, 0.4, 1e-6]),
+            // A period of two samples.
+            with(Augment::ShaftCompliance, [1000.0, 0.4, 0.1]),
+            // A brush knee above every current: a resistance.
+            with(Augment::BrushDrop, [2.0, 25.0, 0.0]),
+            // A breakaway decaying slower than any speed reached: Tst.
+            with(Augment::CoulombFriction, [0.01, 400.0, 0.0]),
+            with(Augment::ArmatureReaction, [0.02, 0.0, 0.0]),
+            with(Augment::ThermalDrift, [0.05, 0.0, 0.0]),
+        ];
+        for m in &undetermined_fits {
+            assert!(undetermined(m, &s).is_some(), "{m:?}");
+        }
+        let determined = [
+            with(Augment::ShaftCompliance, [40.0, 0.4, 0.05]),
+            with(Augment::BrushDrop, [2.0, 0.5, 0.0]),
+            with(Augment::CoulombFriction, [0.01, 5.0, 0.0]),
+            with(Augment::ArmatureReaction, [0.002, 0.0, 0.0]),
+            with(Augment::ThermalDrift, [0.002, 0.0, 0.0]),
+            with(Augment::SensorLag(LagChannel::Speed), [1e-3, 0.0, 0.0]),
+        ];
+        for m in &determined {
+            assert_eq!(undetermined(m, &s), None, "{m:?}");
+        }
+    }
 }

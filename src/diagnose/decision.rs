@@ -170,6 +170,37 @@ pub fn noise_sigma(y: &[f64]) -> f64 {
     median(&mut d).map_or(0.0, |m| m / (std::f64::consts::SQRT_2 * 0.674_489_75))
 }
 
+/// Standard deviation of the measurement noise in residuals (measured
+/// minus simulated), pooled over `residuals` (one slice per segment):
+/// `σ² = mean(Δr²)/2` over the first differences, which the misfit's slow
+/// part does not reach, and never below the quantisation noise `q/√12` of
+/// `readings`, `q` their smallest nonzero step. The mean square rather
+/// than the median: a reading quantised near its noise level has first
+/// differences of 0 or one step, whose median says nothing of σ.
+///
+/// Differencing the residual rather than the reading removes what the
+/// model follows, so the estimate holds on ramps, PRBS and closed loops,
+/// where the reading itself never settles.
+pub fn residual_noise_sigma(residuals: &[&[f64]], readings: &[&[f64]]) -> f64 {
+    let (sum, count) = residuals
+        .iter()
+        .flat_map(|r| r.windows(2).map(|w| (w[1] - w[0]).powi(2)))
+        .filter(|v| v.is_finite())
+        .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    let rms = (sum / (2.0 * count.max(1) as f64)).sqrt();
+    let step = readings
+        .iter()
+        .flat_map(|y| y.windows(2).map(|w| (w[1] - w[0]).abs()))
+        .filter(|v| *v > 0.0 && v.is_finite())
+        .fold(f64::INFINITY, f64::min);
+    let quantisation = if step.is_finite() {
+        step / 12f64.sqrt()
+    } else {
+        0.0
+    };
+    rms.max(quantisation)
+}
+
 /// The median of `values` (the upper one of an even count), reordering
 /// them; `None` when there are none.
 pub fn median(values: &mut [f64]) -> Option<f64> {
@@ -249,6 +280,24 @@ mod tests {
             held_out_sign_flip_test(&candidate, &candidate, 1).p_value,
             1.0
         );
+    }
+
+    #[test]
+    fn residual_noise_ignores_a_slow_misfit_and_keeps_the_quantisation_floor() {
+        let white = noise(21, 4000);
+        let residual: Vec<f64> = white
+            .iter()
+            .enumerate()
+            .map(|(k, v)| 0.05 * v + 0.3 * (k as f64 * 0.002).sin())
+            .collect();
+        let s = residual_noise_sigma(&[&residual], &[&white]);
+        assert!((s - 0.05).abs() < 0.003, "sigma {s}");
+        // A reading in steps of 0.5 with a residual that never moves:
+        // the quantisation noise 0.5/sqrt(12) remains.
+        let coarse: Vec<f64> = (0..100).map(|k| 0.5 * (k / 10) as f64).collect();
+        let flat = vec![0.0; 100];
+        let q = residual_noise_sigma(&[&flat], &[&coarse]);
+        assert!((q - 0.5 / 12f64.sqrt()).abs() < 1e-12, "{q}");
     }
 
     #[test]
