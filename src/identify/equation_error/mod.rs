@@ -707,6 +707,13 @@ mod tests {
             i.push(x.current);
             w.push((read(x.angle) - read(before)) / dt);
         }
+        segmented(&v, &i, &w, dt, per)
+    }
+
+    /// Readings cut into step segments of `per` samples (each sharing its
+    /// first sample with the previous one's last).
+    fn segmented(v: &[f64], i: &[f64], w: &[f64], dt: f64, per: usize) -> Record {
+        let n = v.len();
         let segments = (0..n.div_ceil(per))
             .map(|s| {
                 let r = s * per..((s + 1) * per + 1).min(n);
@@ -870,24 +877,7 @@ mod tests {
             last_w = (x.angle - before) / dt + sd_w * nw;
             w.push(last_w);
         }
-        let segments = (0..n.div_ceil(per))
-            .map(|s| {
-                let r = s * per..((s + 1) * per + 1).min(n);
-                DcSegment {
-                    index: s as u32,
-                    kind: Some(SegmentKind::DcStep),
-                    label: format!("{s}"),
-                    time: r.clone().map(|k| k as f64 * dt).collect(),
-                    voltage: v[r.clone()].to_vec(),
-                    current: i[r.clone()].to_vec(),
-                    speed: w[r].to_vec(),
-                }
-            })
-            .collect();
-        Record {
-            segments,
-            ..Default::default()
-        }
+        segmented(&v, &i, &w, dt, per)
     }
 
     #[test]
