@@ -41,8 +41,6 @@ echo "== cargo fmt --check"
 cargo fmt --all -- --check
 echo "== cargo clippy (warnings are errors)"
 cargo clippy --workspace --all-targets --locked -- -D warnings
-echo "== cargo build --release (the diagnosis tests run the optimised binary)"
-cargo build --release --locked --bin motorbench
 if cargo nextest --version >/dev/null 2>&1; then
     echo "== cargo nextest run (every test target), then the doc tests"
     cargo nextest run --workspace --locked --no-fail-fast

@@ -69,33 +69,3 @@ pub fn python_check_mcap(file: &Path, expect: &[String]) -> serde_json::Value {
         .expect("check_mcap.py prints its counts last");
     serde_json::from_str(last).expect("the last line is JSON")
 }
-
-/// The release build of `motorbench`, built on first use (a no-op when
-/// `tests/run.sh` or `cargo run --release` already built it). The
-/// diagnosis fits dozens of models per record; tests that run it many
-/// times use the optimised binary so the suite stays within its time.
-pub fn release_motorbench() -> &'static Path {
-    static BIN: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
-    BIN.get_or_init(|| {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-        let status = Command::new(cargo)
-            .args(["build", "--release", "--locked", "--bin", "motorbench"])
-            .current_dir(root)
-            .status()
-            .expect("cargo runs");
-        assert!(status.success(), "the release build failed");
-        let target = std::env::var_os("CARGO_TARGET_DIR")
-            .map(std::path::PathBuf::from)
-            .unwrap_or_else(|| root.join("target"));
-        target.join("release").join("motorbench")
-    })
-}
-
-/// Run the release build of `motorbench` (see [`release_motorbench`]).
-pub fn motorbench_release(args: &[&str]) -> Output {
-    Command::new(release_motorbench())
-        .args(args)
-        .output()
-        .expect("motorbench runs")
-}

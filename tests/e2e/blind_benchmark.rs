@@ -18,7 +18,7 @@
 
 use crate::common;
 
-use common::{motorbench_release as motorbench, text};
+use common::{motorbench, text};
 use motorbench::diagnose::blind::{Manifest, PlanKind, SuiteScore, TruthFile};
 
 #[test]

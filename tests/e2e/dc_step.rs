@@ -138,9 +138,9 @@ async fn default_run_identifies_the_seed_motor_and_replays_identically() {
 fn cli_run_then_replay_prints_the_same_json_to_the_last_digit() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().to_str().unwrap();
-    // The release build: `run` and `replay` both diagnose the record, and
-    // the diagnosis fits dozens of models.
-    let run = common::motorbench_release(&["run", "--out", out, "--json", "--quiet"]);
+    // `run` and `replay` both diagnose the record (dozens of model fits;
+    // the test profile optimises motorbench's own crates, see Cargo.toml).
+    let run = common::motorbench(&["run", "--out", out, "--json", "--quiet"]);
     let (run_json, stderr) = common::text(&run);
     assert!(run.status.success(), "{stderr}");
     let mcap = std::fs::read_dir(dir.path())
@@ -148,14 +148,13 @@ fn cli_run_then_replay_prints_the_same_json_to_the_last_digit() {
         .map(|e| e.unwrap().path())
         .find(|p| p.extension().is_some_and(|e| e == "mcap"))
         .expect("run wrote an MCAP");
-    let replay =
-        common::motorbench_release(&["replay", "--json", "--check", mcap.to_str().unwrap()]);
+    let replay = common::motorbench(&["replay", "--json", "--check", mcap.to_str().unwrap()]);
     let (replay_json, stderr) = common::text(&replay);
     assert!(replay.status.success(), "{stderr}");
     assert!(stderr.contains("identical to the recorded"), "{stderr}");
     assert_eq!(run_json, replay_json);
     // Without the diagnosis: the rest of the recorded result still matches.
-    let replay = common::motorbench_release(&[
+    let replay = common::motorbench(&[
         "replay",
         "--json",
         "--check",
@@ -183,8 +182,7 @@ fn cli_run_then_replay_prints_the_same_json_to_the_last_digit() {
 #[test]
 fn cli_text_report_shows_the_truth_beside_the_estimate() {
     let dir = tempfile::tempdir().unwrap();
-    let run =
-        common::motorbench_release(&["run", "--out", dir.path().to_str().unwrap(), "--quiet"]);
+    let run = common::motorbench(&["run", "--out", dir.path().to_str().unwrap(), "--quiet"]);
     let (stdout, stderr) = common::text(&run);
     assert!(run.status.success(), "{stderr}");
     assert!(stdout.contains("method steady_state"), "{stdout}");

@@ -5,7 +5,7 @@
 use crate::common;
 use crate::common::dc_shapes;
 
-use common::{motorbench_release as motorbench, text};
+use common::{motorbench, text};
 use motorbench::diagnose::blind::{simulate_dc_case, simulate_im_case, write_case_files};
 use motorbench::model::Effect;
 use rand::rngs::StdRng;

@@ -8,7 +8,7 @@
 
 use crate::common;
 
-use common::{motorbench_release as motorbench, text};
+use common::{motorbench, text};
 use serde_json::Value;
 
 #[test]

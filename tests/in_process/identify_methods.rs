@@ -214,7 +214,7 @@ mod shapes {
     //! motor, a ramp, a PRBS, a closed speed loop; 12-bit ADC, 1024-line
     //! encoder): equation error applies to each and recovers K and Ra.
     //! (The whole identification and the diagnosis of the same records run
-    //! on the release binary in tests/e2e/diagnose_cli.rs.)
+    //! on the binary in tests/e2e/diagnose_cli.rs.)
 
     use super::dc_shapes;
 
