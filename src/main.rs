@@ -11,8 +11,10 @@
 
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
-use motorbench::cli::{self, Failure, IdentifyArgs, ProbeArgs, ReplayArgs, RunArgs};
+use clap::{CommandFactory, Parser, Subcommand};
+use motorbench::cli::{
+    self, CompletionsArgs, Failure, IdentifyArgs, ManArgs, ProbeArgs, ReplayArgs, RunArgs,
+};
 use motorbench::diagnose::cli::{run_blind, run_diagnose, BlindArgs, DiagnoseArgs};
 use motorbench::serve::cli::{run_ctl, run_serve, CtlArgs, ServeArgs};
 
@@ -53,6 +55,11 @@ enum Command {
     Serve(ServeArgs),
     /// Talk to a running daemon (status, start, follow, abort, records, fetch).
     Ctl(CtlArgs),
+    /// Print a shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions(CompletionsArgs),
+    /// Print the man page, or write every page (one per subcommand) into a
+    /// directory.
+    Man(ManArgs),
 }
 
 /// Run `future` on a multi-threaded runtime; its value is the exit code.
@@ -94,5 +101,7 @@ fn main() -> ExitCode {
             run_serve(args, stop).await
         }),
         Command::Ctl(args) => block_on(run_ctl(args)),
+        Command::Completions(args) => Failure::exit(cli::completions(args, Cli::command())),
+        Command::Man(args) => Failure::exit(cli::man(args, Cli::command())),
     }
 }

@@ -1,6 +1,6 @@
 //! The bodies of the `motorbench` subcommands that drive a test or read a
-//! record (`run`, `probe`, `replay`, `identify`), with their clap
-//! arguments; `src/main.rs` only parses the command line and dispatches.
+//! record (`run`, `probe`, `replay`, `identify`) or document the command
+//! line itself (`completions`, `man`), with their clap arguments; `src/main.rs` only parses the command line and dispatches.
 //! (`diagnose`, `blind`, `serve` and `ctl` live beside what they drive:
 //! [`crate::diagnose::cli`], [`crate::serve::cli`].)
 //!
@@ -17,6 +17,7 @@ mod probe;
 mod progress_bar;
 mod replay;
 mod run;
+mod shell_docs;
 mod signal;
 
 pub use failure::Failure;
@@ -24,4 +25,5 @@ pub use identify::{identify, IdentifyArgs};
 pub use probe::{probe, ProbeArgs};
 pub use replay::{replay, ReplayArgs};
 pub use run::{run, RunArgs};
+pub use shell_docs::{completions, man, CompletionsArgs, ManArgs};
 pub use signal::stop_signal;

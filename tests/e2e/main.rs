@@ -23,6 +23,7 @@ mod modbus_stage;
 mod peers_modbus;
 mod peers_serial;
 mod peers_slcan;
+mod shell_docs;
 mod sim_can;
 mod sim_merged_sensors;
 mod sim_modbus;
