@@ -17,13 +17,10 @@ use crate::diagnose::attach_diagnosis;
 use crate::identify::{identify_im, ImIdentification};
 use crate::model::ImCircuit;
 use crate::record::{
-    Entry, Record, Recorder, RecorderStats, SegmentKind, TestMeta, SCHEMA_VERSION,
+    Entry, Record, Recorder, RecorderStats, SegmentKind, TestMeta, QUEUE_CAPACITY, SCHEMA_VERSION,
 };
 use crate::report::plot::PlotError;
 use crate::report::write_im_svg;
-
-/// Recorder queue length, in entries.
-const QUEUE_CAPACITY: usize = 4096;
 
 /// What an induction-machine commissioning run produced.
 #[derive(Debug)]

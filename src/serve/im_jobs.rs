@@ -21,11 +21,8 @@ use crate::bench::{
 };
 use crate::diagnose::attach_diagnosis;
 use crate::identify::identify_im;
-use crate::record::{Recorder, SegmentKind, TestMeta, SCHEMA_VERSION};
+use crate::record::{Recorder, SegmentKind, TestMeta, QUEUE_CAPACITY, SCHEMA_VERSION};
 use crate::report::write_im_svg;
-
-/// Recorder queue length, in entries.
-const QUEUE_CAPACITY: usize = 4096;
 
 /// The plan for a person.
 pub fn im_plan_summary(cfg: &ImRunConfig) -> String {

@@ -24,12 +24,10 @@ use crate::config::{Config, Plan, Retention};
 use crate::diagnose::attach_diagnosis;
 use crate::identify::identify_dc;
 use crate::record::{
-    Entry, Event, EventLevel, Record, Recorder, SegmentKind, TestMeta, SCHEMA_VERSION,
+    Entry, Event, EventLevel, Record, Recorder, SegmentKind, TestMeta, QUEUE_CAPACITY,
+    SCHEMA_VERSION,
 };
 use crate::report::{segment_plots, write_segments_svg, IdentificationReport};
-
-/// Recorder queue length, in entries.
-const QUEUE_CAPACITY: usize = 4096;
 
 /// Where a test is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
