@@ -9,7 +9,7 @@ use motorbench::bench::{
 use motorbench::identify::identify_im;
 use motorbench::model::{
     with_leakage_split, Connection, ImCircuit, ImModel, ImParam, ImSupply, LeakageSplit,
-    PerUnitBase, RotorCage,
+    PerUnitBase, RotorCage, SEED_DOUBLE_CAGE_PU,
 };
 use motorbench::record::{read_mcap, EventLevel, Recorder, SegmentKind, TestMeta, SCHEMA_VERSION};
 use motorbench_drivers::{PowerStage, SensorStream};
@@ -18,17 +18,20 @@ use motorbench_drivers::{PowerStage, SensorStream};
 fn machine() -> (ImCircuit, ImSupply, f64) {
     let rated_current = 8.3;
     let base = PerUnitBase::from_rating(400.0, rated_current, Connection::Star);
+    // Rs ×4 and Rr2 ×2, to look like a small industrial motor.
+    let seed = SEED_DOUBLE_CAGE_PU;
+    let RotorCage::Double { rr1, rr2, xr1, xr2 } = seed.rotor else {
+        unreachable!("the seed machine has a double cage")
+    };
     let pu = ImCircuit {
-        rs: 0.00778 * 4.0,
-        xs: 0.123,
-        xm: 4.3,
-        rfe: None,
+        rs: seed.rs * 4.0,
         rotor: RotorCage::Double {
-            rr1: 0.0693,
-            rr2: 0.0132 * 2.0,
-            xr1: 0.00843,
-            xr2: 0.1162,
+            rr1,
+            rr2: rr2 * 2.0,
+            xr1,
+            xr2,
         },
+        ..seed
     };
     let supply = ImSupply {
         line_voltage: 400.0,
