@@ -86,6 +86,7 @@ pub async fn commission_im(
     let mut sink = RecordSink::new(Some(recorder), Some(meta), channels);
     let outcome = run_im_sweep(
         &cfg.plan,
+        &cfg.safety_rules(),
         vfd.as_mut(),
         dyno.as_mut(),
         sensors.as_mut(),

@@ -20,6 +20,7 @@ mod progress;
 mod rig;
 mod runner;
 mod sampling;
+mod sequencer;
 mod served;
 mod served_im;
 mod settle;
@@ -42,7 +43,7 @@ pub use interlock::{
     supervise, supervise_stages, InterlockedStage, StopReport, Supervised, SupervisedSensors,
     SupervisedStages, SupervisorHandle, SupervisorSummary, SupervisorTiming,
 };
-pub use limits::{check_limits, Trip};
+pub use limits::Trip;
 pub use plan::{plan_steps, PlanStep};
 pub use probe::{
     probe, probe_im, ProbeLine, ProbeReport, PROBE_CURRENT_FRACTION, PROBE_SETPOINT_FRACTION,
@@ -59,6 +60,8 @@ pub use settle::SettleDetector;
 pub use sim_im_rig::{sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd, COPPER_ALPHA};
 pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};
 pub use stop_path::StopPath;
-pub use supervisor::{Readings, SafetyMonitor, StopCause, SUPERVISOR_ID};
+pub use supervisor::{
+    HeatingBudget, Readings, SafetyMonitor, SafetyRules, StopCause, SUPERVISOR_ID,
+};
 pub use supply_limits::SupplyLimitDetector;
 pub use thermal::WindingTemperature;

@@ -72,6 +72,7 @@ async fn sweep_records_operating_points_that_identify_the_machine() {
     let (_stop_tx, stop) = tokio::sync::watch::channel(false);
     let outcome = run_im_sweep(
         &plan,
+        &plan.safety_rules(),
         &mut vfd,
         &mut dyno,
         &mut sensors,
@@ -149,6 +150,7 @@ async fn over_current_stops_the_sweep_with_both_stages_safe() {
     let (_stop_tx, stop) = tokio::sync::watch::channel(false);
     let outcome = run_im_sweep(
         &plan,
+        &plan.safety_rules(),
         &mut vfd,
         &mut dyno,
         &mut sensors,
@@ -161,7 +163,7 @@ async fn over_current_stops_the_sweep_with_both_stages_safe() {
     let Outcome::Aborted { reason } = outcome else {
         panic!("not aborted")
     };
-    assert!(reason.contains("line_current"), "{reason}");
+    assert!(reason.contains("limit tripped: current"), "{reason}");
     let (_, record) = sink.into_parts();
     assert!(record
         .events
@@ -191,6 +193,7 @@ async fn heating_budget_stops_a_sweep_without_cool_down() {
     let (_stop_tx, stop) = tokio::sync::watch::channel(false);
     let outcome = run_im_sweep(
         &plan,
+        &plan.safety_rules(),
         &mut vfd,
         &mut dyno,
         &mut sensors,
@@ -217,6 +220,7 @@ async fn operator_stop_ends_the_sweep() {
     let (_stop_tx, stop) = tokio::sync::watch::channel(true);
     let outcome = run_im_sweep(
         &plan,
+        &plan.safety_rules(),
         &mut vfd,
         &mut dyno,
         &mut sensors,
@@ -229,7 +233,7 @@ async fn operator_stop_ends_the_sweep() {
     assert_eq!(
         outcome,
         Outcome::Aborted {
-            reason: "stopped by the operator".into()
+            reason: "operator stop".into()
         }
     );
 }
