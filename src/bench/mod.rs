@@ -1,8 +1,10 @@
 //! The bench: test plans, settle detection, limits and the safe state, the
 //! simulated rigs (DC; induction machine with VFD and dynamometer, with the
-//! `im_slip_sweep` plan), the sequencing that ties them to the recorder,
-//! and the safety supervisor that watches a running test independently of
-//! the sequencing.
+//! `im_slip_sweep` plan), the sequencing that ties them to the recorder
+//! (one reading core, `sequencer`, under both plans and both the CLI and
+//! the daemon, checking every batch with the one [`SafetyMonitor`]), and
+//! the safety supervisor task that watches a daemon's test independently
+//! of the sequencing.
 
 mod commission;
 mod encoder;

@@ -16,7 +16,7 @@
 //!
 //! A non-finite reading on a checked channel counts as crossing its limit.
 //! It is the one limit check of every test: the sequencer's reading path
-//! ([`super::sequencer`]) checks each batch with it synchronously, under
+//! (`src/bench/sequencer.rs`) checks each batch with it synchronously, under
 //! `motorbench run` and under the daemon alike, and the daemon's
 //! supervisor task ([`super::supervise`]) checks the same batches with its
 //! own instance before forwarding them. Bus loss (no data at all, wall
