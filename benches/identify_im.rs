@@ -10,25 +10,16 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use motorbench::identify::{
     fit_lm, slip_grid, LmOptions, PhaseData, SlipSweep, SplitPolicy, SweepNoise,
 };
-use motorbench::model::{Connection, ImCircuit, ImModel, ImSupply, PerUnitBase, RotorCage};
+use motorbench::model::{
+    Connection, ImCircuit, ImModel, ImSupply, PerUnitBase, SEED_DOUBLE_CAGE_PU,
+};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::hint::black_box;
 
 fn data() -> (PhaseData, ImCircuit) {
     // The seed paper's double cage on a 4 kW, 400 V star base.
-    let pu = ImCircuit {
-        rs: 0.00778,
-        xs: 0.123,
-        xm: 4.3,
-        rfe: None,
-        rotor: RotorCage::Double {
-            rr1: 0.0693,
-            rr2: 0.0132,
-            xr1: 0.00843,
-            xr2: 0.1162,
-        },
-    };
+    let pu = SEED_DOUBLE_CAGE_PU;
     let circuit =
         ImCircuit::from_per_unit(&pu, &PerUnitBase::from_rating(400.0, 8.3, Connection::Star));
     let mut rng = StdRng::seed_from_u64(1);

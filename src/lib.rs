@@ -12,7 +12,13 @@
 //! - [`model`]: DC machine equations, effects, exact simulation; the
 //!   induction machine's steady-state equivalent circuits.
 //! - [`bench`]: test plans, settle detection, limits and safe state, the
-//!   simulated rig behind the `motorbench-drivers` traits.
+//!   simulated rigs behind the `motorbench-drivers` traits. Every test
+//!   reads through one sequencer core (`bench/sequencer.rs`: select on the
+//!   stop, stale-data timeout, recording, the [`bench::SafetyMonitor`]
+//!   checked synchronously on every batch); the DC steps and the IM sweep
+//!   are plans on top of it. `run` and the daemon share that safety path;
+//!   the daemon adds the supervisor task ([`bench::supervise`]: heartbeat,
+//!   bus loss, API stops, latching).
 //! - [`record`]: MCAP recorder and reader per the data contract, CSV import.
 //! - [`identify`]: parameter identification from a [`record::Record`]
 //!   (DC; induction machine: the seed paper's recursive estimator and LM).

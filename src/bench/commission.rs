@@ -15,12 +15,10 @@ use crate::diagnose::{attach_diagnosis, write_residual_svg, ResidualPlot};
 use crate::identify::{identify_dc, Identification};
 use crate::model::DcParams;
 use crate::record::{
-    Entry, Record, RecordError, Recorder, RecorderStats, SegmentKind, TestMeta, SCHEMA_VERSION,
+    Entry, Record, RecordError, Recorder, RecorderStats, SegmentKind, TestMeta, QUEUE_CAPACITY,
+    SCHEMA_VERSION,
 };
 use crate::report::{plot::PlotError, segment_plots, write_segments_svg};
-
-/// Recorder queue length, in entries (one entry is one instant's readings).
-const QUEUE_CAPACITY: usize = 4096;
 
 /// Where and how to commission.
 #[derive(Debug, Clone)]

@@ -17,13 +17,10 @@ use crate::diagnose::attach_diagnosis;
 use crate::identify::{identify_im, ImIdentification};
 use crate::model::ImCircuit;
 use crate::record::{
-    Entry, Record, Recorder, RecorderStats, SegmentKind, TestMeta, SCHEMA_VERSION,
+    Entry, Record, Recorder, RecorderStats, SegmentKind, TestMeta, QUEUE_CAPACITY, SCHEMA_VERSION,
 };
 use crate::report::plot::PlotError;
 use crate::report::write_im_svg;
-
-/// Recorder queue length, in entries.
-const QUEUE_CAPACITY: usize = 4096;
 
 /// What an induction-machine commissioning run produced.
 #[derive(Debug)]
@@ -89,6 +86,7 @@ pub async fn commission_im(
     let mut sink = RecordSink::new(Some(recorder), Some(meta), channels);
     let outcome = run_im_sweep(
         &cfg.plan,
+        &cfg.safety_rules(),
         vfd.as_mut(),
         dyno.as_mut(),
         sensors.as_mut(),

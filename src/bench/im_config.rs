@@ -3,8 +3,8 @@
 //! behind Modbus), validated.
 //!
 //! The file has the DC configuration's layout (`[motor]`, `[rig]`,
-//! `[limits]`, `[test]`, and for the daemon the optional `[supervisor]`
-//! and `[records]`) with the induction machine's keys; a file whose
+//! `[limits]`, `[test]`, the optional `[supervisor]` (its checks run
+//! under `motorbench run` and the daemon alike) and `[records]`) with the induction machine's keys; a file whose
 //! `test.plan` is `"im_slip_sweep"` is one of these (the one place that
 //! tells is [`crate::config::TestConfig`]).
 //! `rig.backend` is `"simulated"` or `"modbus"` (see
@@ -13,7 +13,7 @@
 
 use serde::Deserialize;
 
-use super::{ImModbusRig, ImSweepPlan, SimImRigConfig};
+use super::{ImModbusRig, ImSweepPlan, SafetyRules, SimImRigConfig};
 use crate::bounds;
 use crate::config::{
     bounded, invalid, syntax_error, ConfigError, Limits, RawRetention, RawSupervisor, Retention,
@@ -500,6 +500,16 @@ impl ImRunConfig {
             plan,
             model,
         })
+    }
+
+    /// What the sweep's safety monitor enforces: `[limits]`, the
+    /// `[supervisor]` section and the plan's heating budget.
+    pub fn safety_rules(&self) -> SafetyRules {
+        SafetyRules {
+            limits: self.limits,
+            supervision: self.supervision.clone(),
+            heating: Some(self.plan.heating_budget()),
+        }
     }
 
     /// The rig, for a person.

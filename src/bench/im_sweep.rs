@@ -6,26 +6,26 @@
 //! records it on `/bench/operating_point`; every raw sample goes to
 //! `/sensor/*`.
 //!
-//! Safety: the test stops, with both stages in their safe state first, when
-//! the line current passes `max_current`, when the winding's heating budget
-//! (`∫ max(0, (I/I_rated)² − 1) dt` with a recovery time constant, an I²t
-//! limit) is spent, on a driver
-//! error or on an operator stop. Under the daemon's safety supervisor the
-//! current and I²t trips are handed to the supervisor (see
-//! [`super::StopPath`]), which latches the rig. A point whose current exceeds
+//! Safety: the sweep reads through the shared [`Sequencer`], so every batch
+//! is checked with the test's [`super::SafetyMonitor`] (the limits, the
+//! supervisor's checks, and the plan's winding heating budget
+//! `∫ max(0, (I/I_rated)² − 1) dt` with a recovery time constant, an I²t
+//! limit), a silent sensor ends the sweep after the stale-data timeout and
+//! an operator stop ends it at once. The test stops with both stages in
+//! their safe state first. Under the daemon's safety supervisor a failed
+//! check is handed to the supervisor (see [`super::StopPath`]), which
+//! latches the rig. A point whose current exceeds
 //! `hot_current` (towards locked rotor) is held at most `hot_point_max_s`
 //! and followed by a cool-down with the supply off: a real rig burns the
 //! winding otherwise.
 
+use super::sequencer::{safe_state_all, Halt, Read, Sequencer, SpeedChannel};
 use super::{
-    BenchError, Outcome, Progress, RecordSink, SamplingEvents, SettleDetector, SpeedFromEncoder,
-    StopCause, StopPath, Trip,
+    BenchError, HeatingBudget, Outcome, Progress, RecordSink, SafetyRules, SettleDetector, StopPath,
 };
+use crate::config::{Limits, Supervision};
 use crate::identify::slip_grid;
-use crate::record::{
-    ChannelSpec, Entry, Event, EventLevel, OperatingPoint, RecordError, SegmentKind, SegmentMarker,
-    SegmentPhase,
-};
+use crate::record::{ChannelSpec, Entry, EventLevel, OperatingPoint, SegmentKind, SegmentPhase};
 use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
 
 /// The plan of a slip sweep.
@@ -105,6 +105,34 @@ impl ImSweepPlan {
     pub fn synchronous_speed(&self) -> f64 {
         std::f64::consts::TAU * self.frequency / f64::from(self.pole_pairs.max(1))
     }
+
+    /// The plan's winding heating budget.
+    pub fn heating_budget(&self) -> HeatingBudget {
+        HeatingBudget {
+            rated_current: self.rated_current,
+            max_i2t_s: self.max_i2t_s,
+            time_constant_s: self.i2t_time_constant_s,
+        }
+    }
+
+    /// The safety rules of a bare plan (no configuration file): the
+    /// plan's current limit and heating budget, a voltage limit 10 %
+    /// above its highest supply voltage, a speed limit 20 % above
+    /// synchronous, and the `[supervisor]` defaults (the winding estimate
+    /// rated at the plan's rated current). A configured sweep takes its
+    /// rules from [`super::ImRunConfig::safety_rules`].
+    pub fn safety_rules(&self) -> SafetyRules {
+        let limits = Limits {
+            max_voltage: 1.1 * self.voltages.iter().copied().fold(0.0, f64::max),
+            max_current: self.max_current,
+            max_speed: 1.2 * self.synchronous_speed(),
+        };
+        SafetyRules {
+            limits,
+            supervision: Supervision::defaults(&limits, self.rated_current),
+            heating: Some(self.heating_budget()),
+        }
+    }
 }
 
 /// The mean speed over a window of encoder speed readings `(time, speed)`
@@ -177,29 +205,14 @@ struct Indices {
     voltage: usize,
     current: usize,
     power: usize,
-    encoder: usize,
     torque: Option<usize>,
-    speed_rec: usize,
     vfd_rec: usize,
     dyno_rec: usize,
 }
 
-enum Fault {
-    Stop(String),
-    /// A limit of the sweep's own: handed to the supervisor when there is one.
-    Trip(StopCause),
-    Record(RecordError),
-}
-
-impl From<RecordError> for Fault {
-    fn from(e: RecordError) -> Fault {
-        Fault::Record(e)
-    }
-}
-
-impl From<DriverError> for Fault {
-    fn from(e: DriverError) -> Fault {
-        Fault::Stop(format!("driver error: {e}"))
+impl From<DriverError> for Halt {
+    fn from(e: DriverError) -> Halt {
+        Halt::Fault(format!("driver error: {e}"))
     }
 }
 
@@ -207,96 +220,33 @@ struct Sweep<'a> {
     plan: &'a ImSweepPlan,
     vfd: &'a mut dyn PowerStage,
     dyno: &'a mut dyn PowerStage,
-    sensors: &'a mut dyn SensorStream,
-    sink: &'a mut RecordSink,
-    stops: StopPath<'a>,
-    /// The supervisor has taken a trip of ours: record on, check nothing,
-    /// until it ends the stream.
-    tripped: bool,
-    progress: &'a dyn Progress,
+    seq: Sequencer<'a>,
     ix: Indices,
-    encoder: SpeedFromEncoder,
-    t_ns: u64,
-    i2t: f64,
     /// The latest value of each watched quantity: streams that poll
     /// devices separately deliver batches with some channels only.
     held: Reading,
     /// `(data time, speed)` of every encoder reading of the current point.
     speeds: Vec<(u64, f64)>,
-    /// The sensors' sampling warnings admitted to the record.
-    sampling: SamplingEvents,
 }
 
 impl Sweep<'_> {
-    async fn event(&mut self, level: EventLevel, message: String) -> Result<(), RecordError> {
-        self.sink
-            .push(Entry::Event {
-                t_ns: self.t_ns,
-                event: Event { level, message },
-            })
-            .await
+    fn t_ns(&self) -> u64 {
+        self.seq.t_ns()
     }
 
-    async fn command(&mut self, index: usize, value: f64) -> Result<(), RecordError> {
-        self.sink
-            .push(Entry::Samples {
-                t_ns: self.t_ns,
-                values: vec![(index, value)],
-            })
-            .await
-    }
-
-    /// Next reading: batches are recorded as they come; a reading is
-    /// made of the latest value of each quantity when a batch brings a
-    /// new line current (with a rig whose meter and encoder are polled
-    /// separately, batches carrying only the encoder update the speed),
-    /// and checked against the limits. A limit crossed under the
-    /// supervisor is handed to it; the batches up to the end of the stream
-    /// it then delivers are recorded, and its stop is returned.
-    async fn read(&mut self) -> Result<Reading, Fault> {
+    /// Next reading: batches are read through the [`Sequencer`] (recorded
+    /// and checked as they come); a reading is made of the latest value of
+    /// each quantity when a batch brings a new line current (with a rig
+    /// whose meter and encoder are polled separately, batches carrying
+    /// only the encoder update the speed).
+    async fn read(&mut self) -> Result<Reading, Halt> {
         loop {
-            match self.read_checked().await {
-                Err(Fault::Trip(cause)) => {
-                    if !self.stops.trip(cause.clone(), self.t_ns).await {
-                        return Err(Fault::Trip(cause));
-                    }
-                    self.tripped = true;
-                }
-                Ok(_) if self.tripped => {}
-                other => return other,
-            }
-        }
-    }
-
-    /// The next reading, checked unless tripped.
-    async fn read_checked(&mut self) -> Result<Reading, Fault> {
-        loop {
-            if self.stops.operator_stop() {
-                return Err(Fault::Stop("stopped by the operator".into()));
-            }
-            let batch = self.sensors.next_batch().await?;
-            for message in self.sampling.admit(self.sensors.take_warnings()) {
-                self.event(EventLevel::Warn, message).await?;
-            }
-            let dt = batch.t_ns.saturating_sub(self.t_ns) as f64 * 1e-9;
-            self.t_ns = self.t_ns.max(batch.t_ns);
-            self.progress.tick(self.t_ns as f64 * 1e-9);
-            let mut values: Vec<(usize, f64)> =
-                batch.samples.iter().map(|s| (s.channel, s.value)).collect();
-            let get = |c: usize| batch.value(c);
-            if let Some(w) =
-                get(self.ix.encoder).and_then(|count| self.encoder.update(batch.t_ns, count))
-            {
-                values.push((self.ix.speed_rec, w));
+            let Read { batch, speed } = self.seq.next().await?;
+            if let Some(w) = speed {
                 self.held.speed = Some(w);
                 self.speeds.push((batch.t_ns, w));
             }
-            self.sink
-                .push(Entry::Samples {
-                    t_ns: batch.t_ns,
-                    values,
-                })
-                .await?;
+            let get = |c: usize| batch.value(c);
             let h = &mut self.held;
             if let Some(v) = get(self.ix.voltage) {
                 h.voltage = v;
@@ -312,28 +262,7 @@ impl Sweep<'_> {
             };
             h.current = current;
             h.t_ns = batch.t_ns;
-            let r = *h;
-            if self.tripped {
-                return Ok(r);
-            }
-            if !(r.current.is_finite() && r.current <= self.plan.max_current) {
-                return Err(Fault::Trip(StopCause::Limit(Trip {
-                    quantity: "line_current",
-                    value: r.current,
-                    limit: self.plan.max_current,
-                    unit: "A",
-                })));
-            }
-            let excess = ((r.current / self.plan.rated_current).powi(2) - 1.0).max(0.0);
-            self.i2t += (excess - self.i2t / self.plan.i2t_time_constant_s.max(1e-9)) * dt;
-            if self.i2t > self.plan.max_i2t_s {
-                return Err(Fault::Trip(StopCause::HeatingBudget {
-                    i2t_s: self.i2t,
-                    limit_s: self.plan.max_i2t_s,
-                    rated_current: self.plan.rated_current,
-                }));
-            }
-            return Ok(r);
+            return Ok(*h);
         }
     }
 
@@ -343,16 +272,16 @@ impl Sweep<'_> {
         &mut self,
         segment: u32,
         slip: f64,
-    ) -> Result<Option<(OperatingPoint, bool)>, Fault> {
+    ) -> Result<Option<(OperatingPoint, bool)>, Halt> {
         let ws = self.plan.synchronous_speed();
         let target = (1.0 - slip) * ws;
         self.dyno.set_setpoint(target).await?;
-        self.command(self.ix.dyno_rec, target).await?;
+        self.seq.command(self.ix.dyno_rec, target).await?;
         // Line current, input power and speed.
         let mut detector =
             SettleDetector::new(self.plan.settle_window, self.plan.settle_tolerance, 3);
         self.speeds.clear();
-        let start = self.t_ns;
+        let start = self.t_ns();
         let mut recent: Vec<Reading> = Vec::new();
         let mut hot = false;
         let settled = loop {
@@ -366,7 +295,7 @@ impl Sweep<'_> {
             if w.is_finite() && detector.push(&[r.current, r.power, w]) {
                 break true;
             }
-            let elapsed = (self.t_ns - start) as f64 * 1e-9;
+            let elapsed = (self.t_ns() - start) as f64 * 1e-9;
             let limit = if hot {
                 self.plan.hot_point_max_s
             } else {
@@ -380,7 +309,7 @@ impl Sweep<'_> {
             let mut w = Vec::with_capacity(self.plan.average_samples);
             while w.len() < self.plan.average_samples {
                 let r = self.read().await?;
-                let elapsed = (self.t_ns - start) as f64 * 1e-9;
+                let elapsed = (self.t_ns() - start) as f64 * 1e-9;
                 w.push(r);
                 if hot && elapsed > self.plan.hot_point_max_s {
                     break;
@@ -388,25 +317,27 @@ impl Sweep<'_> {
             }
             w
         } else if hot {
-            self.event(
-                EventLevel::Warn,
-                format!(
-                    "slip {slip:.4}: not settled within the hot-point limit {} s; the last {} samples averaged",
-                    self.plan.hot_point_max_s,
-                    recent.len()
-                ),
-            )
-            .await?;
+            self.seq
+                .event(
+                    EventLevel::Warn,
+                    format!(
+                        "slip {slip:.4}: not settled within the hot-point limit {} s; the last {} samples averaged",
+                        self.plan.hot_point_max_s,
+                        recent.len()
+                    ),
+                )
+                .await?;
             recent
         } else {
-            self.event(
-                EventLevel::Warn,
-                format!(
-                    "slip {slip:.4}: not settled within {} s; point skipped",
-                    self.plan.max_point_s
-                ),
-            )
-            .await?;
+            self.seq
+                .event(
+                    EventLevel::Warn,
+                    format!(
+                        "slip {slip:.4}: not settled within {} s; point skipped",
+                        self.plan.max_point_s
+                    ),
+                )
+                .await?;
             return Ok(None);
         };
         let n = window.len() as f64;
@@ -445,74 +376,62 @@ impl Sweep<'_> {
         Ok(Some((point, hot)))
     }
 
-    async fn cool_down(&mut self, voltage: f64) -> Result<(), Fault> {
+    async fn cool_down(&mut self, voltage: f64) -> Result<(), Halt> {
         self.vfd.set_output_enabled(false).await?;
-        self.command(self.ix.vfd_rec, 0.0).await?;
-        self.event(
-            EventLevel::Info,
-            format!("cool-down: supply off for {} s", self.plan.cooldown_s),
-        )
-        .await?;
-        let start = self.t_ns;
-        while ((self.t_ns - start) as f64) * 1e-9 < self.plan.cooldown_s {
+        self.seq.command(self.ix.vfd_rec, 0.0).await?;
+        self.seq
+            .event(
+                EventLevel::Info,
+                format!("cool-down: supply off for {} s", self.plan.cooldown_s),
+            )
+            .await?;
+        let start = self.t_ns();
+        while ((self.t_ns() - start) as f64) * 1e-9 < self.plan.cooldown_s {
             self.read().await?;
         }
         self.vfd.set_output_enabled(true).await?;
-        self.command(self.ix.vfd_rec, voltage).await?;
+        self.seq.command(self.ix.vfd_rec, voltage).await?;
         Ok(())
     }
 
-    async fn run(&mut self) -> Result<(), Fault> {
+    async fn run(&mut self) -> Result<(), Halt> {
         let plan = self.plan;
         for (k, &v) in plan.voltages.iter().enumerate() {
             let label = format!("{v:.0} V, {} Hz", plan.frequency);
-            let marker = |phase| SegmentMarker {
-                index: k as u32,
-                kind: SegmentKind::ImSlipSweep,
-                phase,
-                label: label.clone(),
-            };
-            self.sink
-                .push(Entry::Segment {
-                    t_ns: self.t_ns,
-                    marker: marker(SegmentPhase::Start),
-                })
+            let kind = SegmentKind::ImSlipSweep;
+            self.seq
+                .marker(k, kind, SegmentPhase::Start, &label)
                 .await?;
-            self.progress.segment(k, plan.voltages.len(), &label);
+            self.seq.segment(k, plan.voltages.len(), &label);
             self.vfd.set_setpoint(v).await?;
             self.vfd.set_output_enabled(true).await?;
             self.dyno.set_output_enabled(true).await?;
-            self.command(self.ix.vfd_rec, v).await?;
+            self.seq.command(self.ix.vfd_rec, v).await?;
             for &s in &plan.slips {
                 if let Some((point, hot)) = self.point(k as u32, s).await? {
-                    self.sink
-                        .push(Entry::OperatingPoint {
-                            t_ns: self.t_ns,
-                            point,
-                        })
-                        .await?;
+                    let t_ns = self.t_ns();
+                    self.seq.push(Entry::OperatingPoint { t_ns, point }).await?;
                     if hot {
                         self.cool_down(v).await?;
                     }
                 }
             }
-            self.sink
-                .push(Entry::Segment {
-                    t_ns: self.t_ns,
-                    marker: marker(SegmentPhase::End),
-                })
-                .await?;
+            self.seq.marker(k, kind, SegmentPhase::End, &label).await?;
         }
         Ok(())
     }
 }
 
-/// Run `plan` on the rig; every reading goes to `sink`, progress
-/// (segments, test time) to `progress`. The stages are left in their safe
-/// state however the test ends. `stops` is an operator-stop flag, or the
+/// Run `plan` on the rig under `rules` (the limits, the supervisor's
+/// checks, the plan's heating budget: see [`ImSweepPlan::safety_rules`]
+/// for a bare plan); every reading goes to `sink`, progress (segments,
+/// test time) to `progress`. The stages are left in their safe state
+/// however the test ends. `stops` is an operator-stop flag, or the
 /// supervisor's handle when the rig is supervised (see [`StopPath`]).
+#[allow(clippy::too_many_arguments)]
 pub async fn run_im_sweep<'s>(
     plan: &ImSweepPlan,
+    rules: &SafetyRules,
     vfd: &mut dyn PowerStage,
     dyno: &mut dyn PowerStage,
     sensors: &mut dyn SensorStream,
@@ -528,31 +447,48 @@ pub async fn run_im_sweep<'s>(
             .ok_or(BenchError::MissingChannel(q))
     };
     let n = channels.len();
-    let ix = Indices {
-        voltage: find("line_voltage")?,
-        current: find("line_current")?,
-        power: find("input_power")?,
-        encoder: find("encoder_count")?,
-        torque: channels.iter().position(|c| c.quantity == "torque"),
-        speed_rec: n,
-        vfd_rec: n + 1,
-        dyno_rec: n + 2,
+    let found = (|| {
+        let ix = Indices {
+            voltage: find("line_voltage")?,
+            current: find("line_current")?,
+            power: find("input_power")?,
+            torque: channels.iter().position(|c| c.quantity == "torque"),
+            vfd_rec: n + 1,
+            dyno_rec: n + 2,
+        };
+        let speed = SpeedChannel {
+            encoder: find("encoder_count")?,
+            speed_rec: n,
+            counts_per_rev: plan.encoder_counts_per_rev,
+        };
+        let monitor = rules
+            .monitor(&channels, Some(plan.encoder_counts_per_rev), 0.0)
+            .map_err(BenchError::Safety)?;
+        Ok::<_, BenchError>((ix, speed, monitor))
+    })();
+    let (ix, speed, monitor) = match found {
+        Ok(found) => found,
+        Err(e) => {
+            safe_state_all(&mut [vfd, dyno]).await;
+            return Err(e);
+        }
     };
+    let seq = Sequencer::new(
+        sensors,
+        sink,
+        progress,
+        stops.into(),
+        monitor,
+        speed,
+        f64::INFINITY,
+    );
     let mut sweep = Sweep {
         plan,
         vfd,
         dyno,
-        sensors,
-        sink,
-        stops: stops.into(),
-        tripped: false,
-        progress,
+        seq,
         ix,
-        encoder: SpeedFromEncoder::new(plan.encoder_counts_per_rev),
-        t_ns: 0,
-        i2t: 0.0,
         speeds: Vec::new(),
-        sampling: SamplingEvents::new(),
         held: Reading {
             t_ns: 0,
             voltage: f64::NAN,
@@ -563,19 +499,15 @@ pub async fn run_im_sweep<'s>(
         },
     };
     let result = sweep.run().await;
-    // Safe state first, whatever happened: both stages at once.
-    let (vfd_safe, dyno_safe) =
-        futures_util::join!(sweep.vfd.safe_state(), sweep.dyno.safe_state());
-    let stopped = match result {
-        Ok(()) => None,
-        Err(Fault::Record(e)) => return Err(BenchError::Record(e)),
-        Err(Fault::Stop(reason)) => Some(reason),
-        Err(Fault::Trip(cause)) => Some(cause.to_string()),
-    };
-    let outcome = match stopped {
-        None => Outcome::Completed,
-        Some(reason) => {
+    // Safe state first, whatever happened: both stages at once, the
+    // supply first.
+    let safe = safe_state_all(&mut [&mut *sweep.vfd, &mut *sweep.dyno]).await;
+    let outcome = match result {
+        Ok(()) => Outcome::Completed,
+        Err(Halt::Record(e)) => return Err(BenchError::Record(e)),
+        Err(Halt::Fault(reason)) => {
             sweep
+                .seq
                 .event(
                     EventLevel::Abort,
                     format!("{reason}; supply off, dynamometer braking"),
@@ -584,14 +516,11 @@ pub async fn run_im_sweep<'s>(
             Outcome::Aborted { reason }
         }
     };
-    let stats = sweep.sensors.sampling_stats();
-    let channels = sweep.sensors.channels().to_vec();
-    for (level, message) in sweep.sampling.summary(&stats, &channels) {
-        sweep.event(level, message).await?;
-    }
-    for (name, r) in [("supply", vfd_safe), ("dynamometer", dyno_safe)] {
+    sweep.seq.sampling_summary().await?;
+    for (name, r) in ["supply", "dynamometer"].into_iter().zip(safe) {
         if let Err(e) = r {
             sweep
+                .seq
                 .event(EventLevel::Warn, format!("{name} safe state failed: {e}"))
                 .await?;
         }
@@ -602,6 +531,7 @@ pub async fn run_im_sweep<'s>(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::bench::SpeedFromEncoder;
 
     /// Encoder speed readings of a shaft at `w` rad/s, 4096 counts a turn,
     /// polled every 5 ms; `late` readings carry a timestamp `by` s late.

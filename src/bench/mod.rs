@@ -1,8 +1,10 @@
 //! The bench: test plans, settle detection, limits and the safe state, the
 //! simulated rigs (DC; induction machine with VFD and dynamometer, with the
-//! `im_slip_sweep` plan), the sequencing that ties them to the recorder,
-//! and the safety supervisor that watches a running test independently of
-//! the sequencing.
+//! `im_slip_sweep` plan), the sequencing that ties them to the recorder
+//! (one reading core, `sequencer`, under both plans and both the CLI and
+//! the daemon, checking every batch with the one [`SafetyMonitor`]), and
+//! the safety supervisor task that watches a daemon's test independently
+//! of the sequencing.
 
 mod commission;
 mod encoder;
@@ -20,6 +22,7 @@ mod progress;
 mod rig;
 mod runner;
 mod sampling;
+mod sequencer;
 mod served;
 mod served_im;
 mod settle;
@@ -42,7 +45,7 @@ pub use interlock::{
     supervise, supervise_stages, InterlockedStage, StopReport, Supervised, SupervisedSensors,
     SupervisedStages, SupervisorHandle, SupervisorSummary, SupervisorTiming,
 };
-pub use limits::{check_limits, Trip};
+pub use limits::Trip;
 pub use plan::{plan_steps, PlanStep};
 pub use probe::{
     probe, probe_im, ProbeLine, ProbeReport, PROBE_CURRENT_FRACTION, PROBE_SETPOINT_FRACTION,
@@ -59,6 +62,8 @@ pub use settle::SettleDetector;
 pub use sim_im_rig::{sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd, COPPER_ALPHA};
 pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};
 pub use stop_path::StopPath;
-pub use supervisor::{Readings, SafetyMonitor, StopCause, SUPERVISOR_ID};
+pub use supervisor::{
+    HeatingBudget, Readings, SafetyMonitor, SafetyRules, StopCause, SUPERVISOR_ID,
+};
 pub use supply_limits::SupplyLimitDetector;
 pub use thermal::WindingTemperature;

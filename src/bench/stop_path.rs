@@ -2,12 +2,13 @@
 //! [`super::run_im_sweep`]) see it.
 //!
 //! Without a supervisor (`motorbench run`) the sequencer stops on an
-//! operator flag or on a fault it sees, and commands the safe state
-//! itself. Under the daemon's safety supervisor every stop goes through
-//! the supervisor, whichever layer sees the reason first: a limit the
-//! sequencer's own check finds before the supervisor's (the two estimate
-//! speed differently, the induction-machine sweep has its own current and
-//! I²t bounds) is handed to the supervisor, which commands the safe state,
+//! operator flag (raised at any time: the sequencer waits on it beside
+//! each read) or on a fault it sees, and commands the safe state itself.
+//! Under the daemon's safety supervisor every stop goes through the
+//! supervisor, whichever layer sees the reason first: a check of the
+//! sequencer's [`super::SafetyMonitor`] that fails before the supervisor's
+//! own (its monitor may lack the sweep's heating budget) is handed to the
+//! supervisor, which commands the safe state,
 //! latches the rig and records the stop; the sequencer then records on
 //! until the supervisor ends the stream after a sample read in the safe
 //! state, so the record shows the rig safe.
@@ -42,11 +43,13 @@ impl<'a> From<&'a SupervisorHandle> for StopPath<'a> {
 }
 
 impl StopPath<'_> {
-    /// An operator asked an unsupervised test to stop.
-    pub fn operator_stop(&self) -> bool {
+    /// The operator's stop flag of an unsupervised test, for the
+    /// sequencer to wait on beside each read (under the supervisor, stops
+    /// arrive as the stream's error).
+    pub fn operator_flag(&self) -> Option<watch::Receiver<bool>> {
         match self {
-            StopPath::Unsupervised(flag) => *flag.borrow(),
-            StopPath::Supervised(_) => false,
+            StopPath::Unsupervised(flag) => Some((*flag).clone()),
+            StopPath::Supervised(_) => None,
         }
     }
 

@@ -11,15 +11,103 @@
 //!   than the stale timeout (in data time), and the emergency-stop input
 //!   (a reading ≥ 0.5 on the configured channel).
 //!
+//! - optionally, a winding heating budget ([`HeatingBudget`]: the
+//!   induction-machine sweep's I²t above rated current).
+//!
 //! A non-finite reading on a checked channel counts as crossing its limit.
-//! Bus loss (no data at all, wall clock), link failures and operator stops
-//! come from outside the monitor: see [`super::supervise`].
+//! It is the one limit check of every test: the sequencer's reading path
+//! (`src/bench/sequencer.rs`) checks each batch with it synchronously, under
+//! `motorbench run` and under the daemon alike, and the daemon's
+//! supervisor task ([`super::supervise`]) checks the same batches with its
+//! own instance before forwarding them. Bus loss (no data at all, wall
+//! clock), link failures and operator stops come from outside the monitor.
 
 use motorbench_drivers::{ChannelInfo, SampleBatch};
 use serde::Serialize;
 
 use super::{SpeedFromEncoder, Trip, WindingTemperature};
-use crate::config::{Limits, Supervision};
+use crate::config::{Config, Limits, Supervision};
+
+/// A winding heating budget: the excess heat `∫ max(0, (I/I_rated)² − 1) dt`,
+/// forgetting with a recovery time constant, may not pass `max_i2t_s` (the
+/// induction-machine sweep's I²t limit, beside the temperature estimate).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeatingBudget {
+    /// The current it is counted above, A.
+    pub rated_current: f64,
+    /// The budget, s.
+    pub max_i2t_s: f64,
+    /// Time constant with which the budget recovers, s.
+    pub time_constant_s: f64,
+}
+
+/// What a test's [`SafetyMonitor`] enforces: the `[limits]`, the
+/// `[supervisor]` section, and a heating budget where the plan has one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SafetyRules {
+    /// Voltage, current and speed magnitude.
+    pub limits: Limits,
+    /// Power, winding temperature, stale data, emergency stop.
+    pub supervision: Supervision,
+    /// The I²t budget, if any.
+    pub heating: Option<HeatingBudget>,
+}
+
+impl SafetyRules {
+    /// The rules of a DC test: its `[limits]` and `[supervisor]` section.
+    pub fn dc(cfg: &Config) -> SafetyRules {
+        SafetyRules {
+            limits: cfg.limits,
+            supervision: cfg.supervision.clone(),
+            heating: None,
+        }
+    }
+
+    /// A monitor of these rules for a stream with `channels` (see
+    /// [`SafetyMonitor::new`]).
+    pub fn monitor(
+        &self,
+        channels: &[ChannelInfo],
+        counts_per_rev: Option<f64>,
+        initial_rise_k: f64,
+    ) -> Result<SafetyMonitor, String> {
+        let monitor = SafetyMonitor::new(
+            self.limits,
+            self.supervision.clone(),
+            channels,
+            counts_per_rev,
+            initial_rise_k,
+        )?;
+        Ok(match self.heating {
+            Some(budget) => monitor.with_heating_budget(budget),
+            None => monitor,
+        })
+    }
+}
+
+/// The heating budget's running state.
+#[derive(Debug, Clone)]
+struct Heating {
+    budget: HeatingBudget,
+    i2t_s: f64,
+    /// Data time of the latest current reading, ns.
+    last_t: Option<u64>,
+}
+
+impl Heating {
+    /// Count the current `current` read at `t` (ns) since the previous
+    /// reading (explicit Euler, as the budget is defined); `true` once spent.
+    fn update(&mut self, current: f64, t: u64) -> bool {
+        let dt = self
+            .last_t
+            .map_or(0.0, |last| t.saturating_sub(last) as f64 * 1e-9);
+        self.last_t = Some(t);
+        let b = &self.budget;
+        let excess = ((current / b.rated_current).powi(2) - 1.0).max(0.0);
+        self.i2t_s += (excess - self.i2t_s / b.time_constant_s.max(1e-9)) * dt;
+        self.i2t_s.is_nan() || self.i2t_s > b.max_i2t_s
+    }
+}
 
 /// Device id the supervisor uses in the driver errors it hands the
 /// sequencer after a stop.
@@ -186,6 +274,7 @@ pub struct SafetyMonitor {
     first_t: Option<u64>,
     last_t: Option<u64>,
     winding: WindingTemperature,
+    heating: Option<Heating>,
     readings: Readings,
 }
 
@@ -245,8 +334,20 @@ impl SafetyMonitor {
             }),
             first_t: None,
             last_t: None,
+            heating: None,
             readings: Readings::default(),
         })
+    }
+
+    /// Also check a heating budget (counted from the first current
+    /// reading on).
+    pub fn with_heating_budget(mut self, budget: HeatingBudget) -> SafetyMonitor {
+        self.heating = Some(Heating {
+            budget,
+            i2t_s: 0.0,
+            last_t: None,
+        });
+        self
     }
 
     /// The latest readings.
@@ -365,6 +466,15 @@ impl SafetyMonitor {
                 }
             }
         }
+        if let (Some(h), Some(i)) = (self.heating.as_mut(), current) {
+            if h.update(i, t) {
+                return Err(StopCause::HeatingBudget {
+                    i2t_s: h.i2t_s,
+                    limit_s: h.budget.max_i2t_s,
+                    rated_current: h.budget.rated_current,
+                });
+            }
+        }
         if self.winding.over_limit() {
             return Err(StopCause::WindingTemperature {
                 celsius: self.winding.celsius(),
@@ -390,7 +500,6 @@ impl SafetyMonitor {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::Config;
     use motorbench_drivers::Sample;
 
     fn info(q: &str) -> ChannelInfo {
@@ -510,6 +619,37 @@ mod tests {
                 assert!((silent_s - 0.011).abs() < 1e-12);
             }
             other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_spent_heating_budget_trips() {
+        // 3× rated current: an excess of 8 per second, no recovery to speak
+        // of; a budget of 2.004 s is passed at 251 ms (2.008 s), not at
+        // 250 ms (2.000 s).
+        let budget = HeatingBudget {
+            rated_current: 1.0,
+            max_i2t_s: 2.004,
+            time_constant_s: 1e9,
+        };
+        let mut m = monitor(|_| {}).with_heating_budget(budget);
+        let mut tripped_at = None;
+        for ms in 0..1000 {
+            match m.check(&all(ms, 0.0, 3.0, 0.0)) {
+                Ok(()) => {}
+                Err(StopCause::HeatingBudget { i2t_s, limit_s, .. }) => {
+                    assert!(i2t_s > limit_s);
+                    tripped_at = Some(ms);
+                    break;
+                }
+                Err(other) => panic!("{other}"),
+            }
+        }
+        assert_eq!(tripped_at, Some(251));
+        // Below rated current the budget is not touched.
+        let mut m = monitor(|_| {}).with_heating_budget(budget);
+        for ms in 0..1000 {
+            assert_eq!(m.check(&all(ms, 0.0, 0.9, 0.0)), Ok(()));
         }
     }
 

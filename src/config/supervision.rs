@@ -81,6 +81,26 @@ pub struct Supervision {
     pub thermal: ThermalModel,
 }
 
+impl Supervision {
+    /// The defaults of an absent `[supervisor]` section for a machine of
+    /// `rated_current` (A) under `limits`.
+    pub fn defaults(limits: &Limits, rated_current: f64) -> Supervision {
+        Supervision {
+            max_power: limits.max_voltage * limits.max_current,
+            stale_timeout: DEFAULT_STALE_TIMEOUT_S,
+            bus_loss_timeout: DEFAULT_BUS_LOSS_TIMEOUT_S,
+            estop_channel: None,
+            thermal: ThermalModel {
+                rated_current,
+                rated_rise: DEFAULT_RATED_RISE_K,
+                time_constant: DEFAULT_THERMAL_TIME_CONSTANT_S,
+                ambient: DEFAULT_AMBIENT_C,
+                max_winding: DEFAULT_MAX_WINDING_C,
+            },
+        }
+    }
+}
+
 impl RawSupervisor {
     /// Validate against the rest of the configuration; `source` names the
     /// file in errors.
@@ -194,5 +214,10 @@ mod tests {
         assert_eq!(written.supervision, default.supervision);
         assert_eq!(written.retention, default.retention);
         assert_eq!(written.limits, default.limits);
+        let rated = default.supervision.thermal.rated_current;
+        assert_eq!(
+            super::Supervision::defaults(&default.limits, rated),
+            default.supervision
+        );
     }
 }

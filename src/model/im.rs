@@ -287,6 +287,22 @@ pub enum ImCircuitError {
     },
 }
 
+/// The seed paper's "true" double-cage machine (Sec. IV), per unit: the
+/// circuit the simulated studies, tests and benches scale to their rating
+/// (see [`ImCircuit::from_per_unit`]).
+pub const SEED_DOUBLE_CAGE_PU: ImCircuit = ImCircuit {
+    rs: 0.00778,
+    xs: 0.123,
+    xm: 4.3,
+    rfe: None,
+    rotor: RotorCage::Double {
+        rr1: 0.0693,
+        rr2: 0.0132,
+        xr1: 0.00843,
+        xr2: 0.1162,
+    },
+};
+
 /// The per-phase equivalent circuit, Ω at the test frequency.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ImCircuit {
@@ -686,19 +702,7 @@ mod tests {
     use super::*;
 
     pub(crate) fn double_paper() -> ImCircuit {
-        // The seed paper's "true" double cage, per unit.
-        ImCircuit {
-            rs: 0.00778,
-            xs: 0.123,
-            xm: 4.3,
-            rfe: None,
-            rotor: RotorCage::Double {
-                rr1: 0.0693,
-                rr2: 0.0132,
-                xr1: 0.00843,
-                xr2: 0.1162,
-            },
-        }
+        SEED_DOUBLE_CAGE_PU
     }
 
     fn single_fe() -> ImCircuit {

@@ -245,18 +245,7 @@ mod tests {
     }
 
     fn paper_double() -> ImCircuit {
-        ImCircuit {
-            rs: 0.00778,
-            xs: 0.123,
-            xm: 4.3,
-            rfe: None,
-            rotor: RotorCage::Double {
-                rr1: 0.0693,
-                rr2: 0.0132,
-                xr1: 0.00843,
-                xr2: 0.1162,
-            },
-        }
+        crate::model::SEED_DOUBLE_CAGE_PU
     }
 
     #[test]

@@ -18,7 +18,7 @@ mod im_equivalent;
 
 pub use im::{
     Connection, ImCircuit, ImCircuitError, ImModel, ImOperatingPoint, ImParam, ImSupply,
-    PerUnitBase, RotorCage, C64,
+    PerUnitBase, RotorCage, C64, SEED_DOUBLE_CAGE_PU,
 };
 pub use im_closed_form::{DoubleCageForms, PaperTerms, SingleCageForms};
 pub use im_equivalent::{

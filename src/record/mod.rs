@@ -27,4 +27,4 @@ pub use error::RecordError;
 pub use files::load_record_files;
 pub use reader::{read_entries, read_mcap, Entries};
 pub use types::*;
-pub use writer::{library_name, Recorder, RecorderStats};
+pub use writer::{library_name, Recorder, RecorderStats, QUEUE_CAPACITY};

@@ -107,6 +107,11 @@ impl Channels {
     }
 }
 
+/// The recorder queue length every test records with, in entries (one
+/// entry is one instant's readings): the CLI's and the daemon's, DC and
+/// induction machine alike.
+pub const QUEUE_CAPACITY: usize = 4096;
+
 #[derive(Serialize)]
 struct SamplePayload {
     /// Always finite (non-finite readings become events).

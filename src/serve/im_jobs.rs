@@ -17,15 +17,12 @@ use super::jobs::{conclude, Ending, FeedProgress, Identified, JobEnd, TestRun, T
 use super::records_index::{unix_s, IndexEntry, RecordsIndex};
 use crate::bench::{
     build_im_rig, run_im_sweep, supervise_stages, sweep_channels, ImRunConfig, RecordSink,
-    SafetyMonitor, ServedImRig, SupervisedStages, SupervisorTiming,
+    ServedImRig, SupervisedStages, SupervisorTiming,
 };
 use crate::diagnose::attach_diagnosis;
 use crate::identify::identify_im;
-use crate::record::{Recorder, SegmentKind, TestMeta, SCHEMA_VERSION};
+use crate::record::{Recorder, SegmentKind, TestMeta, QUEUE_CAPACITY, SCHEMA_VERSION};
 use crate::report::write_im_svg;
-
-/// Recorder queue length, in entries.
-const QUEUE_CAPACITY: usize = 4096;
 
 /// The plan for a person.
 pub fn im_plan_summary(cfg: &ImRunConfig) -> String {
@@ -67,13 +64,9 @@ pub async fn prepare_im(
         .await
         .map_err(|e| format!("rig setup: {e}"))?;
     let channels = built.sensors.channels().to_vec();
-    let monitor = SafetyMonitor::new(
-        cfg.limits,
-        cfg.supervision.clone(),
-        &channels,
-        Some(built.counts_per_rev),
-        initial_rise_k,
-    )?;
+    let monitor =
+        cfg.safety_rules()
+            .monitor(&channels, Some(built.counts_per_rev), initial_rise_k)?;
     let record_channels = sweep_channels(&channels, built.supply.id(), built.dynamometer.id());
     let now = SystemTime::now();
     let started_at = humantime::format_rfc3339_seconds(now).to_string();
@@ -169,8 +162,10 @@ impl ImJob {
             vec![SegmentKind::ImSlipSweep; p.voltages.len()],
         );
         // Every stop goes through the supervisor, the sweep's own too.
+        let rules = cfg.safety_rules();
         let outcome = run_im_sweep(
             p,
+            &rules,
             &mut supply,
             &mut dyno,
             &mut sensors,

@@ -17,19 +17,17 @@ use tokio::sync::{watch, Mutex};
 use super::records_index::{unix_s, IndexEntry, KeyResults, RecordOutcome, RecordsIndex};
 use crate::bench::{
     build_rig, plan_steps, record_channels, run_test, supervise, BenchError, Outcome, PlanStep,
-    Progress, Readings, RecordSink, SafetyMonitor, ServedRig, StopCause, StopReport, Supervised,
+    Progress, Readings, RecordSink, SafetyRules, ServedRig, StopCause, StopReport, Supervised,
     SupervisorHandle, SupervisorSummary, SupervisorTiming,
 };
 use crate::config::{Config, Plan, Retention};
 use crate::diagnose::attach_diagnosis;
 use crate::identify::identify_dc;
 use crate::record::{
-    Entry, Event, EventLevel, Record, Recorder, SegmentKind, TestMeta, SCHEMA_VERSION,
+    Entry, Event, EventLevel, Record, Recorder, SegmentKind, TestMeta, QUEUE_CAPACITY,
+    SCHEMA_VERSION,
 };
 use crate::report::{segment_plots, write_segments_svg, IdentificationReport};
-
-/// Recorder queue length, in entries.
-const QUEUE_CAPACITY: usize = 4096;
 
 /// Where a test is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -249,13 +247,7 @@ pub async fn prepare(
         built.served,
     );
     let channels = sensors.channels().to_vec();
-    let monitor = SafetyMonitor::new(
-        cfg.limits,
-        cfg.supervision.clone(),
-        &channels,
-        Some(counts_per_rev),
-        initial_rise_k,
-    )?;
+    let monitor = SafetyRules::dc(&cfg).monitor(&channels, Some(counts_per_rev), initial_rise_k)?;
     let record_channels = record_channels(&channels, stage.id());
     let now = SystemTime::now();
     let started_at = humantime::format_rfc3339_seconds(now).to_string();

@@ -28,7 +28,7 @@
 //! plan is the default staircase scaled to the rated voltage.
 #![allow(dead_code)]
 
-use motorbench::config::{Backend, Config, Plan};
+use motorbench::config::{Backend, Config, Plan, Supervision};
 use motorbench::model::DcParams;
 use rand::rngs::StdRng;
 use rand::RngExt;
@@ -125,6 +125,10 @@ pub fn config_for(motor: &RatedMotor, levels: &[f64], seed: u64, rng: &mut StdRn
     cfg.limits.max_voltage = 1.1 * u;
     cfg.limits.max_current = 1.25 * peak_bound;
     cfg.limits.max_speed = 1.5 * top / p.k;
+    // The `[supervisor]` defaults a file with these limits and this
+    // nameplate would get (power limit, winding estimate): `run` checks
+    // them too.
+    cfg.supervision = Supervision::defaults(&cfg.limits, motor.current);
     let Backend::Simulated(sim) = &mut cfg.backend else {
         unreachable!("the embedded default is the simulated rig")
     };

@@ -10,26 +10,14 @@ use std::path::{Path, PathBuf};
 use common::{motorbench, text};
 use motorbench::identify::{slip_grid, SlipSweep, SweepNoise};
 use motorbench::model::{
-    with_leakage_split, Connection, ImCircuit, ImSupply, LeakageSplit, RotorCage,
+    with_leakage_split, Connection, ImCircuit, ImSupply, LeakageSplit, SEED_DOUBLE_CAGE_PU,
 };
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 
 fn machine() -> ImCircuit {
     // The seed paper's double cage on a 230 V delta, 4 kW base (Z_base ≈ 33 Ω).
-    let z = 33.0;
-    ImCircuit {
-        rs: 0.00778 * z,
-        xs: 0.123 * z,
-        xm: 4.3 * z,
-        rfe: None,
-        rotor: RotorCage::Double {
-            rr1: 0.0693 * z,
-            rr2: 0.0132 * z,
-            xr1: 0.00843 * z,
-            xr2: 0.1162 * z,
-        },
-    }
+    SEED_DOUBLE_CAGE_PU.scaled(33.0)
 }
 
 fn write_sweeps(dir: &Path) -> Vec<PathBuf> {

@@ -3,7 +3,7 @@
 //! and fine sensors; the steady-state method must recover K, Ra, f, Tst.
 
 use crate::common::dry_run;
-use motorbench::config::{Backend, Config, Plan};
+use motorbench::config::{Backend, Config, Plan, Supervision};
 use motorbench::identify::identify_dc;
 use motorbench::model::DcParams;
 use proptest::prelude::*;
@@ -54,6 +54,9 @@ fn run(p: DcParams, v: f64, i: f64) -> motorbench::identify::Identification {
     cfg.limits.max_voltage = 2.0 * v;
     cfg.limits.max_current = 1e6;
     cfg.limits.max_speed = 1e6;
+    // The `[supervisor]` defaults that follow from these limits (the
+    // power limit out of the way too), the winding rated at `i`.
+    cfg.supervision = Supervision::defaults(&cfg.limits, i);
     cfg.plan = Plan::DcStep {
         levels: [0.3, 1.0, 0.5, 0.8, 0.4].iter().map(|f| f * v).collect(),
         coastdown: false,

@@ -9,7 +9,7 @@ use motorbench::bench::{
 use motorbench::identify::identify_im;
 use motorbench::model::{
     with_leakage_split, Connection, ImCircuit, ImModel, ImParam, ImSupply, LeakageSplit,
-    PerUnitBase, RotorCage,
+    PerUnitBase, RotorCage, SEED_DOUBLE_CAGE_PU,
 };
 use motorbench::record::{read_mcap, EventLevel, Recorder, SegmentKind, TestMeta, SCHEMA_VERSION};
 use motorbench_drivers::{PowerStage, SensorStream};
@@ -18,17 +18,20 @@ use motorbench_drivers::{PowerStage, SensorStream};
 fn machine() -> (ImCircuit, ImSupply, f64) {
     let rated_current = 8.3;
     let base = PerUnitBase::from_rating(400.0, rated_current, Connection::Star);
+    // Rs ×4 and Rr2 ×2, to look like a small industrial motor.
+    let seed = SEED_DOUBLE_CAGE_PU;
+    let RotorCage::Double { rr1, rr2, xr1, xr2 } = seed.rotor else {
+        unreachable!("the seed machine has a double cage")
+    };
     let pu = ImCircuit {
-        rs: 0.00778 * 4.0,
-        xs: 0.123,
-        xm: 4.3,
-        rfe: None,
+        rs: seed.rs * 4.0,
         rotor: RotorCage::Double {
-            rr1: 0.0693,
-            rr2: 0.0132 * 2.0,
-            xr1: 0.00843,
-            xr2: 0.1162,
+            rr1,
+            rr2: rr2 * 2.0,
+            xr1,
+            xr2,
         },
+        ..seed
     };
     let supply = ImSupply {
         line_voltage: 400.0,
@@ -69,6 +72,7 @@ async fn sweep_records_operating_points_that_identify_the_machine() {
     let (_stop_tx, stop) = tokio::sync::watch::channel(false);
     let outcome = run_im_sweep(
         &plan,
+        &plan.safety_rules(),
         &mut vfd,
         &mut dyno,
         &mut sensors,
@@ -146,6 +150,7 @@ async fn over_current_stops_the_sweep_with_both_stages_safe() {
     let (_stop_tx, stop) = tokio::sync::watch::channel(false);
     let outcome = run_im_sweep(
         &plan,
+        &plan.safety_rules(),
         &mut vfd,
         &mut dyno,
         &mut sensors,
@@ -158,7 +163,7 @@ async fn over_current_stops_the_sweep_with_both_stages_safe() {
     let Outcome::Aborted { reason } = outcome else {
         panic!("not aborted")
     };
-    assert!(reason.contains("line_current"), "{reason}");
+    assert!(reason.contains("limit tripped: current"), "{reason}");
     let (_, record) = sink.into_parts();
     assert!(record
         .events
@@ -188,6 +193,7 @@ async fn heating_budget_stops_a_sweep_without_cool_down() {
     let (_stop_tx, stop) = tokio::sync::watch::channel(false);
     let outcome = run_im_sweep(
         &plan,
+        &plan.safety_rules(),
         &mut vfd,
         &mut dyno,
         &mut sensors,
@@ -214,6 +220,7 @@ async fn operator_stop_ends_the_sweep() {
     let (_stop_tx, stop) = tokio::sync::watch::channel(true);
     let outcome = run_im_sweep(
         &plan,
+        &plan.safety_rules(),
         &mut vfd,
         &mut dyno,
         &mut sensors,
@@ -226,7 +233,7 @@ async fn operator_stop_ends_the_sweep() {
     assert_eq!(
         outcome,
         Outcome::Aborted {
-            reason: "stopped by the operator".into()
+            reason: "operator stop".into()
         }
     );
 }

@@ -18,5 +18,6 @@ mod im_coverage;
 mod im_paper_study;
 mod im_sweep_rig;
 mod safety;
+mod sequencer;
 mod supervisor;
 mod supervisor_im;

@@ -112,7 +112,7 @@ fn abort_event(record: &Record) -> (u64, String) {
 }
 
 #[tokio::test]
-async fn speed_limit_trips_on_the_first_sample_beyond_it_and_the_stage_is_safe() {
+async fn speed_limit_trips_on_the_monitors_estimate_and_the_stage_is_safe() {
     let cfg = config(|c| c.limits.max_speed = 100.0);
     let ran = run(&cfg, None, false, false).await;
     let Ok(Outcome::Aborted { reason }) = ran.outcome else {
@@ -125,16 +125,24 @@ async fn speed_limit_trips_on_the_first_sample_beyond_it_and_the_stage_is_safe()
     assert!(!ran.output_enabled, "output disabled");
     assert_eq!(ran.setpoint, 0.0);
     let (t_abort, _) = abort_event(&ran.record);
-    // The first recorded speed beyond the limit is the sample that tripped,
-    // and nothing was sampled after it.
+    // The safety monitor (the daemon's check too) estimates speed over
+    // four encoder periods and trips on two estimates beyond the limit in
+    // a row: the sample that tripped is recorded, beyond the limit, within
+    // eight periods of the first recorded (one-period, so noisier) speed
+    // beyond it (the four-period window lags by up to four, the second
+    // estimate adds one, the one-period speed's noise crosses early), and
+    // nothing was sampled after it.
     let seg = &ran.record.segments[1];
-    let k = seg
+    let first = seg
         .speed
         .iter()
         .position(|w| w.abs() > 100.0)
-        .expect("the tripping sample is recorded");
+        .expect("speeds beyond the limit are recorded");
+    let k = seg.time.len() - 1;
     assert_eq!((seg.time[k] * 1e9).round() as u64, t_abort);
-    assert_eq!(k, seg.time.len() - 1);
+    assert!(seg.speed[k].abs() > 100.0, "{}", seg.speed[k]);
+    let periods = (seg.time[k] - seg.time[first]) * cfg.sample_rate_hz;
+    assert!(periods.round() <= 8.0, "tripped {periods} periods late");
     assert!(
         seg.label.ends_with("248 V"),
         "the open segment was closed: {}",

@@ -128,6 +128,7 @@ async fn run_with(edit: impl FnOnce(&mut ImRunConfig), stop_at: Option<(f64, Sto
     });
     let outcome = run_im_sweep(
         &cfg.plan,
+        &cfg.safety_rules(),
         &mut supply,
         &mut dynamometer,
         &mut sensors,
@@ -191,14 +192,15 @@ async fn a_current_trip_makes_both_stages_safe_before_the_cause_is_recorded() {
 
 #[tokio::test(start_paused = true)]
 async fn the_sweeps_own_heating_budget_trips_through_the_supervisor() {
-    // Only the sweep counts I²t: spent, it hands the stop to the
+    // Only the sweep's monitor counts I²t here (the supervisor's is built
+    // without the plan's budget): spent, the sweep hands the stop to the
     // supervisor, which makes both stages safe and latches the rig.
     let r = run_with(|cfg| cfg.plan.max_i2t_s = 0.5, None).await;
     assert_eq!(r.stop_kind, Some("heating_budget"), "{:?}", r.events);
     assert_both_safe_first(&r);
     assert!(
         r.events.iter().any(|(l, m)| *l == EventLevel::Abort
-            && m.contains("safety-supervisor")
+            && m.contains("stopped by the safety supervisor")
             && m.contains("heating budget spent")),
         "{:?}",
         r.events
