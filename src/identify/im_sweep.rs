@@ -327,18 +327,7 @@ mod tests {
 
     #[test]
     fn prediction_gradient_matches_finite_differences() {
-        let c = ImCircuit {
-            rs: 0.00778,
-            xs: 0.123,
-            xm: 4.3,
-            rfe: None,
-            rotor: RotorCage::Double {
-                rr1: 0.0693,
-                rr2: 0.0132,
-                xr1: 0.00843,
-                xr2: 0.1162,
-            },
-        };
+        let c = crate::model::SEED_DOUBLE_CAGE_PU;
         let params = c.model().params();
         for s in [0.01, 0.3, 1.0] {
             let (i, p, di, dp) = predict_gradient(&c, s, 1.0, params);
