@@ -27,7 +27,7 @@ use super::dc_candidates::{
 };
 use super::dc_fit::{fit, refit_spec, FitSpec, Fitted, Transform, Weights};
 use super::dc_gap::{locate, spectral_peak, HeldOutSeries, Measured};
-use super::dc_model::{AugModel, SegmentRun, Start};
+use super::dc_model::{AugModel, Continuation, SegmentRun, Start};
 use super::decision::{
     block_sums, effective_samples, held_out_test, median, penalised_score, residual_noise_sigma,
     HeldOutTest,
@@ -55,6 +55,15 @@ const BLOCK: usize = 32;
 /// already structure the model misses. A candidate that leaves more has
 /// shrunk the gap without explaining it, and naming it would be a guess.
 const EXPLAINED: f64 = 2.0;
+
+/// Smallest share of the nominal model's excess over the noise floor
+/// (`gap² − floor²`, the residual power that is not noise) an effect must
+/// remove to be named. Where the nominal already fits close to the floor,
+/// rule (f) holds for any candidate; an effect that causes the gap
+/// removes most of its excess, one that takes up a little of it with its
+/// extra freedom (a fraction of a sample's lag, a voltage offset) does
+/// not.
+const EXPLAINED_SHARE: f64 = 0.5;
 
 /// Optimiser patience (evaluations per parameter) of an all-segment fit
 /// and of a fold's refit (warm-started next to its optimum).
@@ -110,7 +119,7 @@ pub fn diagnose_dc(
     // torque far below the electrical damping. Candidates therefore start
     // from floors; so that they are compared with the best nominal fit,
     // the nominal is refitted from there too.
-    let candidate_base = floored(&nominal_all.model, scales0.dt);
+    let candidate_base = floored(&nominal_all.model, scales0.dt, scales0.i_max);
     if candidate_base != nominal_all.model {
         let spec = FitSpec {
             start: candidate_base,
@@ -122,7 +131,7 @@ pub fn diagnose_dc(
             }
         }
     }
-    let candidate_base = floored(&nominal_all.model, scales0.dt);
+    let candidate_base = floored(&nominal_all.model, scales0.dt, scales0.i_max);
     if !nominal_all.converged {
         warnings.push("the nominal fit stopped without converging".into());
     }
@@ -318,12 +327,32 @@ pub fn diagnose_dc(
     // parameters are determined and physical, and if it explains the gap:
     // its held-out NRMSE within `EXPLAINED` times the noise floor.
     let refusal = |fam: &FamilyResult| -> Option<String> {
+        if nominal.validation <= noise_floor {
+            return Some(format!(
+                "but the nominal model's held-out NRMSE {:.4} is already within the noise \
+                 floor {:.4}: there is no gap for an effect to explain",
+                nominal.validation, noise_floor
+            ));
+        }
         if !physical(&fam.all.model) {
             return Some("only with an unphysical sign of its parameter".into());
         }
         if let Some(why) = undetermined(&fam.all.model, &scales) {
             return Some(format!(
                 "with a parameter the record does not determine: {why}"
+            ));
+        }
+        let excess = |g: f64| g * g - noise_floor * noise_floor;
+        let explained = 1.0 - excess(fam.validation) / excess(nominal.validation);
+        if explained < EXPLAINED_SHARE {
+            return Some(format!(
+                "by {:.0} % only of its excess over the noise floor (held-out NRMSE {:.4} \
+                 against {:.4}, floor {:.4}): an effect that causes the gap removes most \
+                 of it",
+                100.0 * explained,
+                fam.validation,
+                nominal.validation,
+                noise_floor
             ));
         }
         (fam.validation > EXPLAINED * noise_floor).then(|| {
@@ -542,25 +571,54 @@ fn fold(
         .collect();
     let start = refit_spec(spec, all);
     let fitted = fit(&start, &train, w, PATIENCE_FOLD)?;
-    held_out(&fitted.model, &runs[h])
+    held_out(&fitted.model, &runs[..=h])
 }
 
-/// Residuals (measured − simulated) and NRMSE of `model` on `run`.
-fn held_out(model: &AugModel, run: &SegmentRun) -> Option<HeldOutSeries> {
+/// Residuals (measured − simulated) and NRMSE of `model` on the last of
+/// `runs`, simulated after the others (from which it continues where the
+/// record is continuous; only their voltage is used).
+fn held_out(model: &AugModel, runs: &[SegmentRun]) -> Option<HeldOutSeries> {
+    let h = runs.len().checked_sub(1)?;
+    let run = &runs[h];
     let (mut si, mut sw) = (Vec::with_capacity(run.len()), Vec::with_capacity(run.len()));
-    if !model.simulate(run, &mut |i, w| {
-        si.push(i);
-        sw.push(w);
+    if !model.simulate_runs(runs, &mut |n, i, w| {
+        if n == h {
+            si.push(i);
+            sw.push(w);
+        }
     }) {
         return None;
     }
+    series_of(run, &si, &sw)
+}
+
+/// Residuals and NRMSE of `model` on every run, simulated in order.
+fn all_series(model: &AugModel, runs: &[SegmentRun]) -> Option<Vec<HeldOutSeries>> {
+    let mut sims: Vec<(Vec<f64>, Vec<f64>)> = runs
+        .iter()
+        .map(|r| (Vec::with_capacity(r.len()), Vec::with_capacity(r.len())))
+        .collect();
+    if !model.simulate_runs(runs, &mut |n, i, w| {
+        sims[n].0.push(i);
+        sims[n].1.push(w);
+    }) {
+        return None;
+    }
+    runs.iter()
+        .zip(&sims)
+        .map(|(r, (si, sw))| series_of(r, si, sw))
+        .collect()
+}
+
+/// The held-out series of `run` from its simulated current and speed.
+fn series_of(run: &SegmentRun, si: &[f64], sw: &[f64]) -> Option<HeldOutSeries> {
     let seg = run.seg;
     let t0 = seg.time[0];
-    let speed_nrmse = nrmse(&seg.speed, &sw)?;
+    let speed_nrmse = nrmse(&seg.speed, sw)?;
     let nrmse_v = if run.coast {
         speed_nrmse
     } else {
-        0.5 * (nrmse(&seg.current, &si)? + speed_nrmse)
+        0.5 * (nrmse(&seg.current, si)? + speed_nrmse)
     };
     Some(HeldOutSeries {
         segment: seg.index,
@@ -568,9 +626,9 @@ fn held_out(model: &AugModel, run: &SegmentRun) -> Option<HeldOutSeries> {
         current: if run.coast {
             Vec::new()
         } else {
-            seg.current.iter().zip(&si).map(|(y, s)| y - s).collect()
+            seg.current.iter().zip(si).map(|(y, s)| y - s).collect()
         },
-        speed: seg.speed.iter().zip(&sw).map(|(y, s)| y - s).collect(),
+        speed: seg.speed.iter().zip(sw).map(|(y, s)| y - s).collect(),
         from_rest: run.start == Start::Rest,
         coast: run.coast,
         nrmse: nrmse_v,
@@ -579,9 +637,10 @@ fn held_out(model: &AugModel, run: &SegmentRun) -> Option<HeldOutSeries> {
 
 /// NRMSE of a model on every segment it was fitted to (mean over segments).
 fn fit_nrmse(model: &AugModel, runs: &[SegmentRun]) -> f64 {
-    let v: Vec<f64> = runs
+    let v: Vec<f64> = all_series(model, runs)
+        .unwrap_or_default()
         .iter()
-        .filter_map(|r| held_out(model, r).map(|s| s.nrmse))
+        .map(|s| s.nrmse)
         .collect();
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
@@ -603,10 +662,12 @@ fn transient_seconds(p: &DcParams) -> f64 {
 }
 
 fn all_segment_peaks(model: &AugModel, runs: &[SegmentRun], dt: f64) -> Vec<f64> {
-    let series: Vec<HeldOutSeries> = runs
-        .iter()
-        .filter(|r| !r.coast)
-        .filter_map(|r| held_out(model, r))
+    let series: Vec<HeldOutSeries> = all_series(model, runs)
+        .unwrap_or_default()
+        .into_iter()
+        .zip(runs)
+        .filter(|(_, r)| !r.coast)
+        .map(|(s, _)| s)
         .collect();
     let speed: Vec<&[f64]> = series.iter().map(|s| &s.speed[..]).collect();
     let current: Vec<&[f64]> = series.iter().map(|s| &s.current[..]).collect();
@@ -619,13 +680,19 @@ fn all_segment_peaks(model: &AugModel, runs: &[SegmentRun], dt: f64) -> Vec<f64>
     peaks
 }
 
-/// `m` with its electrical time constant raised to at least one sample
-/// and its viscous friction to at least 0.1 % of the electrical damping
-/// `K²/Ra`.
-fn floored(m: &AugModel, dt: f64) -> AugModel {
+/// `m` with its electrical time constant raised to at least one sample,
+/// its viscous friction to at least 0.1 % of the electrical damping
+/// `K²/Ra`, and its static friction to at least 1 % of the torque at the
+/// record's largest current `i_max`. A fit collapses the static friction
+/// on records that reverse or stop often (closed loops): each stick or
+/// breakaway moves the simulation by a whole sample, the forward
+/// differences of its gradient are erratic, and once `ln Tst` has run off
+/// no derivative brings it back.
+fn floored(m: &AugModel, dt: f64, i_max: f64) -> AugModel {
     let mut m = *m;
     m.p.la = m.p.la.max(m.p.ra * dt);
     m.p.f = m.p.f.max(1e-3 * m.p.k * m.p.k / m.p.ra);
+    m.p.tst = m.p.tst.max(1e-2 * m.p.k * i_max);
     m
 }
 
@@ -634,7 +701,7 @@ fn prepare_runs<'a>(
     segs: &'a [DcSegment],
     warnings: &mut Vec<String>,
 ) -> Result<Vec<SegmentRun<'a>>, DiagnoseError> {
-    let mut runs = Vec::new();
+    let mut runs: Vec<SegmentRun> = Vec::new();
     let mut heat = 0.0;
     for (pos, seg) in segs.iter().enumerate() {
         let n = seg.time.len();
@@ -669,6 +736,12 @@ fn prepare_runs<'a>(
         // largest (the current has already risen over the first interval).
         let at_rest = seg.speed[0].abs() <= 0.01 * speed_scale;
         let start = match prev {
+            // A later segment at rest keeps the current it ends with (a
+            // position loop holding, say): no current is an assumption only
+            // the record's first segment may make.
+            Some(p) if !prev_coast && p.voltage.len() >= 4 && at_rest && !coast => {
+                Start::State(crate::identify::state_at_end(p).0, 0.0)
+            }
             Some(p) if !prev_coast && p.voltage.len() >= 4 && !at_rest => {
                 match crate::identify::settled_level(p) {
                     Some(level) if !level.settled => {
@@ -689,12 +762,19 @@ fn prepare_runs<'a>(
             None if !at_rest => Start::Settled(seg.voltage[0]),
             _ => Start::Rest,
         };
+        let continues = match (prev, runs.last()) {
+            (Some(p), Some(last)) if last.seg.index == p.index => {
+                continuation(p.time[p.time.len() - 1], seg.time[0], dt)
+            }
+            _ => None,
+        };
         runs.push(SegmentRun {
             seg,
             dt,
             start,
             coast,
             heat_before: heat,
+            continues,
         });
         heat += seg_heat;
     }
@@ -710,6 +790,20 @@ fn prepare_runs<'a>(
         ));
     }
     Ok(runs)
+}
+
+/// How a segment whose first sample is at `first` (s) follows one whose
+/// last is at `last`, at sample interval `dt`: sharing that sample, right
+/// after it, or after a gap (`None`).
+fn continuation(last: f64, first: f64, dt: f64) -> Option<Continuation> {
+    let gap = first - last;
+    if gap.abs() <= 0.1 * dt {
+        Some(Continuation::Shared)
+    } else if (gap - dt).abs() <= 0.1 * dt {
+        Some(Continuation::Next)
+    } else {
+        None
+    }
 }
 
 /// The segments with the voltage of each held level denoised: readings
@@ -736,6 +830,9 @@ fn held_levels(segments: &[DcSegment]) -> Vec<DcSegment> {
                 .map(|w| (w[1] - w[0]).powi(2))
                 .sum::<f64>()
                 / (2.0 * (n - tail - 1).max(1) as f64);
+            if !holds_level(&s.voltage[tail..], level, var) {
+                return s;
+            }
             let band = 4.0 * var.sqrt();
             for v in s.voltage.iter_mut().skip(1) {
                 if (*v - level).abs() <= band {
@@ -745,6 +842,18 @@ fn held_levels(segments: &[DcSegment]) -> Vec<DcSegment> {
             s
         })
         .collect()
+}
+
+/// Whether `tail` (mean `level`, first-difference noise variance
+/// `noise_var`) is a held level: its spread about the level is the noise
+/// its sample-to-sample changes show, within a factor of two. A ramp, or
+/// a controller's command (a P position loop swinging between its limits,
+/// a speed loop's integrator), spreads further than its changes: its
+/// readings are the excitation, and replacing them by their mean would
+/// feed the model a voltage the motor never saw.
+fn holds_level(tail: &[f64], level: f64, noise_var: f64) -> bool {
+    let spread = tail.iter().map(|v| (v - level).powi(2)).sum::<f64>() / tail.len().max(1) as f64;
+    spread <= 2.0 * noise_var
 }
 
 fn tail_mean(y: &[f64]) -> f64 {
@@ -801,9 +910,10 @@ fn channel_weights(runs: &[SegmentRun], warnings: &mut Vec<String>) -> Weights {
 /// (`decision::residual_noise_sigma`): unlike the settled tails of
 /// [`channel_weights`], they exist on ramps, PRBS and closed loops too.
 fn residual_weights(model: &AugModel, runs: &[SegmentRun]) -> Weights {
-    let series: Vec<(HeldOutSeries, &SegmentRun)> = runs
-        .iter()
-        .filter_map(|r| held_out(model, r).map(|s| (s, r)))
+    let series: Vec<(HeldOutSeries, &SegmentRun)> = all_series(model, runs)
+        .unwrap_or_default()
+        .into_iter()
+        .zip(runs)
         .collect();
     let sigma = |current: bool| {
         let (residuals, readings): (Vec<&[f64]>, Vec<&[f64]>) = series
@@ -948,9 +1058,10 @@ mod tests {
             assert_eq!(runs.len(), 6);
             assert_eq!(runs[0].start, Start::Rest);
             assert!(runs[5].coast);
-            let v: Vec<f64> = runs
+            let v: Vec<f64> = all_series(&AugModel::nominal(p), &runs)
+                .unwrap()
                 .iter()
-                .map(|r| held_out(&AugModel::nominal(p), r).unwrap().nrmse)
+                .map(|s| s.nrmse)
                 .collect();
             let mean = v.iter().sum::<f64>() / v.len() as f64;
             assert!(
@@ -959,6 +1070,40 @@ mod tests {
                 case.truth.noise_floor
             );
         }
+    }
+
+    /// A held level is replaced by its mean where the readings are its
+    /// noise; a controller's command swinging between its limits (a
+    /// position loop) and a ramp are the excitation and stay as measured.
+    #[test]
+    fn only_a_held_level_is_denoised() {
+        let noise: Vec<f64> = {
+            use rand_distr::{Distribution, Normal};
+            let mut rng = StdRng::seed_from_u64(3);
+            let d = Normal::new(0.0, 0.2).unwrap();
+            (0..400).map(|_| d.sample(&mut rng)).collect()
+        };
+        let seg = |voltage: Vec<f64>| DcSegment {
+            index: 1,
+            time: (0..400).map(|k| k as f64 * 5e-4).collect(),
+            current: vec![1.0; 400],
+            speed: (0..400).map(|k| 50.0 + k as f64).collect(),
+            voltage,
+            ..Default::default()
+        };
+        let level = seg(noise.iter().map(|v| 100.0 + v).collect());
+        let bang: Vec<f64> = (0..400)
+            .map(|k| if (k / 7) % 3 == 0 { 236.0 } else { -236.0 } + noise[k])
+            .collect();
+        let ramp = seg((0..400).map(|k| 0.5 * k as f64 + noise[k]).collect());
+        let out = held_levels(&[level, seg(bang.clone()), ramp.clone()]);
+        let held = out[0].voltage[1..]
+            .iter()
+            .filter(|v| out[0].voltage[1] == **v)
+            .count();
+        assert!(held > 390, "{held} of 399 readings replaced by the level");
+        assert_eq!(out[1].voltage, bang);
+        assert_eq!(out[2].voltage, ramp.voltage);
     }
 
     #[test]

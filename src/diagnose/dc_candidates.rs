@@ -198,9 +198,19 @@ pub fn undetermined(m: &AugModel, s: &RecordScales) -> Option<String> {
             "its resonance fr = {:.1} Hz has a period shorter than four samples",
             e[0]
         )),
+        Augment::SensorLag(_) if e[0].abs() < MIN_LAG_SAMPLES * s.dt => Some(format!(
+            "its time constant tau = {:.2e} s is under a tenth of the sample interval: \
+             a shift of the reading that small is the sampling's own timing (channels \
+             read one after the other, the instant a mean speed stands for), not a sensor",
+            e[0].abs()
+        )),
         _ => None,
     }
 }
+
+/// Shortest sensor lag, in sample intervals, a record resolves from the
+/// timing of its own sampling.
+const MIN_LAG_SAMPLES: f64 = 0.1;
 
 /// Largest relative rise of Ra over a record that physics allows: copper
 /// at +100 % is about 250 K above where it started.
@@ -385,6 +395,8 @@ mod tests {
             with(Augment::CoulombFriction, [0.01, 400.0, 0.0]),
             with(Augment::ArmatureReaction, [0.02, 0.0, 0.0]),
             with(Augment::ThermalDrift, [0.05, 0.0, 0.0]),
+            // A lag of 6 % of a sample: the sampling's own timing.
+            with(Augment::SensorLag(LagChannel::Speed), [3e-5, 0.0, 0.0]),
         ];
         for m in &undetermined_fits {
             assert!(undetermined(m, &s).is_some(), "{m:?}");

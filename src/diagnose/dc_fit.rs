@@ -89,27 +89,29 @@ impl FitSpec {
     }
 }
 
-/// Weighted residuals of one segment: current then speed per sample
-/// (speed only for a coast-down, whose current is zero by construction).
-pub fn segment_residuals(
+/// Weighted residuals of the segments `runs`, simulated in order (each
+/// continuing the one before where the record does): current then speed
+/// per sample (speed only for a coast-down, whose current is zero by
+/// construction).
+pub fn runs_residuals(
     model: &AugModel,
-    run: &SegmentRun,
+    runs: &[SegmentRun],
     w: &Weights,
     out: &mut Vec<f64>,
 ) -> bool {
-    let (yi, yw) = (&run.seg.current, &run.seg.speed);
-    let mut k = 0;
-    let coast = run.coast;
-    let ok = model.simulate(run, &mut |i, s| {
-        if k < yi.len() {
-            if !coast {
-                out.push((i - yi[k]) * w.current);
+    let mut counts = vec![0usize; runs.len()];
+    let ok = model.simulate_runs(runs, &mut |n, i, s| {
+        let run = &runs[n];
+        let k = counts[n];
+        if k < run.len() {
+            if !run.coast {
+                out.push((i - run.seg.current[k]) * w.current);
             }
-            out.push((s - yw[k]) * w.speed);
+            out.push((s - run.seg.speed[k]) * w.speed);
         }
-        k += 1;
+        counts[n] += 1;
     });
-    ok && k == yi.len()
+    ok && counts.iter().zip(runs).all(|(k, r)| *k == r.len())
 }
 
 /// Rows of one segment's residuals.
@@ -151,10 +153,8 @@ impl FitProblem<'_> {
             return false;
         }
         let m = self.spec.model_at(x);
-        for run in self.runs {
-            if !segment_residuals(&m, run, &self.w, r) {
-                return false;
-            }
+        if !runs_residuals(&m, self.runs, &self.w, r) {
+            return false;
         }
         r.len() == self.rows && r.iter().all(|v| v.is_finite())
     }
@@ -375,6 +375,7 @@ mod tests {
                 start: start(k),
                 coast: false,
                 heat_before: heat,
+                continues: None,
             };
             let (mut i, mut w) = (Vec::new(), Vec::new());
             assert!(m.simulate(&run, &mut |a, b| {
@@ -413,6 +414,7 @@ mod tests {
                     start: start(k),
                     coast: false,
                     heat_before: heat,
+                    continues: None,
                 };
                 heat += seg.current.iter().map(|v| v * v * DT).sum::<f64>();
                 r

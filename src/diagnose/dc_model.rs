@@ -65,6 +65,28 @@ pub enum Start {
     State(f64, f64),
 }
 
+/// How a segment follows the one before it in the record.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Continuation {
+    /// Its first sample is the previous segment's last (the boundary
+    /// sample, repeated).
+    Shared,
+    /// Its first sample is the one after the previous segment's last.
+    Next,
+}
+
+/// The model's state at the end of a simulated segment, where the next
+/// segment of a continuous record starts.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EndState {
+    /// Current (A), motor speed, load speed (rad/s), shaft twist (rad).
+    x: [f64; 4],
+    /// The last simulated readings (current, speed).
+    reading: (f64, f64),
+    /// The lagged readings of a sensor-lag model (current, speed).
+    lag: Option<(f64, f64)>,
+}
+
 /// One recorded segment ready to simulate.
 #[derive(Debug, Clone, Copy)]
 pub struct SegmentRun<'a> {
@@ -78,6 +100,11 @@ pub struct SegmentRun<'a> {
     pub coast: bool,
     /// `∫i²dt` of the measured current before the segment, A²·s.
     pub heat_before: f64,
+    /// Whether it continues the record's previous segment without a gap.
+    /// Simulated right after that segment ([`AugModel::simulate_runs`]),
+    /// it starts from the model's own state at that segment's end; else
+    /// (the previous segment held out or not simulated) from `start`.
+    pub continues: Option<Continuation>,
 }
 
 impl SegmentRun<'_> {
@@ -248,10 +275,49 @@ impl AugModel {
     /// speed reading is the mean speed over the preceding interval, as
     /// differentiated encoder counts give it). `false` when the model
     /// refuses the parameters or the simulation diverges.
+    #[cfg(test)]
     pub fn simulate(&self, run: &SegmentRun, out: &mut dyn FnMut(f64, f64)) -> bool {
-        if !self.valid() {
-            return false;
+        self.simulate_from(run, None, out).is_some()
+    }
+
+    /// Simulate `runs` in order, each run that continues the one before it
+    /// in `runs` (the record's previous segment) from the model's state at
+    /// that run's end; `out(n, current, speed reading)` for every sample of
+    /// run `n`. A continuous record is thus simulated as one open-loop
+    /// run from its measured voltage: the state where a segment begins is
+    /// the model's, not an estimate from noisy (or coarsely quantised)
+    /// readings at the end of the segment before. `false` when the model
+    /// refuses the parameters or the simulation diverges.
+    pub fn simulate_runs(&self, runs: &[SegmentRun], out: &mut dyn FnMut(usize, f64, f64)) -> bool {
+        let mut prev: Option<(u32, EndState)> = None;
+        for (n, run) in runs.iter().enumerate() {
+            let from = match prev {
+                Some((index, end)) if run.continues.is_some() && index + 1 == run.seg.index => {
+                    Some(end)
+                }
+                _ => None,
+            };
+            match self.simulate_from(run, from.as_ref(), &mut |i, w| out(n, i, w)) {
+                Some(end) => prev = Some((run.seg.index, end)),
+                None => return false,
+            }
         }
+        true
+    }
+
+    /// [`AugModel::simulate`] from the end state of the previous segment
+    /// when `from` is given (and the run continues it), returning the state
+    /// at this segment's end.
+    pub fn simulate_from(
+        &self,
+        run: &SegmentRun,
+        from: Option<&EndState>,
+        out: &mut dyn FnMut(f64, f64),
+    ) -> Option<EndState> {
+        if !self.valid() {
+            return None;
+        }
+        let from = from.filter(|_| run.continues.is_some());
         match self.aug {
             Augment::SensorLag(ch) => {
                 let tau = self.e[0].abs();
@@ -261,47 +327,84 @@ impl AugModel {
                     0.0
                 };
                 let nominal = AugModel::nominal(self.p);
-                let mut y: Option<(f64, f64)> = None;
-                nominal.simulate(run, &mut |i, w| {
+                let inner = from.map(|e| EndState { lag: None, ..*e });
+                // A shared boundary sample is the previous segment's last
+                // reading, lagged already.
+                let mut skip = from.is_some() && run.continues == Some(Continuation::Shared);
+                let mut y: Option<(f64, f64)> = from.and_then(|e| e.lag);
+                let end = nominal.simulate_from(run, inner.as_ref(), &mut |i, w| {
                     let (fi, fw) = match y {
+                        Some(prev) if skip => prev,
                         None => (i, w),
                         Some((pi, pw)) => match ch {
                             LagChannel::Current => (a * pi + (1.0 - a) * i, w),
                             LagChannel::Speed => (i, a * pw + (1.0 - a) * w),
                         },
                     };
+                    skip = false;
                     y = Some((fi, fw));
                     out(fi, fw);
+                })?;
+                Some(EndState {
+                    lag: y,
+                    reading: y.unwrap_or(end.reading),
+                    ..end
                 })
             }
-            Augment::ShaftCompliance => self.simulate_shaft(run, out),
-            _ => self.simulate_rigid(run, out),
+            Augment::ShaftCompliance => self.simulate_shaft(run, from, out),
+            _ => self.simulate_rigid(run, from, out),
         }
     }
 
-    fn simulate_rigid(&self, run: &SegmentRun, out: &mut dyn FnMut(f64, f64)) -> bool {
+    fn simulate_rigid(
+        &self,
+        run: &SegmentRun,
+        from: Option<&EndState>,
+        out: &mut dyn FnMut(f64, f64),
+    ) -> Option<EndState> {
         let p = &self.p;
         let dt = run.dt;
         let inv_dt = 1.0 / dt;
         let u = &run.seg.voltage;
         let plain = self.aug == Augment::Nominal;
         let mut heat = run.heat_before;
-        let (mut i, mut w) = match run.start {
-            Start::Rest => (0.0, 0.0),
-            Start::Settled(u0) => {
-                let s = self.steady_state(u0, heat);
-                out(if run.coast { 0.0 } else { s.0 }, s.1);
-                s
-            }
-            Start::State(i0, w0) => {
-                let i0 = if run.coast { 0.0 } else { i0 };
-                out(i0, w0);
-                (i0, w0)
-            }
+        let mut last = (0.0, 0.0);
+        let mut out = |i: f64, w: f64| {
+            last = (i, w);
+            out(i, w);
         };
-        let first = match run.start {
-            Start::Rest => 0,
-            Start::Settled(_) | Start::State(..) => 1,
+        let (mut i, mut w, first) = if let Some(e) = from {
+            let i0 = if run.coast { 0.0 } else { e.x[0] };
+            if run.continues == Some(Continuation::Shared) {
+                out(if run.coast { 0.0 } else { e.reading.0 }, e.reading.1);
+                (i0, e.x[1], 1)
+            } else {
+                (i0, e.x[1], 0)
+            }
+        } else {
+            let (i, w) = match run.start {
+                Start::Rest => (0.0, 0.0),
+                Start::Settled(u0) => {
+                    let s = self.steady_state(u0, heat);
+                    out(if run.coast { 0.0 } else { s.0 }, s.1);
+                    s
+                }
+                Start::State(i0, w0) => {
+                    let i0 = if run.coast { 0.0 } else { i0 };
+                    out(i0, w0);
+                    (i0, w0)
+                }
+            };
+            let first = match run.start {
+                Start::Rest => 0,
+                Start::Settled(_) | Start::State(..) => 1,
+            };
+            (i, w, first)
+        };
+        let end = |i: f64, w: f64, last: (f64, f64)| EndState {
+            x: [i, w, w, 0.0],
+            reading: last,
+            lag: None,
         };
         if run.coast {
             for _ in first..u.len() {
@@ -323,11 +426,9 @@ impl AugModel {
                 w = nw;
                 out(0.0, dth * inv_dt);
             }
-            return w.is_finite();
+            return w.is_finite().then(|| end(0.0, w, last));
         }
-        let Some(step) = Rigid::new(p, dt) else {
-            return false;
-        };
+        let step = Rigid::new(p, dt)?;
         let k_eff = |i: f64| match self.aug {
             Augment::ArmatureReaction => p.k * (1.0 - self.e[0] * i * i),
             _ => p.k,
@@ -369,15 +470,20 @@ impl AugModel {
             };
             (i, w) = (ni, nw);
             if !(i.is_finite() && w.is_finite()) {
-                return false;
+                return None;
             }
             out(i, dth * inv_dt);
         }
-        true
+        Some(end(i, w, last))
     }
 
     /// Two-mass model: state `[i, ωm, ωl, φ, θm]`, inputs `[U, Tst·dir]`.
-    fn simulate_shaft(&self, run: &SegmentRun, out: &mut dyn FnMut(f64, f64)) -> bool {
+    fn simulate_shaft(
+        &self,
+        run: &SegmentRun,
+        from: Option<&EndState>,
+        out: &mut dyn FnMut(f64, f64),
+    ) -> Option<EndState> {
         let p = &self.p;
         let dt = run.dt;
         let inv_dt = 1.0 / dt;
@@ -412,9 +518,24 @@ impl AugModel {
         let decay = (-dt / p.tau_e()).exp();
         let u = &run.seg.voltage;
         let mut x = SVector::<f64, 5>::zeros();
-        let first = match run.start {
-            Start::Rest => 0,
-            Start::Settled(u0) => {
+        let mut last = (0.0, 0.0);
+        let mut out = |i: f64, w: f64| {
+            last = (i, w);
+            out(i, w);
+        };
+        let first = match (from, run.start) {
+            (Some(e), _) => {
+                let i0 = if run.coast { 0.0 } else { e.x[0] };
+                x = SVector::<f64, 5>::new(i0, e.x[1], e.x[2], e.x[3], 0.0);
+                if run.continues == Some(Continuation::Shared) {
+                    out(if run.coast { 0.0 } else { e.reading.0 }, e.reading.1);
+                    1
+                } else {
+                    0
+                }
+            }
+            (None, Start::Rest) => 0,
+            (None, Start::Settled(u0)) => {
                 let s = p.steady_state(u0);
                 let twist = (p.f * s.speed + p.tst * s.speed.signum()) / ks;
                 x = SVector::<f64, 5>::new(
@@ -427,7 +548,7 @@ impl AugModel {
                 out(x[0], x[1]);
                 1
             }
-            Start::State(i0, w0) => {
+            (None, Start::State(i0, w0)) => {
                 let twist = (p.f * w0 + p.tst * w0.signum()) / ks;
                 x = SVector::<f64, 5>::new(if run.coast { 0.0 } else { i0 }, w0, w0, twist, 0.0);
                 out(x[0], x[1]);
@@ -475,11 +596,15 @@ impl AugModel {
                 }
             }
             if !x.iter().all(|v| v.is_finite()) {
-                return false;
+                return None;
             }
             out(x[0], (x[4] - th0) * inv_dt);
         }
-        true
+        Some(EndState {
+            x: [x[0], x[1], x[2], x[3]],
+            reading: last,
+            lag: None,
+        })
     }
 }
 
@@ -519,6 +644,7 @@ mod tests {
             start: Start::Settled(60.0),
             coast: false,
             heat_before: 0.0,
+            continues: None,
         }
     }
 
@@ -618,6 +744,97 @@ mod tests {
         assert!(di < 0.02 && dw < 0.5, "{di} {dw}");
     }
 
+    /// A record cut into segments (the boundary sample shared, or the next
+    /// sample right after) is simulated as if it were one segment, for the
+    /// rigid, the two-mass and the lagged model alike; a segment that does
+    /// not continue starts from its own start.
+    #[test]
+    fn continued_segments_are_one_simulation() {
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let dt = 5e-4;
+        let n = 900;
+        let u = |k: usize| {
+            if k < 300 {
+                60.0
+            } else {
+                200.0 * (k as f64 * 7e-3).sin()
+            }
+        };
+        let whole = DcSegment {
+            index: 0,
+            time: (0..n).map(|k| k as f64 * dt).collect(),
+            voltage: (0..n).map(u).collect(),
+            ..Default::default()
+        };
+        let cut = |from: usize, to: usize, index: u32| DcSegment {
+            index,
+            time: whole.time[from..to].to_vec(),
+            voltage: whole.voltage[from..to].to_vec(),
+            ..Default::default()
+        };
+        fn run(seg: &DcSegment, start: Start, continues: Option<Continuation>) -> SegmentRun<'_> {
+            SegmentRun {
+                seg,
+                dt: 5e-4,
+                start,
+                coast: false,
+                heat_before: 0.0,
+                continues,
+            }
+        }
+        let whole_run = run(&whole, Start::Rest, None);
+        // Shared boundary at 400, then the next sample at 701.
+        let segs = [cut(0, 401, 0), cut(400, 701, 1), cut(701, n, 2)];
+        let parts = [
+            run(&segs[0], Start::Rest, None),
+            run(&segs[1], Start::State(1.0, 1.0), Some(Continuation::Shared)),
+            run(&segs[2], Start::State(1.0, 1.0), Some(Continuation::Next)),
+        ];
+        for aug in [
+            Augment::Nominal,
+            Augment::ShaftCompliance,
+            Augment::SensorLag(LagChannel::Current),
+        ] {
+            let m = AugModel {
+                aug,
+                e: [40.0, 0.5, 0.1],
+                ..AugModel::nominal(p)
+            };
+            let m = if aug == Augment::SensorLag(LagChannel::Current) {
+                AugModel {
+                    e: [2e-3, 0.0, 0.0],
+                    ..m
+                }
+            } else {
+                m
+            };
+            let (wi, ww) = sim(&m, &whole_run);
+            let (mut ci, mut cw): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
+            let mut seen = [0usize; 3];
+            assert!(m.simulate_runs(&parts, &mut |n, i, w| {
+                seen[n] += 1;
+                if n == 1 && seen[1] == 1 {
+                    // The shared sample is the previous segment's last.
+                    assert!(
+                        (i - ci[400]).abs() < 1e-12 && (w - cw[400]).abs() < 1e-12,
+                        "{aug:?}"
+                    );
+                } else {
+                    ci.push(i);
+                    cw.push(w);
+                }
+            }));
+            assert_eq!(ci.len(), n);
+            for k in 0..n {
+                assert!((ci[k] - wi[k]).abs() < 1e-9, "{aug:?} current at {k}");
+                assert!((cw[k] - ww[k]).abs() < 1e-6, "{aug:?} speed at {k}");
+            }
+            // Simulated alone, the second part starts from its own state.
+            let (alone, _) = sim(&m, &parts[1]);
+            assert!((alone[0] - 1.0).abs() < 1e-12, "{aug:?}");
+        }
+    }
+
     #[test]
     fn coast_down_stops_where_the_closed_form_says() {
         let p = DcParams::SEED_TABLE4_MOMENTS;
@@ -632,6 +849,7 @@ mod tests {
             start: Start::Settled(248.0),
             coast: true,
             heat_before: 0.0,
+            continues: None,
         };
         let (_, w) = sim(&AugModel::nominal(p), &r);
         let w0 = p.steady_state(248.0).speed;

@@ -171,23 +171,48 @@ pub fn noise_sigma(y: &[f64]) -> f64 {
 }
 
 /// Standard deviation of the measurement noise in residuals (measured
-/// minus simulated), pooled over `residuals` (one slice per segment):
-/// `σ² = mean(Δr²)/2` over the first differences, which the misfit's slow
-/// part does not reach, and never below the quantisation noise `q/√12` of
-/// `readings`, `q` their smallest nonzero step. The mean square rather
-/// than the median: a reading quantised near its noise level has first
-/// differences of 0 or one step, whose median says nothing of σ.
+/// minus simulated), pooled over `residuals` (one slice per segment), from
+/// the first differences `Δr`, which the misfit's slow part does not
+/// reach: `σ² = mean(Δr²) + mean(Δr_k·Δr_(k−1))`, exact for noise
+/// correlated over one sample at most, and never below the quantisation
+/// noise `q/√12` of `readings`, `q` their smallest nonzero step. White
+/// noise gives `mean(Δr²)/2`; a speed from differenced encoder counts
+/// (its quantisation error `(e_k − e_(k−1))/dt`, anticorrelated) would be
+/// overestimated by √1.5 by that, and a reading through a filter of about
+/// a sample (correlated) underestimated, so that a nominal model at the
+/// noise floor would seem to miss it, or one that misses it to be at it.
+/// Mean squares rather than medians: a reading quantised near its noise
+/// level has first differences of 0 or one step, whose median says
+/// nothing of σ.
 ///
 /// Differencing the residual rather than the reading removes what the
 /// model follows, so the estimate holds on ramps, PRBS and closed loops,
 /// where the reading itself never settles.
 pub fn residual_noise_sigma(residuals: &[&[f64]], readings: &[&[f64]]) -> f64 {
-    let (sum, count) = residuals
-        .iter()
-        .flat_map(|r| r.windows(2).map(|w| (w[1] - w[0]).powi(2)))
-        .filter(|v| v.is_finite())
-        .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
-    let rms = (sum / (2.0 * count.max(1) as f64)).sqrt();
+    // Over every segment: V0 = mean(Δr²), V1 = mean(Δr_k·Δr_(k−1)).
+    let (mut v0, mut v1, mut n0, mut n1) = (0.0, 0.0, 0usize, 0usize);
+    for r in residuals {
+        let d: Vec<f64> = r.windows(2).map(|w| w[1] - w[0]).collect();
+        for (k, x) in d.iter().enumerate() {
+            if !x.is_finite() {
+                continue;
+            }
+            v0 += x * x;
+            n0 += 1;
+            if let Some(p) = k.checked_sub(1).map(|p| d[p]).filter(|p| p.is_finite()) {
+                v1 += x * p;
+                n1 += 1;
+            }
+        }
+    }
+    let v0 = v0 / n0.max(1) as f64;
+    let v1 = if n1 > 0 { v1 / n1 as f64 } else { -0.5 * v0 };
+    // Noise correlated over one sample at most (white, or an encoder's
+    // differenced quantisation, or a filter of about a sample):
+    // γ0 = V0 + V1; a one-lag correlation cannot make it less than V0/3
+    // (differenced white noise), which bounds the estimate where a
+    // misfit's changes anticorrelate.
+    let rms = (v0 + v1).max(v0 / 3.0).sqrt();
     let step = readings
         .iter()
         .flat_map(|y| y.windows(2).map(|w| (w[1] - w[0]).abs()))
@@ -292,6 +317,14 @@ mod tests {
             .collect();
         let s = residual_noise_sigma(&[&residual], &[&white]);
         assert!((s - 0.05).abs() < 0.003, "sigma {s}");
+        // A speed from encoder counts: its noise is the difference of two
+        // quantisation errors, σ = √2·σe; the first differences alone
+        // (mean(Δr²)/2) would say √3·σe.
+        let e = noise(22, 8001);
+        let encoder: Vec<f64> = e.windows(2).map(|w| 0.1 * (w[1] - w[0])).collect();
+        let s = residual_noise_sigma(&[&encoder], &[&white]);
+        let want = 0.1 * 2f64.sqrt();
+        assert!((s - want).abs() < 0.03 * want, "sigma {s}, want {want}");
         // A reading in steps of 0.5 with a residual that never moves:
         // the quantisation noise 0.5/sqrt(12) remains.
         let coarse: Vec<f64> = (0..100).map(|k| 0.5 * (k / 10) as f64).collect();

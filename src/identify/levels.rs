@@ -177,7 +177,13 @@ pub(crate) fn white_noise(y: &[f64]) -> f64 {
 /// the falling back-EMF (at the end under half its median over the first
 /// quarter) or stays near zero. A step down of a fast motor also has a
 /// falling speed and a mean current far below its transient peak, but its
-/// voltage holds the new level.
+/// voltage holds the new level. A 0 V short has no voltage either, and
+/// when it brakes the rotor within a few milliseconds its mean current is
+/// small too; but an open armature carries no current while the rotor
+/// still turns, and a short carries the braking current `−K·ω/Ra` then:
+/// over the readings after the first two (the boundary sample and the
+/// current sensor's response to the opening) at which the speed is still
+/// at least half its first reading, the mean current must be as small.
 pub fn is_coastdown(seg: &DcSegment) -> bool {
     let n = seg.time.len();
     if n < 2 * MIN_TAIL {
@@ -193,7 +199,15 @@ pub fn is_coastdown(seg: &DcSegment) -> bool {
     let end = seg.voltage[n - MIN_TAIL..].iter().sum::<f64>().abs() / MIN_TAIL as f64;
     let largest = seg.voltage.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let holds_no_level = end < 0.5 * early || early <= 0.05 * largest;
-    mean_abs <= (0.05 * peak).max(1e-3)
+    let small = (0.05 * peak).max(1e-3);
+    let turning: Vec<f64> = (2..n)
+        .filter(|&k| seg.speed[k].abs() >= 0.5 * seg.speed[0].abs())
+        .map(|k| seg.current[k].abs())
+        .collect();
+    let open_while_turning =
+        turning.is_empty() || turning.iter().sum::<f64>() / turning.len() as f64 <= small;
+    mean_abs <= small
+        && open_while_turning
         && head.abs() > 0.0
         && tail.abs() < 0.5 * head.abs()
         && holds_no_level
@@ -281,5 +295,19 @@ mod tests {
         let mean_abs = down.current.iter().map(|v| v.abs()).sum::<f64>() / 1300.0;
         assert!(mean_abs < 0.05 * peak, "the current test alone is fooled");
         assert!(!is_coastdown(&down));
+        // A 0 V short that brakes the rotor in 5 ms: no voltage, a mean
+        // current under 5 % of the braking peak, a falling speed, but the
+        // current flows while the rotor turns.
+        let short = segment(
+            |t| {
+                let w = 160.0 * (-t / 0.005).exp();
+                (0.0, if t == 0.0 { 3.0 } else { -1.1 * w }, w)
+            },
+            1000,
+        );
+        let peak = short.current.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let mean_abs = short.current.iter().map(|v| v.abs()).sum::<f64>() / 1000.0;
+        assert!(mean_abs < 0.05 * peak, "the current test alone is fooled");
+        assert!(!is_coastdown(&short));
     }
 }
