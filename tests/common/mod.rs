@@ -69,3 +69,13 @@ pub fn python_check_mcap(file: &Path, expect: &[String]) -> serde_json::Value {
         .expect("check_mcap.py prints its counts last");
     serde_json::from_str(last).expect("the last line is JSON")
 }
+
+/// The message of `record`'s abort event; panics when it has none.
+pub fn abort_message(record: &motorbench::record::Record) -> String {
+    record
+        .events
+        .iter()
+        .find(|(_, e)| e.level == motorbench::record::EventLevel::Abort)
+        .map(|(_, e)| e.message.clone())
+        .expect("an abort event")
+}

@@ -13,13 +13,14 @@
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
+use crate::common::abort_message;
 use async_trait::async_trait;
 use motorbench::bench::{
     plan_steps, record_channels, run_im_sweep, run_test, sim_im_rig, sim_rig, sweep_channels,
     BenchError, ImRunConfig, NoProgress, Outcome, RecordSink, SimDyno, SimVfd,
 };
 use motorbench::config::{Config, Plan};
-use motorbench::record::{EventLevel, Record};
+use motorbench::record::Record;
 use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SampleBatch, SensorStream};
 use tokio::sync::watch;
 use tokio::time::Instant;
@@ -90,15 +91,6 @@ fn failing<S>(inner: S, after: usize, fault: Fault) -> (Failing<S>, watch::Recei
 
 /// Longest a test here may take in virtual time before it counts as stalled.
 const STALLED: Duration = Duration::from_secs(3600);
-
-fn abort_message(record: &Record) -> String {
-    record
-        .events
-        .iter()
-        .find(|(_, e)| e.level == EventLevel::Abort)
-        .map(|(_, e)| e.message.clone())
-        .expect("an abort event")
-}
 
 struct ImRan {
     outcome: Result<Outcome, BenchError>,

@@ -7,6 +7,7 @@
 
 use std::time::Duration;
 
+use crate::common::abort_message;
 use async_trait::async_trait;
 use motorbench::bench::{
     plan_steps, record_channels, run_test, sim_rig, supervise, NoProgress, Outcome, RecordSink,
@@ -14,7 +15,7 @@ use motorbench::bench::{
     SupervisorTiming,
 };
 use motorbench::config::{Config, Plan};
-use motorbench::record::{EventLevel, Record};
+use motorbench::record::Record;
 use motorbench_drivers::{
     ChannelInfo, DriverError, PowerStage, SampleBatch, SensorStream, StageCapabilities,
 };
@@ -181,15 +182,6 @@ async fn run(
         stop,
         supply,
     }
-}
-
-fn abort_message(record: &Record) -> String {
-    record
-        .events
-        .iter()
-        .find(|(_, e)| e.level == EventLevel::Abort)
-        .map(|(_, e)| e.message.clone())
-        .expect("an abort event")
 }
 
 /// The recorded current at `t_ns`.
