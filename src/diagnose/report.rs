@@ -140,22 +140,32 @@ impl Candidate {
     }
 }
 
-/// `candidates` without those holding a non-finite number; each dropped
-/// one is named, with the number, in `warnings`.
+/// `candidates` without those holding a non-finite number or a parameter
+/// outside its physical range (such a candidate is never a verdict); each
+/// dropped one is named, with the number, in `warnings`.
 pub fn reportable(
     candidates: impl IntoIterator<Item = Candidate>,
     warnings: &mut Vec<String>,
 ) -> Vec<Candidate> {
     candidates
         .into_iter()
-        .filter(|c| match c.non_finite() {
-            None => true,
-            Some(what) => {
-                warnings.push(format!(
-                    "candidate {} left out of the report: its {what} is not a finite number",
-                    c.effect
-                ));
-                false
+        .filter(|c| {
+            let why = c
+                .non_finite()
+                .map(|what| format!("its {what} is not a finite number"))
+                .or_else(|| {
+                    crate::report::unphysical_param(&c.params)
+                        .map(|what| format!("it needs {what}, outside its physical range"))
+                });
+            match why {
+                None => true,
+                Some(why) => {
+                    warnings.push(format!(
+                        "candidate {} left out of the report: {why}",
+                        c.effect
+                    ));
+                    false
+                }
             }
         })
         .collect()

@@ -307,13 +307,13 @@ pub fn identify_im(
     };
     let (lm_report, lm) = lm_method(&sweep, model, &mut warnings);
     let (rec_report, recursive) = recursive_method(&sweep, model, &base, &mut warnings);
-    if lm_report.applies {
-        report.best = Some("lm".into());
-    } else if rec_report.applies {
-        report.best = Some("recursive".into());
-    }
     report.methods.insert("lm".into(), lm_report);
     report.methods.insert("recursive".into(), rec_report);
+    report.refuse_unphysical();
+    report.best = ["lm", "recursive"]
+        .into_iter()
+        .find(|m| report.methods[*m].applies)
+        .map(String::from);
     report.warnings = warnings;
     ImIdentification {
         report,

@@ -468,9 +468,14 @@ pub fn identify_dc(record: &Record) -> Identification {
         }
     };
 
+    report.refuse_unphysical();
     report.best = best_method(&report);
+    let equation_error_applies = report
+        .methods
+        .get("equation_error")
+        .is_some_and(|m| m.applies);
     if let Some(why) = prefer_equation_error(equation_error.as_ref(), output_error.as_ref()) {
-        if report.best.as_deref() != Some("equation_error") {
+        if equation_error_applies && report.best.as_deref() != Some("equation_error") {
             report.warnings.push(format!(
                 "best: equation_error rather than {} (which validates best): {why}",
                 report.best.as_deref().unwrap_or("none")

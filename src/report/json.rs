@@ -20,6 +20,38 @@ pub struct ParamEstimate {
     pub unit: String,
 }
 
+/// Units whose quantity is positive: a resistance, inductance or
+/// reactance, an inertia, a torque constant.
+const POSITIVE_UNITS: [&str; 4] = ["ohm", "H", "kg*m^2", "V*s/rad"];
+
+/// Units whose quantity is never negative: a friction or load torque, a
+/// viscous friction coefficient.
+const NON_NEGATIVE_UNITS: [&str; 2] = ["N*m", "N*m*s/rad"];
+
+impl ParamEstimate {
+    /// Why this estimate of `name` lies outside the physical range its
+    /// unit implies (not a finite number; a resistance at or below 0; a
+    /// friction torque below 0), if it does.
+    pub fn unphysical(&self, name: &str) -> Option<String> {
+        let unit = self.unit.as_str();
+        let v = self.value;
+        if !v.is_finite() {
+            Some(format!("{name} = {v} {unit}, not a finite number"))
+        } else if POSITIVE_UNITS.contains(&unit) && v <= 0.0 {
+            Some(format!("{name} = {v:.4e} {unit}, not above 0"))
+        } else if NON_NEGATIVE_UNITS.contains(&unit) && v < 0.0 {
+            Some(format!("{name} = {v:.4e} {unit}, below 0"))
+        } else {
+            None
+        }
+    }
+}
+
+/// The first of `params` outside its physical range, named.
+pub fn unphysical_param(params: &BTreeMap<String, ParamEstimate>) -> Option<String> {
+    params.iter().find_map(|(name, p)| p.unphysical(name))
+}
+
 /// One method's result: parameters, or why it does not apply.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -97,6 +129,29 @@ impl IdentificationReport {
         }
     }
 
+    /// Every method whose parameters leave their physical range is made
+    /// not to apply, with the parameter named: the record does not meet
+    /// that method's assumptions, and a negative resistance or friction is
+    /// no answer. Call before choosing `best`.
+    /// An interval with a bound that is not a finite number is dropped
+    /// (the parameter's interval is then undetermined, `ci95: null`).
+    pub fn refuse_unphysical(&mut self) {
+        for method in self.methods.values_mut() {
+            for p in method.params.iter_mut().flat_map(|ps| ps.values_mut()) {
+                if p.ci95.is_some_and(|ci| !ci.iter().all(|b| b.is_finite())) {
+                    p.ci95 = None;
+                }
+            }
+            let Some(why) = method.params.as_ref().and_then(unphysical_param) else {
+                continue;
+            };
+            *method = MethodReport::not_applicable(format!(
+                "the fit gives {why}, outside its physical range: the record does not \
+                 meet this method's assumptions"
+            ));
+        }
+    }
+
     /// The report as JSON text (pretty, stable key order).
     pub fn to_json_pretty(&self) -> String {
         serde_json::to_string_pretty(self).expect("a report always serialises")
@@ -106,6 +161,53 @@ impl IdentificationReport {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_method_outside_the_physical_range_does_not_apply() {
+        let est = |value: f64, unit: &str| ParamEstimate {
+            value,
+            ci95: None,
+            unit: unit.into(),
+        };
+        assert!(est(0.0, "ohm").unphysical("Ra").is_some());
+        assert!(est(f64::NAN, "H").unphysical("La").is_some());
+        assert!(est(f64::INFINITY, "N*m").unphysical("Tst").is_some());
+        assert!(est(f64::INFINITY, "V").unphysical("dU").is_some());
+        assert!(est(0.0, "N*m").unphysical("Tst").is_none());
+        assert!(est(-1e-9, "N*m*s/rad").unphysical("f").is_some());
+        assert!(est(-3.0, "V").unphysical("dU").is_none(), "V is signed");
+        let mut r = IdentificationReport::new("dc_step");
+        let method = |params: Vec<(&str, ParamEstimate)>| MethodReport {
+            applies: true,
+            params: Some(
+                params
+                    .into_iter()
+                    .map(|(k, v)| (k.to_string(), v))
+                    .collect(),
+            ),
+            validation_nrmse: Some(0.01),
+            reason: None,
+        };
+        r.methods.insert(
+            "steady_state".into(),
+            method(vec![("Ra", est(-0.99, "ohm")), ("K", est(1.3, "V*s/rad"))]),
+        );
+        let mut wide = est(30.9, "ohm");
+        wide.ci95 = Some([30.0, f64::INFINITY]);
+        r.methods
+            .insert("moments".into(), method(vec![("Ra", wide)]));
+        r.refuse_unphysical();
+        let refused = &r.methods["steady_state"];
+        assert!(!refused.applies && refused.params.is_none());
+        assert!(refused
+            .reason
+            .as_deref()
+            .unwrap()
+            .contains("Ra = -9.9000e-1 ohm"));
+        assert!(r.methods["moments"].applies);
+        let ra = &r.methods["moments"].params.as_ref().unwrap()["Ra"];
+        assert_eq!(ra.ci95, None, "an unbounded interval is undetermined");
+    }
 
     #[test]
     fn serialises_like_the_contract_example() {
