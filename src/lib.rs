@@ -19,12 +19,23 @@
 //!   are plans on top of it. `run` and the daemon share that safety path;
 //!   the daemon adds the supervisor task ([`bench::supervise`]: heartbeat,
 //!   bus loss, API stops, latching).
+//! - [`machine`]: what differs between machines, behind one trait
+//!   ([`machine::Machine`]: the plan's steps, the rig's stages, the
+//!   record's channels, the analysis and its report); the DC machine and
+//!   the induction machine implement it.
+//!   [`config::TestConfig::into_machine`] is the one place a plan is
+//!   mapped to its machine.
+//! - [`session`]: one test, whatever the machine: rig → (supervisor) →
+//!   recorder → plan → analysis off the reactor → `/bench/result` →
+//!   files. `run` ([`session::commission`]), the daemon's jobs and the
+//!   tests all go through it.
 //! - [`record`]: MCAP recorder and reader per the data contract, CSV import.
 //! - [`identify`]: parameter identification from a [`record::Record`]
 //!   (DC; induction machine: the seed paper's recursive estimator and LM).
 //! - [`report`]: JSON, text and SVG output.
 //! - [`cli`]: the bodies of the `run`, `probe`, `replay` and `identify`
-//!   subcommands and their exit codes.
+//!   subcommands and their exit codes; none of them branches on the
+//!   machine.
 //! - [`serve`]: the daemon (`motorbench serve`): control API, one test at
 //!   a time per rig under the safety supervisor, records index, systemd;
 //!   and its client (`motorbench ctl`).
@@ -39,7 +50,9 @@ pub mod config;
 pub mod diagnose;
 pub mod excerpt;
 pub mod identify;
+pub mod machine;
 pub mod model;
 pub mod record;
 pub mod report;
 pub mod serve;
+pub mod session;

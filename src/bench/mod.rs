@@ -6,9 +6,7 @@
 //! the safety supervisor task that watches a daemon's test independently
 //! of the sequencing.
 
-mod commission;
 mod encoder;
-mod im_commission;
 mod im_config;
 mod im_modbus_config;
 mod im_rig;
@@ -33,9 +31,7 @@ mod supervisor;
 mod supply_limits;
 mod thermal;
 
-pub use commission::{commission, record_name, CommissionError, CommissionOptions, Commissioned};
 pub use encoder::SpeedFromEncoder;
-pub use im_commission::{commission_im, ImCommissioned};
 pub use im_config::ImRunConfig;
 pub use im_modbus_config::ImModbusRig;
 pub use im_rig::{build_im_rig, ImRig, SERVED_IM_PLANT_RATE_HZ};
@@ -47,9 +43,7 @@ pub use interlock::{
 };
 pub use limits::Trip;
 pub use plan::{plan_steps, PlanStep};
-pub use probe::{
-    probe, probe_im, ProbeLine, ProbeReport, PROBE_CURRENT_FRACTION, PROBE_SETPOINT_FRACTION,
-};
+pub use probe::{probe, ProbeLine, ProbeReport, PROBE_CURRENT_FRACTION, PROBE_SETPOINT_FRACTION};
 pub use progress::{NoProgress, Progress};
 pub use rig::{build_rig, ModbusProbe, Rig, RigError, SERVED_PLANT_RATE_HZ};
 pub use runner::{

@@ -13,10 +13,8 @@ use std::time::Duration;
 
 use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
 
-use super::im_rig::ImRig;
-use super::rig::{ModbusProbe, Rig};
-use super::ImRunConfig;
-use crate::config::Config;
+use super::rig::ModbusProbe;
+use crate::machine::OpenedRig;
 
 /// Fraction of `limits.max_voltage_V` used as the harmless set point
 /// of a supply (and of `limits.max_speed_rad_s` of a dynamometer).
@@ -176,7 +174,7 @@ fn command(out: &mut Vec<ProbeLine>, what: String, r: Result<(), DriverError>) -
 /// A power stage a probe exercises, and its harmless set point.
 struct ProbedStage<'a> {
     /// Put before each command (`supply: `), empty for a rig's only stage.
-    label: &'static str,
+    label: String,
     stage: &'a mut dyn PowerStage,
     setpoint: f64,
     /// The current limit to set first, where one is asked for.
@@ -187,7 +185,7 @@ impl ProbedStage<'_> {
     /// Drive the stage at its set point, read, and put it in its safe
     /// state whatever happened.
     async fn exercise(&mut self, channels: &mut Channels<'_>, out: &mut Vec<ProbeLine>) {
-        let label = self.label;
+        let label = &self.label;
         let mut ok = match self.current_limit {
             None => true,
             Some(amps) => match self.stage.set_current_limit(amps).await {
@@ -237,41 +235,31 @@ async fn probe_stages(
     ProbeReport { lines }
 }
 
-/// Probe a DC `rig` (built from `cfg`).
-pub async fn probe(cfg: &Config, rig: &mut Rig, actuate: bool) -> ProbeReport {
+/// Probe an opened rig: read every channel; with `actuate`, drive each
+/// stage in turn (the one feeding the machine first, with its current
+/// limited to [`PROBE_CURRENT_FRACTION`] of `max_current`) at
+/// [`PROBE_SETPOINT_FRACTION`] of its largest set point, then put it in
+/// its safe state, and read once more.
+pub async fn probe(rig: &mut OpenedRig, max_current: f64, actuate: bool) -> ProbeReport {
     let channels = Channels {
-        modbus: rig.modbus_sensors.as_ref(),
+        modbus: rig.modbus_probe.as_ref(),
         stream: rig.sensors.as_mut(),
     };
-    let stage = ProbedStage {
-        label: "",
-        stage: rig.stage.as_mut(),
-        setpoint: PROBE_SETPOINT_FRACTION * cfg.limits.max_voltage,
-        current_limit: Some(PROBE_CURRENT_FRACTION * cfg.limits.max_current),
-    };
-    probe_stages(channels, vec![stage], actuate).await
-}
-
-/// Probe an induction-machine `rig` (built from `cfg`): the supply VFD,
-/// then the dynamometer.
-pub async fn probe_im(cfg: &ImRunConfig, rig: &mut ImRig, actuate: bool) -> ProbeReport {
-    let channels = Channels {
-        modbus: None,
-        stream: rig.sensors.as_mut(),
-    };
-    let stages = vec![
-        ProbedStage {
-            label: "supply: ",
-            stage: rig.supply.as_mut(),
-            setpoint: PROBE_SETPOINT_FRACTION * cfg.limits.max_voltage,
-            current_limit: Some(PROBE_CURRENT_FRACTION * cfg.limits.max_current),
-        },
-        ProbedStage {
-            label: "dynamometer: ",
-            stage: rig.dynamometer.as_mut(),
-            setpoint: PROBE_SETPOINT_FRACTION * cfg.limits.max_speed,
-            current_limit: None,
-        },
-    ];
+    let only = rig.stages.len() == 1;
+    let stages = rig
+        .stages
+        .iter_mut()
+        .enumerate()
+        .map(|(k, s)| ProbedStage {
+            label: if only {
+                String::new()
+            } else {
+                format!("{}: ", s.name)
+            },
+            stage: s.stage.as_mut(),
+            setpoint: PROBE_SETPOINT_FRACTION * s.max_setpoint,
+            current_limit: (k == 0).then_some(PROBE_CURRENT_FRACTION * max_current),
+        })
+        .collect();
     probe_stages(channels, stages, actuate).await
 }

@@ -5,9 +5,10 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 
-use super::output::{print_dc, print_im, warn_if_damaged};
+use super::output::{print_analysis, warn_if_damaged};
 use super::Failure;
-use crate::identify::{check_plausible_files, identify_dc, identify_im};
+use crate::identify::check_plausible_files;
+use crate::machine::{analyse_dc, analyse_im};
 use crate::model::{Connection, ImModel};
 use crate::record::{load_record_files, SegmentKind};
 
@@ -108,11 +109,16 @@ pub fn identify(args: IdentifyArgs) -> Result<(), Failure> {
         .map_err(Failure::bad_input)?;
     warn_if_damaged(&args.files[0], &record);
     let svg = args.svg.as_deref();
-    if kind == SegmentKind::ImSlipSweep {
-        let id = identify_im(&record, args.connection.map(Into::into), args.model.into());
-        return print_im(&id, args.json, svg);
-    }
-    check_plausible_files(&record, kind, &args.files).map_err(Failure::bad_input)?;
-    let id = identify_dc(&record);
-    print_dc(&id, Some(&record), args.json, svg, None)
+    let analysed = if kind == SegmentKind::ImSlipSweep {
+        analyse_im(
+            &record,
+            args.connection.map(Into::into),
+            args.model.into(),
+            false,
+        )
+    } else {
+        check_plausible_files(&record, kind, &args.files).map_err(Failure::bad_input)?;
+        analyse_dc(&record, None, false)
+    };
+    print_analysis(analysed.analysis.as_ref(), &record, args.json, svg)
 }

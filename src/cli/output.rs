@@ -6,65 +6,34 @@ use std::path::{Path, PathBuf};
 
 use super::Failure;
 use crate::diagnose::render_diagnosis_text;
-use crate::identify::{Identification, ImIdentification};
-use crate::model::DcParams;
+use crate::machine::Analysis;
 use crate::record::Record;
-use crate::report::{
-    render_im_text, render_text, segment_plots, write_im_svg, write_segments_svg,
-    IdentificationReport,
-};
+use crate::report::IdentificationReport;
 
-/// Print a DC identification (JSON, or text with the diagnosis; `truth`
-/// is the simulated motor, when known) and write its plot to `svg`, if
-/// given; exit code 4 when no method applied.
-pub(crate) fn print_dc(
-    id: &Identification,
-    record: Option<&Record>,
-    json: bool,
-    svg: Option<&Path>,
-    truth: Option<&DcParams>,
-) -> Result<(), Failure> {
-    if json {
-        println!("{}", id.report.to_json_pretty());
-    } else {
-        print!("{}", render_text(id, truth));
-        print_diagnosis_text(&id.report);
-    }
-    if let (Some(path), Some(record)) = (svg, record) {
-        write_segments_svg(path, &segment_plots(record, id)).map_err(Failure::runtime)?;
-    }
-    match id.refusal() {
-        None => Ok(()),
-        Some(why) => Err(Failure {
-            code: 4,
-            message: format!("nothing can be identified from this data: {why}"),
-        }),
-    }
-}
-
-/// Print an induction-machine identification as [`print_dc`] does.
-pub(crate) fn print_im(
-    id: &ImIdentification,
+/// Print an identification (the contract's JSON, or text with the
+/// diagnosis) and write its plot of `record` to `svg`, if given; exit code
+/// 4 when no method applied.
+pub(crate) fn print_analysis(
+    analysis: &dyn Analysis,
+    record: &Record,
     json: bool,
     svg: Option<&Path>,
 ) -> Result<(), Failure> {
+    let report = analysis.report();
     if json {
-        println!("{}", id.report.to_json_pretty());
+        println!("{}", report.to_json_pretty());
     } else {
-        print!("{}", render_im_text(id));
-        print_diagnosis_text(&id.report);
+        print!("{}", analysis.text());
+        print_diagnosis_text(report);
     }
     if let Some(path) = svg {
-        write_im_svg(path, id).map_err(Failure::runtime)?;
+        analysis
+            .write_plot(record, path)
+            .map_err(Failure::runtime)?;
     }
-    identified(&id.report)
-}
-
-/// Exit code 4 when no identification method applied.
-fn identified(report: &IdentificationReport) -> Result<(), Failure> {
-    match report.best {
-        Some(_) => Ok(()),
-        None => Err(Failure::not_identified()),
+    match analysis.refusal() {
+        None => Ok(()),
+        Some(message) => Err(Failure { code: 4, message }),
     }
 }
 

@@ -7,7 +7,7 @@ use clap::Args;
 use motorbench_drivers::PowerStage;
 
 use super::Failure;
-use crate::bench::{build_im_rig, build_rig, probe_im, ProbeReport};
+use crate::bench::ProbeReport;
 use crate::config::TestConfig;
 
 /// `motorbench probe`.
@@ -35,19 +35,13 @@ pub async fn probe(args: ProbeArgs) -> Result<(), Failure> {
             (true, _) => ", with each power stage in turn at a harmless set point",
         }
     );
-    let report = match &cfg {
-        TestConfig::Dc(cfg) => {
-            let mut rig = build_rig(cfg, false).await.map_err(Failure::runtime)?;
-            print_stage("power stage", rig.stage.as_ref());
-            crate::bench::probe(cfg, &mut rig, actuate).await
-        }
-        TestConfig::Im(cfg) => {
-            let mut rig = build_im_rig(cfg, false).await.map_err(Failure::runtime)?;
-            print_stage("supply", rig.supply.as_ref());
-            print_stage("dynamometer", rig.dynamometer.as_ref());
-            probe_im(cfg, &mut rig, actuate).await
-        }
-    };
+    let max_current = cfg.limits().max_current;
+    let machine = cfg.into_machine();
+    let mut rig = machine.open_rig(false).await.map_err(Failure::runtime)?;
+    for s in &rig.stages {
+        print_stage(s.name, s.stage.as_ref());
+    }
+    let report = crate::bench::probe(&mut rig, max_current, actuate).await;
     print_report(&report, actuate)
 }
 

@@ -2,17 +2,15 @@
 //! and diagnose it again, and compare with the `/bench/result` the run
 //! recorded.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use clap::Args;
 
-use super::output::{print_dc, print_im, warn_if_damaged};
+use super::output::{print_analysis, warn_if_damaged};
 use super::Failure;
-use crate::config::recorded_im_model;
-use crate::diagnose::{attach_diagnosis, write_residual_svg};
-use crate::identify::{identify_dc, identify_im};
-use crate::model::ImModel;
-use crate::record::{read_mcap, Record, SegmentKind};
+use crate::diagnose::write_residual_svg;
+use crate::machine::analyse_record;
+use crate::record::{read_mcap, Record};
 use crate::report::IdentificationReport;
 
 /// `motorbench replay`.
@@ -42,50 +40,20 @@ pub struct ReplayArgs {
 pub fn replay(args: ReplayArgs) -> Result<(), Failure> {
     let record = read_mcap(&args.log).map_err(Failure::bad_input)?;
     warn_if_damaged(&args.log, &record);
-    let diagnose = (!args.no_diagnose).then_some(args.residuals_svg.as_deref());
-    let svg = args.svg.as_deref();
-    if !record.operating_points.is_empty() {
-        // An induction-machine record: the circuit its configuration named
-        // (else single-fe), the nameplate's connection.
-        let model = record
-            .meta
-            .as_ref()
-            .and_then(|m| recorded_im_model(&m.config))
-            .unwrap_or(ImModel::SingleFe);
-        let mut id = identify_im(&record, None, model);
-        diagnose_replay(&mut id.report, &record, SegmentKind::ImSlipSweep, diagnose)?;
-        let identified = print_im(&id, args.json, svg);
-        compare_with_recorded(&record, &id.report, diagnose.is_some(), args.check)?;
-        return identified;
+    let diagnose = !args.no_diagnose;
+    let analysed = analyse_record(&record, diagnose);
+    if let (Some(path), Some(plot)) = (&args.residuals_svg, &analysed.residuals) {
+        write_residual_svg(plot, path).map_err(Failure::runtime)?;
     }
-    let mut id = identify_dc(&record);
-    diagnose_replay(&mut id.report, &record, SegmentKind::DcStep, diagnose)?;
-    let identified = print_dc(&id, Some(&record), args.json, svg, None);
+    let analysis = analysed.analysis.as_ref();
+    let identified = print_analysis(analysis, &record, args.json, args.svg.as_deref());
     if let Err(f) = &identified {
         if f.code != 4 {
             return identified;
         }
     }
-    compare_with_recorded(&record, &id.report, diagnose.is_some(), args.check)?;
+    compare_with_recorded(&record, analysis.report(), diagnose, args.check)?;
     identified
-}
-
-/// Diagnose a replayed record into its report (unless `diagnose` is None)
-/// and write the residual plot where asked.
-fn diagnose_replay(
-    report: &mut IdentificationReport,
-    record: &Record,
-    kind: SegmentKind,
-    diagnose: Option<Option<&Path>>,
-) -> Result<(), Failure> {
-    let Some(svg) = diagnose else {
-        return Ok(());
-    };
-    let plot = attach_diagnosis(report, record, kind);
-    if let (Some(path), Some(plot)) = (svg, plot) {
-        write_residual_svg(&plot, path).map_err(Failure::runtime)?;
-    }
-    Ok(())
 }
 
 /// Say whether the replayed report equals the recorded `/bench/result`;

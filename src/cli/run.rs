@@ -1,17 +1,18 @@
-//! `motorbench run`: one test on the rig its configuration names (DC or
-//! induction machine, told apart only by [`TestConfig`]), recorded,
-//! identified, diagnosed and reported.
+//! `motorbench run`: one test on the rig its configuration names, whatever
+//! the machine ([`TestConfig::into_machine`]), through the one session
+//! ([`commission`]): recorded, identified, diagnosed and reported.
 
 use std::path::PathBuf;
 
 use clap::Args;
 
-use super::output::{print_dc, print_im, RunFiles};
+use super::output::{print_analysis, RunFiles};
 use super::progress_bar::Bar;
 use super::signal::stop_on_signal;
 use super::Failure;
-use crate::bench::{commission, commission_im, CommissionOptions, Outcome};
+use crate::bench::Outcome;
 use crate::config::TestConfig;
+use crate::session::{commission, CommissionOptions};
 
 /// `motorbench run`.
 #[derive(Debug, Args)]
@@ -39,70 +40,32 @@ pub struct RunArgs {
 /// Run `args`' test; SIGTERM or SIGINT stops it safely (exit code 3).
 pub async fn run(args: RunArgs) -> Result<(), Failure> {
     let cfg = TestConfig::load_or_default(args.config.as_deref()).map_err(Failure::bad_input)?;
+    let machine = cfg.into_machine();
     let stop = stop_on_signal();
     let opts = CommissionOptions {
         out_dir: args.out,
         realtime: args.realtime,
         diagnose: !args.no_diagnose,
     };
-    let chatty = !args.json && !args.quiet;
-    let (identified, outcome, files) = match &cfg {
-        TestConfig::Dc(cfg) => {
-            let progress = Bar::new(args.quiet || args.json);
-            if chatty {
-                eprintln!(
-                    "motorbench: {} on {} ({})",
-                    cfg.motor_id,
-                    cfg.backend.describe(),
-                    cfg.source
-                );
-            }
-            let done = commission(cfg, &opts, &progress, &stop)
-                .await
-                .map_err(Failure::runtime)?;
-            let identified = print_dc(
-                &done.identification,
-                None,
-                args.json,
-                None,
-                done.truth.as_ref(),
-            );
-            let files = RunFiles {
-                mcap: done.mcap_path,
-                messages: done.stats.messages,
-                report: done.report_path,
-                svg: done.svg_path,
-                residuals_svg: done.residuals_svg_path,
-            };
-            (identified, done.outcome, files)
-        }
-        TestConfig::Im(cfg) => {
-            if chatty {
-                eprintln!(
-                    "motorbench: {} slip sweep on {} ({})",
-                    cfg.motor_id,
-                    cfg.describe_rig(),
-                    cfg.source
-                );
-            }
-            let done = commission_im(cfg, &opts, &stop)
-                .await
-                .map_err(Failure::runtime)?;
-            let identified = print_im(&done.identification, args.json, None);
-            let files = RunFiles {
-                mcap: done.mcap_path,
-                messages: done.stats.messages,
-                report: done.report_path,
-                svg: done.svg_path,
-                residuals_svg: done.residuals_svg_path,
-            };
-            (identified, done.outcome, files)
-        }
-    };
-    if !args.json {
-        files.print();
+    if !args.json && !args.quiet {
+        eprintln!("motorbench: {}", machine.describe());
     }
-    if let Outcome::Aborted { reason } = &outcome {
+    let progress = Bar::new(args.quiet || args.json);
+    let done = commission(machine, &opts, &progress, &stop)
+        .await
+        .map_err(Failure::runtime)?;
+    let identified = print_analysis(done.analysis.as_ref(), &done.record, args.json, None);
+    if !args.json {
+        RunFiles {
+            mcap: done.mcap_path,
+            messages: done.stats.messages,
+            report: done.files.report,
+            svg: done.files.svg,
+            residuals_svg: done.files.residuals_svg,
+        }
+        .print();
+    }
+    if let Outcome::Aborted { reason } = &done.outcome {
         return Err(Failure::aborted(reason));
     }
     identified

@@ -21,6 +21,7 @@ use serde::Deserialize;
 use super::{invalid, syntax_error, Config, ConfigError, Limits, Retention, Supervision};
 use crate::bench::ImRunConfig;
 use crate::excerpt::quoted;
+use crate::machine::Machine;
 use crate::model::ImModel;
 
 /// The test a configuration asks for (`test.plan`).
@@ -127,6 +128,15 @@ impl TestConfig {
             Some(PlanKind::DcStep | PlanKind::DcCoastdown) | None => {
                 Ok(TestConfig::Dc(Box::new(Config::parse(source, text)?)))
             }
+        }
+    }
+
+    /// The test as its machine runs it: the one place a plan is mapped
+    /// to its [`Machine`].
+    pub fn into_machine(self) -> Box<dyn Machine> {
+        match self {
+            TestConfig::Dc(c) => c,
+            TestConfig::Im(c) => c,
         }
     }
 

@@ -1,12 +1,11 @@
-//! One test run by the daemon: the rig opened and put under the safety
-//! supervisor, the record started and indexed, the plan run by the bench's
-//! sequencer ([`run_test`]), then identification, the report files and the
-//! index updated. Progress (phase, segment, current values, ETA) is
-//! published on a watch channel for the API's live feed. This module has
-//! the DC test and what every test shares ([`TestRun`], the ending
-//! [`conclude`]); [`super::im_jobs`] has the induction-machine sweep.
+//! One test run by the daemon, whatever the machine: the session
+//! ([`crate::session`]) opens the rig, the rig is put under the safety
+//! supervisor, the record started and indexed, the plan run, then the
+//! analysis, the report files and the index updated. Progress (phase,
+//! segment, current values, ETA) is published on a watch channel for the
+//! API's live feed.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex as StdMutex};
 use std::time::SystemTime;
@@ -16,18 +15,11 @@ use tokio::sync::{watch, Mutex};
 
 use super::records_index::{unix_s, IndexEntry, KeyResults, RecordOutcome, RecordsIndex};
 use crate::bench::{
-    build_rig, plan_steps, record_channels, run_test, supervise, BenchError, Outcome, PlanStep,
-    Progress, Readings, RecordSink, SafetyRules, ServedRig, StopCause, StopReport, Supervised,
-    SupervisorHandle, SupervisorSummary, SupervisorTiming,
+    BenchError, Outcome, Progress, Readings, StopCause, StopReport, SupervisorHandle,
 };
-use crate::config::{Config, Plan, Retention};
-use crate::diagnose::attach_diagnosis;
-use crate::identify::identify_dc;
-use crate::record::{
-    Entry, Event, EventLevel, Record, Recorder, SegmentKind, TestMeta, QUEUE_CAPACITY,
-    SCHEMA_VERSION,
-};
-use crate::report::{segment_plots, write_segments_svg, IdentificationReport};
+use crate::machine::{Machine, PlanDurations};
+use crate::record::{Entry, Event, EventLevel, SegmentKind};
+use crate::session::{Recording, Session, SupervisorTask};
 
 /// Where a test is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -203,78 +195,48 @@ pub struct JobEnd {
 /// A prepared test, ready to run.
 pub struct Job {
     run: Arc<TestRun>,
-    cfg: Config,
-    steps: Vec<PlanStep>,
-    supervised: Supervised,
-    sink: RecordSink,
-    counts_per_rev: f64,
+    recording: Recording,
+    task: SupervisorTask,
     index: Arc<Mutex<RecordsIndex>>,
     dir: PathBuf,
     name: String,
-    /// Protocol servers of a served simulated rig, kept alive for the test.
-    _served: Option<ServedRig>,
-}
-
-/// The plan for a person.
-pub fn plan_summary(plan: &Plan) -> String {
-    match plan {
-        Plan::DcStep { levels, coastdown } => {
-            let levels: Vec<String> = levels.iter().map(|v| format!("{v}")).collect();
-            let tail = if *coastdown { ", coast-down" } else { "" };
-            format!("dc_step {} V{tail}", levels.join(" → "))
-        }
-        Plan::DcCoastdown { from } => format!("dc_coastdown from {from} V"),
-    }
 }
 
 /// Open the rig, put it under supervision, start and index the record.
 /// Must be called on a tokio runtime (it starts the supervisor task).
 pub async fn prepare(
     rig: &str,
-    cfg: Config,
+    machine: Box<dyn Machine>,
     initial_rise_k: f64,
     index: Arc<Mutex<RecordsIndex>>,
 ) -> Result<(Arc<TestRun>, Job), String> {
     // Paced at the wall clock; a rig served behind a protocol keeps its
-    // servers alive in `served` for as long as the job holds them.
-    let built = build_rig(&cfg, true)
+    // servers alive for as long as the session holds them.
+    let session = Session::open(machine, true)
         .await
-        .map_err(|e| format!("rig setup: {e}"))?;
-    let (stage, sensors, counts_per_rev, served) = (
-        built.stage,
-        built.sensors,
-        built.counts_per_rev,
-        built.served,
-    );
-    let channels = sensors.channels().to_vec();
-    let monitor = SafetyRules::dc(&cfg).monitor(&channels, Some(counts_per_rev), initial_rise_k)?;
-    let record_channels = record_channels(&channels, stage.id());
+        .map_err(|e| e.to_string())?;
+    let m = session.machine();
+    let monitor = m.safety_rules().monitor(
+        session.sensor_channels(),
+        Some(session.counts_per_rev()),
+        initial_rise_k,
+    )?;
+    let motor_id = m.motor_id().to_string();
+    let kind = m.kind();
+    let plan = m.plan_summary();
     let now = SystemTime::now();
     let started_at = humantime::format_rfc3339_seconds(now).to_string();
-    let kind = match cfg.plan {
-        Plan::DcStep { .. } => SegmentKind::DcStep,
-        Plan::DcCoastdown { .. } => SegmentKind::DcCoastdown,
-    };
-    let meta = TestMeta {
-        schema_version: SCHEMA_VERSION.to_string(),
-        kind,
-        motor_id: cfg.motor_id.clone(),
-        started_at: started_at.clone(),
-        nameplate: cfg.nameplate.clone(),
-        config: cfg.text.clone(),
-    };
     let mut idx = index.lock().await;
-    let name = idx.new_name(&cfg.motor_id, &started_at);
+    let name = idx.new_name(&motor_id, &started_at);
     let dir = idx.dir().to_path_buf();
-    let mcap = format!("{name}.mcap");
-    let recorder = Recorder::start(&dir.join(&mcap), &meta, &record_channels, QUEUE_CAPACITY)
+    let recording = session
+        .record_to(&dir.join(format!("{name}.mcap")), started_at.clone())
         .map_err(|e| e.to_string())?;
-    let plan = plan_summary(&cfg.plan);
     idx.insert(IndexEntry::running(
         &name,
         rig,
-        &cfg.motor_id,
-        &kind.to_string(),
+        &motor_id,
+        kind.as_str(),
         &plan,
         started_at,
         unix_s(now),
@@ -282,26 +244,19 @@ pub async fn prepare(
     .map_err(|e| e.to_string())?;
     drop(idx);
 
-    let timing = SupervisorTiming::new(cfg.supervision.bus_loss_timeout, cfg.sample_rate_hz);
-    let supervised = supervise(stage, sensors, monitor, timing, cfg.limits.max_voltage);
-    let (status, _) = watch::channel(TestStatus::running(&name, rig, &cfg.motor_id, plan));
+    let (recording, handle, task) = recording.supervise(monitor);
+    let (status, _) = watch::channel(TestStatus::running(&name, rig, &motor_id, plan));
     let run = Arc::new(TestRun {
         status,
-        supervisor: supervised.handle.clone(),
+        supervisor: handle,
     });
-    let steps = plan_steps(&cfg.plan);
-    let sink = RecordSink::new(Some(recorder), Some(meta), record_channels);
     let job = Job {
         run: run.clone(),
-        cfg,
-        steps,
-        supervised,
-        sink,
-        counts_per_rev,
+        recording,
+        task,
         index,
         dir,
         name,
-        _served: served,
     };
     Ok((run, job))
 }
@@ -312,63 +267,26 @@ impl Job {
     pub async fn run(self) -> JobEnd {
         let Job {
             run,
-            cfg,
-            steps,
-            mut supervised,
-            mut sink,
-            counts_per_rev,
+            mut recording,
+            task,
             index,
             dir,
             name,
-            _served,
         } = self;
-        let progress = FeedProgress::new(run.clone(), &cfg, &steps);
+        let progress = FeedProgress::new(run.clone(), recording.machine().durations());
         // Every stop goes through the supervisor, the sequencer's own too.
-        let outcome = run_test(
-            &cfg,
-            &steps,
-            &mut supervised.stage,
-            &mut supervised.sensors,
-            counts_per_rev,
-            &mut sink,
-            &progress,
-            &supervised.handle,
-        )
-        .await;
+        let handle = run.supervisor.clone();
+        let outcome = recording.run(&progress, (&handle).into()).await;
         let ending = Ending {
             run,
-            handle: supervised.handle,
-            task: supervised.task,
+            handle,
+            task,
             index,
             dir,
             name,
-            retention: cfg.retention,
         };
-        conclude(ending, sink, outcome, |record| {
-            let mut identification = identify_dc(&record);
-            attach_diagnosis(&mut identification.report, &record, SegmentKind::DcStep);
-            let plots = segment_plots(&record, &identification);
-            Identified {
-                report: identification.report,
-                write_svg: Box::new(move |path| {
-                    write_segments_svg(path, &plots).map_err(|e| e.to_string())
-                }),
-            }
-        })
-        .await
+        conclude(ending, recording, outcome).await
     }
-}
-
-/// Draws a test's plot to the path given.
-pub type PlotWriter = Box<dyn FnOnce(&Path) -> Result<(), String> + Send>;
-
-/// What identification produced, for [`conclude`]: the report and how to
-/// draw the plot.
-pub struct Identified {
-    /// The report per the data contract.
-    pub report: IdentificationReport,
-    /// Writes the plot to the path given.
-    pub write_svg: PlotWriter,
 }
 
 /// What [`conclude`] needs of a job besides its record.
@@ -378,26 +296,23 @@ pub struct Ending {
     /// Its supervisor.
     pub handle: SupervisorHandle,
     /// The supervisor's task.
-    pub task: tokio::task::JoinHandle<SupervisorSummary>,
+    pub task: SupervisorTask,
     /// The records index.
     pub index: Arc<Mutex<RecordsIndex>>,
     /// The records directory.
     pub dir: PathBuf,
     /// The record's name.
     pub name: String,
-    /// The rig's retention limits.
-    pub retention: Retention,
 }
 
 /// The end of every test, once the sequencer has returned (the rig is
 /// safe): the supervisor's stop recorded, the supervisor finished, the
-/// record identified (`identify`, on a blocking thread), finished and
-/// indexed with its report and plot, the status published.
-pub async fn conclude(
+/// record analysed (off the reactor), finished and indexed with its
+/// report and plot, the status published.
+async fn conclude(
     ending: Ending,
-    mut sink: RecordSink,
+    mut recording: Recording,
     outcome: Result<Outcome, BenchError>,
-    identify: impl FnOnce(Record) -> Identified + Send + 'static,
 ) -> JobEnd {
     let Ending {
         run,
@@ -406,8 +321,8 @@ pub async fn conclude(
         index,
         dir,
         name,
-        retention,
     } = ending;
+    let retention = recording.machine().retention();
     let stop = handle.stopped();
     if let Some(s) = &stop {
         let first = s.first_safe_t_ns.map_or_else(
@@ -426,7 +341,7 @@ pub async fn conclude(
                 message: format!("safety supervisor: {}; {first}", s.describe()),
             },
         };
-        if let Err(e) = sink.push(event).await {
+        if let Err(e) = recording.push(event).await {
             tracing::error!("{name}: recording the stop failed: {e}");
         }
     }
@@ -445,15 +360,13 @@ pub async fn conclude(
         Ok(Outcome::Aborted { reason }) => (RecordOutcome::Aborted, Some(reason.clone())),
         Err(e) => (RecordOutcome::Failed, Some(e.to_string())),
     };
-    let t_end = sink.last_t_ns();
-    let (recorder, record) = sink.into_parts();
-    let identified = match tokio::task::spawn_blocking(move || identify(record)).await {
-        Ok(identified) => identified,
+    let concluded = match recording.conclude(true).await {
+        Ok(concluded) => concluded,
         Err(e) => {
-            // A bug, not a rig fault: the rig is already safe; the
-            // record stays as written so far (it replays).
-            tracing::error!("{name}: identification failed: {e}");
-            let reason = Some(format!("identification failed: {e}"));
+            // The rig is already safe; the record stays as written so far
+            // (it replays).
+            tracing::error!("{name}: {e}");
+            let reason = Some(e.to_string());
             finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
             return JobEnd {
                 latch: stop.filter(|s| s.cause.latches()),
@@ -461,38 +374,38 @@ pub async fn conclude(
             };
         }
     };
-    let Identified { report, write_svg } = identified;
-    let mut failure = None;
-    if let Some(recorder) = recorder {
-        let value = serde_json::to_value(&report).expect("a report serialises");
-        let result = async {
-            recorder
-                .send(Entry::Result {
-                    t_ns: t_end,
-                    report: value,
-                })
-                .await?;
-            recorder.finish().await
-        };
-        if let Err(e) = result.await {
-            failure = Some(format!("recording failed: {e}"));
-        }
-    }
+    let failure = concluded
+        .recorded
+        .as_ref()
+        .err()
+        .map(|e| format!("recording failed: {e}"));
     let report_name = format!("{name}.report.json");
     let svg_name = format!("{name}.svg");
     // File writing, like the analysis, stays off the reactor.
     let report_path = dir.join(&report_name);
-    let report_text = report.to_json_pretty() + "\n";
     let svg_path = dir.join(&svg_name);
     let written = tokio::task::spawn_blocking(move || {
-        (
+        let report_text = concluded.analysis.report().to_json_pretty() + "\n";
+        let written = (
             std::fs::write(report_path, report_text).map_err(|e| e.to_string()),
-            write_svg(&svg_path),
-        )
+            concluded.analysis.write_plot(&concluded.record, &svg_path),
+        );
+        (written, concluded.analysis)
     })
     .await;
-    let (report_written, svg_written) =
-        written.unwrap_or_else(|e| (Err(e.to_string()), Err(e.to_string())));
+    let ((report_written, svg_written), analysis) = match written {
+        Ok(w) => w,
+        Err(e) => {
+            tracing::error!("{name}: writing the report failed: {e}");
+            let reason = Some(format!("writing the report failed: {e}"));
+            finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
+            return JobEnd {
+                latch: stop.filter(|s| s.cause.latches()),
+                winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
+            };
+        }
+    };
+    let report = analysis.report();
     let report_ok = report_written
         .map_err(|e| tracing::error!("{name}: writing the report failed: {e}"))
         .is_ok();
@@ -603,36 +516,13 @@ struct EtaState {
 }
 
 impl FeedProgress {
-    fn new(run: Arc<TestRun>, cfg: &Config, steps: &[PlanStep]) -> FeedProgress {
-        let st = cfg.settle;
-        FeedProgress::with(
-            run,
-            st.min_hold_s.max(2.0 * st.window_s) + st.hold_s,
-            steps
-                .iter()
-                .map(|s| match s {
-                    PlanStep::Level { .. } => st.timeout_s + st.hold_s,
-                    PlanStep::Coastdown { .. } => st.coastdown_timeout_s,
-                })
-                .collect(),
-            steps.iter().map(PlanStep::kind).collect(),
-        )
-    }
-
-    /// Progress of a plan whose segments take about `guess_s` each before
-    /// one has finished, at most `timeouts[k]` for segment `k`, of test
-    /// kinds `kinds`.
-    pub fn with(
-        run: Arc<TestRun>,
-        guess_s: f64,
-        timeouts: Vec<f64>,
-        kinds: Vec<SegmentKind>,
-    ) -> FeedProgress {
+    /// Progress of a plan whose segments take as `durations` says.
+    pub fn new(run: Arc<TestRun>, durations: PlanDurations) -> FeedProgress {
         FeedProgress {
             run,
-            guess_s,
-            timeouts,
-            kinds,
+            guess_s: durations.guess_s,
+            timeouts: durations.timeouts_s,
+            kinds: durations.kinds,
             eta: StdMutex::new(EtaState::default()),
             last_ms: AtomicU64::new(0),
         }

@@ -8,8 +8,8 @@
 //!   then stop running tests safely and finish their records.
 //! - [`api`]: the HTTP endpoints. [`auth`]: the bearer token.
 //! - [`state`]: rigs, tests, the index. [`rig_config`]: a DC or an
-//!   induction-machine rig. [`jobs`]: one test, and what every test
-//!   shares; [`im_jobs`]: an induction-machine slip sweep.
+//!   induction-machine rig. [`jobs`]: one test of any machine, over the
+//!   one session ([`crate::session`]).
 //! - [`records_index`]: the index file, interrupted records, retention.
 //! - [`client`] and [`ctl`]: the command-line client.
 
@@ -19,7 +19,6 @@ pub mod cli;
 pub mod client;
 pub mod connections;
 pub mod ctl;
-pub mod im_jobs;
 pub mod jobs;
 pub mod records_index;
 pub mod rig_config;

@@ -321,7 +321,7 @@ impl RecordsIndex {
     /// A record name from the motor id and the start time, used by no
     /// entry and no file.
     pub fn new_name(&self, motor_id: &str, started_at: &str) -> String {
-        crate::bench::record_name(motor_id, started_at, |s| {
+        crate::session::record_name(motor_id, started_at, |s| {
             self.get(s).is_some()
                 || ["mcap", "report.json", "svg"]
                     .iter()

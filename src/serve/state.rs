@@ -13,8 +13,7 @@ use tokio::sync::Mutex;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use super::im_jobs::prepare_im;
-use super::jobs::{prepare, JobEnd, StopStatus, TestRun};
+use super::jobs::{prepare, StopStatus, TestRun};
 use super::records_index::{IndexError, RecordsIndex};
 use super::rig_config::RigConfig;
 use crate::bench::{StopCause, StopReport};
@@ -124,21 +123,6 @@ pub enum StopError {
     NotFound(String),
     /// The test is not running.
     NotRunning(String),
-}
-
-/// A prepared job of either kind.
-enum AnyJob {
-    Dc(Box<super::jobs::Job>),
-    Im(Box<super::im_jobs::ImJob>),
-}
-
-impl AnyJob {
-    async fn run(self) -> JobEnd {
-        match self {
-            AnyJob::Dc(j) => j.run().await,
-            AnyJob::Im(j) => j.run().await,
-        }
-    }
 }
 
 /// The daemon. See the module docs.
@@ -297,20 +281,9 @@ impl Daemon {
             None => rig.cfg.clone(),
         };
         let rise = Rig::rise_now(&rt, &rig.cfg);
-        let (run, job) = match cfg {
-            RigConfig::Dc(cfg) => {
-                let (run, job) = prepare(rig_name, *cfg, rise, self.index.clone())
-                    .await
-                    .map_err(StartError::Setup)?;
-                (run, AnyJob::Dc(Box::new(job)))
-            }
-            RigConfig::Im(cfg) => {
-                let (run, job) = prepare_im(rig_name, *cfg, rise, self.index.clone())
-                    .await
-                    .map_err(StartError::Setup)?;
-                (run, AnyJob::Im(Box::new(job)))
-            }
-        };
+        let (run, job) = prepare(rig_name, cfg.into_machine(), rise, self.index.clone())
+            .await
+            .map_err(StartError::Setup)?;
         let id = run.id();
         tracing::info!(
             "{id}: test started on rig {rig_name} ({})",

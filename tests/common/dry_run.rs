@@ -3,19 +3,20 @@
 //! one place the tests turn a configuration into a record, so a change to
 //! how a test is run is made here and not in every test file.
 //!
-//! - [`commission`] and [`commission_im`] go the way `motorbench run`
-//!   goes (rig, sequencer, recorder, identification, report files) into a
+//! - [`commission`] goes the way `motorbench run` goes (the one session:
+//!   rig, sequencer, recorder, identification, report files) into a
 //!   fresh temporary directory, without the diagnosis;
 //! - [`record`] runs a DC configuration's plan on its simulated rig to an
 //!   in-memory record only (no files, no identification), for tests that
 //!   run many motors.
 
 use motorbench::bench::{
-    plan_steps, record_channels, run_test, sim_rig, CommissionOptions, Commissioned,
-    ImCommissioned, ImRunConfig, NoProgress, Outcome, RecordSink,
+    plan_steps, record_channels, run_test, sim_rig, NoProgress, Outcome, RecordSink,
 };
 use motorbench::config::{Backend, Config};
+use motorbench::machine::Machine;
 use motorbench::record::Record;
+use motorbench::session::{CommissionOptions, Commissioned};
 use motorbench_drivers::{PowerStage, SensorStream};
 use tempfile::TempDir;
 
@@ -28,25 +29,21 @@ fn options(dir: &TempDir) -> CommissionOptions {
     }
 }
 
-/// Commission `cfg` (a DC test) into a fresh temporary directory, kept
-/// alive by the returned handle; the outcome is the caller's to check.
-pub async fn commission(cfg: &Config) -> (TempDir, Commissioned) {
+/// Commission `machine`'s test (a [`Config`] or a
+/// [`motorbench::bench::ImRunConfig`]) into
+/// a fresh temporary directory, kept alive by the returned handle; the
+/// outcome is the caller's to check.
+pub async fn commission<M: Machine + Clone + 'static>(machine: &M) -> (TempDir, Commissioned) {
     let dir = tempfile::tempdir().unwrap();
     let (_tx, rx) = tokio::sync::watch::channel(false);
-    let done = motorbench::bench::commission(cfg, &options(&dir), &NoProgress, &rx)
-        .await
-        .unwrap();
-    (dir, done)
-}
-
-/// Commission `cfg` (an induction-machine slip sweep) into a fresh
-/// temporary directory, kept alive by the returned handle.
-pub async fn commission_im(cfg: &ImRunConfig) -> (TempDir, ImCommissioned) {
-    let dir = tempfile::tempdir().unwrap();
-    let (_tx, rx) = tokio::sync::watch::channel(false);
-    let done = motorbench::bench::commission_im(cfg, &options(&dir), &rx)
-        .await
-        .unwrap();
+    let done = motorbench::session::commission(
+        Box::new(machine.clone()),
+        &options(&dir),
+        &NoProgress,
+        &rx,
+    )
+    .await
+    .unwrap();
     (dir, done)
 }
 

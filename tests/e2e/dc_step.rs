@@ -22,7 +22,7 @@ async fn default_run_identifies_the_seed_motor_and_replays_identically() {
     assert_eq!(done.outcome, Outcome::Completed);
 
     // The acceptance: K within 1 %, Ra within 3 %.
-    let r = &done.identification.report;
+    let r = &done.analysis.report();
     let (k, ra) = (param(r, "K"), param(r, "Ra"));
     assert!(((k - truth.k) / truth.k).abs() < 0.01, "K = {k}");
     assert!(((ra - truth.ra) / truth.ra).abs() < 0.03, "Ra = {ra}");
@@ -84,13 +84,13 @@ async fn default_run_identifies_the_seed_motor_and_replays_identically() {
         "replay sees exactly the samples the bench saw"
     );
     let again = identify_dc(&replayed);
-    assert_eq!(again.report, done.identification.report);
+    assert_eq!(&again.report, done.analysis.report());
     let recorded = replayed
         .recorded_result
         .expect("the report is in the record");
     assert_eq!(
         recorded,
-        serde_json::to_value(&done.identification.report).unwrap()
+        serde_json::to_value(done.analysis.report()).unwrap()
     );
 
     // Nothing was dropped: one message per sample per channel.
@@ -124,9 +124,9 @@ async fn default_run_identifies_the_seed_motor_and_replays_identically() {
 
     // The report files exist and hold what was printed.
     let json: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&done.report_path).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(&done.files.report).unwrap()).unwrap();
     assert_eq!(json, recorded);
-    let svg = std::fs::read_to_string(&done.svg_path).unwrap();
+    let svg = std::fs::read_to_string(&done.files.svg).unwrap();
     assert!(
         svg.contains("<svg")
             && svg.contains("segment 1: 60 V → 248 V")

@@ -14,10 +14,11 @@ use crate::common;
 use std::path::Path;
 
 use motorbench::bench::{
-    build_rig, plan_steps, record_channels, run_test, Commissioned, NoProgress, Outcome, RecordSink,
+    build_rig, plan_steps, record_channels, run_test, NoProgress, Outcome, RecordSink,
 };
 use motorbench::config::{Backend, Config};
 use motorbench::report::IdentificationReport;
+use motorbench::session::Commissioned;
 
 static REALTIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
@@ -71,7 +72,7 @@ async fn matches_the_direct_rig(cfg: &Config) -> Commissioned {
     direct_cfg.backend = Backend::Simulated(sim);
     let (_direct_dir, direct) = run(&direct_cfg).await;
     assert_eq!(direct.outcome, Outcome::Completed);
-    let (a, b) = (&served.identification.report, &direct.identification.report);
+    let (a, b) = (&served.analysis.report(), &direct.analysis.report());
     for (key, t, tol) in [("K", truth.k, 0.01), ("Ra", truth.ra, 0.05)] {
         let ((va, ha), (vb, hb)) = (param(a, key), param(b, key));
         eprintln!("{key}: served {va:.5} ± {ha:.5}, direct {vb:.5} ± {hb:.5}, truth {t}");

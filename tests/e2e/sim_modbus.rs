@@ -36,7 +36,7 @@ fn param(r: &IdentificationReport, key: &str) -> (f64, f64) {
     (p.value, (hi - lo) / 2.0)
 }
 
-async fn run(cfg: &Config) -> (tempfile::TempDir, motorbench::bench::Commissioned) {
+async fn run(cfg: &Config) -> (tempfile::TempDir, motorbench::session::Commissioned) {
     common::dry_run::commission(cfg).await
 }
 
@@ -56,7 +56,7 @@ async fn modbus_tcp_run_matches_the_direct_simulated_rig_within_noise() {
     let (_direct_dir, direct) = run(&direct_cfg).await;
     assert_eq!(direct.outcome, Outcome::Completed);
 
-    let (a, b) = (&served.identification.report, &direct.identification.report);
+    let (a, b) = (&served.analysis.report(), &direct.analysis.report());
     // Within noise: the two estimates differ by less than their 95 %
     // intervals together allow; and each is near the truth (a 95 %
     // interval misses the truth in one run of twenty by design, so the
@@ -247,7 +247,7 @@ async fn streaming_serial_daq_run_identifies_the_motor() {
     let truth = cfg.backend.simulated().unwrap().motor;
     let (_dir, done) = run(&cfg).await;
     assert_eq!(done.outcome, Outcome::Completed);
-    let r = &done.identification.report;
+    let r = &done.analysis.report();
     // Device timestamps: no host jitter in the intervals, so the steady
     // state is as sharp as on the in-process rig.
     for (key, t, tol) in [

@@ -32,8 +32,8 @@ async fn modbus_sweep_identifies_the_machine_as_the_direct_rig_does() {
     assert!(cfg.modbus.as_ref().is_some_and(|m| m.simulate.is_some()));
     let mut direct_cfg = cfg.clone();
     direct_cfg.modbus = None;
-    let (_direct_dir, direct) = dry_run::commission_im(&direct_cfg).await;
-    let (_modbus_dir, modbus) = dry_run::commission_im(&cfg).await;
+    let (_direct_dir, direct) = dry_run::commission(&direct_cfg).await;
+    let (_modbus_dir, modbus) = dry_run::commission(&cfg).await;
     assert_eq!(direct.outcome, Outcome::Completed);
     assert_eq!(modbus.outcome, Outcome::Completed);
 
@@ -66,8 +66,8 @@ async fn modbus_sweep_identifies_the_machine_as_the_direct_rig_does() {
     }
 
     // The noise: the direct rig with other seeds.
-    let params = |c: &motorbench::bench::ImCommissioned| {
-        let r = serde_json::to_value(&c.identification.report).unwrap();
+    let params = |c: &motorbench::session::Commissioned| {
+        let r = serde_json::to_value(c.analysis.report()).unwrap();
         let best = r["best"].as_str().unwrap().to_string();
         (best.clone(), r["methods"][&best]["params"].clone())
     };
@@ -75,7 +75,7 @@ async fn modbus_sweep_identifies_the_machine_as_the_direct_rig_does() {
     for seed in 2..=9 {
         let mut c = direct_cfg.clone();
         c.simulated.as_mut().unwrap().seed = seed;
-        let (_dir, run) = dry_run::commission_im(&c).await;
+        let (_dir, run) = dry_run::commission(&c).await;
         reseeded.push(params(&run).1);
     }
     let sigma = |name: &str| {

@@ -36,7 +36,7 @@ async fn coastdown_plan_runs_up_then_decays_to_rest_with_no_current() {
     );
     // One step alone gives no steady-state identification, but the
     // methods driven by the measured voltage identify the motor from it.
-    let report = &done.identification.report;
+    let report = &done.analysis.report();
     assert!(
         !report.methods["steady_state"].applies,
         "{:?}",

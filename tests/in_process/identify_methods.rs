@@ -64,7 +64,7 @@ async fn identify(cfg: &Config) -> IdentificationReport {
 async fn identify_record(cfg: &Config) -> (IdentificationReport, Record) {
     let (_dir, done) = dry_run::commission(cfg).await;
     assert_eq!(done.outcome, Outcome::Completed);
-    (done.identification.report, done.record)
+    (done.analysis.report().clone(), done.record)
 }
 
 /// The NRMSE the true motor scores on the step segments but `skip`: the

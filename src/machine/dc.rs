@@ -1,0 +1,183 @@
+//! The DC machine: the armature-voltage staircase (`dc_step`) and the
+//! coast-down (`dc_coastdown`) on one power stage; identification by the
+//! DC methods, the per-segment plot of measured against simulated current
+//! and speed.
+
+use std::path::Path;
+
+use async_trait::async_trait;
+use motorbench_drivers::ChannelInfo;
+
+use super::{
+    Analysed, Analyser, Analysis, Machine, OpenedRig, PlanDurations, PlanRig, RigStage, Truth,
+};
+use crate::bench::{
+    build_rig, plan_steps, record_channels, run_test, BenchError, Outcome, PlanStep, Progress,
+    RecordSink, SafetyRules, StopPath,
+};
+use crate::config::{Config, Plan, Retention};
+use crate::identify::{identify_dc, Identification};
+use crate::model::DcParams;
+use crate::record::{ChannelSpec, Record, SegmentKind};
+use crate::report::{render_text, segment_plots, write_segments_svg, IdentificationReport};
+
+/// A DC identification, with the simulated motor when there is one.
+struct DcAnalysis {
+    id: Identification,
+    truth: Option<DcParams>,
+}
+
+impl Analysis for DcAnalysis {
+    fn report(&self) -> &IdentificationReport {
+        &self.id.report
+    }
+
+    fn report_mut(&mut self) -> &mut IdentificationReport {
+        &mut self.id.report
+    }
+
+    fn text(&self) -> String {
+        render_text(&self.id, self.truth.as_ref())
+    }
+
+    fn write_plot(&self, record: &Record, path: &Path) -> Result<(), String> {
+        write_segments_svg(path, &segment_plots(record, &self.id)).map_err(|e| e.to_string())
+    }
+
+    fn refusal(&self) -> Option<String> {
+        self.id
+            .refusal()
+            .map(|why| format!("nothing can be identified from this data: {why}"))
+    }
+}
+
+/// Identify a DC record (and diagnose it when `diagnose`); `truth` is the
+/// simulated motor, for the text report.
+pub fn analyse_dc(record: &Record, truth: Option<DcParams>, diagnose: bool) -> Analysed {
+    Analysed::of(record, SegmentKind::DcStep, diagnose, |record| DcAnalysis {
+        id: identify_dc(record),
+        truth,
+    })
+}
+
+#[async_trait]
+impl Machine for Config {
+    fn kind(&self) -> SegmentKind {
+        match self.plan {
+            Plan::DcStep { .. } => SegmentKind::DcStep,
+            Plan::DcCoastdown { .. } => SegmentKind::DcCoastdown,
+        }
+    }
+
+    fn motor_id(&self) -> &str {
+        &self.motor_id
+    }
+
+    fn nameplate(&self) -> &serde_json::Value {
+        &self.nameplate
+    }
+
+    fn config_text(&self) -> &str {
+        &self.text
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "{} on {} ({})",
+            self.motor_id,
+            self.backend.describe(),
+            self.source
+        )
+    }
+
+    fn plan_summary(&self) -> String {
+        match &self.plan {
+            Plan::DcStep { levels, coastdown } => {
+                let levels: Vec<String> = levels.iter().map(|v| format!("{v}")).collect();
+                let tail = if *coastdown { ", coast-down" } else { "" };
+                format!("dc_step {} V{tail}", levels.join(" → "))
+            }
+            Plan::DcCoastdown { from } => format!("dc_coastdown from {from} V"),
+        }
+    }
+
+    fn safety_rules(&self) -> SafetyRules {
+        SafetyRules::dc(self)
+    }
+
+    fn bus_loss_and_rate(&self) -> (f64, f64) {
+        (self.supervision.bus_loss_timeout, self.sample_rate_hz)
+    }
+
+    fn retention(&self) -> Retention {
+        self.retention
+    }
+
+    fn durations(&self) -> PlanDurations {
+        let st = self.settle;
+        let steps = plan_steps(&self.plan);
+        PlanDurations {
+            guess_s: st.min_hold_s.max(2.0 * st.window_s) + st.hold_s,
+            timeouts_s: steps
+                .iter()
+                .map(|s| match s {
+                    PlanStep::Level { .. } => st.timeout_s + st.hold_s,
+                    PlanStep::Coastdown { .. } => st.coastdown_timeout_s,
+                })
+                .collect(),
+            kinds: steps.iter().map(PlanStep::kind).collect(),
+        }
+    }
+
+    fn record_channels(&self, sensors: &[ChannelInfo], stage_ids: &[&str]) -> Vec<ChannelSpec> {
+        record_channels(sensors, stage_ids.first().copied().unwrap_or("stage"))
+    }
+
+    async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, String> {
+        let rig = build_rig(self, realtime).await.map_err(|e| e.to_string())?;
+        Ok(OpenedRig {
+            stages: vec![RigStage {
+                name: "power stage",
+                stage: rig.stage,
+                max_setpoint: self.limits.max_voltage,
+            }],
+            sensors: rig.sensors,
+            counts_per_rev: rig.counts_per_rev,
+            truth: rig.truth.map(|t| Box::new(t) as Truth),
+            keep_alive: rig
+                .served
+                .map(|s| Box::new(s) as Box<dyn std::any::Any + Send>),
+            modbus_probe: rig.modbus_sensors,
+        })
+    }
+
+    async fn run_plan(
+        &self,
+        rig: PlanRig<'_>,
+        sink: &mut RecordSink,
+        progress: &dyn Progress,
+        stops: StopPath<'_>,
+    ) -> Result<Outcome, BenchError> {
+        let [stage] = rig.stages else {
+            unreachable!("a DC rig opens one stage");
+        };
+        run_test(
+            self,
+            &plan_steps(&self.plan),
+            stage.as_mut(),
+            rig.sensors,
+            rig.counts_per_rev,
+            sink,
+            progress,
+            stops,
+        )
+        .await
+    }
+
+    fn analyser(&self, truth: Option<Truth>) -> Analyser {
+        let truth = truth
+            .and_then(|t| t.downcast::<DcParams>().ok())
+            .map(|t| *t);
+        Box::new(move |record, diagnose| analyse_dc(record, truth, diagnose))
+    }
+}

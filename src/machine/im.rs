@@ -1,0 +1,202 @@
+//! The induction machine: the slip sweep (`im_slip_sweep`) on a supply
+//! VFD and a dynamometer; identification of the equivalent circuit, the
+//! plot of current and power against slip.
+
+use std::path::Path;
+
+use async_trait::async_trait;
+use motorbench_drivers::ChannelInfo;
+
+use super::{
+    Analysed, Analyser, Analysis, Machine, OpenedRig, PlanDurations, PlanRig, RigStage, Truth,
+};
+use crate::bench::{
+    build_im_rig, run_im_sweep, sweep_channels, BenchError, ImRunConfig, Outcome, Progress,
+    RecordSink, SafetyRules, StopPath,
+};
+use crate::config::{recorded_im_model, Retention};
+use crate::identify::{identify_im, ImIdentification};
+use crate::model::{Connection, ImModel};
+use crate::record::{ChannelSpec, Record, SegmentKind};
+use crate::report::{render_im_text, write_im_svg, IdentificationReport};
+
+struct ImAnalysis(ImIdentification);
+
+impl Analysis for ImAnalysis {
+    fn report(&self) -> &IdentificationReport {
+        &self.0.report
+    }
+
+    fn report_mut(&mut self) -> &mut IdentificationReport {
+        &mut self.0.report
+    }
+
+    fn text(&self) -> String {
+        render_im_text(&self.0)
+    }
+
+    fn write_plot(&self, _record: &Record, path: &Path) -> Result<(), String> {
+        write_im_svg(path, &self.0)
+    }
+
+    fn refusal(&self) -> Option<String> {
+        self.0
+            .report
+            .best
+            .is_none()
+            .then(|| "no identification method applies to this data (see the warnings)".into())
+    }
+}
+
+/// Identify an induction-machine record with the circuit `model` (the
+/// winding connected as `connection`, else as the nameplate says), and
+/// diagnose it when `diagnose`.
+pub fn analyse_im(
+    record: &Record,
+    connection: Option<Connection>,
+    model: ImModel,
+    diagnose: bool,
+) -> Analysed {
+    Analysed::of(record, SegmentKind::ImSlipSweep, diagnose, |record| {
+        ImAnalysis(identify_im(record, connection, model))
+    })
+}
+
+/// The circuit a record's configuration named, else single cage with
+/// iron loss.
+pub(super) fn recorded_model(record: &Record) -> ImModel {
+    record
+        .meta
+        .as_ref()
+        .and_then(|m| recorded_im_model(&m.config))
+        .unwrap_or(ImModel::SingleFe)
+}
+
+#[async_trait]
+impl Machine for ImRunConfig {
+    fn kind(&self) -> SegmentKind {
+        SegmentKind::ImSlipSweep
+    }
+
+    fn motor_id(&self) -> &str {
+        &self.motor_id
+    }
+
+    fn nameplate(&self) -> &serde_json::Value {
+        &self.nameplate
+    }
+
+    fn config_text(&self) -> &str {
+        &self.text
+    }
+
+    fn describe(&self) -> String {
+        format!(
+            "{} slip sweep on {} ({})",
+            self.motor_id,
+            self.describe_rig(),
+            self.source
+        )
+    }
+
+    fn plan_summary(&self) -> String {
+        let p = &self.plan;
+        let volts: Vec<String> = p.voltages.iter().map(|v| format!("{v}")).collect();
+        format!(
+            "im_slip_sweep {} V at {} Hz, {} slips {}…{}",
+            volts.join(", "),
+            p.frequency,
+            p.slips.len(),
+            p.slips.first().copied().unwrap_or(0.0),
+            p.slips.last().copied().unwrap_or(0.0)
+        )
+    }
+
+    fn safety_rules(&self) -> SafetyRules {
+        ImRunConfig::safety_rules(self)
+    }
+
+    fn bus_loss_and_rate(&self) -> (f64, f64) {
+        (self.supervision.bus_loss_timeout, self.sample_rate_hz)
+    }
+
+    fn retention(&self) -> Retention {
+        self.retention
+    }
+
+    fn durations(&self) -> PlanDurations {
+        let p = &self.plan;
+        // A point: two settle windows and the average; at most the settle
+        // timeout plus the average and a cool-down.
+        let period = 1.0 / self.sample_rate_hz;
+        let point_guess = (2 * p.settle_window + p.average_samples) as f64 * period + 0.1;
+        let point_max = p.max_point_s + p.average_samples as f64 * period + p.cooldown_s;
+        PlanDurations {
+            guess_s: point_guess * p.slips.len() as f64,
+            timeouts_s: vec![point_max * p.slips.len() as f64; p.voltages.len()],
+            kinds: vec![SegmentKind::ImSlipSweep; p.voltages.len()],
+        }
+    }
+
+    fn record_channels(&self, sensors: &[ChannelInfo], stage_ids: &[&str]) -> Vec<ChannelSpec> {
+        let id = |k: usize| stage_ids.get(k).copied().unwrap_or("stage");
+        sweep_channels(sensors, id(0), id(1))
+    }
+
+    async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, String> {
+        let rig = build_im_rig(self, realtime)
+            .await
+            .map_err(|e| e.to_string())?;
+        Ok(OpenedRig {
+            // The supply first: a stop takes the machine off the supply
+            // before the dynamometer lets go of the shaft.
+            stages: vec![
+                RigStage {
+                    name: "supply",
+                    stage: rig.supply,
+                    max_setpoint: self.limits.max_voltage,
+                },
+                RigStage {
+                    name: "dynamometer",
+                    stage: rig.dynamometer,
+                    max_setpoint: self.limits.max_speed,
+                },
+            ],
+            sensors: rig.sensors,
+            counts_per_rev: rig.counts_per_rev,
+            truth: rig.truth.map(|t| Box::new(t) as Truth),
+            keep_alive: rig
+                .served
+                .map(|s| Box::new(s) as Box<dyn std::any::Any + Send>),
+            modbus_probe: None,
+        })
+    }
+
+    async fn run_plan(
+        &self,
+        rig: PlanRig<'_>,
+        sink: &mut RecordSink,
+        progress: &dyn Progress,
+        stops: StopPath<'_>,
+    ) -> Result<Outcome, BenchError> {
+        let [supply, dyno] = rig.stages else {
+            unreachable!("an induction-machine rig opens two stages");
+        };
+        run_im_sweep(
+            &self.plan,
+            &ImRunConfig::safety_rules(self),
+            supply.as_mut(),
+            dyno.as_mut(),
+            rig.sensors,
+            sink,
+            progress,
+            stops,
+        )
+        .await
+    }
+
+    fn analyser(&self, _truth: Option<Truth>) -> Analyser {
+        let model = self.model;
+        Box::new(move |record, diagnose| analyse_im(record, None, model, diagnose))
+    }
+}

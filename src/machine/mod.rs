@@ -1,0 +1,194 @@
+//! The machine plug-in: what differs between a DC machine's test and an
+//! induction machine's, behind one trait, so that everything else — the
+//! session that opens the rig, records, runs the plan and analyses
+//! ([`crate::session`]), the CLI's `run`, the daemon's jobs, the tests —
+//! is written once.
+//!
+//! A [`Machine`] is a validated test configuration that knows its plan: it
+//! opens its rig (any number of power stages, the stage that feeds the
+//! machine first, and one sensor stream), names the channels its record
+//! holds, runs its plan through the bench's one sequencer core, and
+//! analyses the record it made ([`Analysis`]: the contract's report with
+//! the diagnosis attached, the text, the plot).
+//! [`crate::config::TestConfig::into_machine`] is the one place a plan is
+//! mapped to its machine.
+//!
+//! A third machine would be a folder beside `dc.rs` and `im.rs`
+//! implementing this trait, plus a [`crate::config::TestConfig`] variant
+//! (with its [`crate::config::PlanKind`]s) and the record's
+//! [`SegmentKind`]s.
+
+mod dc;
+mod im;
+
+pub use dc::analyse_dc;
+pub use im::analyse_im;
+
+use std::any::Any;
+use std::path::Path;
+
+use async_trait::async_trait;
+use motorbench_drivers::{ChannelInfo, PowerStage, SensorStream};
+
+use crate::bench::{BenchError, ModbusProbe, Outcome, Progress, RecordSink, SafetyRules, StopPath};
+use crate::config::Retention;
+use crate::diagnose::{attach_diagnosis, ResidualPlot};
+use crate::record::{ChannelSpec, Record, SegmentKind};
+use crate::report::IdentificationReport;
+
+/// A simulated rig's true machine (its parameters, of the machine's own
+/// type), for the text report's "true value" column.
+pub type Truth = Box<dyn Any + Send + Sync>;
+
+/// One power stage of a rig.
+pub struct RigStage {
+    /// Its role, for a person (`power stage`, `supply`, `dynamometer`).
+    pub name: &'static str,
+    /// The stage.
+    pub stage: Box<dyn PowerStage>,
+    /// The bound of its set points (the configured limit).
+    pub max_setpoint: f64,
+}
+
+/// A rig opened for a test.
+pub struct OpenedRig {
+    /// The power stages, the stage that feeds the machine first (it is
+    /// made safe first).
+    pub stages: Vec<RigStage>,
+    /// What measures the machine.
+    pub sensors: Box<dyn SensorStream>,
+    /// Encoder counts per revolution.
+    pub counts_per_rev: f64,
+    /// The simulated machine, on a simulated rig.
+    pub truth: Option<Truth>,
+    /// What must live as long as the test: the protocol servers of a
+    /// simulated rig served behind Modbus or CAN.
+    pub keep_alive: Option<Box<dyn Any + Send>>,
+    /// The sensors again, for a one-shot read of each channel (`probe`),
+    /// where the rig polls them over Modbus.
+    pub modbus_probe: Option<ModbusProbe>,
+}
+
+/// The rig as a plan drives it: its stages in the order
+/// [`OpenedRig::stages`] gave them, and its sensors.
+pub struct PlanRig<'a> {
+    /// The power stages.
+    pub stages: &'a mut [Box<dyn PowerStage>],
+    /// The sensors.
+    pub sensors: &'a mut dyn SensorStream,
+    /// Encoder counts per revolution.
+    pub counts_per_rev: f64,
+}
+
+/// How long a plan's segments take, for a progress estimate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlanDurations {
+    /// A segment's expected duration before one has finished, s.
+    pub guess_s: f64,
+    /// Each segment's longest duration (its timeout), s.
+    pub timeouts_s: Vec<f64>,
+    /// Each segment's kind.
+    pub kinds: Vec<SegmentKind>,
+}
+
+/// A machine's analysis of a record: identification with its diagnosis.
+pub trait Analysis: Send {
+    /// The report per the data contract.
+    fn report(&self) -> &IdentificationReport;
+    /// The report, to attach a diagnosis to.
+    fn report_mut(&mut self) -> &mut IdentificationReport;
+    /// The identification as text for a person (without the diagnosis).
+    fn text(&self) -> String;
+    /// Draw the record against the identified model to `path` (SVG).
+    fn write_plot(&self, record: &Record, path: &Path) -> Result<(), String>;
+    /// Why nothing could be identified, for exit code 4; `None` when a
+    /// method applied.
+    fn refusal(&self) -> Option<String>;
+}
+
+/// What differs between machines; see the module docs.
+#[async_trait]
+pub trait Machine: Send + Sync {
+    /// The record's kind (the contract's `kind`).
+    fn kind(&self) -> SegmentKind;
+    /// The motor's id.
+    fn motor_id(&self) -> &str;
+    /// The contract's nameplate.
+    fn nameplate(&self) -> &serde_json::Value;
+    /// The configuration's text, recorded in the record's metadata.
+    fn config_text(&self) -> &str;
+    /// The test and its rig for a person: "`motor` on `rig` (`file`)".
+    fn describe(&self) -> String;
+    /// The plan for a person, one line.
+    fn plan_summary(&self) -> String;
+    /// The checks every batch of this test must pass.
+    fn safety_rules(&self) -> SafetyRules;
+    /// The configured bus-loss timeout, s, and the sample rate, Hz.
+    fn bus_loss_and_rate(&self) -> (f64, f64);
+    /// The daemon's retention limits for this rig's records.
+    fn retention(&self) -> Retention;
+    /// How long the plan's segments take.
+    fn durations(&self) -> PlanDurations;
+    /// The record's channels: the sensors', the derived speed, and one
+    /// command channel per stage (`stage_ids` in [`OpenedRig::stages`]'
+    /// order).
+    fn record_channels(&self, sensors: &[ChannelInfo], stage_ids: &[&str]) -> Vec<ChannelSpec>;
+    /// Open the rig; `realtime` paces a simulated rig at the wall clock.
+    async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, String>;
+    /// Run the plan to its end, recording into `sink`; every stop comes
+    /// through `stops`, and the rig is safe when this returns.
+    async fn run_plan(
+        &self,
+        rig: PlanRig<'_>,
+        sink: &mut RecordSink,
+        progress: &dyn Progress,
+        stops: StopPath<'_>,
+    ) -> Result<Outcome, BenchError>;
+    /// The analysis of a record this test made (CPU work: call it off the
+    /// reactor); `truth` is the simulated machine.
+    fn analyser(&self, truth: Option<Truth>) -> Analyser;
+}
+
+/// Analyses a record: identification and, when the flag says so, the
+/// diagnosis.
+pub type Analyser = Box<dyn FnOnce(&Record, bool) -> Analysed + Send>;
+
+/// A record analysed.
+pub struct Analysed {
+    /// Identification, with the diagnosis in its report when asked for.
+    pub analysis: Box<dyn Analysis>,
+    /// The diagnosis' residuals before and after its effect, when diagnosed.
+    pub residuals: Option<ResidualPlot>,
+}
+
+impl Analysed {
+    /// Identify `record` as `identify` does and, when `diagnose`, attach
+    /// the diagnosis of a test of `kind` to the report.
+    pub fn of<A: Analysis + 'static>(
+        record: &Record,
+        kind: SegmentKind,
+        diagnose: bool,
+        identify: impl FnOnce(&Record) -> A,
+    ) -> Analysed {
+        let mut analysis = identify(record);
+        let residuals = diagnose
+            .then(|| attach_diagnosis(analysis.report_mut(), record, kind))
+            .flatten();
+        Analysed {
+            analysis: Box::new(analysis),
+            residuals,
+        }
+    }
+}
+
+/// Analyse a record of any machine (`replay`): an induction-machine
+/// record (one that holds operating points) by the circuit its
+/// configuration named (else single cage with iron loss), any other as a
+/// DC record.
+pub fn analyse_record(record: &Record, diagnose: bool) -> Analysed {
+    if record.operating_points.is_empty() {
+        analyse_dc(record, None, diagnose)
+    } else {
+        analyse_im(record, None, im::recorded_model(record), diagnose)
+    }
+}

@@ -1,0 +1,432 @@
+//! One test session, whatever the machine: the rig opened
+//! ([`Session::open`]), the record started ([`Session::record_to`]), the
+//! plan run through the bench's sequencer, unsupervised as `run` drives it
+//! or under the safety supervisor task as the daemon does
+//! ([`Recording::supervise`]), then the analysis off the reactor, the
+//! report recorded as `/bench/result` and the recorder finished
+//! ([`Recording::conclude`]).
+//!
+//! [`commission`] is the whole of it as `motorbench run` and the tests do
+//! it, writing the report and plot files beside the record;
+//! `crate::serve::jobs` wraps the same steps with the records index and
+//! the live status.
+
+use std::path::{Path, PathBuf};
+
+use motorbench_drivers::{ChannelInfo, PowerStage, SensorStream};
+use thiserror::Error;
+use tokio::sync::watch;
+
+use crate::bench::{
+    supervise_stages, BenchError, Outcome, Progress, RecordSink, SafetyMonitor, StopPath,
+    SupervisorHandle, SupervisorSummary, SupervisorTiming,
+};
+use crate::diagnose::{write_residual_svg, ResidualPlot};
+use crate::machine::{Analysed, Analysis, Machine, PlanRig, Truth};
+use crate::record::{
+    Entry, Record, RecordError, Recorder, RecorderStats, TestMeta, QUEUE_CAPACITY, SCHEMA_VERSION,
+};
+
+/// Why a session could not finish.
+#[derive(Debug, Error)]
+pub enum SessionError {
+    /// A file or directory could not be written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The path.
+        path: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// Recording failed.
+    #[error(transparent)]
+    Record(#[from] RecordError),
+    /// The bench stopped (the rig was made safe first).
+    #[error(transparent)]
+    Bench(#[from] BenchError),
+    /// The rig could not be set up.
+    #[error("rig setup: {0}")]
+    Rig(String),
+    /// The analysis task failed (a bug; the record is as written).
+    #[error("identification task failed: {0}")]
+    Analysis(String),
+    /// A plot could not be written.
+    #[error("{what}: {reason}")]
+    Plot {
+        /// Which plot.
+        what: &'static str,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// A test's rig, opened, not yet recording.
+pub struct Session {
+    machine: Box<dyn Machine>,
+    stages: Vec<Box<dyn PowerStage>>,
+    bounds: Vec<f64>,
+    sensors: Box<dyn SensorStream>,
+    counts_per_rev: f64,
+    truth: Option<Truth>,
+    keep_alive: Option<Box<dyn std::any::Any + Send>>,
+}
+
+impl Session {
+    /// Open `machine`'s rig; `realtime` paces a simulated rig at the wall
+    /// clock.
+    pub async fn open(machine: Box<dyn Machine>, realtime: bool) -> Result<Session, SessionError> {
+        let rig = machine
+            .open_rig(realtime)
+            .await
+            .map_err(SessionError::Rig)?;
+        let (stages, bounds) = rig
+            .stages
+            .into_iter()
+            .map(|s| (s.stage, s.max_setpoint))
+            .unzip();
+        Ok(Session {
+            machine,
+            stages,
+            bounds,
+            sensors: rig.sensors,
+            counts_per_rev: rig.counts_per_rev,
+            truth: rig.truth,
+            keep_alive: rig.keep_alive,
+        })
+    }
+
+    /// The test.
+    pub fn machine(&self) -> &dyn Machine {
+        self.machine.as_ref()
+    }
+
+    /// The sensors' channels.
+    pub fn sensor_channels(&self) -> &[ChannelInfo] {
+        self.sensors.channels()
+    }
+
+    /// Encoder counts per revolution.
+    pub fn counts_per_rev(&self) -> f64 {
+        self.counts_per_rev
+    }
+
+    /// The record's metadata for a test started at `started_at` (RFC 3339).
+    pub fn meta(&self, started_at: String) -> TestMeta {
+        TestMeta {
+            schema_version: SCHEMA_VERSION.to_string(),
+            kind: self.machine.kind(),
+            motor_id: self.machine.motor_id().to_string(),
+            started_at,
+            nameplate: self.machine.nameplate().clone(),
+            config: self.machine.config_text().to_string(),
+        }
+    }
+
+    /// Start recording to `path` (the MCAP file) a test started at
+    /// `started_at`.
+    pub fn record_to(self, path: &Path, started_at: String) -> Result<Recording, SessionError> {
+        let stage_ids: Vec<&str> = self.stages.iter().map(|s| s.id()).collect();
+        let channels = self
+            .machine
+            .record_channels(self.sensors.channels(), &stage_ids);
+        let meta = self.meta(started_at);
+        let recorder = Recorder::start(path, &meta, &channels, QUEUE_CAPACITY)?;
+        Ok(Recording {
+            sink: RecordSink::new(Some(recorder), Some(meta), channels),
+            session: self,
+        })
+    }
+}
+
+/// A session that records: run its plan, then conclude.
+pub struct Recording {
+    session: Session,
+    sink: RecordSink,
+}
+
+/// A supervised recording's supervisor task.
+pub type SupervisorTask = tokio::task::JoinHandle<SupervisorSummary>;
+
+impl Recording {
+    /// The test.
+    pub fn machine(&self) -> &dyn Machine {
+        self.session.machine()
+    }
+
+    /// Put the rig under the safety supervisor task checking every batch
+    /// with `monitor`: every stop then goes through it (the sequencer's
+    /// own trips too), and it commands every stage safe, the one that
+    /// feeds the machine first. Must be called on a tokio runtime.
+    pub fn supervise(
+        self,
+        monitor: SafetyMonitor,
+    ) -> (Recording, SupervisorHandle, SupervisorTask) {
+        let Recording { session, sink } = self;
+        let Session {
+            machine,
+            stages,
+            bounds,
+            sensors,
+            counts_per_rev,
+            truth,
+            keep_alive,
+        } = session;
+        let (bus_loss_s, rate_hz) = machine.bus_loss_and_rate();
+        let supervised = supervise_stages(
+            stages.into_iter().zip(bounds.iter().copied()).collect(),
+            sensors,
+            monitor,
+            SupervisorTiming::new(bus_loss_s, rate_hz),
+        );
+        let session = Session {
+            machine,
+            stages: supervised
+                .stages
+                .into_iter()
+                .map(|st| Box::new(st) as Box<dyn PowerStage>)
+                .collect(),
+            bounds,
+            sensors: Box::new(supervised.sensors),
+            counts_per_rev,
+            truth,
+            keep_alive,
+        };
+        let recording = Recording { session, sink };
+        (recording, supervised.handle, supervised.task)
+    }
+
+    /// Run the plan to its end; every stop comes through `stops`: the
+    /// operator's flag as `run` drives a test, or the supervisor's handle
+    /// once [`Recording::supervise`]d.
+    pub async fn run(
+        &mut self,
+        progress: &dyn Progress,
+        stops: StopPath<'_>,
+    ) -> Result<Outcome, BenchError> {
+        let s = &mut self.session;
+        let rig = PlanRig {
+            stages: &mut s.stages,
+            sensors: s.sensors.as_mut(),
+            counts_per_rev: s.counts_per_rev,
+        };
+        s.machine
+            .run_plan(rig, &mut self.sink, progress, stops)
+            .await
+    }
+
+    /// Record `entry` (e.g. the supervisor's account of a stop).
+    pub async fn push(&mut self, entry: Entry) -> Result<(), RecordError> {
+        self.sink.push(entry).await
+    }
+
+    /// Close the rig (its sensors, stages and any protocol servers), then
+    /// analyse the record off the reactor (diagnosed when `diagnose`),
+    /// record the report as `/bench/result` and finish the file. An
+    /// analysis that fails leaves the record as written (it replays); a
+    /// record that cannot be finished is in [`Concluded::recorded`].
+    pub async fn conclude(self, diagnose: bool) -> Result<Concluded, SessionError> {
+        let Recording { session, sink } = self;
+        let Session {
+            machine,
+            stages,
+            sensors,
+            truth,
+            keep_alive,
+            ..
+        } = session;
+        drop((sensors, stages, keep_alive));
+        let t_end = sink.last_t_ns();
+        let (recorder, record) = sink.into_parts();
+        let analyser = machine.analyser(truth);
+        let (analysed, record) = tokio::task::spawn_blocking(move || {
+            let analysed = analyser(&record, diagnose);
+            (analysed, record)
+        })
+        .await
+        .map_err(|e| SessionError::Analysis(e.to_string()))?;
+        let recorder = recorder.expect("a recording session always records");
+        let report =
+            serde_json::to_value(analysed.analysis.report()).expect("a report always serialises");
+        let recorded = async {
+            recorder
+                .send(Entry::Result {
+                    t_ns: t_end,
+                    report,
+                })
+                .await?;
+            recorder.finish().await
+        }
+        .await;
+        let Analysed {
+            analysis,
+            residuals,
+        } = analysed;
+        Ok(Concluded {
+            analysis,
+            residuals,
+            record,
+            recorded,
+        })
+    }
+}
+
+/// A concluded test.
+pub struct Concluded {
+    /// Identification and diagnosis.
+    pub analysis: Box<dyn Analysis>,
+    /// The diagnosis' residual plot, when diagnosed.
+    pub residuals: Option<ResidualPlot>,
+    /// The data the analysis ran on.
+    pub record: Record,
+    /// What the recorder wrote, or why the record could not be finished
+    /// (the analysis stands: the data it ran on is in memory).
+    pub recorded: Result<RecorderStats, RecordError>,
+}
+
+/// The report, plot and residual-plot files of a concluded test.
+#[derive(Debug, Clone)]
+pub struct ReportFiles {
+    /// `<stem>.report.json`.
+    pub report: PathBuf,
+    /// `<stem>.svg`.
+    pub svg: PathBuf,
+    /// `<stem>.residuals.svg`, when diagnosed.
+    pub residuals_svg: Option<PathBuf>,
+}
+
+impl Concluded {
+    /// Write `<stem>.report.json`, `<stem>.svg` and, when diagnosed,
+    /// `<stem>.residuals.svg` into `dir`.
+    pub fn write_files(&self, dir: &Path, stem: &str) -> Result<ReportFiles, SessionError> {
+        let report = dir.join(format!("{stem}.report.json"));
+        std::fs::write(&report, self.analysis.report().to_json_pretty() + "\n").map_err(
+            |source| SessionError::Io {
+                path: report.display().to_string(),
+                source,
+            },
+        )?;
+        let svg = dir.join(format!("{stem}.svg"));
+        self.analysis
+            .write_plot(&self.record, &svg)
+            .map_err(|reason| SessionError::Plot {
+                what: "plot",
+                reason,
+            })?;
+        let residuals_svg = self
+            .residuals
+            .as_ref()
+            .map(|plot| {
+                let path = dir.join(format!("{stem}.residuals.svg"));
+                write_residual_svg(plot, &path).map_err(|reason| SessionError::Plot {
+                    what: "residual plot",
+                    reason,
+                })?;
+                Ok::<_, SessionError>(path)
+            })
+            .transpose()?;
+        Ok(ReportFiles {
+            report,
+            svg,
+            residuals_svg,
+        })
+    }
+}
+
+/// A record name from the motor id (unsafe characters replaced) and the
+/// start time (punctuation dropped), with `-2`, `-3`, … appended until
+/// `taken` says the name is free.
+pub fn record_name(motor_id: &str, started: &str, taken: impl Fn(&str) -> bool) -> String {
+    let id: String = motor_id
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "-_.".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    let stamp: String = started
+        .chars()
+        .filter(|c| c.is_ascii_alphanumeric())
+        .collect();
+    let base = format!("{id}-{stamp}");
+    (1..)
+        .map(|n| {
+            if n == 1 {
+                base.clone()
+            } else {
+                format!("{base}-{n}")
+            }
+        })
+        .find(|name| !taken(name))
+        .expect("an unused name exists")
+}
+
+/// Where and how to commission.
+#[derive(Debug, Clone)]
+pub struct CommissionOptions {
+    /// Directory for the record and report files (created if missing).
+    pub out_dir: PathBuf,
+    /// Pace the simulated rig at wall-clock time.
+    pub realtime: bool,
+    /// Diagnose the sim-to-real gap after identification (the report's
+    /// `diagnosis`, and a residual plot beside the record).
+    pub diagnose: bool,
+}
+
+/// What a commissioning run produced.
+pub struct Commissioned {
+    /// How the test ended.
+    pub outcome: Outcome,
+    /// The MCAP record.
+    pub mcap_path: PathBuf,
+    /// The report files beside it.
+    pub files: ReportFiles,
+    /// What the recorder wrote.
+    pub stats: RecorderStats,
+    /// Identification and diagnosis.
+    pub analysis: Box<dyn Analysis>,
+    /// The data the analysis ran on.
+    pub record: Record,
+}
+
+/// Run `machine`'s test on its rig, record it to MCAP, identify (and
+/// diagnose) the machine and write the report files: `motorbench run`.
+/// An aborted test still yields its record and whatever identification
+/// the data allows.
+pub async fn commission(
+    machine: Box<dyn Machine>,
+    opts: &CommissionOptions,
+    progress: &dyn Progress,
+    shutdown: &watch::Receiver<bool>,
+) -> Result<Commissioned, SessionError> {
+    let dir = &opts.out_dir;
+    std::fs::create_dir_all(dir).map_err(|source| SessionError::Io {
+        path: dir.display().to_string(),
+        source,
+    })?;
+    let session = Session::open(machine, opts.realtime).await?;
+    let started_at = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
+    let stem = record_name(session.machine().motor_id(), &started_at, |s| {
+        dir.join(format!("{s}.mcap")).exists()
+    });
+    let mcap_path = dir.join(format!("{stem}.mcap"));
+    let mut recording = session.record_to(&mcap_path, started_at)?;
+    let outcome = recording.run(progress, shutdown.into()).await?;
+    let concluded = recording.conclude(opts.diagnose).await?;
+    let files = concluded.write_files(dir, &stem)?;
+    let stats = concluded.recorded?;
+    progress.done(match &outcome {
+        Outcome::Completed => "test complete",
+        Outcome::Aborted { .. } => "test aborted",
+    });
+    Ok(Commissioned {
+        outcome,
+        mcap_path,
+        files,
+        stats,
+        analysis: concluded.analysis,
+        record: concluded.record,
+    })
+}
