@@ -11,12 +11,13 @@
 //! - [`excerpt`]: user input quoted in error messages, long values cut.
 //! - [`model`]: DC machine equations, effects, exact simulation; the
 //!   induction machine's steady-state equivalent circuits.
-//! - [`bench`]: test plans, settle detection, limits and safe state, the
-//!   simulated rigs behind the `motorbench-drivers` traits. Every test
-//!   reads through one sequencer core (`bench/sequencer.rs`: select on the
-//!   stop, stale-data timeout, recording, the [`bench::SafetyMonitor`]
-//!   checked synchronously on every batch); the DC steps and the IM sweep
-//!   are plans on top of it. `run` and the daemon share that safety path;
+//! - [`bench`]: machine-agnostic: settle detection, limits and safe state.
+//!   Every test reads through one sequencer core (`bench/sequencer.rs`:
+//!   select on the stop, stale-data timeout, recording, the
+//!   [`bench::SafetyMonitor`] checked synchronously on every batch); the
+//!   DC steps and the IM sweep are plans on top of it, in [`machine`].
+//! - [`rig`]: what every machine's rig shares (Modbus clients and bus
+//!   sharing, the simulated device served behind a profile). `run` and the daemon share that safety path;
 //!   the daemon adds the supervisor task ([`bench::supervise`]: heartbeat,
 //!   bus loss, API stops, latching).
 //! - [`machine`]: what differs between machines, behind one trait
@@ -54,5 +55,6 @@ pub mod machine;
 pub mod model;
 pub mod record;
 pub mod report;
+pub mod rig;
 pub mod serve;
 pub mod session;

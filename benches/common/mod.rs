@@ -2,8 +2,9 @@
 //! rig (the embedded default), a 60 → 248 → 107 → 201 → 60 V staircase, 5
 //! segments at 2 kHz.
 
-use motorbench::bench::{plan_steps, record_channels, run_test, sim_rig, NoProgress, RecordSink};
+use motorbench::bench::{NoProgress, RecordSink};
 use motorbench::config::{Config, Plan};
+use motorbench::machine::dc::{plan_steps, record_channels, run_test, sim_rig};
 use motorbench::record::Record;
 use motorbench_drivers::SensorStream;
 

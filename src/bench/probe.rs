@@ -13,8 +13,8 @@ use std::time::Duration;
 
 use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
 
-use super::rig::ModbusProbe;
 use crate::machine::OpenedRig;
+use crate::rig::ModbusProbe;
 
 /// Fraction of `limits.max_voltage_V` used as the harmless set point
 /// of a supply (and of `limits.max_speed_rad_s` of a dynamometer).

@@ -29,7 +29,7 @@ use crate::record::{
 
 /// Why a test cannot go on.
 #[derive(Debug)]
-pub(super) enum Halt {
+pub(crate) enum Halt {
     /// A fault, a trip or a stop: the test ends as aborted, for this reason.
     Fault(String),
     /// Recording failed: the test cannot go on without losing data.
@@ -43,7 +43,7 @@ impl From<RecordError> for Halt {
 }
 
 /// One batch as read: recorded and checked.
-pub(super) struct Read {
+pub(crate) struct Read {
     /// The batch.
     pub batch: SampleBatch,
     /// The speed derived from its encoder count, rad/s, when there is one.
@@ -52,7 +52,7 @@ pub(super) struct Read {
 
 /// Where the plan's channels are in the record.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct SpeedChannel {
+pub(crate) struct SpeedChannel {
     /// The sensor channel of the encoder count.
     pub encoder: usize,
     /// The record channel of the derived speed.
@@ -69,7 +69,7 @@ enum Checked {
 }
 
 /// The reading core of a test. See the module docs.
-pub(super) struct Sequencer<'a> {
+pub(crate) struct Sequencer<'a> {
     sensors: &'a mut dyn SensorStream,
     sink: &'a mut RecordSink,
     progress: &'a dyn Progress,
@@ -90,7 +90,7 @@ pub(super) struct Sequencer<'a> {
 /// The stale-data timeout of a stream whose channels run at `rates_hz`
 /// (and nominally at `nominal_hz`): fifty periods of the slowest, at least
 /// half a second.
-pub(super) fn stale_timeout(rates_hz: impl Iterator<Item = f64>, nominal_hz: f64) -> Duration {
+pub(crate) fn stale_timeout(rates_hz: impl Iterator<Item = f64>, nominal_hz: f64) -> Duration {
     let slowest = rates_hz
         .filter(|r| r.is_finite() && *r > 0.0)
         .fold(nominal_hz, f64::min);
@@ -297,7 +297,7 @@ fn sensor_stop_reason(e: &DriverError) -> String {
 /// Command every stage to its safe state at once (the commands go out in
 /// the order given: put the stage that feeds the machine first); each
 /// stage's result, in that order.
-pub(super) async fn safe_state_all(
+pub(crate) async fn safe_state_all(
     stages: &mut [&mut dyn PowerStage],
 ) -> Vec<Result<(), DriverError>> {
     futures_util::future::join_all(stages.iter_mut().map(|s| s.safe_state())).await

@@ -19,8 +19,8 @@ use std::path::Path;
 use serde::Deserialize;
 
 use super::{invalid, syntax_error, Config, ConfigError, Limits, Retention, Supervision};
-use crate::bench::ImRunConfig;
 use crate::excerpt::quoted;
+use crate::machine::im::ImRunConfig;
 use crate::machine::Machine;
 use crate::model::ImModel;
 

@@ -18,8 +18,8 @@
 //! (with its [`crate::config::PlanKind`]s) and the record's
 //! [`SegmentKind`]s.
 
-mod dc;
-mod im;
+pub mod dc;
+pub mod im;
 
 pub use dc::analyse_dc;
 pub use im::analyse_im;
@@ -30,11 +30,12 @@ use std::path::Path;
 use async_trait::async_trait;
 use motorbench_drivers::{ChannelInfo, PowerStage, SensorStream};
 
-use crate::bench::{BenchError, ModbusProbe, Outcome, Progress, RecordSink, SafetyRules, StopPath};
+use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
 use crate::config::Retention;
 use crate::diagnose::{attach_diagnosis, ResidualPlot};
 use crate::record::{ChannelSpec, Record, SegmentKind};
 use crate::report::IdentificationReport;
+use crate::rig::ModbusProbe;
 
 /// A simulated rig's true machine (its parameters, of the machine's own
 /// type), for the text report's "true value" column.

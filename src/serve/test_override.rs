@@ -3,8 +3,8 @@
 //! the configuration's, and the result is validated like any
 //! configuration file, so a bad override is refused with the key named.
 
-use crate::bench::ImRunConfig;
 use crate::config::{Config, ConfigError};
+use crate::machine::im::ImRunConfig;
 
 /// Keys that describe one plan; a request naming a `plan` drops the
 /// configuration's ones so they cannot clash with the new plan.

@@ -10,10 +10,9 @@
 //!   in-memory record only (no files, no identification), for tests that
 //!   run many motors.
 
-use motorbench::bench::{
-    plan_steps, record_channels, run_test, sim_rig, NoProgress, Outcome, RecordSink,
-};
+use motorbench::bench::{NoProgress, Outcome, RecordSink};
 use motorbench::config::{Backend, Config};
+use motorbench::machine::dc::{plan_steps, record_channels, run_test, sim_rig};
 use motorbench::machine::Machine;
 use motorbench::record::Record;
 use motorbench::session::{CommissionOptions, Commissioned};
@@ -30,7 +29,7 @@ fn options(dir: &TempDir) -> CommissionOptions {
 }
 
 /// Commission `machine`'s test (a [`Config`] or a
-/// [`motorbench::bench::ImRunConfig`]) into
+/// [`motorbench::machine::im::ImRunConfig`]) into
 /// a fresh temporary directory, kept alive by the returned handle; the
 /// outcome is the caller's to check.
 pub async fn commission<M: Machine + Clone + 'static>(machine: &M) -> (TempDir, Commissioned) {

@@ -31,9 +31,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use motorbench::bench::{build_im_rig, build_rig, ImRunConfig, ServedLink};
 use motorbench::config::{Backend, Config};
+use motorbench::machine::dc::build_rig;
+use motorbench::machine::im::{build_im_rig, ImRunConfig};
 use motorbench::record::{read_mcap, EventLevel};
+use motorbench::rig::ServedLink;
 use motorbench_drivers::modbus::server::lock_bank;
 
 use common::daemon::{get, shipped, wait_test, Served, PATIENCE};
@@ -311,7 +313,7 @@ async fn abort_halfway_behind_modbus_makes_the_supply_safe_and_is_timed() {
 /// `config/sim-modbus-im.toml` rewritten for a rig reached at the served
 /// IM rig's addresses (no `simulate`, no `[rig.simulated]`: hardware to
 /// the daemon), with the profiles' paths made absolute.
-fn im_hardware_config(served: &motorbench::bench::ServedImRig) -> String {
+fn im_hardware_config(served: &motorbench::machine::im::ServedImRig) -> String {
     let addr = |l: &ServedLink| match l {
         ServedLink::Tcp(a) => a.to_string(),
         other => panic!("served over TCP, not {other:?}"),

@@ -6,8 +6,8 @@
 use std::path::Path;
 use std::time::Duration;
 
-use motorbench::bench::build_rig;
 use motorbench::config::Config;
+use motorbench::machine::dc::build_rig;
 use motorbench_drivers::can::{CanChannel, CanSignalSensors, SignalMap, SlcanOptions, SlcanStream};
 use motorbench_drivers::serial::port::{open_serial, pty_pair, SerialSettings};
 use motorbench_drivers::{ChannelInfo, SensorStream};

@@ -13,10 +13,9 @@ use crate::common;
 
 use std::path::Path;
 
-use motorbench::bench::{
-    build_rig, plan_steps, record_channels, run_test, NoProgress, Outcome, RecordSink,
-};
+use motorbench::bench::{NoProgress, Outcome, RecordSink};
 use motorbench::config::{Backend, Config};
+use motorbench::machine::dc::{build_rig, plan_steps, record_channels, run_test};
 use motorbench::report::IdentificationReport;
 use motorbench::session::Commissioned;
 

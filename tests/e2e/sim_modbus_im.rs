@@ -19,7 +19,8 @@
 use std::path::Path;
 
 use crate::common::{dry_run, motorbench, probed, text};
-use motorbench::bench::{ImRunConfig, Outcome};
+use motorbench::bench::Outcome;
+use motorbench::machine::im::ImRunConfig;
 
 fn shipped() -> ImRunConfig {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("config/sim-modbus-im.toml");

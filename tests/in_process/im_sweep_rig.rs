@@ -2,11 +2,11 @@
 //! sensors with noise), recorded to MCAP, read back and identified; and
 //! the limits that stop it.
 
-use motorbench::bench::{
-    run_im_sweep, sim_im_rig, sweep_channels, ImSweepPlan, NoProgress, Outcome, RecordSink,
-    SimImRigConfig,
-};
+use motorbench::bench::{NoProgress, Outcome, RecordSink};
 use motorbench::identify::identify_im;
+use motorbench::machine::im::{
+    run_im_sweep, sim_im_rig, sweep_channels, ImSweepPlan, SimImRigConfig,
+};
 use motorbench::model::{
     with_leakage_split, Connection, ImCircuit, ImModel, ImParam, ImSupply, LeakageSplit,
     PerUnitBase, RotorCage, SEED_DOUBLE_CAGE_PU,

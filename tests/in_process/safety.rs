@@ -2,11 +2,9 @@
 //! its safe state before anything else, and the record says why.
 
 use async_trait::async_trait;
-use motorbench::bench::{
-    plan_steps, record_channels, run_test, sim_rig, BenchError, NoProgress, Outcome, RecordSink,
-    SimSensors,
-};
+use motorbench::bench::{BenchError, NoProgress, Outcome, RecordSink};
 use motorbench::config::{Config, Plan};
+use motorbench::machine::dc::{plan_steps, record_channels, run_test, sim_rig, SimSensors};
 use motorbench::record::{EventLevel, Record};
 use motorbench_drivers::{ChannelInfo, DriverError, SampleBatch, SensorStream};
 

@@ -15,11 +15,12 @@ use std::time::Duration;
 
 use crate::common::abort_message;
 use async_trait::async_trait;
-use motorbench::bench::{
-    plan_steps, record_channels, run_im_sweep, run_test, sim_im_rig, sim_rig, sweep_channels,
-    BenchError, ImRunConfig, NoProgress, Outcome, RecordSink, SimDyno, SimVfd,
-};
+use motorbench::bench::{BenchError, NoProgress, Outcome, RecordSink};
 use motorbench::config::{Config, Plan};
+use motorbench::machine::dc::{plan_steps, record_channels, run_test, sim_rig};
+use motorbench::machine::im::{
+    run_im_sweep, sim_im_rig, sweep_channels, ImRunConfig, SimDyno, SimVfd,
+};
 use motorbench::record::Record;
 use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SampleBatch, SensorStream};
 use tokio::sync::watch;

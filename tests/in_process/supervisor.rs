@@ -10,11 +10,13 @@ use std::time::Duration;
 use crate::common::abort_message;
 use async_trait::async_trait;
 use motorbench::bench::{
-    plan_steps, record_channels, run_test, sim_rig, supervise, NoProgress, Outcome, RecordSink,
-    SafetyMonitor, SimPowerStage, SimSensors, StopCause, StopReport, SupervisorSummary,
-    SupervisorTiming,
+    supervise, NoProgress, Outcome, RecordSink, SafetyMonitor, StopCause, StopReport,
+    SupervisorSummary, SupervisorTiming,
 };
 use motorbench::config::{Config, Plan};
+use motorbench::machine::dc::{
+    plan_steps, record_channels, run_test, sim_rig, SimPowerStage, SimSensors,
+};
 use motorbench::record::Record;
 use motorbench_drivers::{
     ChannelInfo, DriverError, PowerStage, SampleBatch, SensorStream, StageCapabilities,

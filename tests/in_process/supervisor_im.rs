@@ -9,8 +9,11 @@ use std::sync::{Arc, Mutex, OnceLock};
 
 use async_trait::async_trait;
 use motorbench::bench::{
-    run_im_sweep, sim_im_rig, supervise_stages, sweep_channels, ImRunConfig, NoProgress, Outcome,
-    RecordSink, SafetyMonitor, SimDyno, SimVfd, StopCause, SupervisorHandle, SupervisorTiming,
+    supervise_stages, NoProgress, Outcome, RecordSink, SafetyMonitor, StopCause, SupervisorHandle,
+    SupervisorTiming,
+};
+use motorbench::machine::im::{
+    run_im_sweep, sim_im_rig, sweep_channels, ImRunConfig, SimDyno, SimVfd,
 };
 use motorbench::record::EventLevel;
 use motorbench_drivers::{DriverError, PowerStage, StageCapabilities};

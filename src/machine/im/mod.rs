@@ -1,6 +1,29 @@
 //! The induction machine: the slip sweep (`im_slip_sweep`) on a supply
 //! VFD and a dynamometer; identification of the equivalent circuit, the
 //! plot of current and power against slip.
+//!
+//! - `config` (+ `modbus_config`): the test's validated configuration;
+//! - `sweep`: the sweep driven through the bench's sequencer; `stages`:
+//!   the VFD and dynamometer behind their Modbus profiles;
+//! - `rig`: the rig a configuration names; `sim_rig`: the simulated
+//!   machine, VFD and dynamometer; `served`: the simulated rig behind
+//!   Modbus.
+
+mod config;
+mod modbus_config;
+mod rig;
+mod served;
+mod sim_rig;
+mod stages;
+mod sweep;
+
+pub use config::ImRunConfig;
+pub use modbus_config::ImModbusRig;
+pub use rig::{build_im_rig, ImRig, SERVED_IM_PLANT_RATE_HZ};
+pub use served::{ServedImRig, ServedVfd};
+pub use sim_rig::{sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd, COPPER_ALPHA};
+pub use stages::{VfdDyno, VfdSupply};
+pub use sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
 
 use std::path::Path;
 
@@ -10,10 +33,7 @@ use motorbench_drivers::ChannelInfo;
 use super::{
     Analysed, Analyser, Analysis, Machine, OpenedRig, PlanDurations, PlanRig, RigStage, Truth,
 };
-use crate::bench::{
-    build_im_rig, run_im_sweep, sweep_channels, BenchError, ImRunConfig, Outcome, Progress,
-    RecordSink, SafetyRules, StopPath,
-};
+use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
 use crate::config::{recorded_im_model, Retention};
 use crate::identify::{identify_im, ImIdentification};
 use crate::model::{Connection, ImModel};

@@ -2,6 +2,27 @@
 //! coast-down (`dc_coastdown`) on one power stage; identification by the
 //! DC methods, the per-segment plot of measured against simulated current
 //! and speed.
+//!
+//! - `plan`: the plan's steps; `runner`: the steps driven through the
+//!   bench's sequencer, with settle detection and the supply-limit
+//!   detector (`supply_limits`);
+//! - `rig`: the rig a configuration names (simulated, Modbus, CAN,
+//!   serial); `sim_rig`: the simulated supply and sensors; `served`: the
+//!   simulated rig behind the real protocols.
+
+mod plan;
+mod rig;
+mod runner;
+mod served;
+mod sim_rig;
+mod supply_limits;
+
+pub use plan::{plan_steps, PlanStep};
+pub use rig::{build_rig, Rig, SERVED_PLANT_RATE_HZ};
+pub use runner::{record_channels, run_test, SUPPLY_LIMIT_FRACTION};
+pub use served::ServedRig;
+pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};
+pub use supply_limits::SupplyLimitDetector;
 
 use std::path::Path;
 
@@ -11,10 +32,7 @@ use motorbench_drivers::ChannelInfo;
 use super::{
     Analysed, Analyser, Analysis, Machine, OpenedRig, PlanDurations, PlanRig, RigStage, Truth,
 };
-use crate::bench::{
-    build_rig, plan_steps, record_channels, run_test, BenchError, Outcome, PlanStep, Progress,
-    RecordSink, SafetyRules, StopPath,
-};
+use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
 use crate::config::{Config, Plan, Retention};
 use crate::identify::{identify_dc, Identification};
 use crate::model::DcParams;

@@ -8,13 +8,11 @@ use motorbench_drivers::modbus::{
 };
 use motorbench_drivers::{ChannelInfo, MergedSensors, PowerStage, SensorStream};
 
-use super::im_modbus_config::ImModbusRig;
-use super::rig::{client, same_link};
-use super::served::ServedLink;
-use super::served_im::{ServedDevice, ServedImRig};
-use super::{sim_im_rig, ImRunConfig, RigError, VfdDyno, VfdSupply};
+use super::served::{ServedDevice, ServedImRig};
+use super::{sim_im_rig, ImModbusRig, ImRunConfig, VfdDyno, VfdSupply};
 use crate::config::ModbusDeviceLink;
 use crate::model::ImCircuit;
+use crate::rig::{client, same_link, RigError, ServedLink};
 
 /// Plant rate of the simulated induction-machine rig when it is served
 /// behind Modbus, Hz (independent of the bench's poll rate).

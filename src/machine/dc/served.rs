@@ -12,10 +12,7 @@
 //! "now" in steps of its own sample period, so a set point written at
 //! time t acts from t on, and a read returns the sensors' latest sample.
 
-use std::future::Future;
-use std::pin::pin;
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::task::{Context, Poll, Waker};
 use std::time::Instant;
 
 use motorbench_drivers::can::{FrameStream, SignalMap, SlcanOptions, SlcanStream};
@@ -32,35 +29,7 @@ use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
 use crate::config::{SimulatedRig, SimulatedTransport};
-
-/// Why the simulated rig could not be served.
-#[derive(Debug, thiserror::Error)]
-pub enum ServeError {
-    /// The profile lacks a register the simulation needs.
-    #[error("{profile}: the simulated rig needs a register named `{register}`")]
-    MissingRegister {
-        /// Profile name.
-        profile: String,
-        /// Register name.
-        register: String,
-    },
-    /// The simulated motor is not valid.
-    #[error("simulated motor: {0}")]
-    Motor(String),
-    /// A socket or pseudo-terminal could not be opened.
-    #[error("serving the simulated rig: {0}")]
-    Io(String),
-}
-
-/// Run a future that never waits (the simulated stage's methods only lock
-/// a mutex) to completion, here and now.
-pub(super) fn ready_now<F: Future>(f: F) -> F::Output {
-    let mut f = pin!(f);
-    match f.as_mut().poll(&mut Context::from_waker(Waker::noop())) {
-        Poll::Ready(v) => v,
-        Poll::Pending => unreachable!("the simulated rig's calls never wait"),
-    }
-}
+use crate::rig::{ready_now, register, touches, ServeError, ServedLink};
 
 /// The simulated plant on the wall clock.
 struct RealtimePlant {
@@ -125,22 +94,6 @@ type SharedPlant = Arc<Mutex<RealtimePlant>>;
 
 fn lock(p: &SharedPlant) -> MutexGuard<'_, RealtimePlant> {
     p.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-pub(super) fn register(profile: &DeviceProfile, name: &str) -> Result<Register, ServeError> {
-    profile
-        .register(name)
-        .cloned()
-        .ok_or_else(|| ServeError::MissingRegister {
-            profile: profile.name.clone(),
-            register: name.to_string(),
-        })
-}
-
-pub(super) fn touches(span: &WriteSpan, r: &Register) -> bool {
-    span.kind == r.kind
-        && span.address < r.address + r.data_type.width()
-        && r.address < span.address + span.count
 }
 
 /// The simulated supply behind its profile's power-stage registers, with
@@ -218,17 +171,6 @@ impl SimulatedDevice for DaqDevice {
         bank.set(&self.current, p.reading(channel::CURRENT));
         bank.set(&self.count, p.reading(channel::ENCODER));
     }
-}
-
-/// Where a served device can be reached.
-#[derive(Debug, Clone, PartialEq)]
-pub enum ServedLink {
-    /// Modbus TCP on this loopback address.
-    Tcp(std::net::SocketAddr),
-    /// Modbus RTU: open this pseudo-terminal path.
-    Rtu(SerialSettings),
-    /// A streaming DAQ: open this pseudo-terminal path.
-    Stream(SerialSettings),
 }
 
 /// How the simulated sensors are served.

@@ -8,19 +8,16 @@
 use motorbench_drivers::can::{
     CanChannel, CanSignalSensors, SlcanOptions, SlcanStream, SocketCanStream,
 };
-use motorbench_drivers::modbus::{
-    spawn_bus, BusHandle, CallPolicy, ModbusClient, ModbusPowerStage, ModbusSensors, PolledChannel,
-};
+use motorbench_drivers::modbus::{spawn_bus, ModbusPowerStage, ModbusSensors, PolledChannel};
 use motorbench_drivers::serial::port::open_serial;
 use motorbench_drivers::serial::{SerialChannel, SerialSensors};
-use motorbench_drivers::{ChannelInfo, DriverError, MergedSensors, PowerStage, SensorStream};
+use motorbench_drivers::{ChannelInfo, MergedSensors, PowerStage, SensorStream};
 
-use super::served::{ServeError, ServedDaq, ServedLink, ServedRig};
+use super::served::{ServedDaq, ServedRig};
 use super::sim_rig;
-use crate::config::{
-    Backend, CanLink, CanTransport, Config, LinkSpec, ModbusDeviceLink, ModbusRig, SensorLink,
-};
+use crate::config::{Backend, CanLink, CanTransport, Config, ModbusRig, SensorLink};
 use crate::model::DcParams;
+use crate::rig::{client, same_link, ModbusProbe, RigError, ServedLink};
 
 /// Plant rate of the simulated rig when it is served behind a protocol,
 /// Hz (independent of the bench's poll rate).
@@ -40,72 +37,6 @@ pub struct Rig {
     pub served: Option<ServedRig>,
     /// The Modbus sensors again, for a one-shot read (`probe`).
     pub modbus_sensors: Option<ModbusProbe>,
-}
-
-/// What `probe` needs to read every channel once.
-pub struct ModbusProbe {
-    bus: BusHandle,
-    channels: Vec<PolledChannel>,
-}
-
-impl ModbusProbe {
-    /// Read every sensor channel once: `(channel, value or error)`.
-    pub async fn read_each(&self) -> Vec<(ChannelInfo, Result<f64, DriverError>)> {
-        let mut out = Vec::new();
-        for c in &self.channels {
-            let r = self
-                .bus
-                .read(
-                    c.unit,
-                    vec![c.register.clone()],
-                    motorbench_drivers::modbus::Priority::Routine,
-                )
-                .await
-                .map(|r| r.values[0]);
-            out.push((c.info.clone(), r));
-        }
-        out
-    }
-}
-
-/// Why a rig could not be built.
-#[derive(Debug, thiserror::Error)]
-pub enum RigError {
-    /// The simulated motor is not valid.
-    #[error("simulated rig: {0}")]
-    Simulated(String),
-    /// Serving the simulated rig failed.
-    #[error(transparent)]
-    Serve(#[from] ServeError),
-    /// A device could not be reached while setting up.
-    #[error(transparent)]
-    Driver(#[from] DriverError),
-}
-
-pub(super) fn client(
-    name: &str,
-    link: &LinkSpec,
-    served: Option<&ServedLink>,
-    unit: u8,
-    policy: CallPolicy,
-) -> ModbusClient {
-    match (link, served) {
-        (_, Some(ServedLink::Tcp(addr))) | (LinkSpec::Tcp(addr), None) => {
-            ModbusClient::tcp(name, *addr, unit, policy)
-        }
-        (_, Some(ServedLink::Rtu(s) | ServedLink::Stream(s))) | (LinkSpec::Rtu(s), None) => {
-            ModbusClient::rtu(name, s.clone(), unit, policy)
-        }
-        (LinkSpec::Simulated, None) => unreachable!("a simulated link is always served"),
-    }
-}
-
-pub(super) fn same_link(a: &ModbusDeviceLink, b: &ModbusDeviceLink) -> bool {
-    match (&a.link, &b.link) {
-        (LinkSpec::Tcp(x), LinkSpec::Tcp(y)) => x == y,
-        (LinkSpec::Rtu(x), LinkSpec::Rtu(y)) => x.path == y.path,
-        _ => false,
-    }
 }
 
 async fn modbus_rig(

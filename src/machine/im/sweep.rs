@@ -7,21 +7,22 @@
 //! `/sensor/*`.
 //!
 //! Safety: the sweep reads through the shared [`Sequencer`], so every batch
-//! is checked with the test's [`super::SafetyMonitor`] (the limits, the
+//! is checked with the test's [`crate::bench::SafetyMonitor`] (the limits, the
 //! supervisor's checks, and the plan's winding heating budget
 //! `∫ max(0, (I/I_rated)² − 1) dt` with a recovery time constant, an I²t
 //! limit), a silent sensor ends the sweep after the stale-data timeout and
 //! an operator stop ends it at once. The test stops with both stages in
 //! their safe state first. Under the daemon's safety supervisor a failed
-//! check is handed to the supervisor (see [`super::StopPath`]), which
+//! check is handed to the supervisor (see [`crate::bench::StopPath`]), which
 //! latches the rig. A point whose current exceeds
 //! `hot_current` (towards locked rotor) is held at most `hot_point_max_s`
 //! and followed by a cool-down with the supply off: a real rig burns the
 //! winding otherwise.
 
-use super::sequencer::{safe_state_all, Halt, Read, Sequencer, SpeedChannel};
-use super::{
-    BenchError, HeatingBudget, Outcome, Progress, RecordSink, SafetyRules, SettleDetector, StopPath,
+use crate::bench::sequencer::{safe_state_all, Halt, Read, Sequencer, SpeedChannel};
+use crate::bench::{
+    sensor_channels_with_speed, BenchError, HeatingBudget, Outcome, Progress, RecordSink,
+    SafetyRules, SettleDetector, StopPath,
 };
 use crate::config::{Limits, Supervision};
 use crate::identify::slip_grid;
@@ -183,7 +184,7 @@ fn angle_slope(time: &[f64], speed: &[f64], rad_per_count: f64) -> f64 {
 /// derived from the encoder, then the supply-voltage and dynamometer-speed
 /// commands.
 pub fn sweep_channels(sensors: &[ChannelInfo], vfd_id: &str, dyno_id: &str) -> Vec<ChannelSpec> {
-    let mut out = super::runner::sensor_channels_with_speed(sensors);
+    let mut out = sensor_channels_with_speed(sensors);
     out.push(ChannelSpec::command("line_voltage", "V", vfd_id));
     out.push(ChannelSpec::command("dyno_speed", "rad/s", dyno_id));
     out

@@ -16,7 +16,7 @@
 //!   power, frequency, from the simulated sensors;
 //! - the encoder counter (e.g. `config/devices/sim-daq.toml`): the count.
 //!
-//! The plant runs on the wall clock, as in [`super::ServedRig`]: every
+//! The plant runs on the wall clock, as in [`crate::machine::dc::ServedRig`]: every
 //! request first advances it to "now" in steps of its own period.
 
 use std::f64::consts::TAU;
@@ -32,10 +32,10 @@ use motorbench_drivers::serial::port::{pty_pair, SerialSettings, SerialStream};
 use motorbench_drivers::{PowerStage, SampleBatch};
 use tokio::task::JoinHandle;
 
-use super::served::{ready_now, register, touches, ServeError, ServedLink};
-use super::sim_im_rig::{channel, sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd};
+use super::sim_rig::{channel, sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd};
 use crate::config::SimulatedTransport;
 use crate::model::Connection;
+use crate::rig::{ready_now, register, touches, ServeError, ServedLink};
 
 /// The simulated machine, supply and dynamometer on the wall clock.
 struct Plant {

@@ -13,7 +13,8 @@
 
 use serde::Deserialize;
 
-use super::{ImModbusRig, ImSweepPlan, SafetyRules, SimImRigConfig};
+use super::{ImModbusRig, ImSweepPlan, SimImRigConfig};
+use crate::bench::SafetyRules;
 use crate::bounds;
 use crate::config::{
     bounded, invalid, syntax_error, ConfigError, Limits, RawRetention, RawSupervisor, Retention,
@@ -525,7 +526,7 @@ impl ImRunConfig {
 mod tests {
     use super::*;
 
-    const SIM_IM: &str = include_str!("../../config/sim-im.toml");
+    const SIM_IM: &str = include_str!("../../../config/sim-im.toml");
 
     #[test]
     fn shipped_config_parses() {
@@ -590,7 +591,7 @@ mod tests {
         }
     }
 
-    const SIM_MODBUS_IM: &str = include_str!("../../config/sim-modbus-im.toml");
+    const SIM_MODBUS_IM: &str = include_str!("../../../config/sim-modbus-im.toml");
 
     fn modbus_source() -> String {
         concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-modbus-im.toml").to_string()

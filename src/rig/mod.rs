@@ -1,0 +1,146 @@
+//! What every rig shares, whatever the machine: the Modbus client of a
+//! device's link (or of the simulated device served in its place), which
+//! devices share one bus, the one-shot read of polled sensors (`probe`),
+//! the serving of a simulated device behind a profile's registers, and
+//! the errors of setting a rig up. The machines' rig builders
+//! (`machine::dc::rig`, `machine::im::rig`) are built from these.
+
+use std::future::Future;
+use std::pin::pin;
+use std::task::{Context, Poll, Waker};
+
+use motorbench_drivers::modbus::server::WriteSpan;
+use motorbench_drivers::modbus::{
+    BusHandle, CallPolicy, DeviceProfile, ModbusClient, PolledChannel, Register,
+};
+use motorbench_drivers::serial::port::SerialSettings;
+use motorbench_drivers::{ChannelInfo, DriverError};
+
+use crate::config::{LinkSpec, ModbusDeviceLink};
+
+/// What `probe` needs to read every channel once.
+pub struct ModbusProbe {
+    pub(crate) bus: BusHandle,
+    pub(crate) channels: Vec<PolledChannel>,
+}
+
+impl ModbusProbe {
+    /// Read every sensor channel once: `(channel, value or error)`.
+    pub async fn read_each(&self) -> Vec<(ChannelInfo, Result<f64, DriverError>)> {
+        let mut out = Vec::new();
+        for c in &self.channels {
+            let r = self
+                .bus
+                .read(
+                    c.unit,
+                    vec![c.register.clone()],
+                    motorbench_drivers::modbus::Priority::Routine,
+                )
+                .await
+                .map(|r| r.values[0]);
+            out.push((c.info.clone(), r));
+        }
+        out
+    }
+}
+
+/// Why a rig could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum RigError {
+    /// The simulated motor is not valid.
+    #[error("simulated rig: {0}")]
+    Simulated(String),
+    /// Serving the simulated rig failed.
+    #[error(transparent)]
+    Serve(#[from] ServeError),
+    /// A device could not be reached while setting up.
+    #[error(transparent)]
+    Driver(#[from] DriverError),
+}
+
+/// The Modbus client of a device on `link`, or of the simulated device
+/// served in its place.
+pub(crate) fn client(
+    name: &str,
+    link: &LinkSpec,
+    served: Option<&ServedLink>,
+    unit: u8,
+    policy: CallPolicy,
+) -> ModbusClient {
+    match (link, served) {
+        (_, Some(ServedLink::Tcp(addr))) | (LinkSpec::Tcp(addr), None) => {
+            ModbusClient::tcp(name, *addr, unit, policy)
+        }
+        (_, Some(ServedLink::Rtu(s) | ServedLink::Stream(s))) | (LinkSpec::Rtu(s), None) => {
+            ModbusClient::rtu(name, s.clone(), unit, policy)
+        }
+        (LinkSpec::Simulated, None) => unreachable!("a simulated link is always served"),
+    }
+}
+
+/// Whether two devices are on one bus (one TCP gateway, one serial line).
+pub(crate) fn same_link(a: &ModbusDeviceLink, b: &ModbusDeviceLink) -> bool {
+    match (&a.link, &b.link) {
+        (LinkSpec::Tcp(x), LinkSpec::Tcp(y)) => x == y,
+        (LinkSpec::Rtu(x), LinkSpec::Rtu(y)) => x.path == y.path,
+        _ => false,
+    }
+}
+
+/// Why the simulated rig could not be served.
+#[derive(Debug, thiserror::Error)]
+pub enum ServeError {
+    /// The profile lacks a register the simulation needs.
+    #[error("{profile}: the simulated rig needs a register named `{register}`")]
+    MissingRegister {
+        /// Profile name.
+        profile: String,
+        /// Register name.
+        register: String,
+    },
+    /// The simulated motor is not valid.
+    #[error("simulated motor: {0}")]
+    Motor(String),
+    /// A socket or pseudo-terminal could not be opened.
+    #[error("serving the simulated rig: {0}")]
+    Io(String),
+}
+
+/// Run a future that never waits (the simulated stage's methods only lock
+/// a mutex) to completion, here and now.
+pub(crate) fn ready_now<F: Future>(f: F) -> F::Output {
+    let mut f = pin!(f);
+    match f.as_mut().poll(&mut Context::from_waker(Waker::noop())) {
+        Poll::Ready(v) => v,
+        Poll::Pending => unreachable!("the simulated rig's calls never wait"),
+    }
+}
+
+/// The register `name` of a profile, or why the simulation cannot use it.
+pub(crate) fn register(profile: &DeviceProfile, name: &str) -> Result<Register, ServeError> {
+    profile
+        .register(name)
+        .cloned()
+        .ok_or_else(|| ServeError::MissingRegister {
+            profile: profile.name.clone(),
+            register: name.to_string(),
+        })
+}
+
+/// Whether a write touches the register `r`.
+pub(crate) fn touches(span: &WriteSpan, r: &Register) -> bool {
+    span.kind == r.kind
+        && span.address < r.address + r.data_type.width()
+        && r.address < span.address + span.count
+}
+
+/// Where a served device can be reached.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ServedLink {
+    /// Modbus TCP on this loopback address.
+    Tcp(std::net::SocketAddr),
+    /// Modbus RTU: open this pseudo-terminal path.
+    Rtu(SerialSettings),
+    /// A streaming DAQ: open this pseudo-terminal path.
+    Stream(SerialSettings),
+}
