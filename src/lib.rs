@@ -3,9 +3,8 @@
 //! Map of the crate (data flows top to bottom):
 //!
 //! - [`config`]: rig and test configuration (TOML), validated;
-//!   [`config::TestConfig`] is the one place a test plan
-//!   ([`config::PlanKind`], `test.plan`) is mapped to its machine (DC or
-//!   induction), for the CLI, the daemon and the tests alike.
+//!   [`config::TestConfig`] names the test plan ([`config::PlanKind`],
+//!   `test.plan`), for the CLI, the daemon and the tests alike.
 //! - [`bounds`]: the practical bounds on every number from outside that
 //!   sizes an allocation, a loop or a wait.
 //! - [`excerpt`]: user input quoted in error messages, long values cut.
@@ -16,10 +15,11 @@
 //!   select on the stop, stale-data timeout, recording, the
 //!   [`bench::SafetyMonitor`] checked synchronously on every batch); the
 //!   DC steps and the IM sweep are plans on top of it, in [`machine`].
+//!   `run` and the daemon share that safety path; the daemon adds the
+//!   supervisor task ([`bench::supervise`]: heartbeat, bus loss, API
+//!   stops, latching).
 //! - [`rig`]: what every machine's rig shares (Modbus clients and bus
-//!   sharing, the simulated device served behind a profile). `run` and the daemon share that safety path;
-//!   the daemon adds the supervisor task ([`bench::supervise`]: heartbeat,
-//!   bus loss, API stops, latching).
+//!   sharing, the simulated device served behind a profile).
 //! - [`machine`]: what differs between machines, behind one trait
 //!   ([`machine::Machine`]: the plan's steps, the rig's stages, the
 //!   record's channels, the analysis and its report); the DC machine and
