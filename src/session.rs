@@ -26,6 +26,8 @@ use crate::machine::{Analysed, Analysis, Machine, PlanRig, Truth};
 use crate::record::{
     Entry, Record, RecordError, Recorder, RecorderStats, TestMeta, QUEUE_CAPACITY, SCHEMA_VERSION,
 };
+use crate::report::Provenance;
+use crate::rig::RigError;
 
 /// Why a session could not finish.
 #[derive(Debug, Error)]
@@ -46,7 +48,7 @@ pub enum SessionError {
     Bench(#[from] BenchError),
     /// The rig could not be set up.
     #[error("rig setup: {0}")]
-    Rig(String),
+    Rig(#[from] RigError),
     /// The analysis task failed (a bug; the record is as written).
     #[error("identification task failed: {0}")]
     Analysis(String),
@@ -75,10 +77,7 @@ impl Session {
     /// Open `machine`'s rig; `realtime` paces a simulated rig at the wall
     /// clock.
     pub async fn open(machine: Box<dyn Machine>, realtime: bool) -> Result<Session, SessionError> {
-        let rig = machine
-            .open_rig(realtime)
-            .await
-            .map_err(SessionError::Rig)?;
+        let rig = machine.open_rig(realtime).await?;
         let (stages, bounds) = rig
             .stages
             .into_iter()
@@ -132,8 +131,10 @@ impl Session {
         let meta = self.meta(started_at);
         let recorder = Recorder::start(path, &meta, &channels, QUEUE_CAPACITY)?;
         Ok(Recording {
-            sink: RecordSink::new(Some(recorder), Some(meta), channels),
+            sink: RecordSink::new(Some(recorder), Some(meta.clone()), channels),
             session: self,
+            meta,
+            path: path.to_path_buf(),
         })
     }
 }
@@ -142,6 +143,9 @@ impl Session {
 pub struct Recording {
     session: Session,
     sink: RecordSink,
+    meta: TestMeta,
+    /// The MCAP file.
+    path: PathBuf,
 }
 
 /// A supervised recording's supervisor task.
@@ -161,7 +165,12 @@ impl Recording {
         self,
         monitor: SafetyMonitor,
     ) -> (Recording, SupervisorHandle, SupervisorTask) {
-        let Recording { session, sink } = self;
+        let Recording {
+            session,
+            sink,
+            meta,
+            path,
+        } = self;
         let Session {
             machine,
             stages,
@@ -191,7 +200,12 @@ impl Recording {
             truth,
             keep_alive,
         };
-        let recording = Recording { session, sink };
+        let recording = Recording {
+            session,
+            sink,
+            meta,
+            path,
+        };
         (recording, supervised.handle, supervised.task)
     }
 
@@ -225,7 +239,12 @@ impl Recording {
     /// analysis that fails leaves the record as written (it replays); a
     /// record that cannot be finished is in [`Concluded::recorded`].
     pub async fn conclude(self, diagnose: bool) -> Result<Concluded, SessionError> {
-        let Recording { session, sink } = self;
+        let Recording {
+            session,
+            sink,
+            meta,
+            path,
+        } = self;
         let Session {
             machine,
             stages,
@@ -238,12 +257,21 @@ impl Recording {
         let t_end = sink.last_t_ns();
         let (recorder, record) = sink.into_parts();
         let analyser = machine.analyser(truth);
-        let (analysed, record) = tokio::task::spawn_blocking(move || {
+        let (mut analysed, record) = tokio::task::spawn_blocking(move || {
             let analysed = analyser(&record, diagnose);
             (analysed, record)
         })
         .await
         .map_err(|e| SessionError::Analysis(e.to_string()))?;
+        let stem = path
+            .file_stem()
+            .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+        let record_name = path
+            .file_name()
+            .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+        let files = ReportFiles::names(&stem, analysed.residuals.is_some());
+        analysed.analysis.report_mut().provenance =
+            Some(Provenance::new(&meta, &record_name, files));
         let recorder = recorder.expect("a recording session always records");
         let report =
             serde_json::to_value(analysed.analysis.report()).expect("a report always serialises");
@@ -294,9 +322,22 @@ pub struct ReportFiles {
     pub residuals_svg: Option<PathBuf>,
 }
 
+impl ReportFiles {
+    /// The names of the files written beside the record `<stem>.mcap`:
+    /// the report, the plot and, when `diagnosed`, the residual plot.
+    pub fn names(stem: &str, diagnosed: bool) -> Vec<String> {
+        let mut names = vec![format!("{stem}.report.json"), format!("{stem}.svg")];
+        if diagnosed {
+            names.push(format!("{stem}.residuals.svg"));
+        }
+        names
+    }
+}
+
 impl Concluded {
     /// Write `<stem>.report.json`, `<stem>.svg` and, when diagnosed,
-    /// `<stem>.residuals.svg` into `dir`.
+    /// `<stem>.residuals.svg` into `dir` (the names
+    /// [`ReportFiles::names`] gives).
     pub fn write_files(&self, dir: &Path, stem: &str) -> Result<ReportFiles, SessionError> {
         let report = dir.join(format!("{stem}.report.json"));
         std::fs::write(&report, self.analysis.report().to_json_pretty() + "\n").map_err(

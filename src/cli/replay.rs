@@ -11,7 +11,7 @@ use super::Failure;
 use crate::diagnose::write_residual_svg;
 use crate::machine::analyse_record;
 use crate::record::{read_mcap, Record};
-use crate::report::IdentificationReport;
+use crate::report::{IdentificationReport, Provenance};
 
 /// `motorbench replay`.
 #[derive(Debug, Args)]
@@ -41,7 +41,8 @@ pub fn replay(args: ReplayArgs) -> Result<(), Failure> {
     let record = read_mcap(&args.log).map_err(Failure::bad_input)?;
     warn_if_damaged(&args.log, &record);
     let diagnose = !args.no_diagnose;
-    let analysed = analyse_record(&record, diagnose);
+    let mut analysed = analyse_record(&record, diagnose);
+    analysed.analysis.report_mut().provenance = provenance(&record, &args.log);
     if let (Some(path), Some(plot)) = (&args.residuals_svg, &analysed.residuals) {
         write_residual_svg(plot, path).map_err(Failure::runtime)?;
     }
@@ -54,6 +55,21 @@ pub fn replay(args: ReplayArgs) -> Result<(), Failure> {
     }
     compare_with_recorded(&record, analysis.report(), diagnose, args.check)?;
     identified
+}
+
+/// Where a replayed report comes from: the run's, as recorded with its
+/// result (so a replay prints what the run printed), else the record's
+/// metadata and `path`'s file name.
+fn provenance(record: &Record, path: &std::path::Path) -> Option<Provenance> {
+    let recorded = record
+        .recorded_result
+        .as_ref()
+        .and_then(|r| r.get("provenance"))
+        .and_then(|p| serde_json::from_value(p.clone()).ok());
+    recorded.or_else(|| {
+        let name = path.file_name()?.to_string_lossy().into_owned();
+        Some(Provenance::new(record.meta.as_ref()?, &name, Vec::new()))
+    })
 }
 
 /// Say whether the replayed report equals the recorded `/bench/result`;
@@ -82,10 +98,11 @@ fn compare_with_recorded(
     Ok(())
 }
 
-/// Whether `replayed` equals `recorded`. The diagnosis is compared only
-/// when both have one to compare: a replay with `--no-diagnose` (not
-/// `diagnosed`) leaves the record's out, and a record made with
-/// `--no-diagnose` (or before the diagnosis existed) has none.
+/// Whether `replayed` equals `recorded`. The provenance (file names,
+/// version) is not compared. The diagnosis is compared only when both have
+/// one to compare: a replay with `--no-diagnose` (not `diagnosed`) leaves
+/// the record's out, and a record made with `--no-diagnose` (or before the
+/// diagnosis existed) has none.
 fn same_result(
     recorded: &serde_json::Value,
     replayed: &IdentificationReport,
@@ -93,6 +110,12 @@ fn same_result(
 ) -> bool {
     let mut recorded = recorded.clone();
     let mut now = serde_json::to_value(replayed).expect("a report always serialises");
+    for v in [&mut recorded, &mut now] {
+        if let Some(obj) = v.as_object_mut() {
+            // Where the report came from is not part of the result.
+            obj.remove("provenance");
+        }
+    }
     if !diagnosed || recorded.get("diagnosis").is_none() {
         for v in [&mut recorded, &mut now] {
             if let Some(obj) = v.as_object_mut() {
@@ -120,6 +143,10 @@ mod tests {
         assert!(same_result(&plain, &replayed, true));
         // A diagnosed record whose replay lost its diagnosis differs.
         assert!(!same_result(&diagnosed, &replayed, true));
+        // Where a report came from is not its result.
+        let mut moved = plain.clone();
+        moved["provenance"] = serde_json::json!({"record": "renamed.mcap"});
+        assert!(same_result(&moved, &replayed, true));
         // Anything else that differs still differs.
         let mut other = diagnosed.clone();
         other["best"] = "steady_state".into();

@@ -36,6 +36,7 @@ use crate::diagnose::{attach_diagnosis, ResidualPlot};
 use crate::record::{ChannelSpec, Record, SegmentKind};
 use crate::report::IdentificationReport;
 use crate::rig::ModbusProbe;
+use crate::rig::RigError;
 
 /// A simulated rig's true machine (its parameters, of the machine's own
 /// type), for the text report's "true value" column.
@@ -135,7 +136,7 @@ pub trait Machine: Send + Sync {
     /// order).
     fn record_channels(&self, sensors: &[ChannelInfo], stage_ids: &[&str]) -> Vec<ChannelSpec>;
     /// Open the rig; `realtime` paces a simulated rig at the wall clock.
-    async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, String>;
+    async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, RigError>;
     /// Run the plan to its end, recording into `sink`; every stop comes
     /// through `stops`, and the rig is safe when this returns.
     async fn run_plan(

@@ -114,6 +114,41 @@ pub struct IdentificationReport {
     /// (and diagnosis) report".
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub diagnosis: Option<Box<Diagnosis>>,
+    /// Where the report comes from, when it comes from a test (`run`, the
+    /// daemon, `replay`): an additive extension of the contract.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub provenance: Option<Provenance>,
+}
+
+/// Where a report comes from: the motor, the test's start, the record and
+/// the files written beside it, the motorbench that wrote it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Provenance {
+    /// The motor's id (the record's `motorbench.test` metadata).
+    pub motor_id: String,
+    /// When the test started, RFC 3339 (the record's metadata).
+    pub started_at: String,
+    /// The record's file name.
+    pub record: String,
+    /// The files written beside the record with this report (report,
+    /// plots), by name; empty for a replay.
+    pub files: Vec<String>,
+    /// The version of motorbench that made this report.
+    pub motorbench_version: String,
+}
+
+impl Provenance {
+    /// The provenance of a report on `record` (a file name) of the test
+    /// `meta` describes, with `files` written beside it.
+    pub fn new(meta: &crate::record::TestMeta, record: &str, files: Vec<String>) -> Provenance {
+        Provenance {
+            motor_id: meta.motor_id.clone(),
+            started_at: meta.started_at.clone(),
+            record: record.to_string(),
+            files,
+            motorbench_version: env!("CARGO_PKG_VERSION").to_string(),
+        }
+    }
 }
 
 impl IdentificationReport {
@@ -126,6 +161,7 @@ impl IdentificationReport {
             best: None,
             warnings: Vec::new(),
             diagnosis: None,
+            provenance: None,
         }
     }
 

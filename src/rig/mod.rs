@@ -11,7 +11,7 @@ use std::task::{Context, Poll, Waker};
 
 use motorbench_drivers::modbus::server::WriteSpan;
 use motorbench_drivers::modbus::{
-    BusHandle, CallPolicy, DeviceProfile, ModbusClient, PolledChannel, Register,
+    spawn_bus, BusHandle, CallPolicy, DeviceProfile, ModbusClient, PolledChannel, Register,
 };
 use motorbench_drivers::serial::port::SerialSettings;
 use motorbench_drivers::{ChannelInfo, DriverError};
@@ -60,7 +60,7 @@ pub enum RigError {
 
 /// The Modbus client of a device on `link`, or of the simulated device
 /// served in its place.
-pub(crate) fn client(
+fn client(
     name: &str,
     link: &LinkSpec,
     served: Option<&ServedLink>,
@@ -84,6 +84,52 @@ pub(crate) fn same_link(a: &ModbusDeviceLink, b: &ModbusDeviceLink) -> bool {
         (LinkSpec::Tcp(x), LinkSpec::Tcp(y)) => x == y,
         (LinkSpec::Rtu(x), LinkSpec::Rtu(y)) => x.path == y.path,
         _ => false,
+    }
+}
+
+/// A rig's Modbus buses by link: devices on one line (or one gateway
+/// address) share the one task that owns it, unless the rig is served
+/// (every simulated device then has a link of its own).
+pub(crate) struct Buses<'a> {
+    policy: CallPolicy,
+    served: bool,
+    open: Vec<(&'a ModbusDeviceLink, BusHandle)>,
+}
+
+impl<'a> Buses<'a> {
+    /// No bus open yet; `served` when the rig's devices are simulated
+    /// behind links of their own.
+    pub(crate) fn new(policy: CallPolicy, served: bool) -> Buses<'a> {
+        Buses {
+            policy,
+            served,
+            open: Vec::new(),
+        }
+    }
+
+    /// The bus of `device` (named `name` in errors), on `served` in place
+    /// of its configured link when the rig is served: one already open on
+    /// the same link, else a new one.
+    pub(crate) fn bus(
+        &mut self,
+        name: &str,
+        device: &'a ModbusDeviceLink,
+        served: Option<&ServedLink>,
+    ) -> BusHandle {
+        if !self.served {
+            if let Some((_, b)) = self.open.iter().find(|(d, _)| same_link(d, device)) {
+                return b.clone();
+            }
+        }
+        let bus = spawn_bus(client(
+            name,
+            &device.link,
+            served,
+            device.unit_id,
+            self.policy,
+        ));
+        self.open.push((device, bus.clone()));
+        bus
     }
 }
 

@@ -17,6 +17,7 @@ use super::records_index::{unix_s, IndexEntry, KeyResults, RecordOutcome, Record
 use crate::bench::{
     BenchError, Outcome, Progress, Readings, StopCause, StopReport, SupervisorHandle,
 };
+use crate::diagnose::write_residual_svg;
 use crate::machine::{Machine, PlanDurations};
 use crate::record::{Entry, Event, EventLevel, SegmentKind};
 use crate::session::{Recording, Session, SupervisorTask};
@@ -194,12 +195,8 @@ pub struct JobEnd {
 
 /// A prepared test, ready to run.
 pub struct Job {
-    run: Arc<TestRun>,
     recording: Recording,
-    task: SupervisorTask,
-    index: Arc<Mutex<RecordsIndex>>,
-    dir: PathBuf,
-    name: String,
+    ending: Ending,
 }
 
 /// Open the rig, put it under supervision, start and index the record.
@@ -251,12 +248,14 @@ pub async fn prepare(
         supervisor: handle,
     });
     let job = Job {
-        run: run.clone(),
         recording,
-        task,
-        index,
-        dir,
-        name,
+        ending: Ending {
+            run: run.clone(),
+            task,
+            index,
+            dir,
+            name,
+        },
     };
     Ok((run, job))
 }
@@ -266,43 +265,29 @@ impl Job {
     /// the index.
     pub async fn run(self) -> JobEnd {
         let Job {
-            run,
             mut recording,
-            task,
-            index,
-            dir,
-            name,
+            ending,
         } = self;
-        let progress = FeedProgress::new(run.clone(), recording.machine().durations());
+        let progress = FeedProgress::new(ending.run.clone(), recording.machine().durations());
         // Every stop goes through the supervisor, the sequencer's own too.
-        let handle = run.supervisor.clone();
+        let handle = ending.run.supervisor.clone();
         let outcome = recording.run(&progress, (&handle).into()).await;
-        let ending = Ending {
-            run,
-            handle,
-            task,
-            index,
-            dir,
-            name,
-        };
         conclude(ending, recording, outcome).await
     }
 }
 
 /// What [`conclude`] needs of a job besides its record.
-pub struct Ending {
-    /// The test.
-    pub run: Arc<TestRun>,
-    /// Its supervisor.
-    pub handle: SupervisorHandle,
+struct Ending {
+    /// The test (its supervisor's handle too).
+    run: Arc<TestRun>,
     /// The supervisor's task.
-    pub task: SupervisorTask,
+    task: SupervisorTask,
     /// The records index.
-    pub index: Arc<Mutex<RecordsIndex>>,
+    index: Arc<Mutex<RecordsIndex>>,
     /// The records directory.
-    pub dir: PathBuf,
+    dir: PathBuf,
     /// The record's name.
-    pub name: String,
+    name: String,
 }
 
 /// The end of every test, once the sequencer has returned (the rig is
@@ -316,12 +301,12 @@ async fn conclude(
 ) -> JobEnd {
     let Ending {
         run,
-        handle,
         task,
         index,
         dir,
         name,
     } = ending;
+    let handle = run.supervisor.clone();
     let retention = recording.machine().retention();
     let stop = handle.stopped();
     if let Some(s) = &stop {
@@ -347,6 +332,10 @@ async fn conclude(
     }
     handle.finish().await;
     let summary = task.await.ok();
+    let end = JobEnd {
+        latch: stop.clone().filter(|s| s.cause.latches()),
+        winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
+    };
     // Every segment is on disk (the recorder flushes at each marker): a
     // daemon killed from here on leaves a record that only lacks its
     // analysis, marked so on the next start.
@@ -368,10 +357,7 @@ async fn conclude(
             tracing::error!("{name}: {e}");
             let reason = Some(e.to_string());
             finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
-            return JobEnd {
-                latch: stop.filter(|s| s.cause.latches()),
-                winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
-            };
+            return end;
         }
     };
     let failure = concluded
@@ -384,12 +370,18 @@ async fn conclude(
     // File writing, like the analysis, stays off the reactor.
     let report_path = dir.join(&report_name);
     let svg_path = dir.join(&svg_name);
+    let residuals_path = dir.join(format!("{name}.residuals.svg"));
     let written = tokio::task::spawn_blocking(move || {
         let report_text = concluded.analysis.report().to_json_pretty() + "\n";
         let written = (
             std::fs::write(report_path, report_text).map_err(|e| e.to_string()),
             concluded.analysis.write_plot(&concluded.record, &svg_path),
         );
+        if let Some(plot) = &concluded.residuals {
+            if let Err(e) = write_residual_svg(plot, &residuals_path) {
+                tracing::error!("writing the residual plot failed: {e}");
+            }
+        }
         (written, concluded.analysis)
     })
     .await;
@@ -399,10 +391,7 @@ async fn conclude(
             tracing::error!("{name}: writing the report failed: {e}");
             let reason = Some(format!("writing the report failed: {e}"));
             finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
-            return JobEnd {
-                latch: stop.filter(|s| s.cause.latches()),
-                winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
-            };
+            return end;
         }
     };
     let report = analysis.report();
@@ -463,10 +452,7 @@ async fn conclude(
         s.eta_s = Some(0.0);
         s.eta_max_s = Some(0.0);
     });
-    JobEnd {
-        latch: stop.filter(|s| s.cause.latches()),
-        winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
-    }
+    end
 }
 
 /// Mark a test failed in the index and its status.

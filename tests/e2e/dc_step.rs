@@ -84,7 +84,36 @@ async fn default_run_identifies_the_seed_motor_and_replays_identically() {
         "replay sees exactly the samples the bench saw"
     );
     let again = identify_dc(&replayed);
-    assert_eq!(&again.report, done.analysis.report());
+    let mut live = done.analysis.report().clone();
+    let provenance = live
+        .provenance
+        .take()
+        .expect("a run's report says where it came from");
+    assert_eq!(again.report, live);
+    // Where it came from: the motor, the start, the record and every file
+    // written beside it, the version.
+    assert_eq!(provenance.motor_id, cfg.motor_id);
+    let meta = replayed.meta.as_ref().unwrap();
+    assert_eq!(provenance.started_at, meta.started_at);
+    let dir = done.mcap_path.parent().unwrap();
+    assert_eq!(
+        dir.join(&provenance.record),
+        done.mcap_path,
+        "the record's file name"
+    );
+    let mut written: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| *n != provenance.record)
+        .collect();
+    written.sort();
+    let mut named = provenance.files.clone();
+    named.sort();
+    assert_eq!(
+        named, written,
+        "every file written is named, and only those"
+    );
+    assert_eq!(provenance.motorbench_version, env!("CARGO_PKG_VERSION"));
     let recorded = replayed
         .recorded_result
         .expect("the report is in the record");

@@ -38,6 +38,7 @@ use crate::identify::{identify_dc, Identification};
 use crate::model::DcParams;
 use crate::record::{ChannelSpec, Record, SegmentKind};
 use crate::report::{render_text, segment_plots, write_segments_svg, IdentificationReport};
+use crate::rig::RigError;
 
 /// A DC identification, with the simulated motor when there is one.
 struct DcAnalysis {
@@ -151,8 +152,8 @@ impl Machine for Config {
         record_channels(sensors, stage_ids.first().copied().unwrap_or("stage"))
     }
 
-    async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, String> {
-        let rig = build_rig(self, realtime).await.map_err(|e| e.to_string())?;
+    async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, RigError> {
+        let rig = build_rig(self, realtime).await?;
         Ok(OpenedRig {
             stages: vec![RigStage {
                 name: "power stage",

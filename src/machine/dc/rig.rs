@@ -8,7 +8,7 @@
 use motorbench_drivers::can::{
     CanChannel, CanSignalSensors, SlcanOptions, SlcanStream, SocketCanStream,
 };
-use motorbench_drivers::modbus::{spawn_bus, ModbusPowerStage, ModbusSensors, PolledChannel};
+use motorbench_drivers::modbus::{ModbusPowerStage, ModbusSensors, PolledChannel};
 use motorbench_drivers::serial::port::open_serial;
 use motorbench_drivers::serial::{SerialChannel, SerialSensors};
 use motorbench_drivers::{ChannelInfo, MergedSensors, PowerStage, SensorStream};
@@ -17,7 +17,7 @@ use super::served::{ServedDaq, ServedRig};
 use super::sim_rig;
 use crate::config::{Backend, CanLink, CanTransport, Config, ModbusRig, SensorLink};
 use crate::model::DcParams;
-use crate::rig::{client, same_link, ModbusProbe, RigError, ServedLink};
+use crate::rig::{Buses, ModbusProbe, RigError, ServedLink};
 
 /// Plant rate of the simulated rig when it is served behind a protocol,
 /// Hz (independent of the bench's poll rate).
@@ -66,13 +66,12 @@ async fn modbus_rig(
         }
         _ => None,
     };
-    let stage_bus = spawn_bus(client(
+    let mut buses = Buses::new(m.policy, served.is_some());
+    let stage_bus = buses.bus(
         "modbus-stage",
-        &m.power_stage.link,
+        &m.power_stage,
         served.as_ref().map(|s| &s.stage_link),
-        m.power_stage.unit_id,
-        m.policy,
-    ));
+    );
     let stage_id = format!("modbus:{}", m.power_stage.profile.name);
     let stage = ModbusPowerStage::new(
         &stage_id,
@@ -83,17 +82,11 @@ async fn modbus_rig(
     let (sensors, modbus_sensors): (Box<dyn SensorStream>, _) = match &m.sensors {
         SensorLink::Modbus(link) => {
             // One task per link: a stage and sensors on one line share it.
-            let sensor_bus = if served.is_none() && same_link(&m.power_stage, link.as_ref()) {
-                stage_bus
-            } else {
-                spawn_bus(client(
-                    "modbus-sensors",
-                    &link.link,
-                    served.as_ref().map(|s| &s.daq_link),
-                    link.unit_id,
-                    m.policy,
-                ))
-            };
+            let sensor_bus = buses.bus(
+                "modbus-sensors",
+                link.as_ref(),
+                served.as_ref().map(|s| &s.daq_link),
+            );
             let source = format!("modbus:{}", link.profile.name);
             let channels: Vec<PolledChannel> = m
                 .channels

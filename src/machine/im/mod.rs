@@ -39,6 +39,7 @@ use crate::identify::{identify_im, ImIdentification};
 use crate::model::{Connection, ImModel};
 use crate::record::{ChannelSpec, Record, SegmentKind};
 use crate::report::{render_im_text, write_im_svg, IdentificationReport};
+use crate::rig::RigError;
 
 struct ImAnalysis(ImIdentification);
 
@@ -163,10 +164,8 @@ impl Machine for ImRunConfig {
         sweep_channels(sensors, id(0), id(1))
     }
 
-    async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, String> {
-        let rig = build_im_rig(self, realtime)
-            .await
-            .map_err(|e| e.to_string())?;
+    async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, RigError> {
+        let rig = build_im_rig(self, realtime).await?;
         Ok(OpenedRig {
             // The supply first: a stop takes the machine off the supply
             // before the dynamometer lets go of the shaft.

@@ -3,16 +3,14 @@
 //! power meter and the encoder counter over Modbus (with the simulated rig
 //! served behind those links when the configuration asks for it).
 
-use motorbench_drivers::modbus::{
-    spawn_bus, BusHandle, ModbusPowerStage, ModbusSensors, PolledChannel,
-};
+use motorbench_drivers::modbus::{ModbusPowerStage, ModbusSensors, PolledChannel};
 use motorbench_drivers::{ChannelInfo, MergedSensors, PowerStage, SensorStream};
 
 use super::served::{ServedDevice, ServedImRig};
 use super::{sim_im_rig, ImModbusRig, ImRunConfig, VfdDyno, VfdSupply};
 use crate::config::ModbusDeviceLink;
 use crate::model::ImCircuit;
-use crate::rig::{client, same_link, RigError, ServedLink};
+use crate::rig::{same_link, Buses, RigError};
 
 /// Plant rate of the simulated induction-machine rig when it is served
 /// behind Modbus, Hz (independent of the bench's poll rate).
@@ -43,38 +41,6 @@ impl std::fmt::Debug for ImRig {
             .field("sensors", &self.sensors.id())
             .field("served", &self.served)
             .finish()
-    }
-}
-
-/// Buses by link: devices on one line (or one gateway address) share the
-/// task that owns it.
-struct Buses<'a> {
-    m: &'a ImModbusRig,
-    served: bool,
-    open: Vec<(&'a ModbusDeviceLink, BusHandle)>,
-}
-
-impl<'a> Buses<'a> {
-    fn bus(
-        &mut self,
-        name: &str,
-        device: &'a ModbusDeviceLink,
-        served: Option<&ServedLink>,
-    ) -> BusHandle {
-        if !self.served {
-            if let Some((_, b)) = self.open.iter().find(|(d, _)| same_link(d, device)) {
-                return b.clone();
-            }
-        }
-        let bus = spawn_bus(client(
-            name,
-            &device.link,
-            served,
-            device.unit_id,
-            self.m.policy,
-        ));
-        self.open.push((device, bus.clone()));
-        bus
     }
 }
 
@@ -155,11 +121,7 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
         _ => None,
     };
     let s = served.as_ref();
-    let mut buses = Buses {
-        m,
-        served: s.is_some(),
-        open: Vec::new(),
-    };
+    let mut buses = Buses::new(m.policy, s.is_some());
     let supply_bus = buses.bus("modbus-supply", &m.supply, s.map(|s| &s.supply.link));
     let dyno_bus = buses.bus(
         "modbus-dyno",
