@@ -80,7 +80,7 @@ spacing to locked rotor) or `load-curve` (linear spacing to a slip of
 0.25-0.7, stopping short of locked rotor), 12-45 points, the lowest slip
 0.001-0.015, ascending or descending, one to three supply voltages (rated,
 then 55-90 % of the previous; saturation cases two or three). Slip from
-the speed as read (0.01 rpm). Meters: gain error noise 0.03-0.5 % of reading
+the speed as read (0.01 rpm). Meters: noise of 0.03-0.5 % of reading
 on current, 0.05-1 % on power, 0.02-0.2 % on voltage, plus 0-0.05 % of the
 range; autoranging (the decade above the reading) or a fixed range per sweep
 (1-2-5 above the sweep's largest value), 4000, 20 000 or 200 000 counts;
