@@ -5,6 +5,8 @@
 //! - [`config`]: rig and test configuration (TOML), validated;
 //!   [`config::TestConfig`] names the test plan ([`config::PlanKind`],
 //!   `test.plan`), for the CLI, the daemon and the tests alike.
+//! - [`contract`]: the data contract's serde types (the identification
+//!   report, the diagnosis, the version); depends on nothing else here.
 //! - [`bounds`]: the practical bounds on every number from outside that
 //!   sizes an allocation, a loop or a wait.
 //! - [`excerpt`]: user input quoted in error messages, long values cut.
@@ -48,6 +50,7 @@ pub mod bench;
 pub mod bounds;
 pub mod cli;
 pub mod config;
+pub mod contract;
 pub mod diagnose;
 pub mod excerpt;
 pub mod identify;

@@ -270,8 +270,12 @@ impl Recording {
             .file_name()
             .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
         let files = ReportFiles::names(&stem, analysed.residuals.is_some());
-        analysed.analysis.report_mut().provenance =
-            Some(Provenance::new(&meta, &record_name, files));
+        analysed.analysis.report_mut().provenance = Some(Provenance::new(
+            &meta.motor_id,
+            &meta.started_at,
+            &record_name,
+            files,
+        ));
         let recorder = recorder.expect("a recording session always records");
         let report =
             serde_json::to_value(analysed.analysis.report()).expect("a report always serialises");

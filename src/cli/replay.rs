@@ -68,7 +68,13 @@ fn provenance(record: &Record, path: &std::path::Path) -> Option<Provenance> {
         .and_then(|p| serde_json::from_value(p.clone()).ok());
     recorded.or_else(|| {
         let name = path.file_name()?.to_string_lossy().into_owned();
-        Some(Provenance::new(record.meta.as_ref()?, &name, Vec::new()))
+        let meta = record.meta.as_ref()?;
+        Some(Provenance::new(
+            &meta.motor_id,
+            &meta.started_at,
+            &name,
+            Vec::new(),
+        ))
     })
 }
 

@@ -15,7 +15,6 @@ pub mod blind;
 pub mod cli;
 pub mod decision;
 mod plot;
-pub mod report;
 mod text;
 
 mod dc;
@@ -33,7 +32,10 @@ mod im_verdict;
 pub use dc::diagnose_dc;
 pub use im::diagnose_im;
 pub use plot::{write_residual_svg, ResidualPanel, ResidualPlot};
-pub use report::{
+// The diagnosis' report types live in the contract; the diagnosis'
+// files name them as `super::report::…`.
+use crate::contract as report;
+pub use crate::contract::{
     Candidate, Diagnosis, Gap, GapRegion, LookAlike, NominalFit, ParamCorrection, RegionAxis,
     ResidualEvidence, Verdict,
 };

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 /// Contract version written to every record and report.
-pub const SCHEMA_VERSION: &str = "1";
+pub use crate::contract::SCHEMA_VERSION;
 
 /// The test kinds of the data contract.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize, PartialOrd, Ord)]

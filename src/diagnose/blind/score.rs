@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::suite::{read_json, Manifest, TruthFile};
 use super::CaseTruth;
-use crate::diagnose::report::Diagnosis;
+use crate::contract::Diagnosis;
 use crate::diagnose::{diagnose, DiagnoseOptions};
 use crate::record::{load_record_files, SegmentKind};
 

@@ -6,7 +6,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::report::ParamEstimate;
+use super::ParamEstimate;
 
 /// The nominal model: the paper's model as identification produces it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

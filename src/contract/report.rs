@@ -1,12 +1,12 @@
 //! The identification report as the data contract defines it
-//! (`motorbench identify … --json`, `/bench/result`).
+//! (`motorbench identify … --json`, `/bench/result`), with motorbench's
+//! additive keys (`diagnosis`, `provenance`).
 
 use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use crate::diagnose::Diagnosis;
-use crate::record::SCHEMA_VERSION;
+use super::{Diagnosis, SCHEMA_VERSION};
 
 /// One identified parameter.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -139,11 +139,12 @@ pub struct Provenance {
 
 impl Provenance {
     /// The provenance of a report on `record` (a file name) of the test
-    /// `meta` describes, with `files` written beside it.
-    pub fn new(meta: &crate::record::TestMeta, record: &str, files: Vec<String>) -> Provenance {
+    /// of `motor_id` started at `started_at`, with `files` written beside
+    /// it.
+    pub fn new(motor_id: &str, started_at: &str, record: &str, files: Vec<String>) -> Provenance {
         Provenance {
-            motor_id: meta.motor_id.clone(),
-            started_at: meta.started_at.clone(),
+            motor_id: motor_id.to_string(),
+            started_at: started_at.to_string(),
             record: record.to_string(),
             files,
             motorbench_version: env!("CARGO_PKG_VERSION").to_string(),

@@ -1,0 +1,19 @@
+//! The data contract's types, as serde reads and writes them: the
+//! identification report (`/bench/result`, `report.json`, `--json`) with
+//! its methods and parameters, the diagnosis, and the contract's version.
+//! This module depends on nothing else in the crate, so identification,
+//! diagnosis, the report renderers and the record all build on it without
+//! importing one another. The extensions motorbench makes to the contract
+//! are listed in `docs/data-contract.md`.
+
+mod diagnosis;
+mod report;
+
+pub use diagnosis::{
+    reportable, Candidate, Diagnosis, Gap, GapRegion, LookAlike, NominalFit, ParamCorrection,
+    RegionAxis, ResidualEvidence, Verdict,
+};
+pub use report::{unphysical_param, IdentificationReport, MethodReport, ParamEstimate, Provenance};
+
+/// The contract version this motorbench writes.
+pub const SCHEMA_VERSION: &str = "1";
