@@ -85,7 +85,7 @@ pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
                 Effect::CoulombFriction,
                 Augment::CoulombFriction,
                 [0.3 * p.tst.max(1e-4), share * s.w_max.max(1.0), 0.0],
-                vec![lin(0.3 * p.tst.max(1e-4)), Transform::Log],
+                vec![Transform::Log, Transform::Log],
             )
         })
         .chain([
