@@ -58,6 +58,12 @@ pub struct CandidateDef {
 /// the fit that explains the fitting data best stands.
 const BRUSH_KNEES: [f64; 3] = [0.03, 0.3, 1.0];
 
+/// Sensor lags a fit starts from, in sample intervals, on each channel: a
+/// lag of many samples (a slow current sensor, a filtered tachometer) is
+/// far from a one-sample start, where the nominal fit has absorbed it into
+/// La or Ra and the gradient points elsewhere.
+const LAG_SAMPLES: [f64; 2] = [1.0, 20.0];
+
 /// Decay speeds a breakaway fit starts from, as shares of the record's
 /// largest speed: the breakaway excess of dry friction fades over a speed
 /// band anywhere from a few percent of rated speed to a third of it, and
@@ -107,19 +113,17 @@ pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
                 [0.0; 3],
                 vec![lin(0.01 / s.heat_total.max(1e-9))],
             ),
-            def(
-                Effect::SensorLag,
-                Augment::SensorLag(LagChannel::Current),
-                [s.dt, 0.0, 0.0],
-                vec![lin(s.dt)],
-            ),
-            def(
-                Effect::SensorLag,
-                Augment::SensorLag(LagChannel::Speed),
-                [s.dt, 0.0, 0.0],
-                vec![lin(s.dt)],
-            ),
         ])
+        .chain(LAG_SAMPLES.iter().flat_map(|n| {
+            [LagChannel::Current, LagChannel::Speed].map(|ch| {
+                def(
+                    Effect::SensorLag,
+                    Augment::SensorLag(ch),
+                    [n * s.dt, 0.0, 0.0],
+                    vec![lin(n * s.dt)],
+                )
+            })
+        }))
         .chain(BRUSH_KNEES.iter().map(|share| {
             let knee = share * s.i_settled.max(1e-3 * s.i_max).max(1e-6);
             def(
