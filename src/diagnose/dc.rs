@@ -141,8 +141,10 @@ pub fn diagnose_dc(
     // decides nothing (the tests below do), so a peak need not be
     // significant to be tried.
     let peaks_hz = all_segment_peaks(&nominal_all.model, &runs, scales0.dt);
+    let nominal_noise = residual_weights(&nominal_all.model, &runs);
     let scales = RecordScales {
         peaks_hz,
+        w_noise: 1.0 / nominal_noise.speed,
         ..scales0
     };
 
@@ -322,7 +324,7 @@ pub fn diagnose_dc(
         })
         .collect();
     scored.sort_by(|a, b| b.3.total_cmp(&a.3));
-    let noise_floor = noise_floor(&runs, &residual_weights(&nominal_all.model, &runs));
+    let noise_floor = noise_floor(&runs, &nominal_noise);
     // A candidate that passes the tests is the verdict only if its
     // parameters are determined and physical, and if it explains the gap:
     // its held-out NRMSE within `EXPLAINED` times the noise floor.
@@ -966,6 +968,7 @@ fn scales(runs: &[SegmentRun]) -> RecordScales {
         heat_total: 0.0,
         dt: runs[0].dt,
         peaks_hz: Vec::new(),
+        w_noise: 0.0,
     };
     for r in runs {
         for k in 0..r.len() {

@@ -27,6 +27,9 @@ pub struct RecordScales {
     /// Frequencies of the largest spectral peaks in the nominal residual
     /// (speed and current), Hz; each starts a shaft-compliance fit.
     pub peaks_hz: Vec<f64>,
+    /// Noise of the speed reading (σ from the nominal residual), rad/s:
+    /// the smallest speed the record resolves.
+    pub w_noise: f64,
 }
 
 /// One candidate ready to fit.
@@ -47,7 +50,26 @@ pub struct CandidateDef {
 /// peaks). A fit can drive the knee far below every current of the record,
 /// where the record no longer tells it where the knee is: on a noise-free
 /// record with a 0.1 A knee, a start at 0.33 A ended at 0.002 A.
-const BRUSH_KNEES: [f64; 2] = [0.3, 1.0];
+///
+/// A third start at 3 % covers a knee far below the settled current (a
+/// drop that follows the current's sign, as a converter's dead time
+/// gives): from 0.3 the fit takes the drop as a change of Ra and runs the
+/// knee above every current. Three starts a decade apart span the range;
+/// the fit that explains the fitting data best stands.
+const BRUSH_KNEES: [f64; 3] = [0.03, 0.3, 1.0];
+
+/// Sensor lags a fit starts from, in sample intervals, on each channel: a
+/// lag of many samples (a slow current sensor, a filtered tachometer) is
+/// far from a one-sample start, where the nominal fit has absorbed it into
+/// La or Ra and the gradient points elsewhere.
+const LAG_SAMPLES: [f64; 2] = [1.0, 20.0];
+
+/// Decay speeds a breakaway fit starts from, as shares of the record's
+/// largest speed: the breakaway excess of dry friction fades over a speed
+/// band anywhere from a few percent of rated speed to a third of it, and
+/// from one start the fit can settle on an excess of the wrong sign
+/// (friction rising with speed, which the viscous term already has).
+const BREAKAWAY_SPEEDS: [f64; 2] = [0.05, 0.25];
 
 /// Every candidate (sensor lag twice, on the current and on the speed; the
 /// brush drop from two knees; shaft compliance from each resonance start):
@@ -62,63 +84,64 @@ pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
         e,
         transforms,
     };
-    vec![
-        def(
-            Effect::CoulombFriction,
-            Augment::CoulombFriction,
-            [0.3 * p.tst.max(1e-4), 0.05 * s.w_max.max(1.0), 0.0],
-            vec![lin(0.3 * p.tst.max(1e-4)), Transform::Log],
-        ),
-        def(
-            Effect::ArmatureReaction,
-            Augment::ArmatureReaction,
-            [0.0; 3],
-            vec![lin(0.02 / i2)],
-        ),
-        def(
-            Effect::InductanceSaturation,
-            Augment::InductanceSaturation,
-            [0.0; 3],
-            vec![lin(0.2 / i2)],
-        ),
-        def(
-            Effect::ThermalDrift,
-            Augment::ThermalDrift,
-            [0.0; 3],
-            vec![lin(0.01 / s.heat_total.max(1e-9))],
-        ),
-        def(
-            Effect::SensorLag,
-            Augment::SensorLag(LagChannel::Current),
-            [s.dt, 0.0, 0.0],
-            vec![lin(s.dt)],
-        ),
-        def(
-            Effect::SensorLag,
-            Augment::SensorLag(LagChannel::Speed),
-            [s.dt, 0.0, 0.0],
-            vec![lin(s.dt)],
-        ),
-    ]
-    .into_iter()
-    .chain(BRUSH_KNEES.iter().map(|share| {
-        let knee = share * s.i_settled.max(1e-3 * s.i_max).max(1e-6);
-        def(
-            Effect::BrushDrop,
-            Augment::BrushDrop,
-            [0.01 * s.u_max, knee, 0.0],
-            vec![lin(0.01 * s.u_max), Transform::Log],
-        )
-    }))
-    .chain(shaft_starts(s).into_iter().map(|hz| {
-        def(
-            Effect::ShaftCompliance,
-            Augment::ShaftCompliance,
-            [hz, 0.5, 0.1],
-            vec![Transform::Log, Transform::Logit, Transform::Log],
-        )
-    }))
-    .collect()
+    BREAKAWAY_SPEEDS
+        .iter()
+        .map(|share| {
+            def(
+                Effect::CoulombFriction,
+                Augment::CoulombFriction,
+                [0.3 * p.tst.max(1e-4), share * s.w_max.max(1.0), 0.0],
+                vec![Transform::Log, Transform::Log],
+            )
+        })
+        .chain([
+            def(
+                Effect::ArmatureReaction,
+                Augment::ArmatureReaction,
+                [0.0; 3],
+                vec![lin(0.02 / i2)],
+            ),
+            def(
+                Effect::InductanceSaturation,
+                Augment::InductanceSaturation,
+                [0.0; 3],
+                vec![lin(0.2 / i2)],
+            ),
+            def(
+                Effect::ThermalDrift,
+                Augment::ThermalDrift,
+                [0.0; 3],
+                vec![lin(0.01 / s.heat_total.max(1e-9))],
+            ),
+        ])
+        .chain(LAG_SAMPLES.iter().flat_map(|n| {
+            [LagChannel::Current, LagChannel::Speed].map(|ch| {
+                def(
+                    Effect::SensorLag,
+                    Augment::SensorLag(ch),
+                    [n * s.dt, 0.0, 0.0],
+                    vec![lin(n * s.dt)],
+                )
+            })
+        }))
+        .chain(BRUSH_KNEES.iter().map(|share| {
+            let knee = share * s.i_settled.max(1e-3 * s.i_max).max(1e-6);
+            def(
+                Effect::BrushDrop,
+                Augment::BrushDrop,
+                [0.01 * s.u_max, knee, 0.0],
+                vec![lin(0.01 * s.u_max), Transform::Log],
+            )
+        }))
+        .chain(shaft_starts(s).into_iter().map(|hz| {
+            def(
+                Effect::ShaftCompliance,
+                Augment::ShaftCompliance,
+                [hz, 0.5, 0.1],
+                vec![Transform::Log, Transform::Logit, Transform::Log],
+            )
+        }))
+        .collect()
 }
 
 /// Resonance frequencies a shaft-compliance fit starts from: the residual
@@ -169,6 +192,12 @@ pub fn undetermined(m: &AugModel, s: &RecordScales) -> Option<String> {
             "its decay speed ws = {:.3} rad/s exceeds every speed of the record ({:.3} rad/s): \
              a constant torque there, the same as Tst",
             e[1], s.w_max
+        )),
+        Augment::CoulombFriction if e[1] <= s.w_noise => Some(format!(
+            "its decay speed ws = {:.3} rad/s is within the speed reading's noise ({:.3} rad/s): \
+             the excess then acts only at a standstill the record cannot resolve, where it \
+             moves the instant the rotor breaks away and nothing else",
+            e[1], s.w_noise
         )),
         Augment::BrushDrop if e[1] >= s.i_max => Some(format!(
             "its knee current i0 = {:.3} A lies above every current of the record ({:.3} A): \
@@ -369,6 +398,7 @@ mod tests {
             heat_total: 50.0,
             dt: 5e-4,
             peaks_hz: Vec::new(),
+            w_noise: 0.1,
         }
     }
 
@@ -395,6 +425,9 @@ mod tests {
             with(Augment::CoulombFriction, [0.01, 400.0, 0.0]),
             with(Augment::ArmatureReaction, [0.02, 0.0, 0.0]),
             with(Augment::ThermalDrift, [0.05, 0.0, 0.0]),
+            // A breakaway decaying within the speed reading's noise: it
+            // only moves the instant the rotor starts.
+            with(Augment::CoulombFriction, [0.01, 0.05, 0.0]),
             // A lag of 6 % of a sample: the sampling's own timing.
             with(Augment::SensorLag(LagChannel::Speed), [3e-5, 0.0, 0.0]),
         ];

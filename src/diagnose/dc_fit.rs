@@ -435,6 +435,7 @@ mod tests {
             heat_total: heat,
             dt: DT,
             peaks_hz: Vec::new(),
+            w_noise: 0.0,
         };
         let nominal = AugModel::nominal(DcParams::SEED_TABLE4_MOMENTS);
         let w = Weights {
