@@ -12,10 +12,10 @@ use motorbench::diagnose::blind::simulate_im_case;
 use motorbench::diagnose::{diagnose_im, DiagnoseOptions};
 use motorbench::model::{Connection, Effect};
 use motorbench::record::{load_record_files, SegmentKind};
-use std::path::PathBuf;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::hint::black_box;
+use std::path::PathBuf;
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("diagnose_im");
