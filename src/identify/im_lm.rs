@@ -1016,6 +1016,57 @@ mod tests {
     }
 
     #[test]
+    fn the_evaluation_bound_scales_with_the_points() {
+        // 150 000 point evaluations: 1063 runs on 141 points, q = 7 …
+        assert_eq!(evaluation_bound(141, 7), 1063);
+        // … never more than the crate's usual 200·(q + 1) …
+        assert_eq!(evaluation_bound(10, 7), 1600);
+        // … nor fewer than 20·(q + 1).
+        assert_eq!(evaluation_bound(1_000_000, 4), 100);
+    }
+
+    #[test]
+    fn a_far_start_on_many_points_stays_within_the_bound() {
+        // 6000 points (bound: 20·(q + 1) = 120 evaluations) from a start
+        // a factor 30 off every element.
+        let c = single(1.0, 2.0, 60.0, 1.2, 3.0);
+        let supply = ImSupply {
+            line_voltage: 400.0,
+            frequency: 50.0,
+            connection: Connection::Star,
+            pole_pairs: 2,
+        };
+        let mut rng = StdRng::seed_from_u64(3);
+        let d = SlipSweep::simulate(
+            &c,
+            &supply,
+            &slip_grid(6000, 0.002),
+            &SweepNoise::relative(0.002),
+            0,
+            &mut rng,
+        )
+        .phase_data();
+        let mut o = LmOptions::new(ImModel::Single);
+        o.split_policy = SplitPolicy::Never;
+        o.starts = vec![single(30.0, 0.07, 2.0, 36.0, 0.1)];
+        let fit = fit_lm(&d, &o).unwrap();
+        let bound = evaluation_bound(d.len(), 5);
+        assert_eq!(bound, 120);
+        // One screening run and one final run, each within its bound (the
+        // crate may overrun by the few evaluations of its last step).
+        assert!(fit.evaluations <= 2 * bound + 20, "{}", fit.evaluations);
+        // The flag and the warning go together.
+        assert_eq!(
+            fit.stopped_at_bound,
+            fit.warnings
+                .iter()
+                .any(|w| w.contains("stopped at its bound")),
+            "{:?}",
+            fit.warnings
+        );
+    }
+
+    #[test]
     fn too_few_points_are_refused() {
         let c = single(1.0, 2.0, 60.0, 1.2, 3.0);
         let mut d = data(&c, 0.0);
