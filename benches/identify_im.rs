@@ -4,15 +4,24 @@
 //! whitening, identifiability, leakage-split convention) and one
 //! Levenberg–Marquardt run from a single start.
 //!
+//! And the whole `identify_im` (the `lm` fit, its held-out validation and
+//! the paper's recursive estimator) of a motor lab's record of a small
+//! motor (`model::LabMachine`: no-load sweep with the slip not measured,
+//! load curve, locked rotor; saturation, core loss, friction and windage)
+//! for every circuit: the 141-point record of `tests/data/im_lab`, and the
+//! same shape with a 400-point load curve (416 points).
+//!
 //! `cargo bench --bench identify_im`
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use motorbench::identify::{
-    fit_lm, slip_grid, LmOptions, PhaseData, SlipSweep, SplitPolicy, SweepNoise,
+    fit_lm, identify_im, slip_grid, LmOptions, PhaseData, SlipSweep, SplitPolicy, SweepNoise,
 };
 use motorbench::model::{
-    Connection, ImCircuit, ImModel, ImSupply, PerUnitBase, SEED_DOUBLE_CAGE_PU,
+    Connection, ImCircuit, ImModel, ImSupply, LabMachine, LabMeters, PerUnitBase,
+    SEED_DOUBLE_CAGE_PU,
 };
+use motorbench::record::{OperatingPoint, Record};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::hint::black_box;
@@ -69,5 +78,60 @@ fn bench(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, bench);
+/// The lab record with a load curve of `load_points` readings.
+fn lab_record(load_points: usize) -> Record {
+    let m = LabMachine::small_motor();
+    let mut record = Record::default();
+    for (k, seg) in m
+        .lab_record(load_points, 6, 10, &LabMeters::default(), 19)
+        .iter()
+        .enumerate()
+    {
+        record
+            .operating_points
+            .extend(seg.points.iter().map(|p| OperatingPoint {
+                segment: k as u32,
+                slip: p.slip,
+                line_voltage: p.line_voltage,
+                line_current: p.line_current,
+                input_power: p.input_power,
+                speed: f64::NAN,
+                frequency: m.frequency,
+                torque: p.torque,
+            }));
+    }
+    record
+}
+
+fn bench_lab(c: &mut Criterion) {
+    let mut group = c.benchmark_group("identify_im lab record");
+    group.sample_size(10);
+    for load_points in [125, 400] {
+        let record = lab_record(load_points);
+        let n = record.operating_points.len();
+        for model in [
+            ImModel::Single,
+            ImModel::SingleFe,
+            ImModel::Double,
+            ImModel::DoubleFe,
+        ] {
+            let id = identify_im(&record, Some(Connection::Star), model);
+            println!(
+                "identify_im {model} on {n} points: {} evaluations in the final fit_lm{}",
+                id.lm.as_ref().map_or(0, |f| f.evaluations),
+                if id.lm.as_ref().is_some_and(|f| f.stopped_at_bound) {
+                    " (stopped at its bound)"
+                } else {
+                    ""
+                }
+            );
+            group.bench_function(format!("{model}, {n} points"), |b| {
+                b.iter(|| identify_im(black_box(&record), Some(Connection::Star), model))
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, bench_lab);
 criterion_main!(benches);

@@ -130,9 +130,24 @@ pub fn diagnose_im(
     }
     evaluated.sort_by(|a, b| b.score.total_cmp(&a.score));
 
+    // Candidates as reported: one whose effect parameters are not finite
+    // or leave their physical range is left out, with a warning, and can
+    // be no verdict.
+    let candidates = reportable(
+        evaluated
+            .iter()
+            .map(|e| candidate_report(&data, e, gap_before, split.ratio())),
+        &mut warnings,
+    );
+    let physical = |e: &Evaluated| {
+        let name = effect_name(Some(e.effect));
+        candidates.iter().any(|c| c.effect == name)
+    };
+
     // Verdict.
     let winner = evaluated
-        .first()
+        .iter()
+        .find(|e| physical(e))
         .filter(|e| e.test.significant() && e.score > 0.0);
     let regions = {
         let v = &nominal_full.x;
@@ -190,12 +205,6 @@ pub fn diagnose_im(
                 .unwrap_or((f64::NAN, f64::NAN))
         })
         .collect();
-    let candidates = reportable(
-        evaluated
-            .iter()
-            .map(|e| candidate_report(&data, e, gap_before, split.ratio())),
-        &mut warnings,
-    );
     let report = Diagnosis {
         schema_version: SCHEMA_VERSION.into(),
         kind: "im_slip_sweep".into(),
@@ -602,7 +611,8 @@ mod tests {
     fn one_voltage_warns_that_main_flux_saturation_is_unresolved() {
         let model = ImAugmentation::with(Effect::DeepBar, 1.0);
         let mut x = nominal_x();
-        x.extend([2.0, 0.7]);
+        // xi1 = 2, bar share 0.7 (carried as ln and logit).
+        x.extend([2f64.ln(), (0.7f64 / 0.3).ln()]);
         let run = diagnose_im(&record(model, &x, &[400.0], 4), &star()).unwrap();
         let d = &run.report;
         assert_eq!(d.verdict.effect, "deep_bar", "{:?}", d.candidates);

@@ -9,14 +9,20 @@
 //! Every vector starts with `ln Rs, ln Xm, ln Rr, ln Xr`; an effect appends
 //! its own few parameters:
 //!
-//! | effect | parameters | model |
+//! | effect | parameters (physical range) | model |
 //! | --- | --- | --- |
-//! | `iron_loss` | `Rfe` (Ω) | `Rfe` in parallel with `Xm` |
-//! | `deep_bar` | `xi1`, `bar_share` (1) | skin effect of a rectangular bar: `Rr(s) = Rr·(1 − b + b·kR(ξ))`, `Xr(s) = Xr·(1 − b + b·kX(ξ))`, `ξ = xi1·√s` |
-//! | `main_flux_saturation` | `Es` (V) | `Xm(E) = Xm/(1 + (E/Es)^7)`, `E` the air-gap voltage |
-//! | `leakage_saturation` | `Iknee` (A), `slope` (1) | leakage flux `X·I` linear up to the knee current, then rising with `slope` of its slope (bend smoothed over a quarter of the knee), `I` the phase current; both leakages |
-//! | `stray_load_loss` | `Rsll` (Ω) | a loss `3·Rsll·Ir²` drawn from the supply as in-phase current |
-//! | `thermal_drift` | `rise_Rs`, `rise_Rr` (1) | `Rs` times `1 + rise_Rs·h`, `Rr` times `1 + rise_Rr·h`, `h` the heat index 0…1 |
+//! | `iron_loss` | `Rfe` (Ω, > 0) | `Rfe` in parallel with `Xm` |
+//! | `deep_bar` | `xi1` (1, > 0), `bar_share` (1, 0…1) | skin effect of a rectangular bar: `Rr(s) = Rr·(1 − b + b·kR(ξ))`, `Xr(s) = Xr·(1 − b + b·kX(ξ))`, `ξ = xi1·√s` |
+//! | `main_flux_saturation` | `Es` (V, > 0) | `Xm(E) = Xm/(1 + (E/Es)^7)`, `E` the air-gap voltage: saturation only lowers `Xm` |
+//! | `leakage_saturation` | `Iknee` (A, > 0), `slope` (1, 0…1) | leakage flux `X·I` linear up to the knee current, then rising with `slope` of its slope (bend smoothed over a quarter of the knee), `I` the phase current; both leakages, only lowered |
+//! | `stray_load_loss` | `Rsll` (Ω, ≥ 0) | a loss `3·Rsll·Ir²` drawn from the supply as in-phase current |
+//! | `thermal_drift` | `rise_Rs`, `rise_Rr` (1, ≥ 0) | `Rs` times `1 + rise_Rs·h`, `Rr` times `1 + rise_Rr·h`, `h` the heat index 0…1 |
+//!
+//! Every effect parameter is carried in the fitted vector so that it
+//! cannot leave its physical range ([`Transform`]): a quantity > 0 (or
+//! ≥ 0, reached in the limit) as its logarithm, a share as its logit. A
+//! fit can then only approach the neutral value (no rise, no loss) and
+//! never ask for a falling resistance or a negative loss.
 //!
 //! The heat index `h` of a point is the measured `I²` accumulated in
 //! recording order up to it, normalised to 1 at the end of the record: a
@@ -52,8 +58,8 @@ pub struct PointInput {
 pub enum Transform {
     /// The vector holds `ln(value)`.
     Log,
-    /// The vector holds the value itself.
-    Linear,
+    /// The vector holds `logit(value)`: a share in (0, 1).
+    Logistic,
 }
 
 impl Transform {
@@ -61,9 +67,14 @@ impl Transform {
     pub fn value(self, x: f64) -> f64 {
         match self {
             Transform::Log => x.exp(),
-            Transform::Linear => x,
+            Transform::Logistic => logistic(x),
         }
     }
+}
+
+/// `1/(1 + e^(−x))`, in (0, 1).
+pub fn logistic(x: f64) -> f64 {
+    1.0 / (1.0 + (-x).exp())
 }
 
 /// One effect parameter: contract-style key, unit, meaning.
@@ -225,12 +236,12 @@ impl ImAugmentation {
             EffectParam {
                 key: "xi1",
                 unit: "1",
-                transform: Transform::Linear,
+                transform: Transform::Log,
             },
             EffectParam {
                 key: "bar_share",
                 unit: "1",
-                transform: Transform::Linear,
+                transform: Transform::Logistic,
             },
         ];
         const ES: [EffectParam; 1] = [EffectParam {
@@ -247,24 +258,24 @@ impl ImAugmentation {
             EffectParam {
                 key: "slope",
                 unit: "1",
-                transform: Transform::Linear,
+                transform: Transform::Logistic,
             },
         ];
         const RSLL: [EffectParam; 1] = [EffectParam {
             key: "Rsll",
             unit: "ohm",
-            transform: Transform::Linear,
+            transform: Transform::Log,
         }];
         const RISE: [EffectParam; 2] = [
             EffectParam {
                 key: "rise_Rs",
                 unit: "1",
-                transform: Transform::Linear,
+                transform: Transform::Log,
             },
             EffectParam {
                 key: "rise_Rr",
                 unit: "1",
-                transform: Transform::Linear,
+                transform: Transform::Log,
             },
         ];
         match self.effect {
@@ -295,17 +306,26 @@ impl ImAugmentation {
                 .iter()
                 .map(|k| vec![(k * xm).ln()])
                 .collect(),
-            Some(Effect::DeepBar) => vec![vec![1.0, 0.5], vec![2.0, 0.5]],
+            // xi1 1 or 2, bar share 1/2 (logit 0).
+            Some(Effect::DeepBar) => vec![vec![0.0, 0.0], vec![2f64.ln(), 0.0]],
             Some(Effect::MainFluxSaturation) => [0.9, 1.2, 2.0]
                 .iter()
                 .map(|k| vec![(k * v_max).ln()])
                 .collect(),
             Some(Effect::LeakageSaturation) => [0.3, 0.6, 1.0]
                 .iter()
-                .map(|k| vec![(k * i_max).ln(), 0.5])
+                .map(|k| vec![(k * i_max).ln(), 0.0])
                 .collect(),
-            Some(Effect::StrayLoadLoss) => vec![vec![0.0]],
-            Some(Effect::ThermalDrift) => vec![vec![0.0, 0.0]],
+            // Near the neutral 0 (a loss and a rise are ≥ 0: carried as
+            // logarithms, they start small rather than at 0).
+            Some(Effect::StrayLoadLoss) => {
+                let rr = nominal[2].exp();
+                [0.05, 0.5].iter().map(|k| vec![(k * rr).ln()]).collect()
+            }
+            Some(Effect::ThermalDrift) => [0.01f64, 0.1]
+                .iter()
+                .map(|r| vec![r.ln(), r.ln()])
+                .collect(),
             Some(_) => vec![vec![]],
         }
     }
@@ -336,11 +356,11 @@ impl ImAugmentation {
                 linear_terminal(&cage, Some(rfe), s, v)
             }
             Some(Effect::DeepBar) => {
-                let b = x[5];
-                if !(0.0..=1.0).contains(&b) {
+                let (xi1, b) = (x[4].exp(), logistic(x[5]));
+                if !xi1.is_finite() {
                     return None;
                 }
-                let (kr, kx) = skin_effect(x[4].abs() * s.sqrt());
+                let (kr, kx) = skin_effect(xi1 * s.sqrt());
                 let fr = 1.0 - b + b * kr;
                 let fx = 1.0 - b + b * kx;
                 let deep = Cage {
@@ -359,7 +379,7 @@ impl ImAugmentation {
             }
             Some(Effect::LeakageSaturation) => {
                 let knee = x[4].exp();
-                let slope = x[5];
+                let slope = logistic(x[5]);
                 // A positive slope keeps the leakage flux rising with I.
                 if !(knee.is_finite() && knee > 0.0 && (0.02..=1.0).contains(&slope)) {
                     return None;
@@ -368,12 +388,15 @@ impl ImAugmentation {
             }
             Some(Effect::StrayLoadLoss) => {
                 let t = linear_terminal(&cage, None, s, v);
-                let p_sll = 3.0 * x[4] * t.rotor_current * t.rotor_current;
+                let p_sll = 3.0 * x[4].exp() * t.rotor_current * t.rotor_current;
+                if !p_sll.is_finite() {
+                    return None;
+                }
                 stray_terminal(&cage, s, v, p_sll)
             }
             Some(Effect::ThermalDrift) => {
-                let (fs, fr) = (1.0 + x[4] * p.heat, 1.0 + x[5] * p.heat);
-                if fs < 0.2 || fr < 0.2 {
+                let (fs, fr) = (1.0 + x[4].exp() * p.heat, 1.0 + x[5].exp() * p.heat);
+                if !(fs.is_finite() && fr.is_finite()) {
                     return None;
                 }
                 let hot = Cage {
@@ -509,6 +532,10 @@ mod tests {
     use crate::identify::predict;
     use crate::model::{ImCircuit, RotorCage};
 
+    fn logit(p: f64) -> f64 {
+        (p / (1.0 - p)).ln()
+    }
+
     fn x0() -> Vec<f64> {
         [1.0f64, 60.0, 1.2, 2.0].iter().map(|v| v.ln()).collect()
     }
@@ -543,11 +570,11 @@ mod tests {
         let nominal = ImAugmentation::nominal(1.0);
         let neutral: [(Effect, &[f64]); 6] = [
             (Effect::IronLoss, &[27.6]),
-            (Effect::DeepBar, &[0.0, 0.0]),
+            (Effect::DeepBar, &[-40.0, -40.0]),
             (Effect::MainFluxSaturation, &[20.7]),
-            (Effect::LeakageSaturation, &[1.0, 1.0]),
-            (Effect::StrayLoadLoss, &[0.0]),
-            (Effect::ThermalDrift, &[0.0, 0.0]),
+            (Effect::LeakageSaturation, &[1.0, 40.0]),
+            (Effect::StrayLoadLoss, &[-40.0]),
+            (Effect::ThermalDrift, &[-40.0, -40.0]),
         ];
         for (e, extra) in neutral {
             let m = ImAugmentation::with(e, 1.0);
@@ -593,21 +620,25 @@ mod tests {
         // Leakage saturation: more current at locked rotor.
         let ls = at(
             ImAugmentation::with(Effect::LeakageSaturation, 1.0),
-            &[20f64.ln(), 0.4],
+            &[20f64.ln(), logit(0.4)],
             1.0,
         );
         assert!(ls.current > 1.05 * base(1.0).current);
         // Stray load loss: power, and a little in-phase current.
         let sl = at(
             ImAugmentation::with(Effect::StrayLoadLoss, 1.0),
-            &[0.3],
+            &[0.3f64.ln()],
             0.5,
         );
         let extra = 3.0 * 0.3 * base(0.5).rotor_current.powi(2);
         assert!((sl.power - base(0.5).power - extra).abs() < 1e-6 * extra);
         assert!(sl.current > base(0.5).current && sl.current < 1.05 * base(0.5).current);
         // Deep bar: more power at locked rotor for the same kx = 0.
-        let db = at(ImAugmentation::with(Effect::DeepBar, 1.0), &[2.0, 0.7], 1.0);
+        let db = at(
+            ImAugmentation::with(Effect::DeepBar, 1.0),
+            &[2f64.ln(), logit(0.7)],
+            1.0,
+        );
         assert!(db.power > base(1.0).power);
         let (kr, kx) = skin_effect(0.05);
         let (kr2, kx2) = skin_effect(0.0499);

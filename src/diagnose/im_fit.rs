@@ -257,7 +257,16 @@ pub fn intervals(
     if !jac.iter().all(|v| v.is_finite()) {
         return none();
     }
-    let svd = jac.svd(false, true);
+    // Bounded: an SVD that does not converge gives no intervals rather
+    // than an endless loop.
+    let Some(svd) = jac.try_svd(
+        false,
+        true,
+        f64::EPSILON,
+        crate::identify::SVD_MAX_ITERATIONS,
+    ) else {
+        return none();
+    };
     let Some(v_t) = svd.v_t else {
         return none();
     };

@@ -136,6 +136,193 @@ fn sweep_nrmse(c: &ImCircuit, sweep: &SlipSweep, segment: u32) -> Option<f64> {
     (!parts.is_empty()).then(|| parts.iter().sum::<f64>() / parts.len() as f64)
 }
 
+/// Folds of interleaved points when no segment can be held out: within
+/// each segment the points ranked by slip (recording order among equal
+/// slips) go to fold `rank mod k`.
+const INTERLEAVED_FOLDS: usize = 5;
+
+/// A noise-to-misfit ratio above which the circuit is said to misfit the
+/// data: the rms residual exceeds three times the scatter between
+/// neighbouring points (a correct model leaves a ratio near 1; a smooth
+/// misfit raises the rms but hardly the scatter between neighbours).
+const MISFIT_RATIO: f64 = 3.0;
+
+/// Relative noise of `residual` (one segment after another, each ordered
+/// by slip) from its first differences: `σ² ≈ mean((r_k − r_{k−1})²)/2`.
+fn neighbour_noise(sweep: &SlipSweep, residual: &[f64]) -> Option<f64> {
+    let segments: std::collections::BTreeSet<u32> =
+        sweep.points.iter().map(|p| p.segment).collect();
+    let (mut sum, mut count) = (0.0, 0usize);
+    for seg in segments {
+        let mut idx: Vec<usize> = (0..sweep.points.len())
+            .filter(|&k| sweep.points[k].segment == seg)
+            .collect();
+        idx.sort_by(|&a, &b| sweep.points[a].slip.total_cmp(&sweep.points[b].slip));
+        for w in idx.windows(2) {
+            let d = residual[w[1]] - residual[w[0]];
+            if d.is_finite() {
+                sum += d * d;
+                count += 1;
+            }
+        }
+    }
+    (count >= 3).then(|| (sum / (2.0 * count as f64)).sqrt())
+}
+
+/// The relative residuals of current and power of `c` on `sweep`.
+fn relative_residuals(c: &ImCircuit, sweep: &SlipSweep) -> (Vec<f64>, Vec<f64>) {
+    let d = sweep.phase_data();
+    (0..d.len())
+        .map(|k| {
+            let (i, p) = predict(c, d.slip[k], d.voltage[k]);
+            (
+                (i - d.current[k]) / d.current[k].abs().max(f64::MIN_POSITIVE),
+                (p - d.power[k]) / d.power[k].abs().max(f64::MIN_POSITIVE),
+            )
+        })
+        .unzip()
+}
+
+/// A warning when `c` misfits `sweep` well beyond its noise.
+fn misfit_warning(c: &ImCircuit, sweep: &SlipSweep, model: ImModel) -> Option<String> {
+    let (ri, rp) = relative_residuals(c, sweep);
+    let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
+    // A floor of 0.01 % (below any meter) keeps noise-free data from
+    // calling round-off a misfit.
+    let noise = |r: &[f64]| neighbour_noise(sweep, r).map(|s| s.max(1e-4));
+    let (ni, np) = (noise(&ri)?, noise(&rp)?);
+    let (ei, ep) = (rms(&ri), rms(&rp));
+    (ei > MISFIT_RATIO * ni || ep > MISFIT_RATIO * np).then(|| {
+        format!(
+            "lm: the {model} circuit misfits these data: rms relative residual {:.2} % (current), \
+             {:.2} % (power), against a scatter of about {:.2} % and {:.2} % between neighbouring \
+             points; its elements are biased by what the circuit lacks (a loss, saturation, or a \
+             slip recorded as 0 where it was not measured), and its intervals do not cover that bias \
+             (`diagnose` locates the misfit)",
+            100.0 * ei,
+            100.0 * ep,
+            100.0 * ni,
+            100.0 * np
+        )
+    })
+}
+
+/// Mean over current and power of the NRMSE of `pred` against `sweep`.
+fn pooled_nrmse(sweep: &SlipSweep, pred: &[(f64, f64)]) -> Option<f64> {
+    let d = sweep.phase_data();
+    let i: Vec<f64> = pred.iter().map(|p| p.0).collect();
+    let p: Vec<f64> = pred.iter().map(|p| p.1).collect();
+    let parts: Vec<f64> = [nrmse(&d.current, &i), nrmse(&d.power, &p)]
+        .into_iter()
+        .flatten()
+        .collect();
+    (!parts.is_empty()).then(|| parts.iter().sum::<f64>() / parts.len() as f64)
+}
+
+/// The segments whose slip range the other segments cover: holding one
+/// out then asks the fit to interpolate, not to extrapolate.
+fn covered_segments(sweep: &SlipSweep) -> Vec<u32> {
+    let segments: std::collections::BTreeSet<u32> =
+        sweep.points.iter().map(|p| p.segment).collect();
+    let range = |keep: &dyn Fn(u32) -> bool| {
+        sweep
+            .points
+            .iter()
+            .filter(|p| keep(p.segment))
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p.slip), hi.max(p.slip))
+            })
+    };
+    segments
+        .iter()
+        .copied()
+        .filter(|&s| {
+            let (lo, hi) = range(&|t| t == s);
+            let (rlo, rhi) = range(&|t| t != s);
+            // Within the others' range, give or take a tenth of it.
+            let tol = 0.1 * (rhi - rlo).max(0.0);
+            lo >= rlo - tol && hi <= rhi + tol
+        })
+        .collect()
+}
+
+/// Held-out validation of the fit `full`: leave one segment out where the
+/// other segments cover its slip range (sweeps at several voltages), else
+/// interleaved points. Each held-out fit starts from `full` alone. Returns
+/// the NRMSE and how it was taken.
+fn validate(
+    sweep: &SlipSweep,
+    opts: &LmOptions,
+    full: &LmFit,
+    warnings: &mut Vec<String>,
+) -> Option<f64> {
+    let opts = LmOptions {
+        starts: vec![full.circuit],
+        ..opts.clone()
+    };
+    let segments: std::collections::BTreeSet<u32> =
+        sweep.points.iter().map(|p| p.segment).collect();
+    let covered = covered_segments(sweep);
+    let subset = |keep: &dyn Fn(usize) -> bool| SlipSweep {
+        points: sweep
+            .points
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| keep(*k))
+            .map(|(_, p)| *p)
+            .collect(),
+        ..sweep.clone()
+    };
+    if segments.len() >= 2 && covered.len() == segments.len() {
+        let mut scores = Vec::new();
+        for &held in &segments {
+            let rest = subset(&|k| sweep.points[k].segment != held);
+            if let Ok(f) = fit_lm(&rest.phase_data(), &opts) {
+                scores.extend(sweep_nrmse(&f.circuit, sweep, held));
+            }
+        }
+        return (!scores.is_empty()).then(|| scores.iter().sum::<f64>() / scores.len() as f64);
+    }
+    // Interleaved folds, stratified by segment.
+    let n = sweep.points.len();
+    let mut fold = vec![0usize; n];
+    for &seg in &segments {
+        let mut idx: Vec<usize> = (0..n).filter(|&k| sweep.points[k].segment == seg).collect();
+        idx.sort_by(|&a, &b| sweep.points[a].slip.total_cmp(&sweep.points[b].slip));
+        for (rank, &k) in idx.iter().enumerate() {
+            fold[k] = rank % INTERLEAVED_FOLDS;
+        }
+    }
+    let mut pred = vec![(f64::NAN, f64::NAN); n];
+    for f in 0..INTERLEAVED_FOLDS {
+        if !fold.contains(&f) {
+            continue;
+        }
+        let train = subset(&|k| fold[k] != f);
+        let fitted = match fit_lm(&train.phase_data(), &opts) {
+            Ok(fitted) => fitted,
+            Err(e) => {
+                warnings.push(format!(
+                    "lm: no held-out validation: the fit without fold {} of {INTERLEAVED_FOLDS} failed ({e})",
+                    f + 1
+                ));
+                return None;
+            }
+        };
+        let d = sweep.phase_data();
+        for k in (0..n).filter(|&k| fold[k] == f) {
+            pred[k] = predict(&fitted.circuit, d.slip[k], d.voltage[k]);
+        }
+    }
+    if segments.len() >= 2 {
+        warnings.push(format!(
+            "lm: held-out validation on interleaved points ({INTERLEAVED_FOLDS} folds): no segment \
+             can be held out whole, the others do not cover its slip range"
+        ));
+    }
+    pooled_nrmse(sweep, &pred)
+}
+
 fn lm_method(
     sweep: &SlipSweep,
     model: ImModel,
@@ -153,16 +340,32 @@ fn lm_method(
             values.push((p.param.key().to_string(), p.value, p.ci95));
         }
     }
-    if !fit.identifiability.unidentifiable.is_empty() {
-        let names: Vec<&str> = fit
-            .identifiability
-            .unidentifiable
-            .iter()
-            .map(|p| p.key())
-            .collect();
+    let at_bound = &fit.identifiability.at_bound;
+    if !at_bound.is_empty() {
+        let names: Vec<&str> = at_bound.iter().map(|p| p.key()).collect();
         warnings.push(format!(
-            "lm: {} not determined by these data (left out of the parameters); record input power, or fix Rs (DC test) and Xm",
+            "lm: the fit drove {} towards 0 (below 10⁻³·|Z(s=1)|): these data ask for less than \
+             the {model} circuit holds; a simpler circuit may fit as well",
             names.join(", ")
+        ));
+    }
+    let weak: Vec<&str> = fit
+        .identifiability
+        .unidentifiable
+        .iter()
+        .filter(|p| !at_bound.contains(p))
+        .map(|p| p.key())
+        .collect();
+    if !weak.is_empty() {
+        let advice = if opts.channels.uses_power() {
+            "fixing an element measured otherwise (Rs from a DC test) removes a degree of freedom"
+        } else {
+            "record input power, or fix Rs (DC test) and Xm"
+        };
+        warnings.push(format!(
+            "lm: {} not determined by these data (left out of the parameters: relative standard \
+             error above 50 %, or on a direction the data do not see); {advice}",
+            weak.join(", ")
         ));
     }
     for w in &fit.identifiability.weak_before_convention {
@@ -177,34 +380,31 @@ fn lm_method(
         ));
     }
     warnings.extend(fit.warnings.iter().map(|w| format!("lm: {w}")));
+    warnings.extend(misfit_warning(&fit.circuit, sweep, model));
 
-    // Leave one segment out.
     let segments: std::collections::BTreeSet<u32> =
         sweep.points.iter().map(|p| p.segment).collect();
-    let mut scores = Vec::new();
-    if segments.len() >= 2 {
-        for &held in &segments {
-            let rest = SlipSweep {
-                points: sweep
-                    .points
-                    .iter()
-                    .copied()
-                    .filter(|p| p.segment != held)
-                    .collect(),
-                ..sweep.clone()
-            };
-            if let Ok(f) = fit_lm(&rest.phase_data(), &opts) {
-                scores.extend(sweep_nrmse(&f.circuit, sweep, held));
-            }
-        }
-    } else {
+    if segments.len() < 2 {
         warnings.push(
             "lm: one sweep only, so no held-out validation (sweep at a second voltage for one)"
                 .into(),
         );
     }
-    let validation_nrmse =
-        (!scores.is_empty()).then(|| scores.iter().sum::<f64>() / scores.len() as f64);
+    let mut validation_nrmse = if segments.len() >= 2 {
+        validate(sweep, &opts, &fit, warnings)
+    } else {
+        None
+    };
+    // An NRMSE of 1 is the held-out data's own mean: above it the fit is
+    // no prediction at all, and the number is no score.
+    if let Some(v) = validation_nrmse.filter(|v| !(v.is_finite() && *v < 1.0)) {
+        warnings.push(format!(
+            "lm: held-out NRMSE {v:.3e}, not reported as a score: the circuit fitted without the \
+             held-out points predicts them worse than their own mean (a circuit that misfits \
+             these data, or held-out points unlike the rest)"
+        ));
+        validation_nrmse = None;
+    }
     let report = MethodReport {
         applies: true,
         params: Some(params_of(&values)),

@@ -21,7 +21,7 @@
 //!   ([`LeakageSplit`], IEEE 112 by design class) and `Xs` is reported as
 //!   derived from it. Whatever stays weak is flagged and given no interval.
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
+use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use nalgebra::storage::Owned;
 use nalgebra::{DMatrix, DVector, Dyn};
 
@@ -34,6 +34,21 @@ use crate::model::{standstill_rotor_leakage, ImCircuit, ImModel, ImParam, Leakag
 /// Relative standard error (log scale) above which a direction counts as
 /// not determined by the data.
 pub const PRACTICAL_LIMIT: f64 = 0.5;
+
+/// Iteration bound of every singular-value decomposition of the IM fits
+/// (nalgebra's plain `svd` iterates without bound, and never ends on
+/// some ill-conditioned matrices).
+pub const SVD_MAX_ITERATIONS: usize = 10_000;
+
+/// Work bound of one Levenberg–Marquardt run, in point evaluations
+/// (residual evaluations times operating points): a run on `n` points
+/// may evaluate its residuals `SOLVE_POINT_EVALUATIONS/n` times (at most
+/// the crate's usual `200·(q + 1)`, at least `20·(q + 1)`), so the time
+/// of a fit no longer grows with the record's length times its
+/// difficulty. The screening runs from several starts share one such
+/// bound between them. Deterministic, unlike a time limit, so a replay
+/// reproduces a fit to the last digit.
+pub const SOLVE_POINT_EVALUATIONS: usize = 150_000;
 
 /// How residuals are scaled before whitening.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -128,9 +143,11 @@ pub struct LmFit {
     pub circuit: ImCircuit,
     /// Every element of the model.
     pub params: Vec<FittedParam>,
-    /// The fitted (free) elements, in the order of [`LmFit::correlation`].
+    /// The fitted elements with a finite variance (the data determine
+    /// them), in the order of [`LmFit::correlation`].
     pub free: Vec<ImParam>,
-    /// Correlation matrix of the free elements (log scale).
+    /// Correlation matrix of those elements (log scale); every entry
+    /// finite.
     pub correlation: DMatrix<f64>,
     /// What the data determine and what convention was used.
     pub identifiability: Identifiability,
@@ -144,6 +161,9 @@ pub struct LmFit {
     pub starts: (usize, usize),
     /// Residual and Jacobian evaluations, all starts together.
     pub evaluations: usize,
+    /// Whether the final run stopped at its evaluation bound
+    /// ([`evaluation_bound`]) instead of converging (a warning says so).
+    pub stopped_at_bound: bool,
     /// Findings worth a user's attention.
     pub warnings: Vec<String>,
 }
@@ -356,19 +376,47 @@ const SCREEN_TOL: f64 = 1e-8;
 /// Relative tolerance of the final fits.
 const FINAL_TOL: f64 = 1e-12;
 
-fn solve(mut problem: SweepProblem<'_>, tol: f64) -> (SweepProblem<'_>, f64, bool) {
+/// Residual evaluations one run on `points` points may use with `q`
+/// free elements (see [`SOLVE_POINT_EVALUATIONS`]).
+pub fn evaluation_bound(points: usize, q: usize) -> usize {
+    (SOLVE_POINT_EVALUATIONS / points.max(1)).clamp(20 * (q + 1), 200 * (q + 1))
+}
+
+/// How one Levenberg–Marquardt run ended.
+struct Solved<'a> {
+    problem: SweepProblem<'a>,
+    cost: f64,
+    converged: bool,
+    /// Stopped at its evaluation bound, not converged.
+    at_bound: bool,
+}
+
+fn solve(problem: SweepProblem<'_>, tol: f64, max_evaluations: usize) -> Solved<'_> {
     let start_ok = problem.residuals().is_some();
     if !start_ok {
-        return (problem, f64::INFINITY, false);
+        return Solved {
+            problem,
+            cost: f64::INFINITY,
+            converged: false,
+            at_bound: false,
+        };
     }
-    let lm = LevenbergMarquardt::new().with_patience(200).with_tol(tol);
-    let (p, report) = lm.minimize(problem);
-    problem = p;
+    let q = problem.param.free.len();
+    let patience = (max_evaluations / (q + 1)).max(1);
+    let lm = LevenbergMarquardt::new()
+        .with_patience(patience)
+        .with_tol(tol);
+    let (problem, report) = lm.minimize(problem);
     let cost = problem
         .residuals()
         .map_or(f64::INFINITY, |r| r.norm_squared());
     let cost = if cost >= 1e199 { f64::INFINITY } else { cost };
-    (problem, cost, report.termination.was_successful())
+    Solved {
+        problem,
+        cost,
+        converged: report.termination.was_successful(),
+        at_bound: report.termination == TerminationReason::LostPatience,
+    }
 }
 
 /// A start for the fit under the leakage split: the exact member of the
@@ -485,9 +533,18 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
         free: free.clone(),
         xs_ratio: None,
     };
+    // The starts share one run's bound (each at least 5·(q + 1)
+    // evaluations): more starts, shorter screening runs.
+    let bound = evaluation_bound(data.len(), free.len());
+    let screen_bound = (bound / starts.len().max(1)).max(5 * (free.len() + 1));
     let mut results = Vec::new();
     for s in &starts {
-        let (p, cost, ok) = solve(make(open(*s), weights.clone(), s), SCREEN_TOL);
+        let Solved {
+            problem: p,
+            cost,
+            converged: ok,
+            ..
+        } = solve(make(open(*s), weights.clone(), s), SCREEN_TOL, screen_bound);
         evaluations += p.evaluations.get();
         if let Some(c) = p.param.circuit(&p.x) {
             results.push((cost, ok, c));
@@ -528,9 +585,10 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
     }
     let probe = make(open(best), weights.clone(), &best);
     weights.l_inv = whitening(&probe.raw_residuals(&best), dof, opts.channels.uses_power());
-    let (p, _, _) = solve(make(open(best), weights.clone(), &best), FINAL_TOL);
-    evaluations += p.evaluations.get();
-    let mut problem = p;
+    let solved = solve(make(open(best), weights.clone(), &best), FINAL_TOL, bound);
+    evaluations += solved.problem.evaluations.get();
+    let mut at_bound = solved.at_bound;
+    let mut problem = solved.problem;
     let mut analysis = analyse(&problem)?;
     let weak_before = weak_directions(&analysis.svd_parts(), &problem.param.free, PRACTICAL_LIMIT);
 
@@ -571,7 +629,12 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
         let free_cost = problem
             .residuals()
             .map_or(f64::INFINITY, |r| r.norm_squared());
-        let (p, cost, _) = solve(make(param, weights.clone(), &start), FINAL_TOL);
+        let Solved {
+            problem: p,
+            cost,
+            at_bound: p_at_bound,
+            ..
+        } = solve(make(param, weights.clone(), &start), FINAL_TOL, bound);
         evaluations += p.evaluations.get();
         // Keep the convention only where the data do not contradict it: a
         // likelihood-ratio test on one degree of freedom (whitened
@@ -581,6 +644,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
             || cost - free_cost <= 10.0 * analysis.s2
         {
             problem = p;
+            at_bound = p_at_bound;
             analysis = analyse(&problem)?;
             convention = Some(format!(
                 "Xs = {:.3}·Xr(s=1) (stator share {:.2} of the locked-rotor leakage, the IEEE 112 design-class split)",
@@ -689,14 +753,28 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
             source,
         });
     }
+    // Correlation over the elements with a finite, non-zero variance
+    // only: an element the data do not determine has no correlation to
+    // report (it would be ∞/∞, a NaN).
     let sd: Vec<f64> = (0..q).map(|j| cov[(j, j)].max(0.0).sqrt()).collect();
-    let correlation = DMatrix::from_fn(q, q, |i, j| {
-        if sd[i] > 0.0 && sd[j] > 0.0 {
-            cov[(i, j)] / (sd[i] * sd[j])
+    let determined: Vec<usize> = (0..q)
+        .filter(|&j| sd[j].is_finite() && sd[j] > 0.0)
+        .collect();
+    let correlation = DMatrix::from_fn(determined.len(), determined.len(), |a, b| {
+        let (i, j) = (determined[a], determined[b]);
+        let r = cov[(i, j)] / (sd[i] * sd[j]);
+        if r.is_finite() {
+            r.clamp(-1.0, 1.0)
         } else {
-            f64::NAN
+            0.0
         }
     });
+    if at_bound {
+        warnings.push(format!(
+            "the fit stopped at its bound of {bound} residual evaluations before converging: \
+             the elements are where it stopped, not at a minimum"
+        ));
+    }
 
     // Fit quality in relative terms.
     let rel = |meas: &[f64], k: usize, model: f64| {
@@ -712,7 +790,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
     Ok(LmFit {
         circuit,
         params,
-        free: problem.param.free.clone(),
+        free: determined.iter().map(|&j| problem.param.free[j]).collect(),
         correlation,
         identifiability: Identifiability {
             weak_before_convention: weak_before,
@@ -726,6 +804,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
         paper_cost: paper_cost(data, &circuit, opts.channels),
         starts: (starts.len(), converged),
         evaluations,
+        stopped_at_bound: at_bound,
         warnings,
     })
 }
@@ -780,7 +859,9 @@ fn analyse(problem: &SweepProblem<'_>) -> Result<Analysis, String> {
     if !jac.iter().all(|v| v.is_finite()) {
         return Err("the scaled Jacobian is not finite at the solution".into());
     }
-    let svd = jac.svd(false, true);
+    let svd = jac
+        .try_svd(false, true, f64::EPSILON, SVD_MAX_ITERATIONS)
+        .ok_or("the SVD of the Jacobian did not converge within its iteration bound")?;
     let v_t = svd.v_t.ok_or("SVD failed")?;
     let sv = svd.singular_values;
     let smax = sv.max();
@@ -932,6 +1013,57 @@ mod tests {
             .contains("not part of the single model"));
         o.fixed = vec![(ImParam::Rs, -1.0)];
         assert!(fit_lm(&data(&c, 0.003), &o).unwrap_err().contains("> 0"));
+    }
+
+    #[test]
+    fn the_evaluation_bound_scales_with_the_points() {
+        // 150 000 point evaluations: 1063 runs on 141 points, q = 7 …
+        assert_eq!(evaluation_bound(141, 7), 1063);
+        // … never more than the crate's usual 200·(q + 1) …
+        assert_eq!(evaluation_bound(10, 7), 1600);
+        // … nor fewer than 20·(q + 1).
+        assert_eq!(evaluation_bound(1_000_000, 4), 100);
+    }
+
+    #[test]
+    fn a_far_start_on_many_points_stays_within_the_bound() {
+        // 6000 points (bound: 20·(q + 1) = 120 evaluations) from a start
+        // a factor 30 off every element.
+        let c = single(1.0, 2.0, 60.0, 1.2, 3.0);
+        let supply = ImSupply {
+            line_voltage: 400.0,
+            frequency: 50.0,
+            connection: Connection::Star,
+            pole_pairs: 2,
+        };
+        let mut rng = StdRng::seed_from_u64(3);
+        let d = SlipSweep::simulate(
+            &c,
+            &supply,
+            &slip_grid(6000, 0.002),
+            &SweepNoise::relative(0.002),
+            0,
+            &mut rng,
+        )
+        .phase_data();
+        let mut o = LmOptions::new(ImModel::Single);
+        o.split_policy = SplitPolicy::Never;
+        o.starts = vec![single(30.0, 0.07, 2.0, 36.0, 0.1)];
+        let fit = fit_lm(&d, &o).unwrap();
+        let bound = evaluation_bound(d.len(), 5);
+        assert_eq!(bound, 120);
+        // One screening run and one final run, each within its bound (the
+        // crate may overrun by the few evaluations of its last step).
+        assert!(fit.evaluations <= 2 * bound + 20, "{}", fit.evaluations);
+        // The flag and the warning go together.
+        assert_eq!(
+            fit.stopped_at_bound,
+            fit.warnings
+                .iter()
+                .any(|w| w.contains("stopped at its bound")),
+            "{:?}",
+            fit.warnings
+        );
     }
 
     #[test]

@@ -46,7 +46,8 @@ pub use im::{identify_im, sweep_of, ImIdentification};
 pub use im_classical::{classical_single, classical_starts};
 pub use im_identifiability::{weak_directions, Identifiability, WeakDirection, STRUCTURAL_LIMIT};
 pub use im_lm::{
-    fit_lm, FittedParam, LmFit, LmOptions, ParamSource, ResidualScale, SplitPolicy, PRACTICAL_LIMIT,
+    evaluation_bound, fit_lm, FittedParam, LmFit, LmOptions, ParamSource, ResidualScale,
+    SplitPolicy, PRACTICAL_LIMIT, SOLVE_POINT_EVALUATIONS, SVD_MAX_ITERATIONS,
 };
 pub use im_recursive::{
     paper_cost, recursive_estimate, recursive_pass, Innovation, RecursiveEstimate,

@@ -15,6 +15,7 @@ pub use zoh::Zoh;
 mod im;
 mod im_closed_form;
 mod im_equivalent;
+mod im_lab;
 
 pub use im::{
     Connection, ImCircuit, ImCircuitError, ImModel, ImOperatingPoint, ImParam, ImSupply,
@@ -25,3 +26,4 @@ pub use im_equivalent::{
     impedance_mismatch, standstill_rotor_leakage, stator_leakage_range, with_leakage_split,
     with_stator_leakage, EquivalentError, LeakageSplit,
 };
+pub use im_lab::{LabMachine, LabMeters, LabPoint, LabSegment, LabTerminal};

@@ -15,6 +15,7 @@ mod identify_coverage;
 mod identify_methods;
 mod identify_property;
 mod im_coverage;
+mod im_lab_record;
 mod im_paper_study;
 mod im_sweep_rig;
 mod safety;
