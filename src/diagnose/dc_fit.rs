@@ -468,7 +468,12 @@ mod tests {
     }
 
     proptest! {
-        #![proptest_config(ProptestConfig::with_cases(24))]
+        #![proptest_config(ProptestConfig {
+            cases: 24,
+            // A fixed seed: CI runs the same cases every time.
+            rng_seed: proptest::test_runner::RngSeed::Fixed(24),
+            ..ProptestConfig::default()
+        })]
 
         /// identify(simulate(θ)) ≈ θ for every augmentation with a zero
         /// effect inside its search space, from the starts the diagnosis
