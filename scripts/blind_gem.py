@@ -40,6 +40,8 @@ import sys
 
 import numpy as np
 
+from blind_suite import Suite
+
 import gym_electric_motor.physical_systems as ps
 from gym_electric_motor.physical_systems.converters import ContFourQuadrantConverter
 from gym_electric_motor.physical_systems.electric_motors import DcPermanentlyExcitedMotor
@@ -361,17 +363,7 @@ def main():
     ap.add_argument("--seed", type=int, default=20261121)
     ap.add_argument("--cases", type=int, default=15, help="gem cases to add")
     args = ap.parse_args()
-    manifest_path = os.path.join(args.out, "cases.json")
-    truth_path = os.path.join(args.out, "truth.json")
-    if os.path.exists(manifest_path):
-        manifest = json.load(open(manifest_path))
-        truth = json.load(open(truth_path))
-    else:
-        os.makedirs(args.out, exist_ok=False)
-        manifest = {"seed": args.seed, "cases": []}
-        truth = {"seed": args.seed, "cases": []}
-    if any(c["id"].startswith("gem-") for c in manifest["cases"]):
-        sys.exit(f"{manifest_path}: already holds gem cases; give a new suite")
+    suite = Suite(args.out, args.seed, "gem-", "gem")
     rng = np.random.default_rng(args.seed)
     # Three fifths none, the rest the converter's interlocking (brush_drop).
     effects = ["none" if n % 5 < 3 else "brush_drop" for n in range(args.cases)]
@@ -381,15 +373,9 @@ def main():
         plan = PLANS[n % len(PLANS)]
         case_rng = np.random.default_rng([args.seed, n])
         segs, t = make_case(case_rng, effect, plan)
-        manifest["cases"].append(write_case(args.out, cid, segs))
-        truth["cases"].append([cid, t])
+        suite.add(write_case(args.out, cid, segs), t)
         print(f"{cid}: {plan} {effect}", file=sys.stderr)
-    with open(manifest_path, "w") as f:
-        json.dump(manifest, f, indent=2)
-        f.write("\n")
-    with open(truth_path, "w") as f:
-        json.dump(truth, f, indent=2)
-        f.write("\n")
+    suite.save()
     print(f"{len(effects)} gym-electric-motor cases added to {args.out}")
 
 

@@ -105,6 +105,8 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from blind_suite import Suite
+
 from importlib.metadata import version
 
 from motulator.common.model._base import System
@@ -555,19 +557,7 @@ def main():
     ap.add_argument("--seed", type=int, default=20261121)
     ap.add_argument("--cases", type=int, default=12, help="motulator cases to add")
     args = ap.parse_args()
-    manifest_path = os.path.join(args.out, "cases.json")
-    truth_path = os.path.join(args.out, "truth.json")
-    if os.path.exists(manifest_path):
-        with open(manifest_path) as f:
-            manifest = json.load(f)
-        with open(truth_path) as f:
-            truth = json.load(f)
-    else:
-        os.makedirs(args.out, exist_ok=False)
-        manifest = {"seed": args.seed, "cases": []}
-        truth = {"seed": args.seed, "cases": []}
-    if any(c["id"].startswith("mot-") for c in manifest["cases"]):
-        sys.exit(f"{manifest_path}: already holds motulator cases; give a new suite")
+    suite = Suite(args.out, args.seed, "mot-", "motulator")
     rng = np.random.default_rng([args.seed, 0x6D6F74])
     # A third none, a third each effect motulator simulates.
     cycle = ["none", "main_flux_saturation", "iron_loss"]
@@ -580,19 +570,13 @@ def main():
         case_rng = np.random.default_rng([args.seed, 0x6D6F74, n])
         t0 = time.time()
         sweeps, plate, t, torque = make_case(case_rng, effect, plan)
-        manifest["cases"].append(write_case(args.out, cid, sweeps, plate, torque))
-        truth["cases"].append([cid, t])
+        suite.add(write_case(args.out, cid, sweeps, plate, torque), t)
         points = sum(len(r) for r in sweeps.values())
         print(
             f"{cid}: {plan} {effect}, {points} points, floor {t['noise_floor']:.2e}, {time.time() - t0:.1f} s",
             file=sys.stderr,
         )
-    with open(manifest_path, "w") as f:
-        json.dump(manifest, f, indent=2)
-        f.write("\n")
-    with open(truth_path, "w") as f:
-        json.dump(truth, f, indent=2)
-        f.write("\n")
+    suite.save()
     print(f"{len(effects)} motulator {VERSION} cases added to {args.out} in {time.time() - start:.0f} s")
 
 
