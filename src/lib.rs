@@ -24,8 +24,10 @@
 //!   sharing, the simulated device served behind a profile).
 //! - [`machine`]: what differs between machines, behind one trait
 //!   ([`machine::Machine`]: the plan's steps, the rig's stages, the
-//!   record's channels, the analysis and its report); the DC machine and
-//!   the induction machine implement it.
+//!   record's channels, the analysis and its report); the DC machine
+//!   (`machine/dc/`) and the induction machine (`machine/im/`) implement
+//!   it, each folder holding its plan, rigs, identification
+//!   (`identify/`), diagnosis (`diagnose/`), text and plots.
 //!   [`config::TestConfig::into_machine`] is the one place a plan is
 //!   mapped to its machine.
 //! - [`session`]: one test, whatever the machine: rig → (supervisor) →
@@ -33,9 +35,13 @@
 //!   files. `run` ([`session::commission`]), the daemon's jobs and the
 //!   tests all go through it.
 //! - [`record`]: MCAP recorder and reader per the data contract, CSV import.
-//! - [`identify`]: parameter identification from a [`record::Record`]
-//!   (DC; induction machine: the seed paper's recursive estimator and LM).
-//! - [`report`]: JSON, text and SVG output.
+//! - [`identify`]: the public paths of each machine's identification and
+//!   the numerics they share.
+//! - [`diagnose`]: the sim-to-real gap: what both machines' diagnoses
+//!   share (the held-out decision, residual plots, text, the blind
+//!   benchmark) and their public paths.
+//! - [`report`]: JSON, SVG time-series plots; each machine's text and
+//!   plots by their public paths.
 //! - [`cli`]: the bodies of the `run`, `probe`, `replay` and `identify`
 //!   subcommands and their exit codes; none of them branches on the
 //!   machine.

@@ -7,9 +7,10 @@
 //! - [`decision`]: the paired held-out test, the penalised score, noise
 //!   estimates; shared by both machines.
 //! - [`plot`]: residuals before and after per region, as SVG.
-//! - `dc*`: the DC motor (leave-one-segment-out on a staircase).
-//! - `im*`: the induction machine (interleaved points, stratified by
-//!   sweep, so every fold sees every supply voltage).
+//! - each machine's diagnosis lives with it: `machine/dc/diagnose/`
+//!   (leave-one-segment-out on a staircase) and `machine/im/diagnose/`
+//!   (interleaved points, stratified by sweep, so every fold sees every
+//!   supply voltage).
 
 pub mod blind;
 pub mod cli;
@@ -17,28 +18,13 @@ pub mod decision;
 mod plot;
 mod text;
 
-mod dc;
-mod dc_candidates;
-mod dc_fit;
-mod dc_gap;
-mod dc_model;
-mod im;
-mod im_data;
-mod im_effects;
-mod im_fit;
-mod im_gap;
-mod im_verdict;
-
-pub use dc::diagnose_dc;
-pub use im::diagnose_im;
-pub use plot::{write_residual_svg, ResidualPanel, ResidualPlot};
-// The diagnosis' report types live in the contract; the diagnosis'
-// files name them as `super::report::…`.
-use crate::contract as report;
 pub use crate::contract::{
     Candidate, Diagnosis, Gap, GapRegion, LookAlike, NominalFit, ParamCorrection, RegionAxis,
     ResidualEvidence, Verdict,
 };
+pub use crate::machine::dc::diagnose::diagnose_dc;
+pub use crate::machine::im::diagnose::diagnose_im;
+pub use plot::{write_residual_svg, ResidualPanel, ResidualPlot};
 pub use text::render_diagnosis_text;
 
 use crate::model::Connection;

@@ -1,17 +1,13 @@
-//! Reports for people and programs: JSON per the contract, a text table,
-//! SVG plots.
+//! Reports for people and programs: JSON per the contract, SVG time-series
+//! plots, and the public paths of each machine's text and plots (which
+//! live with the machine: `machine/dc/text.rs`, `overlay.rs`;
+//! `machine/im/text.rs`, `plot.rs`).
 
-mod im_plot;
-mod im_text;
-mod overlay;
 pub mod plot;
-mod text;
 
 pub use crate::contract::{
     unphysical_param, IdentificationReport, MethodReport, ParamEstimate, Provenance,
 };
-pub use im_plot::{render_im_svg, write_im_svg};
-pub use im_text::render_im_text;
-pub use overlay::segment_plots;
+pub use crate::machine::dc::{render_text, segment_plots};
+pub use crate::machine::im::{render_im_svg, render_im_text, write_im_svg};
 pub use plot::{render_segments_svg, write_segments_svg, SegmentPlot, Trace};
-pub use text::render_text;

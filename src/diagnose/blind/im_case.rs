@@ -40,7 +40,7 @@ use rand::RngExt;
 use rand_distr::{Distribution, Normal};
 
 use super::{BlindRecord, CaseTruth};
-use crate::diagnose::im_effects::{increasing_root, leakage_factor, skin_effect as skin};
+use crate::machine::im::diagnose::effects::{increasing_root, leakage_factor, skin_effect as skin};
 use crate::model::{Connection, Effect, C64};
 use crate::record::{OperatingPoint, Record, SegmentKind, TestMeta, SCHEMA_VERSION};
 
@@ -497,7 +497,7 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         ..Record::default()
     };
     let truth = CaseTruth {
-        effect: crate::diagnose::im_effects::effect_name(effect),
+        effect: crate::machine::im::diagnose::effects::effect_name(effect),
         effect_params,
         nominal,
         noise: BTreeMap::from([

@@ -10,19 +10,25 @@
 //!   serial); `sim_rig`: the simulated supply and sensors; `served`: the
 //!   simulated rig behind the real protocols.
 
+pub mod diagnose;
+pub mod identify;
+mod overlay;
 mod plan;
 mod rig;
 mod runner;
 mod served;
 mod sim_rig;
 mod supply_limits;
+mod text;
 
+pub use overlay::segment_plots;
 pub use plan::{plan_steps, PlanStep};
 pub use rig::{build_rig, Rig, SERVED_PLANT_RATE_HZ};
 pub use runner::{record_channels, run_test, SUPPLY_LIMIT_FRACTION};
 pub use served::ServedRig;
 pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};
 pub use supply_limits::SupplyLimitDetector;
+pub use text::render_text;
 
 use std::path::Path;
 
@@ -37,7 +43,7 @@ use crate::config::{Config, Plan, Retention};
 use crate::identify::{identify_dc, Identification};
 use crate::model::DcParams;
 use crate::record::{ChannelSpec, Record, SegmentKind};
-use crate::report::{render_text, segment_plots, write_segments_svg, IdentificationReport};
+use crate::report::{write_segments_svg, IdentificationReport};
 use crate::rig::RigError;
 
 /// A DC identification, with the simulated motor when there is one.

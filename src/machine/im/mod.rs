@@ -10,20 +10,26 @@
 //!   Modbus.
 
 mod config;
+pub mod diagnose;
+pub mod identify;
 mod modbus_config;
+mod plot;
 mod rig;
 mod served;
 mod sim_rig;
 mod stages;
 mod sweep;
+mod text;
 
 pub use config::ImRunConfig;
 pub use modbus_config::ImModbusRig;
+pub use plot::{render_im_svg, write_im_svg};
 pub use rig::{build_im_rig, ImRig, SERVED_IM_PLANT_RATE_HZ};
 pub use served::{ServedImRig, ServedVfd};
 pub use sim_rig::{sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd, COPPER_ALPHA};
 pub use stages::{VfdDyno, VfdSupply};
 pub use sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
+pub use text::render_im_text;
 
 use std::path::Path;
 
@@ -38,7 +44,7 @@ use crate::config::{recorded_im_model, Retention};
 use crate::identify::{identify_im, ImIdentification};
 use crate::model::{Connection, ImModel};
 use crate::record::{ChannelSpec, Record, SegmentKind};
-use crate::report::{render_im_text, write_im_svg, IdentificationReport};
+use crate::report::IdentificationReport;
 use crate::rig::RigError;
 
 struct ImAnalysis(ImIdentification);

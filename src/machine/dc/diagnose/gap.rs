@@ -8,8 +8,8 @@ use std::f64::consts::TAU;
 
 use statrs::distribution::{ChiSquared, ContinuousCDF, StudentsT};
 
-use super::decision::{effective_samples, median, FALSE_ALARM_RATE};
-use super::report::{GapRegion, RegionAxis, ResidualEvidence};
+use crate::contract::{GapRegion, RegionAxis, ResidualEvidence};
+use crate::diagnose::decision::{effective_samples, median, FALSE_ALARM_RATE};
 
 /// Held-out residuals (measured − simulated) of one segment.
 #[derive(Debug, Clone, PartialEq, Default)]

@@ -4,8 +4,8 @@
 
 use std::collections::BTreeMap;
 
-use super::dc_fit::{Fitted, Transform};
-use super::dc_model::{AugModel, Augment, LagChannel};
+use super::fit::{Fitted, Transform};
+use super::model::{AugModel, Augment, LagChannel};
 use crate::model::Effect;
 use crate::report::ParamEstimate;
 

@@ -12,24 +12,32 @@
 //! 3. Every IM effect of the vocabulary ([`IM_EFFECTS`]) refitted with the
 //!    nominal parameters, cross-validated on the same folds, compared with
 //!    the nominal model per operating point by the paired sign-flip test of
-//!    [`super::decision`] (Bonferroni over the six candidates), ranked by
+//!    [`crate::diagnose::decision`] (Bonferroni over the six candidates), ranked by
 //!    the held-out BIC score. The verdict is the best-scoring candidate if
 //!    its test is significant and its score positive, else `none`.
 //!
 //! The method is written up in `docs/diagnosis-im.md`.
 
+mod data;
+pub(crate) mod effects;
+mod fit;
+mod gap;
+mod verdict;
+
 use std::collections::BTreeMap;
 
-use super::decision::{held_out_sign_flip_test, noise_sigma, penalised_score, HeldOutTest};
-use super::im_data::SweepSet;
-use super::im_effects::{effect_name, ImAugmentation, IM_EFFECTS, NOMINAL_KEYS};
-use super::im_fit::{fit, held_out, intervals, starts_from, AugmentedFit, HeldOut};
-use super::im_gap::{evidence, shares, SlipRegions, CHANNELS};
-use super::im_verdict::separating_plan;
-use super::report::{
+use self::data::SweepSet;
+use self::effects::{effect_name, ImAugmentation, IM_EFFECTS, NOMINAL_KEYS};
+use self::fit::{fit, held_out, intervals, starts_from, AugmentedFit, HeldOut};
+use self::gap::{evidence, shares, SlipRegions, CHANNELS};
+use self::verdict::separating_plan;
+use crate::contract::{
     reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
 };
-use super::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
+use crate::diagnose::decision::{
+    held_out_sign_flip_test, noise_sigma, penalised_score, HeldOutTest,
+};
+use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{fit_lm, nrmse, LmOptions, PhaseData, SplitPolicy};
 use crate::model::{Effect, ImModel, LeakageSplit};
 use crate::record::{Record, SCHEMA_VERSION};
@@ -422,7 +430,7 @@ fn residual_plot(
     data: &SweepSet,
     nominal: &HeldOut,
     winner: Option<&Evaluated>,
-    gap_regions: &[super::report::GapRegion],
+    gap_regions: &[crate::contract::GapRegion],
     regions: &SlipRegions,
 ) -> ResidualPlot {
     let after = winner.map_or(nominal, |w| &w.held);
@@ -491,7 +499,7 @@ mod tests {
         let currents: Vec<f64> = points
             .iter()
             .map(|&(_, s, v)| {
-                let p = super::super::im_effects::PointInput {
+                let p = super::effects::PointInput {
                     slip: s,
                     voltage: v / 3f64.sqrt(),
                     heat: 0.0,
@@ -507,7 +515,7 @@ mod tests {
             .map(|(&(segment, s, v), i0)| {
                 let heat = (acc + 0.5 * i0 * i0) / total;
                 acc += i0 * i0;
-                let p = super::super::im_effects::PointInput {
+                let p = super::effects::PointInput {
                     slip: s,
                     voltage: v / 3f64.sqrt(),
                     heat,

@@ -377,7 +377,7 @@ mod tests {
                 settled: true,
             }
         };
-        let step = crate::identify::step::voltage_step(&seg, &lv(60.0, 0), &lv(248.0, 1)).unwrap();
+        let step = super::super::step::voltage_step(&seg, &lv(60.0, 0), &lv(248.0, 1)).unwrap();
         let ss = SteadyStateEstimate {
             k: p.k,
             ra: p.ra,

@@ -26,8 +26,8 @@
 use nalgebra::{DMatrix, DVector};
 
 use super::level_error::{level_error, LevelError};
-use super::stats::{least_squares, t975};
 use super::{nrmse, SettledLevel, SimulatedSegment};
+use crate::identify::stats::{least_squares, t975};
 use crate::record::{DcSegment, Record};
 use crate::report::{MethodReport, ParamEstimate};
 

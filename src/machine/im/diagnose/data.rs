@@ -2,8 +2,8 @@
 //! operating points in recording order, their supply-voltage groups, the
 //! heat index, the noise weights and the held-out folds.
 
-use super::im_effects::PointInput;
-use super::{DiagnoseError, DiagnoseOptions};
+use super::effects::PointInput;
+use crate::diagnose::{DiagnoseError, DiagnoseOptions};
 use crate::identify::sweep_of;
 use crate::model::Connection;
 use crate::record::Record;

@@ -22,11 +22,11 @@
 //! Gauss–Newton step regularised by `W0⁻¹`. [`Innovation`] selects either;
 //! the paper's form is the default. The derivatives are analytic (the
 //! appendix's for the single cage, and through the complex impedance for
-//! every model: [`super::im_sweep::predict_gradient`]).
+//! every model: [`super::sweep::predict_gradient`]).
 
 use nalgebra::{DMatrix, DVector};
 
-use super::im_sweep::{predict, predict_gradient, Channels, PhaseData};
+use super::sweep::{predict, predict_gradient, Channels, PhaseData};
 use crate::model::{ImCircuit, ImParam};
 
 /// The paper's θ of Eq. 17, single cage with iron loss, l = 6.
@@ -276,7 +276,7 @@ pub fn recursive_estimate(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::identify::im_sweep::{slip_grid, SlipSweep, SweepNoise};
+    use crate::identify::{slip_grid, SlipSweep, SweepNoise};
     use crate::model::{Connection, ImSupply, RotorCage};
     use rand::rngs::StdRng;
     use rand::SeedableRng;

@@ -16,8 +16,8 @@
 //!   ([`super::simulate_segment`]); a segment's NRMSE is the mean over
 //!   current and speed, and the method's is the mean over segments.
 
-use super::stats::t975;
 use super::{is_coastdown, nrmse, simulate_segment, SimulatedSegment, SteadyStateFit};
+use crate::identify::stats::t975;
 use crate::model::DcParams;
 use crate::record::{DcSegment, Record, SegmentKind};
 use crate::report::{MethodReport, ParamEstimate};

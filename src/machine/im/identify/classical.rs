@@ -15,7 +15,7 @@
 //!   locked rotor give the running (inner) and starting (outer) cage; a
 //!   few ratios of the two cages' resistances make several starts.
 
-use super::im_sweep::PhaseData;
+use super::sweep::PhaseData;
 use crate::model::{ImCircuit, ImModel, LeakageSplit, RotorCage, C64};
 
 /// The per-phase impedance a point shows: `|Z| = V/I`, `cos φ = P/(3VI)`.
@@ -158,7 +158,7 @@ pub fn classical_starts(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::identify::im_sweep::{slip_grid, SlipSweep, SweepNoise};
+    use crate::identify::{slip_grid, SlipSweep, SweepNoise};
     use crate::model::{Connection, ImSupply};
     use rand::rngs::StdRng;
     use rand::SeedableRng;

@@ -8,12 +8,12 @@
 //!   current and power residuals is estimated and the residuals whitened
 //!   with it, so current and power are weighed by their own scatter and a
 //!   shared error (the voltage reading enters both) is accounted for.
-//! - Several starts (the classical estimates of [`super::im_classical`] or
+//! - Several starts (the classical estimates of [`super::classical`] or
 //!   the user's) and the best fit kept.
 //! - 95 % intervals from the whitened Jacobian (Student t, `m − q` degrees
 //!   of freedom, on the log scale), and the correlation matrix.
 //! - Identifiability from the singular values of that Jacobian
-//!   ([`super::im_identifiability`]): a direction with a relative singular
+//!   ([`super::identifiability`]): a direction with a relative singular
 //!   value near round-off is a family of equivalent circuits; one with a
 //!   relative standard error above [`PRACTICAL_LIMIT`] is not pinned by the
 //!   data at hand. When such a direction moves the stator leakage, the fit
@@ -25,10 +25,10 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationRe
 use nalgebra::storage::Owned;
 use nalgebra::{DMatrix, DVector, Dyn};
 
-use super::im_identifiability::{weak_directions, Identifiability};
-use super::im_recursive::paper_cost;
-use super::im_sweep::{predict, predict_gradient_into, Channels, PhaseData, MAX_PARAMS};
-use super::stats::t975;
+use super::identifiability::{weak_directions, Identifiability};
+use super::recursive::paper_cost;
+use super::sweep::{predict, predict_gradient_into, Channels, PhaseData, MAX_PARAMS};
+use crate::identify::stats::t975;
 use crate::model::{standstill_rotor_leakage, ImCircuit, ImModel, ImParam, LeakageSplit};
 
 /// Relative standard error (log scale) above which a direction counts as
@@ -497,7 +497,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
             .iter()
             .find(|(p, _)| *p == ImParam::Rs)
             .map(|(_, v)| *v);
-        super::im_classical::classical_starts(data, model, opts.split, rs)?
+        super::classical::classical_starts(data, model, opts.split, rs)?
     } else {
         opts.starts.clone()
     };
@@ -903,7 +903,7 @@ fn analyse(problem: &SweepProblem<'_>) -> Result<Analysis, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::identify::im_sweep::{slip_grid, SlipSweep, SweepNoise};
+    use crate::identify::{slip_grid, SlipSweep, SweepNoise};
     use crate::model::{with_leakage_split, Connection, ImSupply, RotorCage};
     use proptest::prelude::*;
     use proptest::test_runner::RngSeed;

@@ -13,8 +13,8 @@ use std::collections::BTreeMap;
 
 use statrs::distribution::{ContinuousCDF, Normal, StudentsT};
 
-use super::im_data::SweepSet;
-use super::report::{GapRegion, RegionAxis, ResidualEvidence};
+use super::data::SweepSet;
+use crate::contract::{GapRegion, RegionAxis, ResidualEvidence};
 use crate::model::C64;
 
 /// Channels of the IM contract, in order (current, power).

@@ -7,8 +7,8 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::storage::Owned;
 use nalgebra::{DMatrix, DVector, Dyn};
 
-use super::im_data::SweepSet;
-use super::im_effects::ImAugmentation;
+use super::data::SweepSet;
+use super::effects::ImAugmentation;
 use crate::identify::PRACTICAL_LIMIT;
 
 /// A fitted model.
@@ -310,7 +310,7 @@ pub fn log_mask(model: &ImAugmentation) -> Vec<bool> {
         model
             .effect_params()
             .iter()
-            .map(|p| p.transform == super::im_effects::Transform::Log),
+            .map(|p| p.transform == super::effects::Transform::Log),
     );
     m
 }

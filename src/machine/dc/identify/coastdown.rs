@@ -146,7 +146,7 @@ pub fn fit_decay(seg: &DcSegment) -> Result<DecayFit, String> {
     let a_mat = DMatrix::from_fn(m, 2, |r, c| if c == 0 { w[r] } else { 1.0 });
     let b_vec = DVector::from_fn(m, |r, _| w[r + 1]);
     let dt = t[m] / m as f64;
-    let (r0, g0) = match super::stats::least_squares(&a_mat, &b_vec) {
+    let (r0, g0) = match crate::identify::stats::least_squares(&a_mat, &b_vec) {
         Some(ls) if ls.x[0] > 0.0 && ls.x[0] < 1.0 => {
             let r = -ls.x[0].ln() / dt;
             (r, -ls.x[1] / phi(r, dt).0)

@@ -65,7 +65,7 @@ fn cubic_fit(x: &[f64], y: &[f64]) -> Option<[f64; 4]> {
     }
     let a = nalgebra::DMatrix::from_fn(x.len(), 4, |r, c| x[r].powi(c as i32));
     let b = nalgebra::DVector::from_column_slice(y);
-    let ls = super::stats::least_squares(&a, &b)?;
+    let ls = crate::identify::stats::least_squares(&a, &b)?;
     Some([ls.x[0], ls.x[1], ls.x[2], ls.x[3]])
 }
 
@@ -422,7 +422,7 @@ mod tests {
         };
         let seg = step_segment(&p, 60.0, 150.0, 2e-4, 8000, 0.002);
         let (b, a) = levels(&p, 60.0, 150.0, 2000);
-        let step = crate::identify::step::voltage_step(&seg, &b, &a).unwrap();
+        let step = super::super::step::voltage_step(&seg, &b, &a).unwrap();
         let ss = SteadyStateEstimate {
             k: p.k,
             ra: p.ra,
@@ -449,7 +449,7 @@ mod tests {
         let p = DcParams::SEED_TABLE4_MOMENTS;
         let seg = step_segment(&p, 60.0, 248.0, 5e-4, 3000, 0.002);
         let (b, a) = levels(&p, 60.0, 248.0, 750);
-        let step = crate::identify::step::voltage_step(&seg, &b, &a).unwrap();
+        let step = super::super::step::voltage_step(&seg, &b, &a).unwrap();
         let ss = seed_ss();
         let err = estimate(&seg, &step, &ss).unwrap_err();
         assert!(err.contains("complex"), "{err}");

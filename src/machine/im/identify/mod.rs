@@ -13,11 +13,29 @@
 //!   something there) from the first classical start; it applies when it
 //!   ends with physical parameters; no intervals.
 
-use super::im_classical::classical_starts;
-use super::im_lm::{fit_lm, LmFit, LmOptions};
-use super::im_recursive::{recursive_estimate, RecursiveEstimate, RecursiveOptions, RecursiveStop};
-use super::im_sweep::{predict, SlipSweep, SweepPoint};
-use super::nrmse;
+mod classical;
+mod identifiability;
+mod lm;
+mod recursive;
+mod sweep;
+
+pub use classical::{classical_single, classical_starts};
+pub use identifiability::{weak_directions, Identifiability, WeakDirection, STRUCTURAL_LIMIT};
+pub use lm::{
+    evaluation_bound, fit_lm, FittedParam, LmFit, LmOptions, ParamSource, ResidualScale,
+    SplitPolicy, PRACTICAL_LIMIT, SOLVE_POINT_EVALUATIONS, SVD_MAX_ITERATIONS,
+};
+pub use recursive::{
+    paper_cost, recursive_estimate, recursive_pass, Innovation, RecursiveEstimate,
+    RecursiveOptions, RecursiveStop, THETA_DOUBLE_L5, THETA_DOUBLE_L7, THETA_SINGLE_FE_L6,
+    THETA_SINGLE_L4,
+};
+pub use sweep::{
+    predict, predict_gradient, predict_gradient_into, slip_grid, Channels, PhaseData, SlipSweep,
+    SweepNoise, SweepPoint, MAX_PARAMS,
+};
+
+use crate::identify::nrmse;
 use crate::model::{Connection, ImCircuit, ImModel, PerUnitBase};
 use crate::record::{Record, SegmentKind};
 use crate::report::{IdentificationReport, MethodReport, ParamEstimate};
@@ -527,7 +545,7 @@ pub fn identify_im(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::identify::im_sweep::{slip_grid, SweepNoise};
+    use crate::identify::{slip_grid, SweepNoise};
     use crate::model::{ImSupply, RotorCage};
     use crate::record::OperatingPoint;
     use rand::rngs::StdRng;

@@ -6,8 +6,8 @@
 //!    refitted leave-one-segment-out: each segment held out in turn (the
 //!    coast-down too), its held-out simulation from the measured voltage
 //!    gives the nominal residual and `gap_before`.
-//! 2. The residual is localised (`dc_gap`).
-//! 3. Every candidate of the vocabulary (`dc_candidates`) is refitted with
+//! 2. The residual is localised (`gap.rs`).
+//! 3. Every candidate of the vocabulary (`candidates.rs`) is refitted with
 //!    the nominal parameters on all segments and then leave-one-segment-
 //!    out, each fold warm-started from the candidate's all-segment optimum;
 //!    the fits run on every core (`std::thread::scope`).
@@ -15,27 +15,32 @@
 //!    with the paired held-out block test of `decision`; the verdict is the
 //!    best significant, physically signed candidate, else `none`.
 
+mod candidates;
+mod fit;
+mod gap;
+mod model;
+
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
-use super::dc_candidates::{
+use self::candidates::{
     candidates, effect_params, extra_params, physical, separating_plan, undetermined, CandidateDef,
     RecordScales,
 };
-use super::dc_fit::{fit, refit_spec, FitSpec, Fitted, Transform, Weights};
-use super::dc_gap::{locate, spectral_peak, HeldOutSeries, Measured};
-use super::dc_model::{AugModel, Continuation, SegmentRun, Start};
-use super::decision::{
+use self::fit::{fit, refit_spec, FitSpec, Fitted, Transform, Weights};
+use self::gap::{locate, spectral_peak, HeldOutSeries, Measured};
+use self::model::{AugModel, Continuation, SegmentRun, Start};
+use crate::contract::{
+    reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
+};
+use crate::diagnose::decision::{
     block_sums, effective_samples, held_out_test, median, penalised_score, residual_noise_sigma,
     HeldOutTest,
 };
-use super::report::{
-    reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
-};
-use super::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
+use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{
     is_coastdown, nrmse, output_error, OutputErrorOptions, PARAM_KEYS, PARAM_UNITS,
 };
@@ -990,7 +995,7 @@ fn scales(runs: &[SegmentRun]) -> RecordScales {
 /// Panels for the largest regions: held-out residual before (nominal)
 /// and after (the verdict's effect).
 fn residual_plot(
-    regions: &[super::GapRegion],
+    regions: &[crate::contract::GapRegion],
     before: &[HeldOutSeries],
     after: Option<&Vec<HeldOutSeries>>,
     effect: &str,

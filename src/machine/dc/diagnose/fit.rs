@@ -18,7 +18,7 @@ use std::cell::RefCell;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 
-use super::dc_model::{AugModel, SegmentRun};
+use super::model::{AugModel, SegmentRun};
 use crate::model::DcParams;
 
 /// How one fitted parameter maps to its physical value.
@@ -315,7 +315,8 @@ pub fn fit(spec: &FitSpec, runs: &[SegmentRun], w: &Weights, patience: usize) ->
     let sse = last.r.norm_squared();
     let dof = (rows as f64 - np as f64).max(1.0);
     let s2 = sse / dof;
-    let colour = rows as f64 / super::decision::effective_samples(last.r.as_slice()).max(1.0);
+    let colour =
+        rows as f64 / crate::diagnose::decision::effective_samples(last.r.as_slice()).max(1.0);
     let covariance = last
         .jac
         .tr_mul(&last.jac)
@@ -343,9 +344,9 @@ pub fn refit_spec(spec: &FitSpec, fitted: &Fitted) -> FitSpec {
 mod tests {
     use proptest::prelude::*;
 
+    use super::super::candidates::{candidates, RecordScales};
+    use super::super::model::{Augment, LagChannel, Start};
     use super::*;
-    use crate::diagnose::dc_candidates::{candidates, RecordScales};
-    use crate::diagnose::dc_model::{Augment, LagChannel, Start};
     use crate::record::DcSegment;
 
     const DT: f64 = 5e-4;

@@ -1,8 +1,8 @@
 //! Measured-against-model plot data for every segment of a record.
 
-use super::{SegmentPlot, Trace};
 use crate::identify::Identification;
 use crate::record::Record;
+use crate::report::{SegmentPlot, Trace};
 
 /// One [`SegmentPlot`] per segment: the measurement first, then every
 /// model response identification produced for that segment.
