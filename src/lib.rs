@@ -17,9 +17,9 @@
 //!   select on the stop, stale-data timeout, recording, the
 //!   [`bench::SafetyMonitor`] checked synchronously on every batch); the
 //!   DC steps and the IM sweep are plans on top of it, in [`machine`].
-//!   `run` and the daemon share that safety path; the daemon adds the
-//!   supervisor task ([`bench::supervise`]: heartbeat, bus loss, API
-//!   stops, latching).
+//!   `run` and the daemon share that safety path, under the one
+//!   supervisor task ([`bench::supervise`]: heartbeat, bus loss, stops,
+//!   latching) that [`session`] starts with every record.
 //! - [`rig`]: what every machine's rig shares (Modbus clients and bus
 //!   sharing, the simulated device served behind a profile).
 //! - [`machine`]: what differs between machines, behind one trait
@@ -30,7 +30,7 @@
 //!   (`identify/`), diagnosis (`diagnose/`), text and plots.
 //!   [`config::TestConfig::into_machine`] is the one place a plan is
 //!   mapped to its machine.
-//! - [`session`]: one test, whatever the machine: rig → (supervisor) →
+//! - [`session`]: one test, whatever the machine: rig → supervisor →
 //!   recorder → plan → analysis off the reactor → `/bench/result` →
 //!   files. `run` ([`session::commission`]), the daemon's jobs and the
 //!   tests all go through it.

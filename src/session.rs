@@ -1,10 +1,10 @@
 //! One test session, whatever the machine: the rig opened
-//! ([`Session::open`]), the record started ([`Session::record_to`]), the
-//! plan run through the bench's sequencer, unsupervised as `run` drives it
-//! or under the safety supervisor task as the daemon does
-//! ([`Recording::supervise`]), then the analysis off the reactor, the
-//! report recorded as `/bench/result` and the recorder finished
-//! ([`Recording::conclude`]).
+//! ([`Session::open`]), the record started under the safety supervisor
+//! task ([`Session::record_to`]: the one safety path, `motorbench run` and
+//! the daemon alike), the plan run through the bench's sequencer with
+//! every stop going through the supervisor ([`Supervised::run`]), then
+//! the analysis off the reactor, the report recorded as `/bench/result`
+//! and the recorder finished ([`Recording::conclude`]).
 //!
 //! [`commission`] is the whole of it as `motorbench run` and the tests do
 //! it, writing the report and plot files beside the record;
@@ -18,13 +18,14 @@ use thiserror::Error;
 use tokio::sync::watch;
 
 use crate::bench::{
-    supervise_stages, BenchError, Outcome, Progress, RecordSink, SafetyMonitor, StopPath,
-    SupervisorHandle, SupervisorSummary, SupervisorTiming,
+    supervise_stages, BenchError, Outcome, Progress, RecordSink, SafetyMonitor, StopCause,
+    StopReport, SupervisorHandle, SupervisorSummary, SupervisorTiming,
 };
 use crate::diagnose::{write_residual_svg, ResidualPlot};
 use crate::machine::{Analysed, Analysis, Machine, PlanRig, Truth};
 use crate::record::{
-    Entry, Record, RecordError, Recorder, RecorderStats, TestMeta, QUEUE_CAPACITY, SCHEMA_VERSION,
+    Entry, Event, EventLevel, Record, RecordError, Recorder, RecorderStats, TestMeta,
+    QUEUE_CAPACITY, SCHEMA_VERSION,
 };
 use crate::report::Provenance;
 use crate::rig::RigError;
@@ -49,6 +50,9 @@ pub enum SessionError {
     /// The rig could not be set up.
     #[error("rig setup: {0}")]
     Rig(#[from] RigError),
+    /// The machine's safety rules do not fit its rig's channels.
+    #[error("safety supervisor: {0}")]
+    Safety(String),
     /// The analysis task failed (a bug; the record is as written).
     #[error("identification task failed: {0}")]
     Analysis(String),
@@ -122,20 +126,40 @@ impl Session {
     }
 
     /// Start recording to `path` (the MCAP file) a test started at
-    /// `started_at`.
-    pub fn record_to(self, path: &Path, started_at: String) -> Result<Recording, SessionError> {
+    /// `started_at`, under the safety supervisor task, the one way a plan
+    /// runs (`motorbench run` and the daemon alike): it checks every batch
+    /// with the machine's safety rules, its thermal model starting with the
+    /// winding `initial_rise_k` above ambient. The rules are checked
+    /// against the rig's channels first: a mismatch creates no file. Must
+    /// be called on a tokio runtime.
+    pub fn record_to(
+        self,
+        path: &Path,
+        started_at: String,
+        initial_rise_k: f64,
+    ) -> Result<Supervised, SessionError> {
+        let monitor = self
+            .machine
+            .safety_rules()
+            .monitor(
+                self.sensors.channels(),
+                Some(self.counts_per_rev),
+                initial_rise_k,
+            )
+            .map_err(|e| SessionError::Safety(e.to_string()))?;
         let stage_ids: Vec<&str> = self.stages.iter().map(|s| s.id()).collect();
         let channels = self
             .machine
             .record_channels(self.sensors.channels(), &stage_ids);
         let meta = self.meta(started_at);
         let recorder = Recorder::start(path, &meta, &channels, QUEUE_CAPACITY)?;
-        Ok(Recording {
+        let recording = Recording {
             sink: RecordSink::new(Some(recorder), Some(meta.clone()), channels),
             session: self,
             meta,
             path: path.to_path_buf(),
-        })
+        };
+        Ok(recording.supervise(monitor))
     }
 }
 
@@ -158,13 +182,10 @@ impl Recording {
     }
 
     /// Put the rig under the safety supervisor task checking every batch
-    /// with `monitor`: every stop then goes through it (the sequencer's
-    /// own trips too), and it commands every stage safe, the one that
-    /// feeds the machine first. Must be called on a tokio runtime.
-    pub fn supervise(
-        self,
-        monitor: SafetyMonitor,
-    ) -> (Recording, SupervisorHandle, SupervisorTask) {
+    /// with `monitor`: every stop then goes through it (the sequencer's own
+    /// trips and the operator's too), and it commands every stage safe,
+    /// the one that feeds the machine first.
+    fn supervise(self, monitor: SafetyMonitor) -> Supervised {
         let Recording {
             session,
             sink,
@@ -200,32 +221,16 @@ impl Recording {
             truth,
             keep_alive,
         };
-        let recording = Recording {
-            session,
-            sink,
-            meta,
-            path,
-        };
-        (recording, supervised.handle, supervised.task)
-    }
-
-    /// Run the plan to its end; every stop comes through `stops`: the
-    /// operator's flag as `run` drives a test, or the supervisor's handle
-    /// once [`Recording::supervise`]d.
-    pub async fn run(
-        &mut self,
-        progress: &dyn Progress,
-        stops: StopPath<'_>,
-    ) -> Result<Outcome, BenchError> {
-        let s = &mut self.session;
-        let rig = PlanRig {
-            stages: &mut s.stages,
-            sensors: s.sensors.as_mut(),
-            counts_per_rev: s.counts_per_rev,
-        };
-        s.machine
-            .run_plan(rig, &mut self.sink, progress, stops)
-            .await
+        Supervised {
+            recording: Recording {
+                session,
+                sink,
+                meta,
+                path,
+            },
+            handle: supervised.handle,
+            task: supervised.task,
+        }
     }
 
     /// Record `entry` (e.g. the supervisor's account of a stop).
@@ -299,6 +304,92 @@ impl Recording {
             record,
             recorded,
         })
+    }
+}
+
+/// A recording under the safety supervisor task, ready to run its plan.
+pub struct Supervised {
+    recording: Recording,
+    handle: SupervisorHandle,
+    task: SupervisorTask,
+}
+
+/// How a supervised plan ended.
+pub struct RunEnd {
+    /// The plan's outcome (the rig is safe whichever it is).
+    pub outcome: Result<Outcome, BenchError>,
+    /// The supervisor's stop, when it stopped the test.
+    pub stop: Option<StopReport>,
+    /// The winding's estimated rise above ambient at the end, K.
+    pub winding_rise_k: f64,
+}
+
+impl Supervised {
+    /// The test.
+    pub fn machine(&self) -> &dyn Machine {
+        self.recording.machine()
+    }
+
+    /// The supervisor's handle: live readings, and stops (an operator's,
+    /// an emergency stop) from outside the plan.
+    pub fn handle(&self) -> &SupervisorHandle {
+        &self.handle
+    }
+
+    /// Run the plan to its end; every stop comes through the supervisor.
+    /// Then the supervisor's stop, if any, is recorded as an event (with
+    /// the first sample read after the safe state) and the supervisor
+    /// finished. The recording comes back for [`Recording::conclude`].
+    pub async fn run(self, progress: &dyn Progress) -> (Recording, RunEnd) {
+        let Supervised {
+            mut recording,
+            handle,
+            task,
+        } = self;
+        let s = &mut recording.session;
+        let rig = PlanRig {
+            stages: &mut s.stages,
+            sensors: s.sensors.as_mut(),
+            counts_per_rev: s.counts_per_rev,
+        };
+        let outcome = s
+            .machine
+            .run_plan(rig, &mut recording.sink, progress, (&handle).into())
+            .await;
+        let stop = handle.stopped();
+        if let Some(s) = &stop {
+            if let Err(e) = recording.push(stop_event(s)).await {
+                tracing::error!("recording the supervisor's stop failed: {e}");
+            }
+        }
+        handle.finish().await;
+        let winding_rise_k = task.await.map_or(0.0, |s| s.winding_rise_k);
+        let end = RunEnd {
+            outcome,
+            stop,
+            winding_rise_k,
+        };
+        (recording, end)
+    }
+}
+
+/// The record's account of a supervisor's stop.
+fn stop_event(s: &StopReport) -> Entry {
+    let first = s.first_safe_t_ns.map_or_else(
+        || "no sample was read after it".to_string(),
+        |t| {
+            format!(
+                "first sample after it at test time {:.4} s",
+                t as f64 * 1e-9
+            )
+        },
+    );
+    Entry::Event {
+        t_ns: s.requested_t_ns,
+        event: Event {
+            level: EventLevel::Info,
+            message: format!("safety supervisor: {}; {first}", s.describe()),
+        },
     }
 }
 
@@ -457,8 +548,18 @@ pub async fn commission(
         dir.join(format!("{s}.mcap")).exists()
     });
     let mcap_path = dir.join(format!("{stem}.mcap"));
-    let mut recording = session.record_to(&mcap_path, started_at)?;
-    let outcome = recording.run(progress, shutdown.into()).await?;
+    // A cold motor: `run` keeps no thermal memory between tests.
+    let supervised = session.record_to(&mcap_path, started_at, 0.0)?;
+    let operator = supervised.handle().clone();
+    let mut flag = shutdown.clone();
+    let operator_stop = tokio::spawn(async move {
+        if flag.wait_for(|stop| *stop).await.is_ok() {
+            operator.stop(StopCause::OperatorAbort).await;
+        }
+    });
+    let (recording, end) = supervised.run(progress).await;
+    operator_stop.abort();
+    let outcome = end.outcome?;
     let concluded = recording.conclude(opts.diagnose).await?;
     let files = concluded.write_files(dir, &stem)?;
     let stats = concluded.recorded?;

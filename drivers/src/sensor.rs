@@ -80,4 +80,13 @@ pub trait SensorStream: Send {
     fn epoch(&self) -> Option<tokio::time::Instant> {
         None
     }
+
+    /// True when the readings come from a simulation on a virtual clock
+    /// that advances only as the stream is read: nothing outside moves
+    /// between reads, so a reader may take batches no faster than its
+    /// consumer does. A live source (the default) must be read on
+    /// regardless: a consumer that falls behind it has stalled.
+    fn virtual_clock(&self) -> bool {
+        false
+    }
 }

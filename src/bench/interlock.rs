@@ -36,7 +36,7 @@ use motorbench_drivers::{
     ChannelInfo, ChannelStats, DriverError, PowerStage, SampleBatch, SensorStream,
     StageCapabilities,
 };
-use tokio::sync::{mpsc, oneshot, watch, Mutex};
+use tokio::sync::{mpsc, oneshot, watch, Mutex, Notify};
 use tokio::time::Instant;
 
 use super::supervisor::{Readings, SafetyMonitor, StopCause, SUPERVISOR_ID};
@@ -279,6 +279,9 @@ pub struct SupervisedSensors {
     channels: Vec<ChannelInfo>,
     rx: mpsc::Receiver<Result<SampleBatch, DriverError>>,
     telemetry: Arc<StdMutex<Telemetry>>,
+    /// A stream on a virtual clock: each call asks the supervisor for one
+    /// batch (see [`read_next`]).
+    demand: Option<Arc<Notify>>,
 }
 
 /// The supervised stream's own sampling statistics and warnings, relayed
@@ -301,6 +304,9 @@ impl SensorStream for SupervisedSensors {
     }
 
     async fn next_batch(&mut self) -> Result<SampleBatch, DriverError> {
+        if let Some(demand) = &self.demand {
+            demand.notify_one();
+        }
         match self.rx.recv().await {
             Some(r) => r,
             None => Err(DriverError::Ended {
@@ -359,12 +365,22 @@ type ReadResult = (
     Result<Result<SampleBatch, DriverError>, tokio::time::error::Elapsed>,
 );
 
+/// The next read of `sensors`. A stream on a virtual clock is read only
+/// when the sequencer asks for a batch (`demand`): its simulation advances
+/// only as it is read, so reading ahead would run the plant ahead of the
+/// plan's commands (a step would reach the record late) and fill the
+/// queue, a stall of nothing. A live stream is read on regardless, so a
+/// stalled sequencer is caught.
 fn read_next(
     mut sensors: Box<dyn SensorStream>,
     bus_loss: Duration,
     telemetry: Arc<StdMutex<Telemetry>>,
+    demand: Option<Arc<Notify>>,
 ) -> std::pin::Pin<Box<dyn std::future::Future<Output = ReadResult> + Send>> {
     Box::pin(async move {
+        if let Some(demand) = demand {
+            demand.notified().await;
+        }
         let r = tokio::time::timeout(bus_loss, sensors.next_batch()).await;
         let warnings = sensors.take_warnings();
         let stats = sensors.sampling_stats();
@@ -451,11 +467,13 @@ pub fn supervise_stages(
     let (cmd_tx, cmd_rx) = mpsc::channel(8);
     let (readings_tx, readings_rx) = watch::channel(monitor.readings());
     let telemetry = Arc::new(StdMutex::new(Telemetry::default()));
+    let demand = sensors.virtual_clock().then(|| Arc::new(Notify::new()));
     let sensors_out = SupervisedSensors {
         id: sensors.id().to_string(),
         channels: sensors.channels().to_vec(),
         rx: batch_rx,
         telemetry: telemetry.clone(),
+        demand: demand.clone(),
     };
     let task = Task {
         stages: shared_stages,
@@ -472,6 +490,7 @@ pub fn supervise_stages(
         stop_delivered: false,
         read_after_safe: false,
         telemetry,
+        demand,
     };
     let task = tokio::spawn(task.run(sensors, cmd_rx));
     SupervisedStages {
@@ -505,6 +524,9 @@ struct Task {
     read_after_safe: bool,
     /// Where the stream's statistics and warnings go for the sequencer.
     telemetry: Arc<StdMutex<Telemetry>>,
+    /// The sequencer's requests for a batch, when the stream is on a
+    /// virtual clock (see [`read_next`]).
+    demand: Option<Arc<Notify>>,
 }
 
 impl Task {
@@ -514,9 +536,19 @@ impl Task {
         mut commands: mpsc::Receiver<Command>,
     ) -> SupervisorSummary {
         self.shared.touch();
-        let mut read = read_next(sensors, self.timing.bus_loss, self.telemetry.clone());
+        let mut read = read_next(
+            sensors,
+            self.timing.bus_loss,
+            self.telemetry.clone(),
+            self.demand.clone(),
+        );
         let mut tick = tokio::time::interval(self.loop_period);
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        // On a virtual clock the stage's watchdog runs on data time, which
+        // outpaces the wall clock: the heartbeat goes out every loop period
+        // of data time as well.
+        let loop_period_ns = self.loop_period.as_nanos() as u64;
+        let mut next_data_pet = self.demand.as_ref().map(|_| 0u64);
         let mut reading = true;
         loop {
             tokio::select! {
@@ -556,6 +588,12 @@ impl Task {
                         }
                         Ok(Ok(batch)) => {
                             self.batches += 1;
+                            if let Some(next) = next_data_pet.as_mut() {
+                                if batch.t_ns >= *next {
+                                    *next = batch.t_ns + loop_period_ns;
+                                    self.pet().await;
+                                }
+                            }
                             let check = self.monitor.check(&batch);
                             let _ = self.readings.send(self.monitor.readings());
                             if let Err(cause) = check {
@@ -583,7 +621,12 @@ impl Task {
                             }
                         }
                     }
-                    read = read_next(sensors, self.timing.bus_loss, self.telemetry.clone());
+                    read = read_next(
+                        sensors,
+                        self.timing.bus_loss,
+                        self.telemetry.clone(),
+                        self.demand.clone(),
+                    );
                     self.read_after_safe = self.shared.stopped.load(Ordering::SeqCst);
                 },
             }

@@ -14,13 +14,11 @@ use serde::Serialize;
 use tokio::sync::{watch, Mutex};
 
 use super::records_index::{unix_s, IndexEntry, KeyResults, RecordOutcome, RecordsIndex};
-use crate::bench::{
-    BenchError, Outcome, Progress, Readings, StopCause, StopReport, SupervisorHandle,
-};
+use crate::bench::{Outcome, Progress, Readings, StopCause, StopReport, SupervisorHandle};
 use crate::diagnose::write_residual_svg;
 use crate::machine::{Machine, PlanDurations};
-use crate::record::{Entry, Event, EventLevel, SegmentKind};
-use crate::session::{Recording, Session, SupervisorTask};
+use crate::record::SegmentKind;
+use crate::session::{Recording, RunEnd, Session, Supervised};
 
 /// Where a test is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -195,7 +193,7 @@ pub struct JobEnd {
 
 /// A prepared test, ready to run.
 pub struct Job {
-    recording: Recording,
+    supervised: Supervised,
     ending: Ending,
 }
 
@@ -213,11 +211,6 @@ pub async fn prepare(
         .await
         .map_err(|e| e.to_string())?;
     let m = session.machine();
-    let monitor = m.safety_rules().monitor(
-        session.sensor_channels(),
-        Some(session.counts_per_rev()),
-        initial_rise_k,
-    )?;
     let motor_id = m.motor_id().to_string();
     let kind = m.kind();
     let plan = m.plan_summary();
@@ -226,8 +219,12 @@ pub async fn prepare(
     let mut idx = index.lock().await;
     let name = idx.new_name(&motor_id, &started_at);
     let dir = idx.dir().to_path_buf();
-    let recording = session
-        .record_to(&dir.join(format!("{name}.mcap")), started_at.clone())
+    let supervised = session
+        .record_to(
+            &dir.join(format!("{name}.mcap")),
+            started_at.clone(),
+            initial_rise_k,
+        )
         .map_err(|e| e.to_string())?;
     idx.insert(IndexEntry::running(
         &name,
@@ -241,17 +238,15 @@ pub async fn prepare(
     .map_err(|e| e.to_string())?;
     drop(idx);
 
-    let (recording, handle, task) = recording.supervise(monitor);
     let (status, _) = watch::channel(TestStatus::running(&name, rig, &motor_id, plan));
     let run = Arc::new(TestRun {
         status,
-        supervisor: handle,
+        supervisor: supervised.handle().clone(),
     });
     let job = Job {
-        recording,
+        supervised,
         ending: Ending {
             run: run.clone(),
-            task,
             index,
             dir,
             name,
@@ -264,15 +259,10 @@ impl Job {
     /// Run the test to its end (completed, aborted or failed) and update
     /// the index.
     pub async fn run(self) -> JobEnd {
-        let Job {
-            mut recording,
-            ending,
-        } = self;
-        let progress = FeedProgress::new(ending.run.clone(), recording.machine().durations());
-        // Every stop goes through the supervisor, the sequencer's own too.
-        let handle = ending.run.supervisor.clone();
-        let outcome = recording.run(&progress, (&handle).into()).await;
-        conclude(ending, recording, outcome).await
+        let Job { supervised, ending } = self;
+        let progress = FeedProgress::new(ending.run.clone(), supervised.machine().durations());
+        let (recording, end) = supervised.run(&progress).await;
+        conclude(ending, recording, end).await
     }
 }
 
@@ -280,8 +270,6 @@ impl Job {
 struct Ending {
     /// The test (its supervisor's handle too).
     run: Arc<TestRun>,
-    /// The supervisor's task.
-    task: SupervisorTask,
     /// The records index.
     index: Arc<Mutex<RecordsIndex>>,
     /// The records directory.
@@ -294,47 +282,22 @@ struct Ending {
 /// safe): the supervisor's stop recorded, the supervisor finished, the
 /// record analysed (off the reactor), finished and indexed with its
 /// report and plot, the status published.
-async fn conclude(
-    ending: Ending,
-    mut recording: Recording,
-    outcome: Result<Outcome, BenchError>,
-) -> JobEnd {
+async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
     let Ending {
         run,
-        task,
         index,
         dir,
         name,
     } = ending;
-    let handle = run.supervisor.clone();
     let retention = recording.machine().retention();
-    let stop = handle.stopped();
-    if let Some(s) = &stop {
-        let first = s.first_safe_t_ns.map_or_else(
-            || "no sample was read after it".to_string(),
-            |t| {
-                format!(
-                    "first sample after it at test time {:.4} s",
-                    t as f64 * 1e-9
-                )
-            },
-        );
-        let event = Entry::Event {
-            t_ns: s.requested_t_ns,
-            event: Event {
-                level: EventLevel::Info,
-                message: format!("safety supervisor: {}; {first}", s.describe()),
-            },
-        };
-        if let Err(e) = recording.push(event).await {
-            tracing::error!("{name}: recording the stop failed: {e}");
-        }
-    }
-    handle.finish().await;
-    let summary = task.await.ok();
+    let RunEnd {
+        outcome,
+        stop,
+        winding_rise_k,
+    } = ran;
     let end = JobEnd {
         latch: stop.clone().filter(|s| s.cause.latches()),
-        winding_rise_k: summary.map_or(0.0, |s| s.winding_rise_k),
+        winding_rise_k,
     };
     // Every segment is on disk (the recorder flushes at each marker): a
     // daemon killed from here on leaves a record that only lacks its

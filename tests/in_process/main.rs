@@ -18,6 +18,7 @@ mod im_coverage;
 mod im_lab_record;
 mod im_paper_study;
 mod im_sweep_rig;
+mod run_supervised;
 mod safety;
 mod sequencer;
 mod supervisor;

@@ -309,6 +309,10 @@ impl SensorStream for SimSensors {
         }
         Ok(batch)
     }
+
+    fn virtual_clock(&self) -> bool {
+        self.realtime_start.is_none()
+    }
 }
 
 impl SimSensors {

@@ -450,6 +450,10 @@ impl SensorStream for SimImSensors {
         }
         Ok(batch)
     }
+
+    fn virtual_clock(&self) -> bool {
+        !self.paced
+    }
 }
 
 #[cfg(test)]
