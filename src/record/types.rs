@@ -193,6 +193,24 @@ pub enum Entry {
     },
 }
 
+/// Test records: a `dc_step` segment boundary.
+#[cfg(test)]
+impl Entry {
+    /// The `phase` boundary of `dc_step` segment `index` labelled `label`
+    /// at `t_ns`.
+    pub(crate) fn dc_step_marker(t_ns: u64, index: u32, phase: SegmentPhase, label: &str) -> Entry {
+        Entry::Segment {
+            t_ns,
+            marker: SegmentMarker {
+                index,
+                kind: SegmentKind::DcStep,
+                phase,
+                label: label.into(),
+            },
+        }
+    }
+}
+
 /// A `/bench/operating_point` message: one averaged steady-state point of
 /// an induction-machine slip sweep, SI units, slip a fraction.
 ///
