@@ -86,34 +86,10 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
                     sim,
                     SERVED_IM_PLANT_RATE_HZ,
                     transport,
-                    (
-                        ServedDevice {
-                            profile: &m.supply.profile,
-                            unit: m.supply.unit_id,
-                        },
-                        &m.supply_voltage_register,
-                    ),
-                    (
-                        ServedDevice {
-                            profile: &m.dynamometer.profile,
-                            unit: m.dynamometer.unit_id,
-                        },
-                        m.dyno_pole_pairs,
-                    ),
-                    (
-                        ServedDevice {
-                            profile: &m.meter.profile,
-                            unit: m.meter.unit_id,
-                        },
-                        &m.meter_channels,
-                    ),
-                    (
-                        ServedDevice {
-                            profile: &m.encoder.profile,
-                            unit: m.encoder.unit_id,
-                        },
-                        count,
-                    ),
+                    (ServedDevice::of(&m.supply), &m.supply_voltage_register),
+                    (ServedDevice::of(&m.dynamometer), m.dyno_pole_pairs),
+                    (ServedDevice::of(&m.meter), &m.meter_channels),
+                    (ServedDevice::of(&m.encoder), count),
                 )
                 .await?,
             )

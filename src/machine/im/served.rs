@@ -33,7 +33,7 @@ use motorbench_drivers::{PowerStage, SampleBatch};
 use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd};
-use crate::config::SimulatedTransport;
+use crate::config::{ModbusDeviceLink, SimulatedTransport};
 use crate::model::Connection;
 use crate::rig::{ready_now, register, touches, ServeError, ServedLink};
 
@@ -355,6 +355,16 @@ pub struct ServedDevice<'a> {
     pub profile: &'a DeviceProfile,
     /// Unit id.
     pub unit: u8,
+}
+
+impl ServedDevice<'_> {
+    /// The device a configured Modbus link names: its profile and unit.
+    pub fn of(link: &ModbusDeviceLink) -> ServedDevice<'_> {
+        ServedDevice {
+            profile: &link.profile,
+            unit: link.unit_id,
+        }
+    }
 }
 
 impl ServedImRig {
