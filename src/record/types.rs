@@ -353,6 +353,17 @@ pub struct DcSegment {
     pub speed: Vec<f64>,
 }
 
+impl DcSegment {
+    /// Append one sample: time `t` (s), voltage (V), current (A) and
+    /// speed (rad/s).
+    pub fn push_sample(&mut self, t: f64, voltage: f64, current: f64, speed: f64) {
+        self.time.push(t);
+        self.voltage.push(voltage);
+        self.current.push(current);
+        self.speed.push(speed);
+    }
+}
+
 /// How much of a damaged (truncated, bit-flipped) file could be read.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Recovery {
