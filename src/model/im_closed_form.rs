@@ -240,7 +240,8 @@ impl DoubleCageForms {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{Connection, ImCircuit, ImParam, ImSupply, RotorCage};
+    use crate::model::im_fixtures::supply;
+    use crate::model::{Connection, ImCircuit, ImParam, RotorCage};
 
     const FE: SingleCageForms = SingleCageForms {
         rs: 1.93,
@@ -293,12 +294,7 @@ mod tests {
     fn single_cage_forms_equal_the_complex_circuit() {
         // The paper's experimental machine (θ_N of Sec. V), on 220 V delta.
         let c = fe_circuit();
-        let supply = ImSupply {
-            line_voltage: 220.0,
-            frequency: 60.0,
-            connection: Connection::Delta,
-            pole_pairs: 2,
-        };
+        let supply = supply(220.0, 60.0, Connection::Delta, 2);
         let w = std::f64::consts::TAU * 60.0;
         for s in [0.001, 0.02, 0.1, 0.5, 1.0] {
             let t = FE.terms(s);
@@ -315,12 +311,7 @@ mod tests {
     #[test]
     fn double_cage_forms_equal_the_complex_circuit() {
         let c = dc_circuit();
-        let supply = ImSupply {
-            line_voltage: 1.0,
-            frequency: 50.0,
-            connection: Connection::Delta,
-            pole_pairs: 1,
-        };
+        let supply = supply(1.0, 50.0, Connection::Delta, 1);
         let w = std::f64::consts::TAU * 50.0;
         for s in [0.002, 0.03, 0.2, 0.7, 1.0] {
             // Eqs. 13–14 against the parallel cages.

@@ -239,6 +239,7 @@ pub fn impedance_mismatch(a: &ImCircuit, b: &ImCircuit, slips: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::model::im_fixtures::single_cage;
 
     fn slips() -> Vec<f64> {
         (0..=100).map(|k| f64::from(k) / 100.0).collect()
@@ -250,13 +251,7 @@ mod tests {
 
     #[test]
     fn single_cage_family_keeps_the_impedance_and_the_invariants() {
-        let c = ImCircuit {
-            rs: 1.0,
-            xs: 2.0,
-            xm: 50.0,
-            rfe: None,
-            rotor: RotorCage::Single { rr: 1.5, xr: 3.0 },
-        };
+        let c = single_cage(1.0, 2.0, 50.0, None, 1.5, 3.0);
         let (_, max) = stator_leakage_range(&c);
         assert!((max - (2.0 + 50.0 * 3.0 / 53.0)).abs() < 1e-12);
         for xs in [0.3, 1.0, 3.5, 4.5] {

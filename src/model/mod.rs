@@ -15,6 +15,8 @@ pub use zoh::Zoh;
 mod im;
 mod im_closed_form;
 mod im_equivalent;
+#[cfg(test)]
+pub(crate) mod im_fixtures;
 mod im_lab;
 
 pub use im::{

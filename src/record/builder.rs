@@ -235,7 +235,7 @@ fn interpolate(s: &[(u64, f64)], t: u64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::record::types::{EventLevel, SegmentMarker};
+    use crate::record::types::EventLevel;
 
     fn channels() -> Vec<ChannelSpec> {
         vec![
@@ -244,18 +244,6 @@ mod tests {
             ChannelSpec::sensor("armature_current", "A", "daq"),
             ChannelSpec::sensor("speed", "rad/s", "enc"),
         ]
-    }
-
-    fn marker(t_ns: u64, index: u32, phase: SegmentPhase, label: &str) -> Entry {
-        Entry::Segment {
-            t_ns,
-            marker: SegmentMarker {
-                index,
-                kind: SegmentKind::DcStep,
-                phase,
-                label: label.into(),
-            },
-        }
     }
 
     fn samples(t_ns: u64, values: &[(usize, f64)]) -> Entry {
@@ -276,10 +264,15 @@ mod tests {
             ));
         }
         // Pushed out of index order on purpose.
-        b.push(&marker(500, 1, SegmentPhase::Start, "second"));
-        b.push(&marker(200, 0, SegmentPhase::Start, "first"));
-        b.push(&marker(400, 0, SegmentPhase::End, "first"));
-        b.push(&marker(700, 1, SegmentPhase::End, "second"));
+        b.push(&Entry::dc_step_marker(
+            500,
+            1,
+            SegmentPhase::Start,
+            "second",
+        ));
+        b.push(&Entry::dc_step_marker(200, 0, SegmentPhase::Start, "first"));
+        b.push(&Entry::dc_step_marker(400, 0, SegmentPhase::End, "first"));
+        b.push(&Entry::dc_step_marker(700, 1, SegmentPhase::End, "second"));
         let r = b.finish();
         assert_eq!(r.segments.len(), 2);
         let s0 = &r.segments[0];
@@ -297,7 +290,7 @@ mod tests {
     #[test]
     fn open_segment_takes_the_rest_and_is_marked() {
         let mut b = RecordBuilder::new(None, channels());
-        b.push(&marker(250, 0, SegmentPhase::Start, "step"));
+        b.push(&Entry::dc_step_marker(250, 0, SegmentPhase::Start, "step"));
         for k in 0..6u64 {
             b.push(&samples(k * 100, &[(1, 1.0), (2, k as f64), (3, 2.0)]));
         }
@@ -309,7 +302,7 @@ mod tests {
     #[test]
     fn interpolates_onto_current_instants() {
         let mut b = RecordBuilder::new(None, channels());
-        b.push(&marker(0, 0, SegmentPhase::Start, "s"));
+        b.push(&Entry::dc_step_marker(0, 0, SegmentPhase::Start, "s"));
         // Voltage at 100 and 300; speed at 0, 200 and 400; current every 50.
         b.push(&samples(100, &[(1, 10.0)]));
         b.push(&samples(300, &[(1, 30.0)]));
@@ -319,7 +312,7 @@ mod tests {
         for t in [0u64, 50, 100, 150, 200, 250, 300, 350, 400, 450] {
             b.push(&samples(t, &[(2, t as f64)]));
         }
-        b.push(&marker(450, 0, SegmentPhase::End, "s"));
+        b.push(&Entry::dc_step_marker(450, 0, SegmentPhase::End, "s"));
         let r = b.finish();
         let s = &r.segments[0];
         assert_eq!(s.time.len(), 10);
@@ -354,9 +347,9 @@ mod tests {
             ChannelSpec::command("speed", "rad/s", "dyno"),
         ];
         let mut b = RecordBuilder::new(None, chans);
-        b.push(&marker(0, 0, SegmentPhase::Start, "s"));
+        b.push(&Entry::dc_step_marker(0, 0, SegmentPhase::Start, "s"));
         b.push(&samples(10, &[(0, 1.0), (1, 2.0), (2, 3.0)]));
-        b.push(&marker(20, 0, SegmentPhase::End, "s"));
+        b.push(&Entry::dc_step_marker(20, 0, SegmentPhase::End, "s"));
         let r = b.finish();
         assert_eq!(r.segments.len(), 1);
         let s = &r.segments[0];
@@ -367,13 +360,13 @@ mod tests {
     #[test]
     fn skips_non_finite_and_unknown_channels() {
         let mut b = RecordBuilder::new(None, channels());
-        b.push(&marker(0, 0, SegmentPhase::Start, "s"));
+        b.push(&Entry::dc_step_marker(0, 0, SegmentPhase::Start, "s"));
         b.push(&samples(
             10,
             &[(1, 1.0), (2, f64::NAN), (3, 2.0), (17, 5.0)],
         ));
         b.push(&samples(20, &[(1, 1.0), (2, 4.0), (3, f64::INFINITY)]));
-        b.push(&marker(30, 0, SegmentPhase::End, "s"));
+        b.push(&Entry::dc_step_marker(30, 0, SegmentPhase::End, "s"));
         let r = b.finish();
         let s = &r.segments[0];
         assert_eq!(s.current, vec![4.0]);

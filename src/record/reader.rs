@@ -381,7 +381,7 @@ fn meta_from(path: &Path, md: &BTreeMap<String, String>) -> Result<TestMeta, Rec
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::record::types::{Event, EventLevel, SegmentMarker, SegmentPhase};
+    use crate::record::types::{Event, EventLevel, SegmentPhase};
     use crate::record::writer::Recorder;
     use mcap::records::{MessageHeader, Metadata};
     use std::io::BufWriter;
@@ -406,18 +406,6 @@ mod tests {
         ]
     }
 
-    fn marker(t_ns: u64, index: u32, phase: SegmentPhase, label: &str) -> Entry {
-        Entry::Segment {
-            t_ns,
-            marker: SegmentMarker {
-                index,
-                kind: SegmentKind::DcStep,
-                phase,
-                label: label.into(),
-            },
-        }
-    }
-
     /// A 10 s test at 1 kHz with two segments (0.001..=1.999 s and
     /// 1.999..=9.999 s), an event and a result.
     fn test_entries() -> Vec<Entry> {
@@ -431,7 +419,12 @@ mod tests {
         for k in 0..10_000u64 {
             let t = k * 1_000_000;
             if k == 1 {
-                out.push(marker(t, 0, SegmentPhase::Start, "0 V → 12 V"));
+                out.push(Entry::dc_step_marker(
+                    t,
+                    0,
+                    SegmentPhase::Start,
+                    "0 V → 12 V",
+                ));
             }
             let x = k as f64 * 1e-3;
             out.push(Entry::Samples {
@@ -444,11 +437,21 @@ mod tests {
                 ],
             });
             if k == 1999 {
-                out.push(marker(t, 0, SegmentPhase::End, "0 V → 12 V"));
-                out.push(marker(t, 1, SegmentPhase::Start, "12 V → 6 V"));
+                out.push(Entry::dc_step_marker(t, 0, SegmentPhase::End, "0 V → 12 V"));
+                out.push(Entry::dc_step_marker(
+                    t,
+                    1,
+                    SegmentPhase::Start,
+                    "12 V → 6 V",
+                ));
             }
         }
-        out.push(marker(9_999_000_000, 1, SegmentPhase::End, "12 V → 6 V"));
+        out.push(Entry::dc_step_marker(
+            9_999_000_000,
+            1,
+            SegmentPhase::End,
+            "12 V → 6 V",
+        ));
         out.push(Entry::Result {
             t_ns: 10_000_000_000,
             report: serde_json::json!({"schema_version": "1", "kind": "dc_step", "methods": {}, "best": null, "warnings": []}),
@@ -509,7 +512,7 @@ mod tests {
             -2.5e-17,
             9007199254740991.0,
         ];
-        let mut entries = vec![marker(0, 0, SegmentPhase::Start, "awkward")];
+        let mut entries = vec![Entry::dc_step_marker(0, 0, SegmentPhase::Start, "awkward")];
         for (k, &v) in awkward.iter().enumerate() {
             entries.push(Entry::Samples {
                 t_ns: k as u64 * 10,
@@ -523,7 +526,7 @@ mod tests {
                 message: "ünïcode \"quoted\"\nnewline".into(),
             },
         });
-        entries.push(marker(110, 0, SegmentPhase::End, "awkward"));
+        entries.push(Entry::dc_step_marker(110, 0, SegmentPhase::End, "awkward"));
         let stats = record_to(&path, &entries);
         assert_eq!(stats.messages, awkward.len() as u64 * 4 + 3);
 

@@ -193,6 +193,24 @@ pub enum Entry {
     },
 }
 
+/// Test records: a `dc_step` segment boundary.
+#[cfg(test)]
+impl Entry {
+    /// The `phase` boundary of `dc_step` segment `index` labelled `label`
+    /// at `t_ns`.
+    pub(crate) fn dc_step_marker(t_ns: u64, index: u32, phase: SegmentPhase, label: &str) -> Entry {
+        Entry::Segment {
+            t_ns,
+            marker: SegmentMarker {
+                index,
+                kind: SegmentKind::DcStep,
+                phase,
+                label: label.into(),
+            },
+        }
+    }
+}
+
 /// A `/bench/operating_point` message: one averaged steady-state point of
 /// an induction-machine slip sweep, SI units, slip a fraction.
 ///
@@ -333,6 +351,17 @@ pub struct DcSegment {
     pub current: Vec<f64>,
     /// Shaft speed, rad/s.
     pub speed: Vec<f64>,
+}
+
+impl DcSegment {
+    /// Append one sample: time `t` (s), voltage (V), current (A) and
+    /// speed (rad/s).
+    pub fn push_sample(&mut self, t: f64, voltage: f64, current: f64, speed: f64) {
+        self.time.push(t);
+        self.voltage.push(voltage);
+        self.current.push(current);
+        self.speed.push(speed);
+    }
 }
 
 /// How much of a damaged (truncated, bit-flipped) file could be read.

@@ -18,6 +18,10 @@ use motorbench_drivers::{ChannelInfo, DriverError};
 
 use crate::config::{LinkSpec, ModbusDeviceLink};
 
+mod modbus_server;
+
+pub use modbus_server::serve_device;
+
 /// What `probe` needs to read every channel once.
 pub struct ModbusProbe {
     pub(crate) bus: BusHandle,

@@ -6,8 +6,9 @@ use std::path::{Path, PathBuf};
 
 use axum::body::Bytes;
 use http_body_util::{BodyExt, Full};
+use hyper::body::Incoming;
 use hyper::client::conn::http1;
-use hyper::{Method, Request};
+use hyper::{Method, Request, Response};
 use hyper_util::rt::TokioIo;
 use thiserror::Error;
 
@@ -114,30 +115,33 @@ impl Client {
     }
 
     async fn connect(&self) -> Result<Sender, ClientError> {
-        // The connection task ends with the connection.
-        let sender = match &self.endpoint {
+        match &self.endpoint {
             Endpoint::Tcp(authority) => {
                 let stream = tokio::net::TcpStream::connect(authority)
                     .await
                     .map_err(|e| self.connect_err(e))?;
-                let (s, conn) = http1::handshake(TokioIo::new(stream))
-                    .await
-                    .map_err(|e| self.connect_err(e))?;
-                tokio::spawn(conn);
-                s
+                self.handshake(stream).await
             }
             Endpoint::Unix(path) => {
                 let stream = tokio::net::UnixStream::connect(path)
                     .await
                     .map_err(|e| self.connect_err(e))?;
-                let (s, conn) = http1::handshake(TokioIo::new(stream))
-                    .await
-                    .map_err(|e| self.connect_err(e))?;
-                tokio::spawn(conn);
-                s
+                self.handshake(stream).await
             }
-        };
-        Ok(sender)
+        }
+    }
+
+    /// The HTTP/1.1 handshake on a connected `stream`; the connection
+    /// task is spawned and ends with the connection.
+    async fn handshake<S>(&self, stream: S) -> Result<Sender, ClientError>
+    where
+        S: tokio::io::AsyncRead + tokio::io::AsyncWrite + Unpin + Send + 'static,
+    {
+        let (s, conn) = http1::handshake(TokioIo::new(stream))
+            .await
+            .map_err(|e| self.connect_err(e))?;
+        tokio::spawn(conn);
+        Ok(s)
     }
 
     fn build(
@@ -174,11 +178,26 @@ impl Client {
         path: &str,
         body: Option<&serde_json::Value>,
     ) -> Result<Reply, ClientError> {
+        let response = self.send(method, path, body).await?;
+        self.read_reply(response).await
+    }
+
+    /// Connect and send a request; the answer's head, its body unread.
+    async fn send(
+        &self,
+        method: Method,
+        path: &str,
+        body: Option<&serde_json::Value>,
+    ) -> Result<Response<Incoming>, ClientError> {
         let mut sender = self.connect().await?;
-        let response = sender
+        sender
             .send_request(self.build(method, path, body))
             .await
-            .map_err(|e| self.connect_err(e))?;
+            .map_err(|e| self.connect_err(e))
+    }
+
+    /// Read the whole answer.
+    async fn read_reply(&self, response: Response<Incoming>) -> Result<Reply, ClientError> {
         let status = response.status().as_u16();
         let body = response
             .into_body()
@@ -211,21 +230,11 @@ impl Client {
         path: &str,
         mut on_event: impl FnMut(&str, &str) -> bool,
     ) -> Result<Option<Reply>, ClientError> {
-        let mut sender = self.connect().await?;
-        let response = sender
-            .send_request(self.build(Method::GET, path, None))
-            .await
-            .map_err(|e| self.connect_err(e))?;
-        let status = response.status().as_u16();
-        let mut body = response.into_body();
-        if !(200..300).contains(&status) {
-            let body = body
-                .collect()
-                .await
-                .map_err(|e| self.connect_err(e))?
-                .to_bytes();
-            return Ok(Some(Reply { status, body }));
+        let response = self.send(Method::GET, path, None).await?;
+        if !response.status().is_success() {
+            return self.read_reply(response).await.map(Some);
         }
+        let mut body = response.into_body();
         let mut parser = SseParser::default();
         while let Some(frame) = body.frame().await {
             let frame = frame.map_err(|e| self.connect_err(e))?;
@@ -244,11 +253,7 @@ impl Client {
     /// Returns the status and, on success, the byte count.
     pub async fn download(&self, path: &str, dest: &Path) -> Result<(u16, u64), ClientError> {
         use tokio::io::AsyncWriteExt;
-        let mut sender = self.connect().await?;
-        let response = sender
-            .send_request(self.build(Method::GET, path, None))
-            .await
-            .map_err(|e| self.connect_err(e))?;
+        let response = self.send(Method::GET, path, None).await?;
         let status = response.status().as_u16();
         if !(200..300).contains(&status) {
             return Ok((status, 0));

@@ -571,23 +571,16 @@ mod tests {
 
     fn entry(name: &str, rig: &str, started_unix_s: f64, outcome: RecordOutcome) -> IndexEntry {
         IndexEntry {
-            name: name.into(),
-            rig: rig.into(),
-            motor_id: "m".into(),
-            kind: "dc_step".into(),
-            plan: "dc_step 60 → 248 V".into(),
-            started_at: "2026-11-21T10:00:00Z".into(),
-            started_unix_s,
-            finished_at: None,
             outcome,
-            reason: None,
-            key_results: None,
-            mcap: format!("{name}.mcap"),
-            report: None,
-            svg: None,
-            bytes: 0,
-            recovered: None,
-            data_complete: false,
+            ..IndexEntry::running(
+                name,
+                rig,
+                "m",
+                "dc_step",
+                "dc_step 60 → 248 V",
+                "2026-11-21T10:00:00Z".into(),
+                started_unix_s,
+            )
         }
     }
 

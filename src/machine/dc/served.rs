@@ -17,8 +17,7 @@ use std::time::Instant;
 
 use motorbench_drivers::can::{FrameStream, SignalMap, SlcanOptions, SlcanStream};
 use motorbench_drivers::modbus::server::{
-    lock_bank, serve_rtu, serve_tcp, BankService, ExceptionCode, RegisterBank, SharedBank,
-    SimulatedDevice, WriteSpan,
+    lock_bank, BankService, ExceptionCode, RegisterBank, SharedBank, SimulatedDevice, WriteSpan,
 };
 use motorbench_drivers::modbus::{DeviceProfile, Register};
 use motorbench_drivers::serial::port::{pty_pair, SerialSettings, SerialStream};
@@ -29,7 +28,7 @@ use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
 use crate::config::{SimulatedRig, SimulatedTransport};
-use crate::rig::{ready_now, register, touches, ServeError, ServedLink};
+use crate::rig::{ready_now, register, serve_device, touches, ServeError, ServedLink};
 
 /// The simulated plant on the wall clock.
 struct RealtimePlant {
@@ -318,28 +317,9 @@ impl ServedRig {
         };
         let stage_bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(sp)));
         let stage_service = BankService::new(su, stage_bank.clone(), Arc::new(supply_dev));
-        let io = |e: std::io::Error| ServeError::Io(e.to_string());
         let mut pty_ends = Vec::new();
-        let mut serve = |service: BankService,
-                         baud: u32|
-         -> Result<(ServedLink, JoinHandle<()>), ServeError> {
-            match transport {
-                SimulatedTransport::Tcp => {
-                    let std_listener = std::net::TcpListener::bind("127.0.0.1:0").map_err(io)?;
-                    std_listener.set_nonblocking(true).map_err(io)?;
-                    let listener = tokio::net::TcpListener::from_std(std_listener).map_err(io)?;
-                    let (addr, task) = serve_tcp(listener, service).map_err(io)?;
-                    Ok((ServedLink::Tcp(addr), task))
-                }
-                SimulatedTransport::Rtu => {
-                    let pty = pty_pair().map_err(|e| ServeError::Io(e.to_string()))?;
-                    let task = serve_rtu(pty.host, service);
-                    let settings = SerialSettings::new_8n1(&pty.device_path, baud);
-                    pty_ends.push(pty.device_end);
-                    Ok((ServedLink::Rtu(settings), task))
-                }
-            }
-        };
+        let mut serve =
+            |service: BankService, baud: u32| serve_device(transport, service, baud, &mut pty_ends);
         let baud = |p: &DeviceProfile| p.serial.map_or(115_200, |s| s.baud_rate);
         let (stage_link, stage_task) = serve(stage_service, baud(sp))?;
         let (daq_link, daq_task, daq_bank) = match daq {

@@ -144,34 +144,19 @@ pub fn write_im_svg(path: &Path, id: &ImIdentification) -> Result<(), String> {
 mod tests {
     use super::*;
     use crate::identify::{identify_im, slip_grid, SlipSweep, SweepNoise};
-    use crate::model::{Connection, ImModel, ImSupply, RotorCage};
+    use crate::model::im_fixtures::{single_cage, STAR_400V_50HZ};
+    use crate::model::{Connection, ImModel};
     use crate::record::{OperatingPoint, Record};
-    use rand::rngs::StdRng;
-    use rand::SeedableRng;
 
     #[test]
     fn svg_shows_points_and_curves() {
-        let c = ImCircuit {
-            rs: 1.5,
-            xs: 3.0,
-            xm: 90.0,
-            rfe: None,
-            rotor: RotorCage::Single { rr: 1.6, xr: 3.0 },
-        };
-        let supply = ImSupply {
-            line_voltage: 400.0,
-            frequency: 50.0,
-            connection: Connection::Star,
-            pole_pairs: 2,
-        };
-        let mut rng = StdRng::seed_from_u64(2);
-        let sw = SlipSweep::simulate(
+        let c = single_cage(1.5, 3.0, 90.0, None, 1.6, 3.0);
+        let sw = SlipSweep::simulate_seeded(
             &c,
-            &supply,
+            &STAR_400V_50HZ,
             &slip_grid(20, 0.002),
             &SweepNoise::relative(0.003),
-            0,
-            &mut rng,
+            2,
         );
         let points = sw
             .points

@@ -86,34 +86,10 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
                     sim,
                     SERVED_IM_PLANT_RATE_HZ,
                     transport,
-                    (
-                        ServedDevice {
-                            profile: &m.supply.profile,
-                            unit: m.supply.unit_id,
-                        },
-                        &m.supply_voltage_register,
-                    ),
-                    (
-                        ServedDevice {
-                            profile: &m.dynamometer.profile,
-                            unit: m.dynamometer.unit_id,
-                        },
-                        m.dyno_pole_pairs,
-                    ),
-                    (
-                        ServedDevice {
-                            profile: &m.meter.profile,
-                            unit: m.meter.unit_id,
-                        },
-                        &m.meter_channels,
-                    ),
-                    (
-                        ServedDevice {
-                            profile: &m.encoder.profile,
-                            unit: m.encoder.unit_id,
-                        },
-                        count,
-                    ),
+                    (ServedDevice::of(&m.supply), &m.supply_voltage_register),
+                    (ServedDevice::of(&m.dynamometer), m.dyno_pole_pairs),
+                    (ServedDevice::of(&m.meter), &m.meter_channels),
+                    (ServedDevice::of(&m.encoder), count),
                 )
                 .await?,
             )
@@ -171,20 +147,17 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
                 .with_max_read_gap(m.meter.profile.max_read_gap),
         )
     } else {
-        let meter = ModbusSensors::new(
-            &format!("modbus:{}", m.meter.profile.name),
-            meter_bus,
-            meter_channels,
-            m.max_lost_polls,
-        )
-        .with_max_read_gap(m.meter.profile.max_read_gap);
-        let encoder = ModbusSensors::new(
-            &format!("modbus:{}", m.encoder.profile.name),
-            encoder_bus,
-            encoder_channels,
-            m.max_lost_polls,
-        )
-        .with_max_read_gap(m.encoder.profile.max_read_gap);
+        let poller = |link: &ModbusDeviceLink, bus, channels| {
+            ModbusSensors::new(
+                &format!("modbus:{}", link.profile.name),
+                bus,
+                channels,
+                m.max_lost_polls,
+            )
+            .with_max_read_gap(link.profile.max_read_gap)
+        };
+        let meter = poller(&m.meter, meter_bus, meter_channels);
+        let encoder = poller(&m.encoder, encoder_bus, encoder_channels);
         // Separate links: a poller each, their batches (each with one
         // device's channels) put on one time base and in time order; the
         // sweep holds the latest value of every channel.

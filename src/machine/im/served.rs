@@ -24,18 +24,17 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Instant;
 
 use motorbench_drivers::modbus::server::{
-    serve_rtu, serve_tcp, BankService, ExceptionCode, RegisterBank, SharedBank, SimulatedDevice,
-    WriteSpan,
+    BankService, ExceptionCode, RegisterBank, SharedBank, SimulatedDevice, WriteSpan,
 };
 use motorbench_drivers::modbus::{DeviceProfile, Register};
-use motorbench_drivers::serial::port::{pty_pair, SerialSettings, SerialStream};
+use motorbench_drivers::serial::port::SerialStream;
 use motorbench_drivers::{PowerStage, SampleBatch};
 use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd};
-use crate::config::SimulatedTransport;
+use crate::config::{ModbusDeviceLink, SimulatedTransport};
 use crate::model::Connection;
-use crate::rig::{ready_now, register, touches, ServeError, ServedLink};
+use crate::rig::{ready_now, register, serve_device, touches, ServeError, ServedLink};
 
 /// The simulated machine, supply and dynamometer on the wall clock.
 struct Plant {
@@ -357,6 +356,16 @@ pub struct ServedDevice<'a> {
     pub unit: u8,
 }
 
+impl ServedDevice<'_> {
+    /// The device a configured Modbus link names: its profile and unit.
+    pub fn of(link: &ModbusDeviceLink) -> ServedDevice<'_> {
+        ServedDevice {
+            profile: &link.profile,
+            unit: link.unit_id,
+        }
+    }
+}
+
 impl ServedImRig {
     /// Serve `sim` (its plant stepped at `plant_rate_hz`) over `transport`:
     /// the supply VFD (its output voltage set through `supply_voltage`),
@@ -445,25 +454,9 @@ impl ServedImRig {
          -> Result<(ServedLink, SharedBank), ServeError> {
             let bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(profile)));
             let service = BankService::new(unit, bank.clone(), device);
-            let io = |e: std::io::Error| ServeError::Io(e.to_string());
-            let link = match transport {
-                SimulatedTransport::Tcp => {
-                    let std_listener = std::net::TcpListener::bind("127.0.0.1:0").map_err(io)?;
-                    std_listener.set_nonblocking(true).map_err(io)?;
-                    let listener = tokio::net::TcpListener::from_std(std_listener).map_err(io)?;
-                    let (addr, task) = serve_tcp(listener, service).map_err(io)?;
-                    tasks.push(task);
-                    ServedLink::Tcp(addr)
-                }
-                SimulatedTransport::Rtu => {
-                    let pty = pty_pair().map_err(|e| ServeError::Io(e.to_string()))?;
-                    tasks.push(serve_rtu(pty.host, service));
-                    let baud = profile.serial.map_or(115_200, |s| s.baud_rate);
-                    let settings = SerialSettings::new_8n1(&pty.device_path, baud);
-                    pty_ends.push(pty.device_end);
-                    ServedLink::Rtu(settings)
-                }
-            };
+            let baud = profile.serial.map_or(115_200, |s| s.baud_rate);
+            let (link, task) = serve_device(transport, service, baud, &mut pty_ends)?;
+            tasks.push(task);
             Ok((link, bank))
         };
         let (supply_link, supply_bank) = serve(sd.profile, sd.unit, Arc::new(supply_dev))?;

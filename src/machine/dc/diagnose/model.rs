@@ -622,10 +622,7 @@ mod tests {
             ..Default::default()
         };
         let push = |seg: &mut DcSegment, k: usize, x: &DcState, u: f64, w: f64| {
-            seg.time.push(k as f64 * dt);
-            seg.voltage.push(u);
-            seg.current.push(x.current);
-            seg.speed.push(w);
+            seg.push_sample(k as f64 * dt, u, x.current, w);
         };
         push(&mut seg, 0, &x, 60.0, x.speed);
         for k in 1..1500 {

@@ -213,15 +213,14 @@ mod tests {
             if k > 0 {
                 x = motor.step(&x, Terminal::Open);
             }
-            seg.time.push(k as f64 * dt);
-            seg.voltage.push(p.k * x.speed);
-            seg.current.push(if k == 0 { x.current } else { 0.0 });
             // Speed quantised like an encoder's count difference.
-            seg.speed.push(if quantum > 0.0 {
+            let speed = if quantum > 0.0 {
                 (x.speed / quantum).round() * quantum
             } else {
                 x.speed
-            });
+            };
+            let current = if k == 0 { x.current } else { 0.0 };
+            seg.push_sample(k as f64 * dt, p.k * x.speed, current, speed);
             if x.speed == 0.0 {
                 break;
             }

@@ -22,6 +22,30 @@ pub struct SettledLevel {
     pub settled: bool,
 }
 
+/// Exact levels, for tests.
+#[cfg(test)]
+impl SettledLevel {
+    /// The settled level of segment `segment`, unlabelled, at `voltage`:
+    /// the steady state of `p` there, as if averaged over `samples`.
+    pub(crate) fn exact(
+        p: &crate::model::DcParams,
+        voltage: f64,
+        segment: u32,
+        samples: usize,
+    ) -> SettledLevel {
+        let s = p.steady_state(voltage);
+        SettledLevel {
+            segment,
+            label: String::new(),
+            voltage,
+            current: s.current,
+            speed: s.speed,
+            samples,
+            settled: true,
+        }
+    }
+}
+
 /// Fewest samples a tail may have.
 const MIN_TAIL: usize = 20;
 

@@ -360,23 +360,9 @@ mod tests {
             if k > 0 {
                 x = motor.step(&x, Terminal::Driven(u));
             }
-            seg.time.push(k as f64 * dt);
-            seg.voltage.push(u);
-            seg.current.push(x.current);
-            seg.speed.push(x.speed);
+            seg.push_sample(k as f64 * dt, u, x.current, x.speed);
         }
-        let lv = |u: f64, segment| {
-            let s = p.steady_state(u);
-            SettledLevel {
-                segment,
-                label: String::new(),
-                voltage: u,
-                current: s.current,
-                speed: s.speed,
-                samples: 400,
-                settled: true,
-            }
-        };
+        let lv = |u: f64, segment| SettledLevel::exact(&p, u, segment, 400);
         let step = super::super::step::voltage_step(&seg, &lv(60.0, 0), &lv(248.0, 1)).unwrap();
         let ss = SteadyStateEstimate {
             k: p.k,

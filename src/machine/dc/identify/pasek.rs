@@ -389,28 +389,16 @@ mod tests {
             if k > 0 {
                 x = motor.step(&x, Terminal::Driven(u));
             }
-            seg.time.push(k as f64 * dt);
-            seg.voltage.push(u);
-            seg.current.push(x.current + noise * gauss());
-            seg.speed.push(x.speed);
+            seg.push_sample(k as f64 * dt, u, x.current + noise * gauss(), x.speed);
         }
         seg
     }
 
     fn levels(p: &DcParams, u0: f64, u1: f64, samples: usize) -> (SettledLevel, SettledLevel) {
-        let l = |u: f64, segment| {
-            let s = p.steady_state(u);
-            SettledLevel {
-                segment,
-                label: String::new(),
-                voltage: u,
-                current: s.current,
-                speed: s.speed,
-                samples,
-                settled: true,
-            }
-        };
-        (l(u0, 0), l(u1, 1))
+        (
+            SettledLevel::exact(p, u0, 0, samples),
+            SettledLevel::exact(p, u1, 1, samples),
+        )
     }
 
     #[test]

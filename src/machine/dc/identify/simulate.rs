@@ -69,10 +69,7 @@ mod tests {
             if k > 0 {
                 x = motor.step(&x, Terminal::Driven(u));
             }
-            seg.time.push(k as f64 * dt);
-            seg.voltage.push(u);
-            seg.current.push(x.current);
-            seg.speed.push(x.speed);
+            seg.push_sample(k as f64 * dt, u, x.current, x.speed);
         }
         let (i, w) = simulate_segment(&p, &seg).unwrap();
         assert_eq!(i.len(), 2000);

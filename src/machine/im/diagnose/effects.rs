@@ -530,7 +530,7 @@ pub fn leakage_terminal(c: &Cage, s: f64, v: f64, f: impl Fn(f64) -> f64) -> Opt
 mod tests {
     use super::*;
     use crate::identify::predict;
-    use crate::model::{ImCircuit, RotorCage};
+    use crate::model::im_fixtures::single_cage;
 
     fn logit(p: f64) -> f64 {
         (p / (1.0 - p)).ln()
@@ -550,13 +550,7 @@ mod tests {
 
     #[test]
     fn nominal_matches_the_model_circuit() {
-        let c = ImCircuit {
-            rs: 1.0,
-            xs: 2.0,
-            xm: 60.0,
-            rfe: None,
-            rotor: RotorCage::Single { rr: 1.2, xr: 2.0 },
-        };
+        let c = single_cage(1.0, 2.0, 60.0, None, 1.2, 2.0);
         let m = ImAugmentation::nominal(1.0);
         for s in [0.0, 0.01, 0.2, 1.0] {
             let (i, p) = m.predict(&x0(), &point(s)).unwrap();

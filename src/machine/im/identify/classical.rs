@@ -159,33 +159,17 @@ pub fn classical_starts(
 mod tests {
     use super::*;
     use crate::identify::{slip_grid, SlipSweep, SweepNoise};
-    use crate::model::{Connection, ImSupply};
-    use rand::rngs::StdRng;
-    use rand::SeedableRng;
+    use crate::model::im_fixtures::{single_cage, STAR_400V_50HZ};
 
     #[test]
     fn classical_estimate_is_near_a_single_cage_machine() {
-        let c = ImCircuit {
-            rs: 0.5,
-            xs: 1.2,
-            xm: 40.0,
-            rfe: Some(600.0),
-            rotor: RotorCage::Single { rr: 0.6, xr: 1.2 },
-        };
-        let supply = ImSupply {
-            line_voltage: 400.0,
-            frequency: 50.0,
-            connection: Connection::Star,
-            pole_pairs: 2,
-        };
-        let mut rng = StdRng::seed_from_u64(5);
-        let d = SlipSweep::simulate(
+        let c = single_cage(0.5, 1.2, 40.0, Some(600.0), 0.6, 1.2);
+        let d = SlipSweep::simulate_seeded(
             &c,
-            &supply,
+            &STAR_400V_50HZ,
             &slip_grid(30, 0.001),
             &SweepNoise::default(),
-            0,
-            &mut rng,
+            5,
         )
         .phase_data();
         let e = classical_single(&d, LeakageSplit::DESIGN_A, true, Some(0.5)).unwrap();
@@ -201,27 +185,13 @@ mod tests {
 
     #[test]
     fn a_sweep_without_locked_rotor_is_refused() {
-        let c = ImCircuit {
-            rs: 0.5,
-            xs: 1.2,
-            xm: 40.0,
-            rfe: None,
-            rotor: RotorCage::Single { rr: 0.6, xr: 1.2 },
-        };
-        let supply = ImSupply {
-            line_voltage: 400.0,
-            frequency: 50.0,
-            connection: Connection::Star,
-            pole_pairs: 2,
-        };
-        let mut rng = StdRng::seed_from_u64(5);
-        let d = SlipSweep::simulate(
+        let c = single_cage(0.5, 1.2, 40.0, None, 0.6, 1.2);
+        let d = SlipSweep::simulate_seeded(
             &c,
-            &supply,
+            &STAR_400V_50HZ,
             &[0.01, 0.03, 0.1],
             &SweepNoise::default(),
-            0,
-            &mut rng,
+            5,
         )
         .phase_data();
         assert!(classical_single(&d, LeakageSplit::DESIGN_A, false, None)

@@ -904,39 +904,24 @@ fn analyse(problem: &SweepProblem<'_>) -> Result<Analysis, String> {
 mod tests {
     use super::*;
     use crate::identify::{slip_grid, SlipSweep, SweepNoise};
-    use crate::model::{with_leakage_split, Connection, ImSupply, RotorCage};
+    use crate::model::im_fixtures::{single_cage, STAR_400V_50HZ};
+    use crate::model::with_leakage_split;
     use proptest::prelude::*;
     use proptest::test_runner::RngSeed;
-    use rand::rngs::StdRng;
-    use rand::SeedableRng;
 
     fn data(c: &ImCircuit, noise: f64) -> PhaseData {
-        let supply = ImSupply {
-            line_voltage: 400.0,
-            frequency: 50.0,
-            connection: Connection::Star,
-            pole_pairs: 2,
-        };
-        let mut rng = StdRng::seed_from_u64(9);
-        SlipSweep::simulate(
+        SlipSweep::simulate_seeded(
             c,
-            &supply,
+            &STAR_400V_50HZ,
             &slip_grid(40, 0.002),
             &SweepNoise::relative(noise),
-            0,
-            &mut rng,
+            9,
         )
         .phase_data()
     }
 
     fn single(rs: f64, xs: f64, xm: f64, rr: f64, xr: f64) -> ImCircuit {
-        ImCircuit {
-            rs,
-            xs,
-            xm,
-            rfe: None,
-            rotor: RotorCage::Single { rr, xr },
-        }
+        single_cage(rs, xs, xm, None, rr, xr)
     }
 
     proptest! {
@@ -1030,20 +1015,12 @@ mod tests {
         // 6000 points (bound: 20·(q + 1) = 120 evaluations) from a start
         // a factor 30 off every element.
         let c = single(1.0, 2.0, 60.0, 1.2, 3.0);
-        let supply = ImSupply {
-            line_voltage: 400.0,
-            frequency: 50.0,
-            connection: Connection::Star,
-            pole_pairs: 2,
-        };
-        let mut rng = StdRng::seed_from_u64(3);
-        let d = SlipSweep::simulate(
+        let d = SlipSweep::simulate_seeded(
             &c,
-            &supply,
+            &STAR_400V_50HZ,
             &slip_grid(6000, 0.002),
             &SweepNoise::relative(0.002),
-            0,
-            &mut rng,
+            3,
         )
         .phase_data();
         let mut o = LmOptions::new(ImModel::Single);

@@ -277,9 +277,8 @@ pub fn recursive_estimate(
 mod tests {
     use super::*;
     use crate::identify::{slip_grid, SlipSweep, SweepNoise};
-    use crate::model::{Connection, ImSupply, RotorCage};
-    use rand::rngs::StdRng;
-    use rand::SeedableRng;
+    use crate::model::im_fixtures::supply;
+    use crate::model::{Connection, RotorCage};
 
     fn machine() -> ImCircuit {
         ImCircuit {
@@ -292,20 +291,12 @@ mod tests {
     }
 
     fn data(c: &ImCircuit) -> PhaseData {
-        let supply = ImSupply {
-            line_voltage: 1.0,
-            frequency: 50.0,
-            connection: Connection::Delta,
-            pole_pairs: 2,
-        };
-        let mut rng = StdRng::seed_from_u64(3);
-        SlipSweep::simulate(
+        SlipSweep::simulate_seeded(
             c,
-            &supply,
+            &supply(1.0, 50.0, Connection::Delta, 2),
             &slip_grid(40, 0.002),
             &SweepNoise::default(),
-            0,
-            &mut rng,
+            3,
         )
         .phase_data()
     }

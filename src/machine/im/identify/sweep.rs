@@ -103,6 +103,23 @@ fn gaussian(sigma: f64, rng: &mut impl Rng) -> f64 {
     }
 }
 
+/// Simulation with a generator of its own, for tests.
+#[cfg(test)]
+impl SlipSweep {
+    /// [`SlipSweep::simulate`] of segment 0 with a generator seeded `seed`.
+    pub(crate) fn simulate_seeded(
+        circuit: &ImCircuit,
+        supply: &ImSupply,
+        slips: &[f64],
+        noise: &SweepNoise,
+        seed: u64,
+    ) -> SlipSweep {
+        use rand::SeedableRng;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        SlipSweep::simulate(circuit, supply, slips, noise, 0, &mut rng)
+    }
+}
+
 impl SlipSweep {
     /// Simulate one segment: the circuit on `supply` at each slip, with
     /// `noise` on the readings.
@@ -277,9 +294,7 @@ pub fn predict_gradient_into(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::RotorCage;
-    use rand::rngs::StdRng;
-    use rand::SeedableRng;
+    use crate::model::im_fixtures::{single_cage, STAR_400V_50HZ};
 
     #[test]
     fn grid_is_dense_near_zero_and_ends_at_one() {
@@ -292,27 +307,13 @@ mod tests {
 
     #[test]
     fn simulated_sweep_maps_back_to_phase_values() {
-        let c = ImCircuit {
-            rs: 1.0,
-            xs: 2.0,
-            xm: 60.0,
-            rfe: Some(800.0),
-            rotor: RotorCage::Single { rr: 1.2, xr: 2.5 },
-        };
-        let supply = ImSupply {
-            line_voltage: 400.0,
-            frequency: 50.0,
-            connection: Connection::Star,
-            pole_pairs: 2,
-        };
-        let mut rng = StdRng::seed_from_u64(1);
-        let sw = SlipSweep::simulate(
+        let c = single_cage(1.0, 2.0, 60.0, Some(800.0), 1.2, 2.5);
+        let sw = SlipSweep::simulate_seeded(
             &c,
-            &supply,
+            &STAR_400V_50HZ,
             &slip_grid(10, 0.01),
             &SweepNoise::default(),
-            0,
-            &mut rng,
+            1,
         );
         sw.validate().unwrap();
         let d = sw.phase_data();

@@ -194,10 +194,7 @@ mod tests {
             if k > 0 {
                 x = motor.step(&x, Terminal::Driven(u));
             }
-            seg.time.push(k as f64 * dt);
-            seg.voltage.push(u);
-            seg.current.push(x.current);
-            seg.speed.push(x.speed);
+            seg.push_sample(k as f64 * dt, u, x.current, x.speed);
             w_mean.push(if k == 0 {
                 x.speed
             } else {

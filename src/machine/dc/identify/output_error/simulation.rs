@@ -259,10 +259,7 @@ mod tests {
                 x = motor.step(&x, Terminal::Driven(uk));
                 mean_speed.push((x.angle - before) / dt);
             }
-            seg.time.push(k as f64 * dt);
-            seg.voltage.push(uk);
-            seg.current.push(x.current);
-            seg.speed.push(x.speed);
+            seg.push_sample(k as f64 * dt, uk, x.current, x.speed);
         }
         (seg, mean_speed)
     }
