@@ -58,7 +58,7 @@ pub fn run_diagnose(args: DiagnoseArgs) -> u8 {
         args.frequency,
     ) {
         Ok(r) => r,
-        Err(e) => return fail(2, &e),
+        Err(e) => return fail(2, &e.to_string()),
     };
     if let Some(r) = &record.recovery {
         eprintln!("motorbench: {} is damaged: {r}", args.files[0].display());
