@@ -26,7 +26,9 @@ pub use modbus_config::ImModbusRig;
 pub use plot::{render_im_svg, write_im_svg};
 pub use rig::{build_im_rig, ImRig, SERVED_IM_PLANT_RATE_HZ};
 pub use served::{ServedImRig, ServedVfd};
-pub use sim_rig::{sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd, COPPER_ALPHA};
+pub use sim_rig::{
+    sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimRigError, SimVfd, COPPER_ALPHA,
+};
 pub use stages::{VfdDyno, VfdSupply};
 pub use sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
 pub use text::render_im_text;
