@@ -23,7 +23,7 @@ mod text;
 
 pub use config::ImRunConfig;
 pub use modbus_config::ImModbusRig;
-pub use plot::{render_im_svg, write_im_svg};
+pub use plot::{render_im_svg, write_im_svg, DrawError, SweepPlotError};
 pub use rig::{build_im_rig, ImRig, SERVED_IM_PLANT_RATE_HZ};
 pub use served::{ServedImRig, ServedVfd};
 pub use sim_rig::{
@@ -65,7 +65,7 @@ impl Analysis for ImAnalysis {
     }
 
     fn write_plot(&self, _record: &Record, path: &Path) -> Result<(), String> {
-        write_im_svg(path, &self.0)
+        write_im_svg(path, &self.0).map_err(|e| e.to_string())
     }
 
     fn refusal(&self) -> Option<String> {
