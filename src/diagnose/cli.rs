@@ -65,7 +65,7 @@ pub fn run_diagnose(args: DiagnoseArgs) -> u8 {
     }
     if args.kind != SegmentKind::ImSlipSweep {
         if let Err(e) = crate::identify::check_plausible_files(&record, args.kind, &args.files) {
-            return fail(2, &e);
+            return fail(2, &e.to_string());
         }
     }
     let options = DiagnoseOptions {
