@@ -10,8 +10,8 @@
 //! them. They are listed for users in `docs/connect-your-rig.md`
 //! ("Bounds").
 //!
-//! The check functions return the reason as text; the caller names the
-//! key and the file.
+//! The check functions return a [`BoundsError`] whose text is the reason;
+//! the caller names the key and the file.
 
 /// Highest sampling rate of the rig or of one channel, Hz: faster than any
 /// bus here (Modbus, CAN, a serial stream) can carry a channel.
@@ -68,96 +68,197 @@ pub const MAX_CSV_STEP_S: f64 = 10.0;
 /// is below the resolution of a double.
 pub const MAX_CSV_TIME_S: f64 = 1e10;
 
+/// Why a number is refused by one of the checks below. Its text is the
+/// reason alone: the caller names the key and the file.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BoundsError {
+    /// Not a finite number above zero (at or above zero with `zero_ok`).
+    #[error("{value} must be a finite number {} 0", lowest(*.zero_ok))]
+    NotPositive {
+        /// The number refused.
+        value: f64,
+        /// Whether zero was allowed.
+        zero_ok: bool,
+    },
+    /// A sampling rate outside [`MIN_SAMPLE_RATE_HZ`] to
+    /// [`MAX_SAMPLE_RATE_HZ`].
+    #[error(
+        "{value} Hz is outside {min} to {max} Hz (the practical range of a rig's channels)",
+        min = MIN_SAMPLE_RATE_HZ,
+        max = MAX_SAMPLE_RATE_HZ
+    )]
+    SampleRate {
+        /// The rate refused, Hz.
+        value: f64,
+    },
+    /// A wait longer than [`MAX_WAIT_S`].
+    #[error("{value} s is beyond {max} s, the longest wait of one step", max = MAX_WAIT_S)]
+    Wait {
+        /// The wait refused, s.
+        value: f64,
+    },
+    /// A window of more than [`MAX_WINDOW_SAMPLES`] samples (or not a
+    /// number of samples at all).
+    #[error(
+        "{samples} samples is beyond {max}, the most one window holds",
+        max = MAX_WINDOW_SAMPLES
+    )]
+    Window {
+        /// The number of samples refused.
+        samples: f64,
+    },
+    /// A list with more entries than it may have.
+    #[error("{count} entries: at most {max}")]
+    Entries {
+        /// The number of entries.
+        count: usize,
+        /// The most allowed.
+        max: usize,
+    },
+    /// A test that could take longer than [`MAX_TEST_DURATION_S`].
+    #[error(
+        "the test could take {duration_s:.0} s with every step at its timeout: at most {max} s",
+        max = MAX_TEST_DURATION_S
+    )]
+    TestDuration {
+        /// The longest the test could take, s.
+        duration_s: f64,
+    },
+    /// A test that could take more than [`MAX_TEST_READINGS`] readings
+    /// per channel.
+    #[error(
+        "the test could take {readings:.3e} readings per channel ({duration_s:.0} s at {rate_hz} Hz): at most {max:.0e}, the memory one test's record may hold",
+        max = MAX_TEST_READINGS
+    )]
+    TestReadings {
+        /// The readings per channel the test could take.
+        readings: f64,
+        /// The longest the test could take, s.
+        duration_s: f64,
+        /// The rate it is read at, Hz.
+        rate_hz: f64,
+    },
+    /// A bus call's deadline of zero or beyond [`MAX_CALL_TIMEOUT_MS`].
+    #[error("{ms} ms: want 1 to {max}", max = MAX_CALL_TIMEOUT_MS)]
+    CallTimeout {
+        /// The deadline refused, ms.
+        ms: u64,
+    },
+    /// A count (retries, lost polls) above its most.
+    #[error("{value}: at most {max}")]
+    AboveMost {
+        /// The count refused.
+        value: u32,
+        /// The most allowed.
+        max: u32,
+    },
+    /// A supervision timeout beyond [`MAX_SUPERVISION_TIMEOUT_S`].
+    #[error(
+        "{value} s is beyond {max} s: a fault would go unnoticed that long",
+        max = MAX_SUPERVISION_TIMEOUT_S
+    )]
+    SupervisionTimeout {
+        /// The timeout refused, s.
+        value: f64,
+    },
+}
+
+/// The lowest a number may be, as a comparison: `≥` with `zero_ok`, else `>`.
+fn lowest(zero_ok: bool) -> &'static str {
+    if zero_ok {
+        "≥"
+    } else {
+        ">"
+    }
+}
+
 /// `v` as a sampling rate, Hz.
-pub fn sample_rate(v: f64) -> Result<f64, String> {
+pub fn sample_rate(v: f64) -> Result<f64, BoundsError> {
     if !v.is_finite() || v <= 0.0 {
-        return Err(format!("{v} must be a finite number > 0"));
+        return Err(BoundsError::NotPositive {
+            value: v,
+            zero_ok: false,
+        });
     }
     if !(MIN_SAMPLE_RATE_HZ..=MAX_SAMPLE_RATE_HZ).contains(&v) {
-        return Err(format!(
-            "{v} Hz is outside {MIN_SAMPLE_RATE_HZ} to {MAX_SAMPLE_RATE_HZ} Hz (the practical range of a rig's channels)"
-        ));
+        return Err(BoundsError::SampleRate { value: v });
     }
     Ok(v)
 }
 
 /// `v` as one wait of a plan, s: finite, > 0 (≥ 0 with `zero_ok`) and at
 /// most [`MAX_WAIT_S`].
-pub fn wait_s(v: f64, zero_ok: bool) -> Result<f64, String> {
+pub fn wait_s(v: f64, zero_ok: bool) -> Result<f64, BoundsError> {
     let low_ok = if zero_ok { v >= 0.0 } else { v > 0.0 };
     if !v.is_finite() || !low_ok {
-        let sign = if zero_ok { "≥" } else { ">" };
-        return Err(format!("{v} must be a finite number {sign} 0"));
+        return Err(BoundsError::NotPositive { value: v, zero_ok });
     }
     if v > MAX_WAIT_S {
-        return Err(format!(
-            "{v} s is beyond {MAX_WAIT_S} s, the longest wait of one step"
-        ));
+        return Err(BoundsError::Wait { value: v });
     }
     Ok(v)
 }
 
 /// `n` samples of a settle window or an average.
-pub fn window_samples(n: f64) -> Result<usize, String> {
+pub fn window_samples(n: f64) -> Result<usize, BoundsError> {
     if !(0.0..=MAX_WINDOW_SAMPLES as f64).contains(&n) {
-        return Err(format!(
-            "{n} samples is beyond {MAX_WINDOW_SAMPLES}, the most one window holds"
-        ));
+        return Err(BoundsError::Window { samples: n });
     }
     Ok(n as usize)
 }
 
 /// `n` entries of a list that has at most `max`.
-pub fn count(n: usize, max: usize) -> Result<usize, String> {
+pub fn count(n: usize, max: usize) -> Result<usize, BoundsError> {
     if n > max {
-        return Err(format!("{n} entries: at most {max}"));
+        return Err(BoundsError::Entries { count: n, max });
     }
     Ok(n)
 }
 
 /// The longest a test takes, `duration_s`, read at `rate_hz`: within
 /// [`MAX_TEST_DURATION_S`] and [`MAX_TEST_READINGS`].
-pub fn test_length(duration_s: f64, rate_hz: f64) -> Result<(), String> {
+pub fn test_length(duration_s: f64, rate_hz: f64) -> Result<(), BoundsError> {
     if !(duration_s.is_finite() && duration_s <= MAX_TEST_DURATION_S) {
-        return Err(format!(
-            "the test could take {duration_s:.0} s with every step at its timeout: at most {MAX_TEST_DURATION_S} s"
-        ));
+        return Err(BoundsError::TestDuration { duration_s });
     }
     let readings = duration_s * rate_hz;
     if readings > MAX_TEST_READINGS {
-        return Err(format!(
-            "the test could take {readings:.3e} readings per channel ({duration_s:.0} s at {rate_hz} Hz): at most {MAX_TEST_READINGS:.0e}, the memory one test's record may hold"
-        ));
+        return Err(BoundsError::TestReadings {
+            readings,
+            duration_s,
+            rate_hz,
+        });
     }
     Ok(())
 }
 
 /// A bus call's deadline, ms: > 0 and at most [`MAX_CALL_TIMEOUT_MS`].
-pub fn call_timeout_ms(ms: u64) -> Result<u64, String> {
+pub fn call_timeout_ms(ms: u64) -> Result<u64, BoundsError> {
     if ms == 0 || ms > MAX_CALL_TIMEOUT_MS {
-        return Err(format!("{ms} ms: want 1 to {MAX_CALL_TIMEOUT_MS}"));
+        return Err(BoundsError::CallTimeout { ms });
     }
     Ok(ms)
 }
 
 /// `n` at most `max` (retries, lost polls).
-pub fn at_most(n: u32, max: u32) -> Result<u32, String> {
+pub fn at_most(n: u32, max: u32) -> Result<u32, BoundsError> {
     if n > max {
-        return Err(format!("{n}: at most {max}"));
+        return Err(BoundsError::AboveMost { value: n, max });
     }
     Ok(n)
 }
 
 /// A supervision timeout, s: finite, > 0, at most
 /// [`MAX_SUPERVISION_TIMEOUT_S`].
-pub fn supervision_timeout_s(v: f64) -> Result<f64, String> {
+pub fn supervision_timeout_s(v: f64) -> Result<f64, BoundsError> {
     if !(v.is_finite() && v > 0.0) {
-        return Err(format!("{v} must be a finite number > 0"));
+        return Err(BoundsError::NotPositive {
+            value: v,
+            zero_ok: false,
+        });
     }
     if v > MAX_SUPERVISION_TIMEOUT_S {
-        return Err(format!(
-            "{v} s is beyond {MAX_SUPERVISION_TIMEOUT_S} s: a fault would go unnoticed that long"
-        ));
+        return Err(BoundsError::SupervisionTimeout { value: v });
     }
     Ok(v)
 }
@@ -178,7 +279,10 @@ mod tests {
             assert!(wait_s(bad, false).is_err(), "{bad}");
         }
         assert_eq!(window_samples(200.0), Ok(200));
-        assert!(window_samples(1e10).unwrap_err().contains("1000000"));
+        assert!(window_samples(1e10)
+            .unwrap_err()
+            .to_string()
+            .contains("1000000"));
         assert!(window_samples(f64::NAN).is_err());
         assert!(count(1001, MAX_LEVELS).is_err() && count(3, MAX_LEVELS).is_ok());
     }
@@ -186,9 +290,9 @@ mod tests {
     #[test]
     fn a_test_is_bounded_in_time_and_in_readings() {
         assert!(test_length(80.0, 2000.0).is_ok());
-        let e = test_length(1e5, 1.0).unwrap_err();
+        let e = test_length(1e5, 1.0).unwrap_err().to_string();
         assert!(e.contains("86400"), "{e}");
-        let e = test_length(3600.0, 100_000.0).unwrap_err();
+        let e = test_length(3600.0, 100_000.0).unwrap_err().to_string();
         assert!(e.contains("readings per channel"), "{e}");
         assert!(test_length(f64::NAN, 1.0).is_err());
     }
@@ -202,5 +306,43 @@ mod tests {
         for bad in [0.0, 60.0, f64::INFINITY] {
             assert!(supervision_timeout_s(bad).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn messages_are_the_reason_alone_and_the_case_is_matchable() {
+        assert_eq!(
+            wait_s(-1.0, true).unwrap_err().to_string(),
+            "-1 must be a finite number ≥ 0"
+        );
+        assert_eq!(
+            sample_rate(0.0).unwrap_err().to_string(),
+            "0 must be a finite number > 0"
+        );
+        assert_eq!(
+            sample_rate(1e6).unwrap_err().to_string(),
+            "1000000 Hz is outside 0.1 to 100000 Hz (the practical range of a rig's channels)"
+        );
+        assert_eq!(
+            wait_s(4000.0, false).unwrap_err().to_string(),
+            "4000 s is beyond 3600 s, the longest wait of one step"
+        );
+        assert_eq!(
+            test_length(3600.0, 100_000.0).unwrap_err().to_string(),
+            "the test could take 3.600e8 readings per channel (3600 s at 100000 Hz): at most 5e7, the memory one test's record may hold"
+        );
+        assert_eq!(
+            call_timeout_ms(0).unwrap_err().to_string(),
+            "0 ms: want 1 to 10000"
+        );
+        assert_eq!(
+            supervision_timeout_s(60.0).unwrap_err().to_string(),
+            "60 s is beyond 10 s: a fault would go unnoticed that long"
+        );
+        // A sign error and a range error are told apart without the text.
+        assert!(matches!(
+            wait_s(-1.0, false),
+            Err(BoundsError::NotPositive { zero_ok: false, .. })
+        ));
+        assert!(matches!(wait_s(1e7, false), Err(BoundsError::Wait { .. })));
     }
 }

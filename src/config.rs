@@ -87,9 +87,9 @@ pub enum ConfigError {
 pub(crate) fn bounded<T>(
     source: &str,
     key: &str,
-    checked: Result<T, String>,
+    checked: Result<T, bounds::BoundsError>,
 ) -> Result<T, ConfigError> {
-    checked.map_err(|reason| invalid(source, key, reason))
+    checked.map_err(|reason| invalid(source, key, reason.to_string()))
 }
 
 /// An invalid value of `key` in `source` (its line filled in later by

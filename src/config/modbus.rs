@@ -121,9 +121,9 @@ pub(crate) fn simulated_transport(
 /// call may wait, and how often it is tried again.
 pub(crate) fn call_policy(timeout_ms: u64, retries: u32) -> Result<CallPolicy, (String, String)> {
     let timeout_ms = bounds::call_timeout_ms(timeout_ms)
-        .map_err(|why| ("rig.modbus.timeout_ms".to_string(), why))?;
+        .map_err(|why| ("rig.modbus.timeout_ms".to_string(), why.to_string()))?;
     let retries = bounds::at_most(retries, bounds::MAX_RETRIES)
-        .map_err(|why| ("rig.modbus.retries".to_string(), why))?;
+        .map_err(|why| ("rig.modbus.retries".to_string(), why.to_string()))?;
     Ok(CallPolicy {
         timeout: Duration::from_millis(timeout_ms),
         retries,
@@ -281,7 +281,7 @@ impl RawModbusRig {
         let simulate = simulated_transport(self.simulate.as_deref(), simulated_present)?;
         let policy = call_policy(self.timeout_ms, self.retries)?;
         let max_lost_polls = bounds::at_most(self.max_lost_polls, bounds::MAX_LOST_POLLS)
-            .map_err(|why| ("rig.modbus.max_lost_polls".to_string(), why))?;
+            .map_err(|why| ("rig.modbus.max_lost_polls".to_string(), why.to_string()))?;
         let power_stage =
             self.power_stage
                 .validate("rig.modbus.power_stage", dir, simulate.is_some())?;

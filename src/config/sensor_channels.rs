@@ -125,7 +125,8 @@ impl RawChannel {
                 if let Err(why) = rate_allowed {
                     return Err((format!("{key}.rate_Hz"), why.to_string()));
                 }
-                crate::bounds::sample_rate(r).map_err(|why| (format!("{key}.rate_Hz"), why))?
+                crate::bounds::sample_rate(r)
+                    .map_err(|why| (format!("{key}.rate_Hz"), why.to_string()))?
             }
         };
         Ok(SensorChannel {

@@ -129,7 +129,7 @@ impl RawSupervisor {
                 .unwrap_or(limits.max_voltage * limits.max_current),
         )?;
         let timeout = |key: &str, v: f64| {
-            crate::bounds::supervision_timeout_s(v).map_err(|why| invalid(key, why))
+            crate::bounds::supervision_timeout_s(v).map_err(|why| invalid(key, why.to_string()))
         };
         let stale_timeout = timeout(
             "stale_timeout_s",

@@ -58,14 +58,14 @@ pub fn run_diagnose(args: DiagnoseArgs) -> u8 {
         args.frequency,
     ) {
         Ok(r) => r,
-        Err(e) => return fail(2, &e),
+        Err(e) => return fail(2, &e.to_string()),
     };
     if let Some(r) = &record.recovery {
         eprintln!("motorbench: {} is damaged: {r}", args.files[0].display());
     }
     if args.kind != SegmentKind::ImSlipSweep {
         if let Err(e) = crate::identify::check_plausible_files(&record, args.kind, &args.files) {
-            return fail(2, &e);
+            return fail(2, &e.to_string());
         }
     }
     let options = DiagnoseOptions {

@@ -23,7 +23,7 @@
 
 use std::path::Path;
 
-use super::error::RecordError;
+use super::error::{DeclarationError, RecordError, TimeError};
 use super::types::{DcSegment, SegmentKind};
 use crate::bounds::{MAX_CSV_STEP_S, MAX_CSV_TIME_S, MIN_CSV_STEP_S};
 use crate::excerpt::{cut, quoted};
@@ -108,7 +108,7 @@ pub fn read_dc_csv(
         let row = CsvRow::split(path, header, no, line)?;
         let number = |col: usize| row.number(col);
         let t = number(time_col)?;
-        check_time(t, previous_time).map_err(|why| err(no, Some(COL_TIME), why))?;
+        check_time(t, previous_time).map_err(|why| err(no, Some(COL_TIME), why.to_string()))?;
         previous_time = Some((t, no));
         let voltage = number(voltage_col)?;
         let current = number(current_col)?;
@@ -130,25 +130,26 @@ pub fn read_dc_csv(
 /// Time `t` of a row, after `previous` (the previous row's time and line):
 /// within ±[`MAX_CSV_TIME_S`] and a step of [`MIN_CSV_STEP_S`] to
 /// [`MAX_CSV_STEP_S`] after the previous row's.
-fn check_time(t: f64, previous: Option<(f64, usize)>) -> Result<(), String> {
+fn check_time(t: f64, previous: Option<(f64, usize)>) -> Result<(), TimeError> {
     if t.abs() > MAX_CSV_TIME_S {
-        return Err(format!(
-            "time {t:e} s is beyond ±{MAX_CSV_TIME_S:e} s (seconds since the start of the record, or a Unix time)"
-        ));
+        return Err(TimeError::OutOfRange { t });
     }
     let Some((prev, prev_no)) = previous else {
         return Ok(());
     };
     if t <= prev {
-        return Err(format!(
-            "time {t} is not after the previous row's {prev} (line {prev_no}); time must increase strictly"
-        ));
+        return Err(TimeError::NotIncreasing {
+            t,
+            previous: prev,
+            previous_line: prev_no,
+        });
     }
     let step = t - prev;
     if !(MIN_CSV_STEP_S..=MAX_CSV_STEP_S).contains(&step) {
-        return Err(format!(
-            "a step of {step:e} s after the previous row (line {prev_no}) is outside {MIN_CSV_STEP_S:e} to {MAX_CSV_STEP_S} s, the sampling steps a record can have"
-        ));
+        return Err(TimeError::Step {
+            step,
+            previous_line: prev_no,
+        });
     }
     Ok(())
 }
@@ -198,7 +199,8 @@ impl<'a> CsvLines<'a> {
         let mut decl_line = None;
         if let Some(&(no, line)) = lines.peek() {
             if let Some(rest) = declaration_text(line) {
-                decl = parse_declaration(rest).map_err(|r| RecordError::csv(path, no, None, r))?;
+                decl = parse_declaration(rest)
+                    .map_err(|r| RecordError::csv(path, no, None, r.to_string()))?;
                 decl_line = Some(no);
                 lines.next();
             }
@@ -279,35 +281,30 @@ pub(super) fn declaration_text(line: &str) -> Option<&str> {
 }
 
 /// Parses `<index> kind=<kind> label=<free text>`.
-pub(super) fn parse_declaration(text: &str) -> Result<Declaration, String> {
+pub(super) fn parse_declaration(text: &str) -> Result<Declaration, DeclarationError> {
     let mut decl = Declaration::default();
     let (index, mut rest) = split_word(text);
     if index.is_empty() {
-        return Err("segment declaration without a segment index".into());
+        return Err(DeclarationError::NoIndex);
     }
-    decl.index = Some(index.parse().map_err(|_| {
-        format!(
-            "segment declaration: {} is not a segment index (0, 1, 2, …)",
-            quoted(index)
-        )
+    decl.index = Some(index.parse().map_err(|_| DeclarationError::BadIndex {
+        quoted: quoted(index),
     })?);
     if let Some(after) = rest.strip_prefix("kind=") {
         let (kind, tail) = split_word(after);
-        decl.kind = Some(SegmentKind::parse(kind).ok_or_else(|| {
-            format!(
-                "segment declaration: kind {} is not dc_step, dc_coastdown or im_slip_sweep",
-                quoted(kind)
-            )
-        })?);
+        decl.kind = Some(
+            SegmentKind::parse(kind).ok_or_else(|| DeclarationError::BadKind {
+                quoted: quoted(kind),
+            })?,
+        );
         rest = tail;
     }
     if let Some(label) = rest.strip_prefix("label=") {
         decl.label = Some(label.trim().to_string());
     } else if !rest.is_empty() {
-        return Err(format!(
-            "segment declaration: unexpected {} (want `<index> kind=<kind> label=<text>`)",
-            quoted(rest)
-        ));
+        return Err(DeclarationError::Unexpected {
+            quoted: quoted(rest),
+        });
     }
     Ok(decl)
 }

@@ -124,6 +124,150 @@ pub enum RecordError {
     },
 }
 
+/// Why the files named on a command line do not load as one record.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    /// One of the files could not be read as a record or a segment.
+    #[error(transparent)]
+    Record(#[from] RecordError),
+    /// The nameplate file could not be read.
+    #[error("{}: {source}", path.display())]
+    NameplateIo {
+        /// The nameplate file.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The nameplate file is not JSON.
+    #[error("{}:{}: {source}", path.display(), source.line())]
+    NameplateJson {
+        /// The nameplate file.
+        path: PathBuf,
+        /// The parser's error, with its line.
+        #[source]
+        source: serde_json::Error,
+    },
+    /// The nameplate is JSON but not an object.
+    #[error("{}: a nameplate must be a JSON object", path.display())]
+    NameplateNotObject {
+        /// The nameplate file.
+        path: PathBuf,
+    },
+    /// More than one MCAP file, or an MCAP file among CSV files.
+    #[error("give either one MCAP file or any number of CSV files")]
+    MixedFiles,
+    /// Two CSV files declare the same segment index.
+    #[error("{}: segment index {index} is already used by {}", path.display(), other.display())]
+    DuplicateSegment {
+        /// The file declaring the index a second time.
+        path: PathBuf,
+        /// The segment index.
+        index: u32,
+        /// The file that declared it first.
+        other: PathBuf,
+    },
+}
+
+/// Why a CSV row's time is refused (the caller names the file, the line
+/// and the column).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub(crate) enum TimeError {
+    /// Beyond ±[`MAX_CSV_TIME_S`](crate::bounds::MAX_CSV_TIME_S).
+    #[error(
+        "time {t:e} s is beyond ±{max:e} s (seconds since the start of the record, or a Unix time)",
+        max = crate::bounds::MAX_CSV_TIME_S
+    )]
+    OutOfRange {
+        /// The time, s.
+        t: f64,
+    },
+    /// Not after the previous row's time.
+    #[error("time {t} is not after the previous row's {previous} (line {previous_line}); time must increase strictly")]
+    NotIncreasing {
+        /// The time, s.
+        t: f64,
+        /// The previous row's time, s.
+        previous: f64,
+        /// The previous row's line.
+        previous_line: usize,
+    },
+    /// A step outside the sampling steps a record can have.
+    #[error(
+        "a step of {step:e} s after the previous row (line {previous_line}) is outside {min:e} to {max} s, the sampling steps a record can have",
+        min = crate::bounds::MIN_CSV_STEP_S,
+        max = crate::bounds::MAX_CSV_STEP_S
+    )]
+    Step {
+        /// The step, s.
+        step: f64,
+        /// The previous row's line.
+        previous_line: usize,
+    },
+}
+
+/// Why a CSV segment declaration (`<index> kind=<kind> label=<text>`) is
+/// refused (the caller names the file and the line).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub(crate) enum DeclarationError {
+    /// No index.
+    #[error("segment declaration without a segment index")]
+    NoIndex,
+    /// The index is not a number.
+    #[error("segment declaration: {quoted} is not a segment index (0, 1, 2, …)")]
+    BadIndex {
+        /// The index as written, quoted.
+        quoted: String,
+    },
+    /// An unknown kind.
+    #[error("segment declaration: kind {quoted} is not dc_step, dc_coastdown or im_slip_sweep")]
+    BadKind {
+        /// The kind as written, quoted.
+        quoted: String,
+    },
+    /// Text that is neither a kind nor a label.
+    #[error("segment declaration: unexpected {quoted} (want `<index> kind=<kind> label=<text>`)")]
+    Unexpected {
+        /// The text, quoted.
+        quoted: String,
+    },
+}
+
+/// Why a walk over an MCAP file's records stopped (the caller says where
+/// in the file).
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub(crate) enum WalkError {
+    /// A record's length-prefixed string runs past the record's end.
+    #[error("record of opcode {opcode:#04x} ({len} bytes) declares a string longer than itself")]
+    StringOverrun {
+        /// The record's opcode.
+        opcode: u8,
+        /// The record's length, bytes.
+        len: usize,
+    },
+    /// The MCAP library refused a record: its error and causes, on one
+    /// line.
+    #[error("{0}")]
+    Mcap(String),
+    /// Damage inside a chunk.
+    #[error("in the chunk: {0}")]
+    InChunk(Box<WalkError>),
+}
+
+/// Why a message does not decode as its topic's JSON payload (the caller
+/// names the file, the topic and the log time).
+#[derive(Debug, thiserror::Error)]
+#[error("cannot decode {shown:?}{}: {source}", if *.cut { "…" } else { "" })]
+pub(crate) struct DecodeError {
+    /// The message's first 80 characters.
+    pub shown: String,
+    /// Whether the message is longer than what is shown.
+    pub cut: bool,
+    /// The parser's error.
+    #[source]
+    pub source: serde_json::Error,
+}
+
 fn column_prefix(column: &Option<String>) -> String {
     match column {
         Some(c) => format!("column {c}: "),

@@ -5,7 +5,9 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{read_dc_csv, read_im_csv, read_mcap, Record, SegmentKind, TestMeta, SCHEMA_VERSION};
+use super::{
+    read_dc_csv, read_im_csv, read_mcap, LoadError, Record, SegmentKind, TestMeta, SCHEMA_VERSION,
+};
 
 /// Read `files` as a record of `kind`. An IM record takes its supply
 /// frequency from `frequency`, else the nameplate's `frequency_Hz`, and
@@ -16,7 +18,7 @@ pub fn load_record_files(
     files: &[PathBuf],
     nameplate: Option<&Path>,
     frequency: Option<f64>,
-) -> Result<Record, String> {
+) -> Result<Record, LoadError> {
     let plate = nameplate.map(read_nameplate).transpose()?;
     let is_mcap = |p: &PathBuf| {
         p.extension()
@@ -24,18 +26,18 @@ pub fn load_record_files(
     };
     match files.iter().filter(|p| is_mcap(p)).count() {
         0 => {}
-        1 if files.len() == 1 => return read_mcap(&files[0]).map_err(|e| e.to_string()),
-        _ => return Err("give either one MCAP file or any number of CSV files".into()),
+        1 if files.len() == 1 => return Ok(read_mcap(&files[0])?),
+        _ => return Err(LoadError::MixedFiles),
     }
     let mut record = Record::default();
     let mut seen: Vec<(u32, usize)> = Vec::new();
-    let mut claim = |index: u32, n: usize| -> Result<(), String> {
+    let mut claim = |index: u32, n: usize| -> Result<(), LoadError> {
         if let Some((_, other)) = seen.iter().find(|(i, _)| *i == index) {
-            return Err(format!(
-                "{}: segment index {index} is already used by {}",
-                files[n].display(),
-                files[*other].display()
-            ));
+            return Err(LoadError::DuplicateSegment {
+                path: files[n].clone(),
+                index,
+                other: files[*other].clone(),
+            });
         }
         seen.push((index, n));
         Ok(())
@@ -50,8 +52,7 @@ pub fn load_record_files(
         let frequency = frequency.or_else(|| number("frequency_Hz"));
         let pole_pairs = number("poles").map(|p| (p / 2.0).round() as u32);
         for (n, path) in files.iter().enumerate() {
-            let seg =
-                read_im_csv(path, n as u32, frequency, pole_pairs).map_err(|e| e.to_string())?;
+            let seg = read_im_csv(path, n as u32, frequency, pole_pairs)?;
             claim(seg.index, n)?;
             record.operating_points.extend(seg.points);
         }
@@ -66,7 +67,7 @@ pub fn load_record_files(
         return Ok(record);
     }
     for (n, path) in files.iter().enumerate() {
-        let seg = read_dc_csv(path, kind, n as u32).map_err(|e| e.to_string())?;
+        let seg = read_dc_csv(path, kind, n as u32)?;
         claim(seg.index, n)?;
         record.segments.push(seg);
     }
@@ -75,15 +76,51 @@ pub fn load_record_files(
 }
 
 /// Read a nameplate: a JSON object with the contract's keys.
-fn read_nameplate(path: &Path) -> Result<serde_json::Value, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+fn read_nameplate(path: &Path) -> Result<serde_json::Value, LoadError> {
+    let text = std::fs::read_to_string(path).map_err(|source| LoadError::NameplateIo {
+        path: path.to_path_buf(),
+        source,
+    })?;
     let v: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| format!("{}:{}: {e}", path.display(), e.line()))?;
+        serde_json::from_str(&text).map_err(|source| LoadError::NameplateJson {
+            path: path.to_path_buf(),
+            source,
+        })?;
     if !v.is_object() {
-        return Err(format!(
-            "{}: a nameplate must be a JSON object",
-            path.display()
-        ));
+        return Err(LoadError::NameplateNotObject {
+            path: path.to_path_buf(),
+        });
     }
     Ok(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::RecordError;
+
+    #[test]
+    fn a_caller_tells_a_bad_choice_of_files_from_a_file_that_does_not_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let mcap = dir.path().join("a.mcap");
+        let csv = dir.path().join("b.csv");
+        let e =
+            load_record_files(SegmentKind::DcStep, &[mcap, csv.clone()], None, None).unwrap_err();
+        assert!(matches!(e, LoadError::MixedFiles), "{e:?}");
+        assert_eq!(
+            e.to_string(),
+            "give either one MCAP file or any number of CSV files"
+        );
+        let e = load_record_files(SegmentKind::DcStep, std::slice::from_ref(&csv), None, None)
+            .unwrap_err();
+        assert!(
+            matches!(&e, LoadError::Record(RecordError::Io { .. })),
+            "{e:?}"
+        );
+        assert!(e.to_string().starts_with(&format!("{}: ", csv.display())));
+        let plate = dir.path().join("plate.json");
+        std::fs::write(&plate, "[1]").unwrap();
+        let e = load_record_files(SegmentKind::DcStep, &[csv], Some(&plate), None).unwrap_err();
+        assert!(matches!(e, LoadError::NameplateNotObject { .. }), "{e:?}");
+    }
 }

@@ -27,6 +27,8 @@ use mcap::records::{op, Record};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use mcap::{McapError, MAGIC};
 
+use super::error::WalkError;
+
 /// An opcode and a 64-bit length precede every record.
 const RECORD_PREFIX: u64 = 1 + 8;
 
@@ -80,7 +82,10 @@ pub(crate) fn walk_records(bytes: &[u8], visit: &mut dyn FnMut(Record<'_>)) -> O
                     _ => hand_on(opcode, data, visit),
                 };
                 if let Err(reason) = handed {
-                    return Some(Damage { offset: at, reason });
+                    return Some(Damage {
+                        offset: at,
+                        reason: reason.to_string(),
+                    });
                 }
             }
             Err(e) => {
@@ -106,7 +111,7 @@ fn walk_chunk(
     record: &[u8],
     limit: usize,
     visit: &mut dyn FnMut(Record<'_>),
-) -> Result<(), String> {
+) -> Result<(), WalkError> {
     let options = LinearReaderOptions::default()
         .with_skip_start_magic(true)
         .with_skip_end_magic(true)
@@ -118,9 +123,9 @@ fn walk_chunk(
         match event {
             Ok(LinearReadEvent::ReadRequest(need)) => feed(&mut reader, &mut unread, need),
             Ok(LinearReadEvent::Record { opcode, data }) => {
-                hand_on(opcode, data, visit).map_err(|e| format!("in the chunk: {e}"))?
+                hand_on(opcode, data, visit).map_err(|e| WalkError::InChunk(Box::new(e)))?
             }
-            Err(e) => return Err(format!("in the chunk: {}", describe(&e))),
+            Err(e) => return Err(WalkError::InChunk(Box::new(WalkError::Mcap(describe(&e))))),
         }
     }
     Ok(())
@@ -135,7 +140,7 @@ fn feed(reader: &mut LinearReader, unread: &mut &[u8], need: usize) {
 }
 
 /// Parses and visits a record the reader uses; skips the others.
-fn hand_on(opcode: u8, body: &[u8], visit: &mut dyn FnMut(Record<'_>)) -> Result<(), String> {
+fn hand_on(opcode: u8, body: &[u8], visit: &mut dyn FnMut(Record<'_>)) -> Result<(), WalkError> {
     if !matches!(
         opcode,
         op::HEADER | op::METADATA | op::CHANNEL | op::MESSAGE
@@ -143,12 +148,12 @@ fn hand_on(opcode: u8, body: &[u8], visit: &mut dyn FnMut(Record<'_>)) -> Result
         return Ok(());
     }
     if !strings_fit(opcode, body) {
-        return Err(format!(
-            "record of opcode {opcode:#04x} ({} bytes) declares a string longer than itself",
-            body.len()
-        ));
+        return Err(WalkError::StringOverrun {
+            opcode,
+            len: body.len(),
+        });
     }
-    let record = mcap::parse_record(opcode, body).map_err(|e| describe(&e))?;
+    let record = mcap::parse_record(opcode, body).map_err(|e| WalkError::Mcap(describe(&e)))?;
     visit(record);
     Ok(())
 }

@@ -23,7 +23,7 @@ mod writer;
 pub use builder::{RecordBuilder, INCOMPLETE_SUFFIX};
 pub use csv::read_dc_csv;
 pub use csv_im::{read_im_csv, ImCsvSegment};
-pub use error::RecordError;
+pub use error::{LoadError, RecordError};
 pub use files::load_record_files;
 pub use reader::{read_entries, read_mcap, Entries};
 pub use types::*;

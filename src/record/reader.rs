@@ -31,7 +31,7 @@ use mcap::records::Record as McapRecord;
 use serde::Deserialize;
 
 use super::builder::RecordBuilder;
-use super::error::RecordError;
+use super::error::{DecodeError, RecordError};
 use super::mcap_walk::{walk_records, Damage};
 use super::schema::{
     is_sample_topic_for, COMMAND_PREFIX, MESSAGE_ENCODING, METADATA_NAME, SENSOR_PREFIX,
@@ -207,7 +207,7 @@ impl<'p> Reading<'p> {
                     reason,
                 };
                 if let Route::Sample(index) = *route {
-                    let s: SamplePayload = decode(&data).map_err(bad)?;
+                    let s: SamplePayload = decode(&data).map_err(|e| bad(e.to_string()))?;
                     let value = (index, s.value);
                     match &mut self.pending {
                         Some((t, values)) if *t == t_ns => values.push(value),
@@ -221,14 +221,15 @@ impl<'p> Reading<'p> {
                 let entry = match route {
                     Route::Segment => Some(Entry::Segment {
                         t_ns,
-                        marker: decode(&data).map_err(bad)?,
+                        marker: decode(&data).map_err(|e| bad(e.to_string()))?,
                     }),
                     Route::Event => Some(Entry::Event {
                         t_ns,
-                        event: decode(&data).map_err(bad)?,
+                        event: decode(&data).map_err(|e| bad(e.to_string()))?,
                     }),
                     Route::Result => {
-                        let report: serde_json::Value = decode(&data).map_err(bad)?;
+                        let report: serde_json::Value =
+                            decode(&data).map_err(|e| bad(e.to_string()))?;
                         if !report.is_object() {
                             return Err(bad("the report is not a JSON object".into()));
                         }
@@ -236,11 +237,11 @@ impl<'p> Reading<'p> {
                     }
                     Route::OperatingPoint => Some(Entry::OperatingPoint {
                         t_ns,
-                        point: decode(&data).map_err(bad)?,
+                        point: decode(&data).map_err(|e| bad(e.to_string()))?,
                     }),
                     Route::SupplyLimit => Some(Entry::SupplyLimit {
                         t_ns,
-                        limit: decode(&data).map_err(bad)?,
+                        limit: decode(&data).map_err(|e| bad(e.to_string()))?,
                     }),
                     Route::Sample(_) | Route::Ignore => None,
                 };
@@ -269,12 +270,14 @@ impl<'p> Reading<'p> {
     }
 }
 
-fn decode<'a, T: Deserialize<'a>>(data: &'a [u8]) -> Result<T, String> {
-    serde_json::from_slice(data).map_err(|e| {
+fn decode<'a, T: Deserialize<'a>>(data: &'a [u8]) -> Result<T, DecodeError> {
+    serde_json::from_slice(data).map_err(|source| {
         let text = String::from_utf8_lossy(data);
-        let shown: String = text.chars().take(80).collect();
-        let more = if text.chars().count() > 80 { "…" } else { "" };
-        format!("cannot decode {shown:?}{more}: {e}")
+        DecodeError {
+            shown: text.chars().take(80).collect(),
+            cut: text.chars().count() > 80,
+            source,
+        }
     })
 }
 

@@ -6,7 +6,7 @@
 //! (`subtle`); a wrong or missing token gets 401 and no other answer, also
 //! on paths that do not exist.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use axum::extract::{Request, State};
@@ -17,6 +17,34 @@ use subtle::ConstantTimeEq;
 
 /// Shortest token accepted, characters.
 pub const MIN_TOKEN_LEN: usize = 16;
+
+/// Why a token file is refused.
+#[derive(Debug, thiserror::Error)]
+pub enum TokenError {
+    /// The file could not be read.
+    #[error("{}: cannot read the token file: {source}", path.display())]
+    Read {
+        /// The token file.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The token is shorter than [`MIN_TOKEN_LEN`].
+    #[error("{}: the token is {len} characters; at least {MIN_TOKEN_LEN} are needed", path.display())]
+    TooShort {
+        /// The token file.
+        path: PathBuf,
+        /// The token's length, characters.
+        len: usize,
+    },
+    /// The token holds a character other than printable ASCII.
+    #[error("{}: the token may hold printable ASCII only (no spaces)", path.display())]
+    NotPrintable {
+        /// The token file.
+        path: PathBuf,
+    },
+}
 
 /// The API token.
 #[derive(Clone)]
@@ -31,22 +59,22 @@ impl std::fmt::Debug for Token {
 impl Token {
     /// Read a token file: its content without surrounding whitespace, at
     /// least [`MIN_TOKEN_LEN`] characters, printable ASCII only.
-    pub fn load(path: &Path) -> Result<Token, String> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| format!("{}: cannot read the token file: {e}", path.display()))?;
+    pub fn load(path: &Path) -> Result<Token, TokenError> {
+        let text = std::fs::read_to_string(path).map_err(|source| TokenError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
         let token = text.trim();
         if token.len() < MIN_TOKEN_LEN {
-            return Err(format!(
-                "{}: the token is {} characters; at least {MIN_TOKEN_LEN} are needed",
-                path.display(),
-                token.len()
-            ));
+            return Err(TokenError::TooShort {
+                path: path.to_path_buf(),
+                len: token.len(),
+            });
         }
         if !token.bytes().all(|b| b.is_ascii_graphic()) {
-            return Err(format!(
-                "{}: the token may hold printable ASCII only (no spaces)",
-                path.display()
-            ));
+            return Err(TokenError::NotPrintable {
+                path: path.to_path_buf(),
+            });
         }
         #[cfg(unix)]
         {
@@ -126,12 +154,22 @@ mod tests {
         let p = dir.path().join("token");
         std::fs::write(&p, "short\n").unwrap();
         let e = Token::load(&p).unwrap_err();
-        assert!(e.contains("at least 16"), "{e}");
+        assert!(matches!(e, TokenError::TooShort { len: 5, .. }), "{e:?}");
+        assert_eq!(
+            e.to_string(),
+            format!(
+                "{}: the token is 5 characters; at least 16 are needed",
+                p.display()
+            )
+        );
         std::fs::write(&p, "has a space in the middle\n").unwrap();
-        assert!(Token::load(&p).unwrap_err().contains("printable"));
+        let e = Token::load(&p).unwrap_err();
+        assert!(matches!(e, TokenError::NotPrintable { .. }), "{e:?}");
+        assert!(e.to_string().contains("printable"));
         std::fs::write(&p, "  0123456789abcdef0123  \n").unwrap();
         assert_eq!(Token::load(&p).unwrap().as_str(), "0123456789abcdef0123");
         let e = Token::load(&dir.path().join("none")).unwrap_err();
-        assert!(e.contains("cannot read"), "{e}");
+        assert!(matches!(e, TokenError::Read { .. }), "{e:?}");
+        assert!(e.to_string().contains("cannot read"), "{e}");
     }
 }

@@ -23,24 +23,45 @@ pub enum Endpoint {
 
 impl Endpoint {
     /// Parse `http://HOST:PORT` (no path) or `unix:PATH`.
-    pub fn parse(url: &str) -> Result<Endpoint, String> {
+    pub fn parse(url: &str) -> Result<Endpoint, EndpointError> {
         if let Some(path) = url.strip_prefix("unix:") {
             if path.is_empty() {
-                return Err(format!("{url}: no socket path after `unix:`"));
+                return Err(EndpointError::NoSocketPath { url: url.into() });
             }
             return Ok(Endpoint::Unix(PathBuf::from(path)));
         }
         let Some(authority) = url.strip_prefix("http://") else {
-            return Err(format!(
-                "{url}: give http://HOST:PORT or unix:PATH (https is not supported: use a tunnel)"
-            ));
+            return Err(EndpointError::Scheme { url: url.into() });
         };
         let authority = authority.trim_end_matches('/');
         if authority.is_empty() || authority.contains('/') {
-            return Err(format!("{url}: give http://HOST:PORT with no path"));
+            return Err(EndpointError::Authority { url: url.into() });
         }
         Ok(Endpoint::Tcp(authority.to_string()))
     }
+}
+
+/// Why an API address is refused.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum EndpointError {
+    /// `unix:` with no path after it.
+    #[error("{url}: no socket path after `unix:`")]
+    NoSocketPath {
+        /// The address as given.
+        url: String,
+    },
+    /// Neither `http://` nor `unix:`.
+    #[error("{url}: give http://HOST:PORT or unix:PATH (https is not supported: use a tunnel)")]
+    Scheme {
+        /// The address as given.
+        url: String,
+    },
+    /// `http://` with no host, or with a path.
+    #[error("{url}: give http://HOST:PORT with no path")]
+    Authority {
+        /// The address as given.
+        url: String,
+    },
 }
 
 /// A failed exchange.
@@ -328,7 +349,12 @@ mod tests {
         );
         assert!(Endpoint::parse("https://host:1")
             .unwrap_err()
+            .to_string()
             .contains("tunnel"));
+        assert!(matches!(
+            Endpoint::parse("https://host:1"),
+            Err(EndpointError::Scheme { .. })
+        ));
         assert!(Endpoint::parse("http://host:1/v1").is_err());
         assert!(Endpoint::parse("unix:").is_err());
     }

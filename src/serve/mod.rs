@@ -35,7 +35,7 @@ use std::time::Duration;
 use thiserror::Error;
 
 use crate::config::ConfigError;
-use auth::Token;
+use auth::{Token, TokenError};
 use rig_config::RigConfig;
 use state::Daemon;
 
@@ -78,6 +78,9 @@ pub enum ServeError {
     /// The options are refused (e.g. no token off loopback).
     #[error("{0}")]
     Refused(String),
+    /// The token file is refused.
+    #[error(transparent)]
+    Token(#[from] TokenError),
     /// Binding, the records directory or the server failed.
     #[error("{0}")]
     Io(String),
@@ -87,7 +90,7 @@ impl ServeError {
     /// Exit code: 2 for bad input, 1 for runtime failures.
     pub fn exit_code(&self) -> u8 {
         match self {
-            ServeError::Config(_) | ServeError::Refused(_) => 2,
+            ServeError::Config(_) | ServeError::Refused(_) | ServeError::Token(_) => 2,
             ServeError::Io(_) => 1,
         }
     }
@@ -143,7 +146,7 @@ pub async fn serve(
 ) -> Result<(), ServeError> {
     let rigs = load_rigs(&opts.configs)?;
     let token = match &opts.token_file {
-        Some(p) => Some(Token::load(p).map_err(ServeError::Refused)?),
+        Some(p) => Some(Token::load(p)?),
         None => None,
     };
     check_listen_policy(&opts.listen, token.as_ref())?;

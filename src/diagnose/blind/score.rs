@@ -303,7 +303,8 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
         })?;
         let files: Vec<_> = case.files.iter().map(|p| dir.join(p)).collect();
         let nameplate = case.nameplate.as_ref().map(|p| dir.join(p));
-        let record = load_record_files(kind, &files, nameplate.as_deref(), None)?;
+        let record = load_record_files(kind, &files, nameplate.as_deref(), None)
+            .map_err(|e| e.to_string())?;
         verdicts.push(diagnose(&record, kind, &DiagnoseOptions::default()).map(|run| run.report));
         progress(n + 1, total);
     }

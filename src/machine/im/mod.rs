@@ -23,10 +23,12 @@ mod text;
 
 pub use config::ImRunConfig;
 pub use modbus_config::ImModbusRig;
-pub use plot::{render_im_svg, write_im_svg};
+pub use plot::{render_im_svg, write_im_svg, DrawError, SweepPlotError};
 pub use rig::{build_im_rig, ImRig, SERVED_IM_PLANT_RATE_HZ};
 pub use served::{ServedImRig, ServedVfd};
-pub use sim_rig::{sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd, COPPER_ALPHA};
+pub use sim_rig::{
+    sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimRigError, SimVfd, COPPER_ALPHA,
+};
 pub use stages::{VfdDyno, VfdSupply};
 pub use sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
 pub use text::render_im_text;
@@ -63,7 +65,7 @@ impl Analysis for ImAnalysis {
     }
 
     fn write_plot(&self, _record: &Record, path: &Path) -> Result<(), String> {
-        write_im_svg(path, &self.0)
+        write_im_svg(path, &self.0).map_err(|e| e.to_string())
     }
 
     fn refusal(&self) -> Option<String> {

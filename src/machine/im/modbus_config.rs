@@ -172,7 +172,7 @@ impl ImModbusRig {
         )?;
         let max_lost_polls: u32 = take(&mut rig, top, "max_lost_polls")?.unwrap_or(5);
         let max_lost_polls = bounds::at_most(max_lost_polls, bounds::MAX_LOST_POLLS)
-            .map_err(|why| (format!("{top}.max_lost_polls"), why))?;
+            .map_err(|why| (format!("{top}.max_lost_polls"), why.to_string()))?;
         let merge_window = merge_window(
             take(&mut rig, top, "merge_window_ms")?
                 .unwrap_or(motorbench_drivers::DEFAULT_REORDER.as_millis() as u64),

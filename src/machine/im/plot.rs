@@ -2,7 +2,7 @@
 //! against slip, the measured operating points as dots (one colour per
 //! segment) and the fitted models as curves at each segment's mean voltage.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
 
@@ -32,12 +32,40 @@ fn models(id: &ImIdentification) -> Vec<(&'static str, ImCircuit)> {
     out
 }
 
+/// The plotting library could not draw the sweep plot: its error's text.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct DrawError(pub String);
+
+/// Why the sweep plot could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum SweepPlotError {
+    /// The plot could not be drawn.
+    #[error("cannot render the sweep plot for {}: {source}", path.display())]
+    Render {
+        /// The output file.
+        path: PathBuf,
+        /// The plotting library's error.
+        #[source]
+        source: DrawError,
+    },
+    /// The SVG could not be written to its file.
+    #[error("cannot write {}: {source}", path.display())]
+    Write {
+        /// The output file.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
 /// Render the sweep and the fitted curves as an SVG document.
-pub fn render_im_svg(id: &ImIdentification) -> Result<String, String> {
+pub fn render_im_svg(id: &ImIdentification) -> Result<String, DrawError> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (1200, 460)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| e.to_string())?;
+        root.fill(&WHITE).map_err(|e| DrawError(e.to_string()))?;
         let panels = root.split_evenly((1, 2));
         let conn = id.sweep.connection;
         let mut segments: Vec<u32> = id.sweep.points.iter().map(|p| p.segment).collect();
@@ -73,14 +101,14 @@ pub fn render_im_svg(id: &ImIdentification) -> Result<String, String> {
                 .x_label_area_size(36)
                 .y_label_area_size(64)
                 .build_cartesian_2d(0.0..1.0, ymin..ymax.max(1e-9))
-                .map_err(|e| e.to_string())?;
+                .map_err(|e| DrawError(e.to_string()))?;
             chart
                 .configure_mesh()
                 .x_desc("slip")
                 .y_desc(if power { "P [W]" } else { "I [A]" })
                 .label_style((FONT, 12))
                 .draw()
-                .map_err(|e| e.to_string())?;
+                .map_err(|e| DrawError(e.to_string()))?;
             for (k, seg) in segments.iter().enumerate() {
                 let pts: Vec<_> = id
                     .sweep
@@ -98,7 +126,7 @@ pub fn render_im_svg(id: &ImIdentification) -> Result<String, String> {
                             colour.filled(),
                         )
                     }))
-                    .map_err(|e| e.to_string())?
+                    .map_err(|e| DrawError(e.to_string()))?
                     .label(format!("measured, segment {seg} ({mean_v:.0} V)"))
                     .legend(move |(x, y)| Circle::new((x + 8, y), 3, colour.filled()));
                 for (m, (name, circuit)) in models(id).into_iter().enumerate() {
@@ -111,7 +139,7 @@ pub fn render_im_svg(id: &ImIdentification) -> Result<String, String> {
                     });
                     let series = chart
                         .draw_series(LineSeries::new(curve, colour.stroke_width(2)))
-                        .map_err(|e| e.to_string())?;
+                        .map_err(|e| DrawError(e.to_string()))?;
                     if k == 0 {
                         series.label(name).legend(move |(x, y)| {
                             PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
@@ -126,18 +154,23 @@ pub fn render_im_svg(id: &ImIdentification) -> Result<String, String> {
                 .border_style(RGBColor(160, 160, 160))
                 .label_font((FONT, 12))
                 .draw()
-                .map_err(|e| e.to_string())?;
+                .map_err(|e| DrawError(e.to_string()))?;
         }
-        root.present().map_err(|e| e.to_string())?;
+        root.present().map_err(|e| DrawError(e.to_string()))?;
     }
     Ok(svg)
 }
 
 /// Write [`render_im_svg`] to `path`.
-pub fn write_im_svg(path: &Path, id: &ImIdentification) -> Result<(), String> {
-    let svg = render_im_svg(id)
-        .map_err(|e| format!("cannot render the sweep plot for {}: {e}", path.display()))?;
-    std::fs::write(path, svg).map_err(|e| format!("cannot write {}: {e}", path.display()))
+pub fn write_im_svg(path: &Path, id: &ImIdentification) -> Result<(), SweepPlotError> {
+    let svg = render_im_svg(id).map_err(|source| SweepPlotError::Render {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    std::fs::write(path, svg).map_err(|source| SweepPlotError::Write {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 #[cfg(test)]
@@ -196,5 +229,13 @@ mod tests {
             2,
             "legend names the LM curve in both panels"
         );
+        // A file that cannot be written is told from a plot that cannot
+        // be drawn.
+        let path = Path::new("/nonexistent-directory/sweep.svg");
+        let e = write_im_svg(path, &id).unwrap_err();
+        assert!(matches!(e, SweepPlotError::Write { .. }), "{e:?}");
+        assert!(e
+            .to_string()
+            .starts_with("cannot write /nonexistent-directory/sweep.svg: "));
     }
 }

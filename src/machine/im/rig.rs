@@ -187,7 +187,8 @@ pub async fn build_im_rig(cfg: &ImRunConfig, realtime: bool) -> Result<ImRig, Ri
     match (&cfg.modbus, &cfg.simulated) {
         (Some(m), _) => modbus_im_rig(cfg, m).await,
         (None, Some(sim)) => {
-            let (vfd, dyno, sensors) = sim_im_rig(sim.clone()).map_err(RigError::Simulated)?;
+            let (vfd, dyno, sensors) =
+                sim_im_rig(sim.clone()).map_err(|e| RigError::Simulated(e.to_string()))?;
             let sensors = if realtime { sensors.paced() } else { sensors };
             Ok(ImRig {
                 supply: Box::new(vfd),

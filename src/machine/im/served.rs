@@ -392,7 +392,7 @@ impl ServedImRig {
             Connection::Star => 1.0 / 3f64.sqrt(),
             Connection::Delta => 1.0,
         };
-        let (vfd, dyno, sensors) = sim_im_rig(cfg).map_err(ServeError::Motor)?;
+        let (vfd, dyno, sensors) = sim_im_rig(cfg).map_err(|e| ServeError::Motor(e.to_string()))?;
         let plant = Arc::new(Mutex::new(Plant {
             vfd: vfd.clone(),
             dyno: dyno.clone(),

@@ -25,7 +25,7 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
-use crate::model::{ImCircuit, ImSupply};
+use crate::model::{ImCircuit, ImCircuitError, ImSupply};
 
 const VFD_ID: &str = "sim-vfd";
 const DYNO_ID: &str = "sim-dyno";
@@ -213,19 +213,36 @@ pub struct SimImSensors {
     realtime_start: Option<tokio::time::Instant>,
 }
 
+/// Why a simulated induction-machine rig cannot be built.
+#[derive(Debug, thiserror::Error)]
+pub enum SimRigError {
+    /// The circuit's parameters are not valid.
+    #[error(transparent)]
+    Circuit(#[from] ImCircuitError),
+    /// The sampling rate is not a finite number above zero.
+    #[error("sample rate {0} Hz must be > 0")]
+    SampleRate(f64),
+    /// The supply has no frequency above zero or no pole pair.
+    #[error("the supply needs a frequency > 0 and at least one pole pair")]
+    Supply,
+    /// The measurement noise's level is not usable.
+    #[error(transparent)]
+    Noise(#[from] rand_distr::NormalError),
+}
+
 /// The rig: supply, dynamometer, sensors, sharing one plant.
-pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors), String> {
-    cfg.circuit.validate().map_err(|e| e.to_string())?;
+pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors), SimRigError> {
+    cfg.circuit.validate()?;
     if !(cfg.sample_rate_hz.is_finite() && cfg.sample_rate_hz > 0.0) {
-        return Err(format!("sample rate {} Hz must be > 0", cfg.sample_rate_hz));
+        return Err(SimRigError::SampleRate(cfg.sample_rate_hz));
     }
     if cfg.supply.pole_pairs == 0
         || !(cfg.supply.frequency.is_finite() && cfg.supply.frequency > 0.0)
     {
-        return Err("the supply needs a frequency > 0 and at least one pole pair".into());
+        return Err(SimRigError::Supply);
     }
     let noise = (cfg.noise_relative > 0.0)
-        .then(|| Normal::new(0.0, cfg.noise_relative).map_err(|e| e.to_string()))
+        .then(|| Normal::new(0.0, cfg.noise_relative))
         .transpose()?;
     let info = |quantity: &str, unit: &str| ChannelInfo {
         quantity: quantity.into(),
@@ -474,6 +491,19 @@ mod tests {
             pole_pairs: 2,
         };
         SimImRigConfig::new(circuit, supply)
+    }
+
+    #[test]
+    fn a_bad_rate_and_a_bad_supply_are_told_apart() {
+        let mut cfg = rig();
+        cfg.sample_rate_hz = 0.0;
+        let e = sim_im_rig(cfg).unwrap_err();
+        assert!(matches!(e, SimRigError::SampleRate(r) if r == 0.0), "{e:?}");
+        assert_eq!(e.to_string(), "sample rate 0 Hz must be > 0");
+        let mut cfg = rig();
+        cfg.supply.pole_pairs = 0;
+        let e = sim_im_rig(cfg).unwrap_err();
+        assert!(matches!(e, SimRigError::Supply), "{e:?}");
     }
 
     #[tokio::test(start_paused = true)]

@@ -107,7 +107,7 @@ pub fn diagnose_dc(
             ..Default::default()
         },
     )
-    .map_err(DiagnoseError::NominalFit)?;
+    .map_err(|e| DiagnoseError::NominalFit(e.to_string()))?;
     let nominal_start = AugModel::nominal(oe.params);
     let nominal_spec = FitSpec {
         start: nominal_start,

@@ -21,6 +21,7 @@
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned, Vector3, U3};
 
+use super::error::NotApplicable;
 use crate::record::DcSegment;
 
 /// The decay fit.
@@ -109,10 +110,13 @@ impl LeastSquaresProblem<f64, Dyn, U3> for DecayProblem<'_> {
 
 /// Fit the decay of `seg` (a coast-down: armature open after its first
 /// samples), or say why not.
-pub fn fit_decay(seg: &DcSegment) -> Result<DecayFit, String> {
+pub fn fit_decay(seg: &DcSegment) -> Result<DecayFit, NotApplicable> {
     let n = seg.time.len();
     if n < 20 {
-        return Err(format!("segment {} has too few samples", seg.index));
+        return Err(NotApplicable::Missing(format!(
+            "segment {} has too few samples",
+            seg.index
+        )));
     }
     // The armature is open from the first of 3 samples with current under
     // a tenth of the segment's largest (or 1 mA).
@@ -120,20 +124,24 @@ pub fn fit_decay(seg: &DcSegment) -> Result<DecayFit, String> {
     let open = (0.1 * peak).max(1e-3);
     let start = (0..n.saturating_sub(3))
         .find(|&k| seg.current[k..k + 3].iter().all(|i| i.abs() <= open))
-        .ok_or("the armature current never falls to zero: no coast-down")?;
+        .ok_or_else(|| {
+            NotApplicable::Missing("the armature current never falls to zero: no coast-down".into())
+        })?;
     let w_start = seg.speed[start];
     if w_start == 0.0 {
-        return Err("the rotor is at rest when the armature opens".into());
+        return Err(NotApplicable::Missing(
+            "the rotor is at rest when the armature opens".into(),
+        ));
     }
     let s = w_start.signum();
     let end = (start..n)
         .find(|&k| s * seg.speed[k] < 0.02 * w_start.abs())
         .unwrap_or(n);
     if end - start < 20 {
-        return Err(format!(
+        return Err(NotApplicable::Missing(format!(
             "only {} samples between the armature opening and rest",
             end - start
-        ));
+        )));
     }
     let t: Vec<f64> = seg.time[start..end]
         .iter()
@@ -160,20 +168,21 @@ pub fn fit_decay(seg: &DcSegment) -> Result<DecayFit, String> {
     };
     let (problem, report) = LevenbergMarquardt::new().minimize(problem);
     if !report.termination.was_successful() {
-        return Err(format!(
+        return Err(NotApplicable::Unidentifiable(format!(
             "the decay fit did not converge ({:?})",
             report.termination
-        ));
+        )));
     }
     let theta = [problem.theta[0], problem.theta[1], problem.theta[2]];
     let res = problem.residuals().expect("finite residuals");
     let jac = problem.jacobian().expect("finite jacobian");
     let dof = (t.len() - 3) as f64;
     let s2 = res.norm_squared() / dof;
-    let cov = (jac.transpose() * &jac)
-        .try_inverse()
-        .ok_or("the decay does not separate f/J from Tc/J (too short or too straight)")?
-        * s2;
+    let cov = (jac.transpose() * &jac).try_inverse().ok_or_else(|| {
+        NotApplicable::Unidentifiable(
+            "the decay does not separate f/J from Tc/J (too short or too straight)".into(),
+        )
+    })? * s2;
     Ok(DecayFit {
         segment: seg.index,
         range: (start, end),
@@ -269,6 +278,9 @@ mod tests {
             speed: vec![40.0; 100],
             ..Default::default()
         };
-        assert!(fit_decay(&seg).unwrap_err().contains("never falls"));
+        assert!(fit_decay(&seg)
+            .unwrap_err()
+            .to_string()
+            .contains("never falls"));
     }
 }

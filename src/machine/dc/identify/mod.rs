@@ -16,6 +16,7 @@
 mod abacus;
 mod coastdown;
 mod equation_error;
+mod error;
 mod level_error;
 mod levels;
 mod moments;
@@ -33,6 +34,7 @@ pub use abacus::{
 };
 pub use coastdown::{fit_decay, DecayFit};
 pub use equation_error::{equation_error, EquationErrorFit};
+pub use error::NotApplicable;
 pub use level_error::LevelError;
 pub use levels::{is_coastdown, settled_level, unsettled_channel, SettledLevel};
 pub use moments::{MomentsEstimate, TransferCoefficients};
@@ -42,7 +44,8 @@ pub use output_error::{
 };
 pub use pasek::{PasekEstimate, PasekReading};
 pub use plausibility::{
-    check_plausible, check_plausible_files, ImplausibleInput, MAX_CURRENT, MAX_SPEED, MAX_VOLTAGE,
+    check_plausible, check_plausible_files, ImplausibleFile, ImplausibleInput, MAX_CURRENT,
+    MAX_SPEED, MAX_VOLTAGE,
 };
 pub use simulate::simulate_segment;
 pub use steady_state::{PairEstimate, SteadyStateEstimate, SteadyStateFit};
@@ -80,9 +83,9 @@ pub struct Identification {
     /// Model responses per segment, for plots.
     pub simulated: Vec<SimulatedSegment>,
     /// Pasek's method on every usable step (segment, estimate or why not).
-    pub pasek_steps: Vec<(u32, Result<PasekEstimate, String>)>,
+    pub pasek_steps: Vec<(u32, Result<PasekEstimate, NotApplicable>)>,
     /// The method of moments on every usable step.
-    pub moments_steps: Vec<(u32, Result<MomentsEstimate, String>)>,
+    pub moments_steps: Vec<(u32, Result<MomentsEstimate, NotApplicable>)>,
     /// The transient methods' fits (`pasek`, `moments`) that applied.
     pub transient: Vec<TransientFit>,
     /// The coast-down fit, when it applied.
@@ -171,18 +174,21 @@ fn coastdown_segments(record: &Record) -> Vec<DcSegment> {
         .collect()
 }
 
-fn coastdown_method(record: &Record, ss: Option<&SteadyStateFit>) -> Result<CoastdownFit, String> {
+fn coastdown_method(
+    record: &Record,
+    ss: Option<&SteadyStateFit>,
+) -> Result<CoastdownFit, NotApplicable> {
     let segs = coastdown_segments(record);
     let seg = segs
         .first()
-        .ok_or("the record holds no coast-down segment")?;
-    let ss = ss.ok_or("needs f from the steady-state fit, which did not apply")?;
+        .ok_or_else(|| NotApplicable::Missing("the record holds no coast-down segment".into()))?;
+    let ss = ss.ok_or(NotApplicable::NeedsSteadyState { needs: "f" })?;
     let decay = fit_decay(seg)?;
     let (f, f_se) = (ss.estimate.f, ss.std_error[2]);
     if f.is_nan() || f <= 0.0 {
-        return Err(format!(
+        return Err(NotApplicable::Unidentifiable(format!(
             "needs a positive f from the steady state (got {f:.3e}) to turn f/J into J"
-        ));
+        )));
     }
     let (j, tc) = coastdown::inertia_and_coulomb(&decay, f, f_se);
     let params = DcParams {
@@ -301,7 +307,11 @@ pub fn identify_dc(record: &Record) -> Identification {
             let simulated = fit.simulate(record);
             (fit.method_report(), Some(fit), simulated)
         }
-        Err(reason) => (MethodReport::not_applicable(reason), None, Vec::new()),
+        Err(reason) => (
+            MethodReport::not_applicable(reason.to_string()),
+            None,
+            Vec::new(),
+        ),
     };
     report.methods.insert("steady_state".into(), method);
 
@@ -333,13 +343,13 @@ pub fn identify_dc(record: &Record) -> Identification {
         ),
     ] {
         let outcome = match (&steady_state, fit_at) {
-            (None, _) => {
-                Err("needs K, Ra and f from the steady-state fit, which did not apply".to_string())
-            }
-            (_, None) => Err(
+            (None, _) => Err(NotApplicable::NeedsSteadyState {
+                needs: "K, Ra and f",
+            }),
+            (_, None) => Err(NotApplicable::Missing(
                 "no voltage step between two settled levels at which the rotor turns the same way"
-                    .to_string(),
-            ),
+                    .into(),
+            )),
             (Some(ss), Some(n)) => {
                 let fit_segment = steps[n].segment;
                 match per_step.iter().find(|(s, _)| *s == fit_segment) {
@@ -361,10 +371,12 @@ pub fn identify_dc(record: &Record) -> Identification {
                                 .find(|(s, _)| *s == fit_segment)
                                 .and_then(|(_, r)| r.as_ref().err().cloned()),
                         };
-                        Err(format!(
-                            "segment {fit_segment}: {}",
-                            why.unwrap_or_default()
-                        ))
+                        Err(NotApplicable::AtSegment {
+                            segment: fit_segment,
+                            source: Box::new(
+                                why.unwrap_or_else(|| NotApplicable::Missing(String::new())),
+                            ),
+                        })
                     }
                 }
             }
@@ -377,9 +389,10 @@ pub fn identify_dc(record: &Record) -> Identification {
                 transient.push(fit);
             }
             Err(reason) => {
-                report
-                    .methods
-                    .insert(name.into(), MethodReport::not_applicable(reason));
+                report.methods.insert(
+                    name.into(),
+                    MethodReport::not_applicable(reason.to_string()),
+                );
             }
         }
     }
@@ -393,9 +406,10 @@ pub fn identify_dc(record: &Record) -> Identification {
             Some(fit)
         }
         Err(reason) => {
-            report
-                .methods
-                .insert("coastdown".into(), MethodReport::not_applicable(reason));
+            report.methods.insert(
+                "coastdown".into(),
+                MethodReport::not_applicable(reason.to_string()),
+            );
             None
         }
     };
@@ -412,7 +426,7 @@ pub fn identify_dc(record: &Record) -> Identification {
         Err(reason) => {
             report.methods.insert(
                 "equation_error".into(),
-                MethodReport::not_applicable(reason),
+                MethodReport::not_applicable(reason.to_string()),
             );
             None
         }
@@ -436,9 +450,10 @@ pub fn identify_dc(record: &Record) -> Identification {
             Some(fit)
         }
         Err(reason) => {
-            report
-                .methods
-                .insert("output_error".into(), MethodReport::not_applicable(reason));
+            report.methods.insert(
+                "output_error".into(),
+                MethodReport::not_applicable(reason.to_string()),
+            );
             None
         }
     };
@@ -524,7 +539,7 @@ fn supply_limited(record: &Record, warnings: &mut Vec<String>) -> Vec<u32> {
 
 /// The per-step parameters of the steps where a method gave numbers.
 fn collect_params<E>(
-    steps: &[(u32, Result<E, String>)],
+    steps: &[(u32, Result<E, NotApplicable>)],
     params: impl Fn(&E) -> DcParams,
 ) -> Vec<(u32, DcParams)> {
     steps

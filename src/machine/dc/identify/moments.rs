@@ -43,6 +43,7 @@
 //! `J = f·a1 − A0(ε_i)·(K² + Ra·f)/ΔU` (the charge that accelerated the
 //! inertia); the root whose J is closer to that one is taken.
 
+use super::error::NotApplicable;
 use super::step::VoltageStep;
 use super::SteadyStateEstimate;
 use crate::model::DcParams;
@@ -197,7 +198,7 @@ pub fn estimate(
     seg: &DcSegment,
     step: &VoltageStep,
     ss: &SteadyStateEstimate,
-) -> Result<MomentsEstimate, String> {
+) -> Result<MomentsEstimate, NotApplicable> {
     let mu = super::pasek::mu(ss);
     let (dw, di, du) = (step.dw_final(), step.di_final(), step.du());
     let speed_moments = channel_moments(seg, step, &seg.speed, step.w0, dw);
@@ -205,17 +206,17 @@ pub fn estimate(
     let current_moments = channel_moments(seg, step, &seg.current, step.before.current, di);
     let current = coefficients(current_moments, di);
     let (small, large) = tau_e_roots(speed.a1, speed.a2, mu).ok_or_else(|| {
-        format!(
+        NotApplicable::Unidentifiable(format!(
             "Eq. 43 has no real root (a1 = {:.4e} s, a2 = {:.4e} s², μ = {mu:.4}): the speed \
              response is not the model's",
             speed.a1, speed.a2
-        )
+        ))
     })?;
     if small.is_nan() || small <= 0.0 {
-        return Err(format!(
+        return Err(NotApplicable::Unidentifiable(format!(
             "Eq. 43 gives no positive τe (a1 = {:.4e} s, a2 = {:.4e} s²)",
             speed.a1, speed.a2
-        ));
+        )));
     }
     let d = ss.k * ss.k + ss.ra * ss.f;
     let j_of = |tau_e: f64| speed.a2 / tau_e * d / ss.ra;

@@ -17,6 +17,7 @@
 //! it does not apply, with the reason, instead of giving numbers.
 
 use super::abacus::{invert_delta, real_pole_threshold};
+use super::error::NotApplicable;
 use super::step::VoltageStep;
 use super::SteadyStateEstimate;
 use crate::model::DcParams;
@@ -89,7 +90,10 @@ fn window(tau: &[f64], z: &[f64], centre: f64, h: f64) -> (Vec<f64>, Vec<f64>) {
 /// parabola's vertex would be biased by the peak's asymmetry); Δi(2·t1)
 /// is the same kind of cubic evaluated at 2·t1. Errors say why the trace
 /// gives no reading, complex poles included.
-pub fn read_current_peak(seg: &DcSegment, step: &VoltageStep) -> Result<PasekReading, String> {
+pub fn read_current_peak(
+    seg: &DcSegment,
+    step: &VoltageStep,
+) -> Result<PasekReading, NotApplicable> {
     let s = step.du().signum();
     let i0 = step.before.current;
     let z_final = s * step.di_final();
@@ -99,7 +103,9 @@ pub fn read_current_peak(seg: &DcSegment, step: &VoltageStep) -> Result<PasekRea
         .unzip();
     let w = 5usize;
     if z.len() < 4 * w {
-        return Err("too few samples between the step and the settled tail".into());
+        return Err(NotApplicable::Missing(
+            "too few samples between the step and the settled tail".into(),
+        ));
     }
     let smooth: Vec<f64> = (0..=z.len() - w)
         .map(|k| z[k..k + w].iter().sum::<f64>() / w as f64)
@@ -113,28 +119,29 @@ pub fn read_current_peak(seg: &DcSegment, step: &VoltageStep) -> Result<PasekRea
     let noise = step.current_noise / (w as f64).sqrt();
     let hump = zmax - z_final;
     if kmax + 1 >= smooth.len() || hump <= 5.0 * noise {
-        return Err(format!(
+        return Err(NotApplicable::Missing(format!(
             "the current shows no peak above its final value (hump {:.3e} A, noise {:.1e} A): \
              no transient to read",
             hump, step.current_noise
-        ));
+        )));
     }
     // Complex poles: the current undershoots its final value after the peak.
     let undershoot = z_final - smooth[kmax..].iter().fold(f64::INFINITY, |m, v| m.min(*v));
     if undershoot > 4.0 * noise + 0.01 * hump {
-        return Err(format!(
+        return Err(NotApplicable::Unidentifiable(format!(
             "the current undershoots its final value by {:.3e} A after its peak \
              ({:.1} % of the peak's rise above it): the poles are complex, and Pasek's \
              method needs real ones",
             undershoot,
             100.0 * undershoot / hump
-        ));
+        )));
     }
     let rough = tau[kmax + w / 2];
     let dt = tau[1] - tau[0];
     let h = (0.3 * rough).max(4.0 * dt);
     let (x, y) = window(&tau, &z, rough, h);
-    let c = cubic_fit(&x, &y).ok_or("too few samples around the current peak")?;
+    let c = cubic_fit(&x, &y)
+        .ok_or_else(|| NotApplicable::Missing("too few samples around the current peak".into()))?;
     // Stationary points of the cubic: c1 + 2c2·u + 3c3·u² = 0, nearest 0.
     let (qa, qb, qc) = (3.0 * c[3], 2.0 * c[2], c[1]);
     let u = if qa.abs() < 1e-300 {
@@ -142,7 +149,9 @@ pub fn read_current_peak(seg: &DcSegment, step: &VoltageStep) -> Result<PasekRea
     } else {
         let disc = qb * qb - 4.0 * qa * qc;
         if disc < 0.0 {
-            return Err("the current peak could not be located".into());
+            return Err(NotApplicable::Unidentifiable(
+                "the current peak could not be located".into(),
+            ));
         }
         let r = disc.sqrt();
         let (u1, u2) = ((-qb + r) / (2.0 * qa), (-qb - r) / (2.0 * qa));
@@ -153,20 +162,23 @@ pub fn read_current_peak(seg: &DcSegment, step: &VoltageStep) -> Result<PasekRea
         }
     };
     if u.abs() > h {
-        return Err("the current peak could not be located".into());
+        return Err(NotApplicable::Unidentifiable(
+            "the current peak could not be located".into(),
+        ));
     }
     let t1 = rough + u;
     let di_t1 = cubic(&c, u);
     let last = tau[tau.len() - 1];
     if 2.0 * t1 + h > last {
-        return Err(format!(
+        return Err(NotApplicable::Missing(format!(
             "2·t1 = {:.4} s is too close to the settled tail (it starts {:.4} s after the step)",
             2.0 * t1,
             last
-        ));
+        )));
     }
     let (x, y) = window(&tau, &z, 2.0 * t1, h);
-    let c2 = cubic_fit(&x, &y).ok_or("too few samples around 2·t1")?;
+    let c2 = cubic_fit(&x, &y)
+        .ok_or_else(|| NotApplicable::Missing("too few samples around 2·t1".into()))?;
     let di_2t1 = cubic(&c2, 0.0);
     Ok(PasekReading {
         t1,
@@ -218,19 +230,19 @@ pub fn estimate(
     seg: &DcSegment,
     step: &VoltageStep,
     ss: &SteadyStateEstimate,
-) -> Result<PasekEstimate, String> {
+) -> Result<PasekEstimate, NotApplicable> {
     let mu = mu(ss);
     if !(0.0..1.0).contains(&mu) {
-        return Err(format!(
+        return Err(NotApplicable::Unidentifiable(format!(
             "μ = {mu:.4} from the steady-state fit is outside [0, 1)"
-        ));
+        )));
     }
     let reading = read_current_peak(seg, step)?;
     let (lambda, x1) = invert_delta(reading.delta, mu).map_err(|e| {
-        format!(
+        NotApplicable::Unidentifiable(format!(
             "{e} (real poles need λ = τm/τe ≥ {:.3} at μ = {mu:.4}); Pasek's method does not apply",
             real_pole_threshold(mu)
-        )
+        ))
     })?;
     let (tau_e, tau_m, params) = params_from_abacus(
         reading.t1,
@@ -440,6 +452,7 @@ mod tests {
         let step = super::super::step::voltage_step(&seg, &b, &a).unwrap();
         let ss = seed_ss();
         let err = estimate(&seg, &step, &ss).unwrap_err();
-        assert!(err.contains("complex"), "{err}");
+        assert!(matches!(err, NotApplicable::Unidentifiable(_)), "{err:?}");
+        assert!(err.to_string().contains("complex"), "{err}");
     }
 }

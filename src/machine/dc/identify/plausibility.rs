@@ -40,6 +40,25 @@ pub struct ImplausibleInput {
     pub reason: String,
 }
 
+/// An [`ImplausibleInput`] in a record loaded from files, with the file
+/// that holds the segment when one does.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{}{input}", file_prefix(.file.as_deref()))]
+pub struct ImplausibleFile {
+    /// The file that holds the segment; `None` for a record-wide finding
+    /// in several files.
+    pub file: Option<PathBuf>,
+    /// What is implausible.
+    #[source]
+    pub input: ImplausibleInput,
+}
+
+/// `<file>: `, or nothing without a file.
+fn file_prefix(file: Option<&std::path::Path>) -> String {
+    file.map(|f| format!("{}: ", f.display()))
+        .unwrap_or_default()
+}
+
 /// Check every segment's channels, then the record as a whole.
 pub fn check_plausible(record: &Record) -> Result<(), ImplausibleInput> {
     for seg in &record.segments {
@@ -55,7 +74,7 @@ pub fn check_plausible_files(
     record: &Record,
     kind: SegmentKind,
     files: &[PathBuf],
-) -> Result<(), String> {
+) -> Result<(), ImplausibleFile> {
     let Err(e) = check_plausible(record) else {
         return Ok(());
     };
@@ -64,9 +83,9 @@ pub fn check_plausible_files(
             || load_record_files(kind, std::slice::from_ref(*f), None, None)
                 .is_ok_and(|r| r.segments.iter().any(|s| s.index == e.segment))
     });
-    Err(match holder {
-        Some(f) => format!("{}: {e}", f.display()),
-        None => e.to_string(),
+    Err(ImplausibleFile {
+        file: holder.cloned(),
+        input: e,
     })
 }
 

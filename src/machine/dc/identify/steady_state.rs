@@ -25,6 +25,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
+use super::error::NotApplicable;
 use super::level_error::{level_error, LevelError};
 use super::{nrmse, SettledLevel, SimulatedSegment};
 use crate::identify::stats::{least_squares, t975};
@@ -104,23 +105,23 @@ fn means(l: &SettledLevel) -> [f64; 3] {
 }
 
 /// The least-squares estimate from level means `[U, i, ω]`.
-fn solve(levels: &[[f64; 3]]) -> Result<SteadyStateEstimate, String> {
+fn solve(levels: &[[f64; 3]]) -> Result<SteadyStateEstimate, NotApplicable> {
     let n = levels.len();
     if n < 2 {
-        return Err(format!("needs at least 2 settled levels, found {n}"));
+        return Err(NotApplicable::Missing(format!(
+            "needs at least 2 settled levels, found {n}"
+        )));
     }
     let a = DMatrix::from_fn(n, 2, |r, c| levels[r][1 + c]);
     let b = DVector::from_fn(n, |r, _| levels[r][0]);
-    let elec = least_squares(&a, &b).ok_or(
-        "the levels do not separate Ra from K (every level has the same current-to-speed ratio)",
-    )?;
+    let elec = least_squares(&a, &b).ok_or_else(|| NotApplicable::Unidentifiable("the levels do not separate Ra from K (every level has the same current-to-speed ratio)".into()))?;
     let (ra, k) = (elec.x[0], elec.x[1]);
     let moving: Vec<&[f64; 3]> = levels.iter().filter(|l| l[2] > 0.0).collect();
     if moving.len() < 2 {
-        return Err(format!(
+        return Err(NotApplicable::Missing(format!(
             "needs at least 2 levels turning forward for f and Tst, found {}",
             moving.len()
-        ));
+        )));
     }
     let a = DMatrix::from_fn(
         moving.len(),
@@ -128,8 +129,11 @@ fn solve(levels: &[[f64; 3]]) -> Result<SteadyStateEstimate, String> {
         |r, c| if c == 0 { moving[r][2] } else { 1.0 },
     );
     let b = DVector::from_fn(moving.len(), |r, _| k * moving[r][1]);
-    let mech =
-        least_squares(&a, &b).ok_or("the levels do not separate f from Tst (all at one speed)")?;
+    let mech = least_squares(&a, &b).ok_or_else(|| {
+        NotApplicable::Unidentifiable(
+            "the levels do not separate f from Tst (all at one speed)".into(),
+        )
+    })?;
     Ok(SteadyStateEstimate {
         k,
         ra,
@@ -256,7 +260,7 @@ fn pairs(levels: &[SettledLevel]) -> (Vec<PairEstimate>, [Spread; 4]) {
 pub fn fit_levels(
     levels: &[SettledLevel],
     errors: &[LevelError],
-) -> Result<SteadyStateFit, String> {
+) -> Result<SteadyStateFit, NotApplicable> {
     let x: Vec<[f64; 3]> = levels.iter().map(means).collect();
     let estimate = solve(&x)?;
     let std_error = propagate(&x, errors);
@@ -312,7 +316,7 @@ fn segment_nrmse(est: &SteadyStateEstimate, seg: &DcSegment) -> Option<f64> {
 }
 
 /// Fit K, Ra, f, Tst to `levels` (from `record`'s step segments).
-pub fn fit(record: &Record, levels: &[SettledLevel]) -> Result<SteadyStateFit, String> {
+pub fn fit(record: &Record, levels: &[SettledLevel]) -> Result<SteadyStateFit, NotApplicable> {
     let errors: Vec<LevelError> = levels
         .iter()
         .map(|l| {
@@ -589,6 +593,7 @@ mod tests {
         let p = DcParams::SEED_TABLE4_MOMENTS;
         let l = level(&p, 60.0, 0);
         let err = fit_levels(&[l], &[LevelError::default()]).unwrap_err();
-        assert!(err.contains("at least 2"));
+        assert!(matches!(err, NotApplicable::Missing(_)), "{err:?}");
+        assert!(err.to_string().contains("at least 2"));
     }
 }

@@ -6,6 +6,7 @@
 //! torque is then a constant load). A step from rest (breakaway) or across
 //! zero speed is not used.
 
+use super::error::NotApplicable;
 use super::SettledLevel;
 use crate::record::{DcSegment, Record, SegmentKind};
 
@@ -66,14 +67,16 @@ pub fn voltage_step(
     seg: &DcSegment,
     before: &SettledLevel,
     after: &SettledLevel,
-) -> Result<VoltageStep, String> {
+) -> Result<VoltageStep, NotApplicable> {
     let n = seg.time.len();
     let du = after.voltage - before.voltage;
     if du.abs() < 1e-9 * after.voltage.abs().max(1.0) {
-        return Err("no voltage step".into());
+        return Err(NotApplicable::Missing("no voltage step".into()));
     }
     if before.speed == 0.0 || after.speed == 0.0 || before.speed.signum() != after.speed.signum() {
-        return Err("the rotor is at rest or reverses across the step".into());
+        return Err(NotApplicable::Missing(
+            "the rotor is at rest or reverses across the step".into(),
+        ));
     }
     let tail_start = n - after.samples.min(n);
     let (_, u_noise) = mean_sd(&seg.voltage[tail_start..]);
@@ -83,9 +86,11 @@ pub fn voltage_step(
     // level for 3 samples.
     let transition_end = (1..n)
         .find(|&k| (k..(k + 3).min(n)).all(|j| (seg.voltage[j] - after.voltage).abs() <= tol))
-        .ok_or("the voltage never reaches its new level")?;
+        .ok_or_else(|| NotApplicable::Missing("the voltage never reaches its new level".into()))?;
     if transition_end >= tail_start {
-        return Err("the voltage transition lasts into the settled tail".into());
+        return Err(NotApplicable::Missing(
+            "the voltage transition lasts into the settled tail".into(),
+        ));
     }
     // The reading at t[k] is the voltage held over (t[k−1], t[k]].
     let t_step = seg.time[0]
@@ -232,6 +237,6 @@ mod tests {
         assert_eq!(s.transition_end, 4);
         assert_eq!(s.tail_start, 150);
         let rest = voltage_step(&seg, &level(0, 60.0, 0.0, 50), &level(1, 248.0, 20.0, 50));
-        assert!(rest.unwrap_err().contains("rest"));
+        assert!(rest.unwrap_err().to_string().contains("rest"));
     }
 }

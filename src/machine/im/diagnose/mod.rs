@@ -80,7 +80,7 @@ pub fn diagnose_im(
     let mut lm_opts = LmOptions::new(ImModel::Single);
     lm_opts.split = split;
     lm_opts.split_policy = SplitPolicy::Always;
-    let lm = fit_lm(&phase, &lm_opts).map_err(DiagnoseError::NominalFit)?;
+    let lm = fit_lm(&phase, &lm_opts).map_err(|e| DiagnoseError::NominalFit(e.to_string()))?;
     let c = lm.circuit;
     let (rr, xr) = match c.rotor {
         crate::model::RotorCage::Single { rr, xr } => (rr, xr),

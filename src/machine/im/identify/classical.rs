@@ -15,6 +15,7 @@
 //!   locked rotor give the running (inner) and starting (outer) cage; a
 //!   few ratios of the two cages' resistances make several starts.
 
+use super::error::ImFitError;
 use super::sweep::PhaseData;
 use crate::model::{ImCircuit, ImModel, LeakageSplit, RotorCage, C64};
 
@@ -49,14 +50,16 @@ pub fn classical_single(
     split: LeakageSplit,
     iron_loss: bool,
     rs: Option<f64>,
-) -> Result<ImCircuit, String> {
-    let nl = extreme(data, false).ok_or("the sweep has no points")?;
-    let lr = extreme(data, true).ok_or("the sweep has no points")?;
+) -> Result<ImCircuit, ImFitError> {
+    let nl = extreme(data, false)
+        .ok_or_else(|| ImFitError::Missing("the sweep has no points".into()))?;
+    let lr =
+        extreme(data, true).ok_or_else(|| ImFitError::Missing("the sweep has no points".into()))?;
     if data.slip[lr] - data.slip[nl] < 0.2 {
-        return Err(format!(
+        return Err(ImFitError::Missing(format!(
             "the sweep spans slip {:.3} to {:.3} only: it needs a point near no load and one near locked rotor",
             data.slip[nl], data.slip[lr]
-        ));
+        )));
     }
     let z_nl = point_impedance(data, nl);
     let z_lr = point_impedance(data, lr);
@@ -88,7 +91,7 @@ pub fn classical_single(
         rotor: RotorCage::Single { rr, xr },
     };
     c.validate()
-        .map_err(|e| format!("classical estimate: {e}"))?;
+        .map_err(|e| ImFitError::Unidentifiable(format!("classical estimate: {e}")))?;
     Ok(c)
 }
 
@@ -107,7 +110,7 @@ pub fn classical_starts(
     model: ImModel,
     split: LeakageSplit,
     rs: Option<f64>,
-) -> Result<Vec<ImCircuit>, String> {
+) -> Result<Vec<ImCircuit>, ImFitError> {
     let single = classical_single(data, split, model.has_iron_loss(), rs)?;
     if !model.is_double() {
         return Ok(vec![single]);
@@ -116,7 +119,8 @@ pub fn classical_starts(
         unreachable!("classical_single gives a single cage")
     };
     // Running cage from a low-slip point with real load current.
-    let lr = extreme(data, true).ok_or("the sweep has no points")?;
+    let lr =
+        extreme(data, true).ok_or_else(|| ImFitError::Missing("the sweep has no points".into()))?;
     let mut low: Option<(f64, f64)> = None;
     let mut order: Vec<usize> = (0..data.len()).collect();
     order.sort_by(|a, b| data.slip[*a].total_cmp(&data.slip[*b]));
@@ -150,7 +154,9 @@ pub fn classical_starts(
         }
     }
     if starts.is_empty() {
-        return Err("classical estimate: no valid double-cage start".into());
+        return Err(ImFitError::Unidentifiable(
+            "classical estimate: no valid double-cage start".into(),
+        ));
     }
     Ok(starts)
 }
@@ -196,6 +202,7 @@ mod tests {
         .phase_data();
         assert!(classical_single(&d, LeakageSplit::DESIGN_A, false, None)
             .unwrap_err()
+            .to_string()
             .contains("locked rotor"));
     }
 }

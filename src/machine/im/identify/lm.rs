@@ -25,6 +25,7 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationRe
 use nalgebra::storage::Owned;
 use nalgebra::{DMatrix, DVector, Dyn};
 
+use super::error::ImFitError;
 use super::identifiability::{weak_directions, Identifiability};
 use super::recursive::paper_cost;
 use super::sweep::{predict, predict_gradient_into, Channels, PhaseData, MAX_PARAMS};
@@ -462,19 +463,19 @@ fn whitening(pairs: &[(f64, f64)], dof: usize, uses_power: bool) -> [[f64; 2]; 2
 }
 
 /// Fit the equivalent circuit to `data` by Levenberg–Marquardt.
-pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
+pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, ImFitError> {
     let model = opts.model;
     let model_params = model.params();
     for (p, v) in &opts.fixed {
         if !model_params.contains(p) {
-            return Err(format!(
+            return Err(ImFitError::BadOptions(format!(
                 "fixed parameter {p} is not part of the {model} model"
-            ));
+            )));
         }
         if !(v.is_finite() && *v > 0.0) {
-            return Err(format!(
+            return Err(ImFitError::BadOptions(format!(
                 "fixed parameter {p} = {v} must be a finite number > 0"
-            ));
+            )));
         }
     }
     let fixed_params: Vec<ImParam> = opts.fixed.iter().map(|(p, _)| *p).collect();
@@ -485,11 +486,11 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
         .collect();
     let rows = data.len() * if opts.channels.uses_power() { 2 } else { 1 };
     if rows <= free.len() {
-        return Err(format!(
+        return Err(ImFitError::Missing(format!(
             "{} operating points give {rows} residuals, fewer than needed for {} parameters",
             data.len(),
             free.len()
-        ));
+        )));
     }
     let mut starts = if opts.starts.is_empty() {
         let rs = opts
@@ -503,13 +504,14 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
     };
     for s in &mut starts {
         if s.model() != model {
-            return Err(format!(
+            return Err(ImFitError::BadOptions(format!(
                 "a starting circuit is a {} model, the fit a {model} one",
                 s.model()
-            ));
+            )));
         }
         for (p, v) in &opts.fixed {
-            s.set(*p, *v).map_err(|e| e.to_string())?;
+            s.set(*p, *v)
+                .map_err(|e| ImFitError::BadOptions(e.to_string()))?;
         }
     }
     let weights = Weighting::new(data, opts.residual_scale);
@@ -552,7 +554,9 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
     }
     let best_cost = results.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
     if !best_cost.is_finite() {
-        return Err("no start led to a finite fit".into());
+        return Err(ImFitError::Unidentifiable(
+            "no start led to a finite fit".into(),
+        ));
     }
     let converged = results
         .iter()
@@ -618,7 +622,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
         let current = problem
             .param
             .circuit(&problem.x)
-            .ok_or("fit left the valid region")?;
+            .ok_or_else(|| ImFitError::Unidentifiable("fit left the valid region".into()))?;
         let start = split_start(&current, opts.split);
         let reduced: Vec<ImParam> = free.iter().copied().filter(|&p| p != ImParam::Xs).collect();
         let param = Parametrisation {
@@ -679,7 +683,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, String> {
     let circuit = problem
         .param
         .circuit(&problem.x)
-        .ok_or("fit left the valid region")?;
+        .ok_or_else(|| ImFitError::Unidentifiable("fit left the valid region".into()))?;
     let weak_after = weak_directions(&analysis.svd_parts(), &problem.param.free, PRACTICAL_LIMIT);
     let mut unidentifiable: Vec<ImParam> = Vec::new();
     for w in &weak_after {
@@ -831,17 +835,17 @@ impl Analysis {
     }
 }
 
-fn analyse(problem: &SweepProblem<'_>) -> Result<Analysis, String> {
-    let jac_log = problem
-        .jacobian()
-        .ok_or("the Jacobian is not finite at the solution")?;
-    let r = problem
-        .residuals()
-        .ok_or("the residuals are not finite at the solution")?;
+fn analyse(problem: &SweepProblem<'_>) -> Result<Analysis, ImFitError> {
+    let jac_log = problem.jacobian().ok_or_else(|| {
+        ImFitError::Unidentifiable("the Jacobian is not finite at the solution".into())
+    })?;
+    let r = problem.residuals().ok_or_else(|| {
+        ImFitError::Unidentifiable("the residuals are not finite at the solution".into())
+    })?;
     let c = problem
         .param
         .circuit(&problem.x)
-        .ok_or("the fit left the valid region")?;
+        .ok_or_else(|| ImFitError::Unidentifiable("the fit left the valid region".into()))?;
     let (m, q) = jac_log.shape();
     let floor = 1e-3 * c.impedance(1.0).norm();
     let theta: Vec<f64> = problem
@@ -857,12 +861,20 @@ fn analyse(problem: &SweepProblem<'_>) -> Result<Analysis, String> {
     }
     let s2 = r.norm_squared() / (m.saturating_sub(q)).max(1) as f64;
     if !jac.iter().all(|v| v.is_finite()) {
-        return Err("the scaled Jacobian is not finite at the solution".into());
+        return Err(ImFitError::Unidentifiable(
+            "the scaled Jacobian is not finite at the solution".into(),
+        ));
     }
     let svd = jac
         .try_svd(false, true, f64::EPSILON, SVD_MAX_ITERATIONS)
-        .ok_or("the SVD of the Jacobian did not converge within its iteration bound")?;
-    let v_t = svd.v_t.ok_or("SVD failed")?;
+        .ok_or_else(|| {
+            ImFitError::Unidentifiable(
+                "the SVD of the Jacobian did not converge within its iteration bound".into(),
+            )
+        })?;
+    let v_t = svd
+        .v_t
+        .ok_or_else(|| ImFitError::Unidentifiable("SVD failed".into()))?;
     let sv = svd.singular_values;
     let smax = sv.max();
     // Pseudo-inverse covariance over the determined directions; an element
@@ -993,11 +1005,14 @@ mod tests {
             assert!(((f.value / t).ln()).abs() < 4.0 * sd, "{p}: {f:?}");
         }
         o.fixed = vec![(ImParam::Rr1, 1.0)];
+        let e = fit_lm(&data(&c, 0.003), &o).unwrap_err();
+        assert!(matches!(e, ImFitError::BadOptions(_)), "{e:?}");
+        assert!(e.to_string().contains("not part of the single model"));
+        o.fixed = vec![(ImParam::Rs, -1.0)];
         assert!(fit_lm(&data(&c, 0.003), &o)
             .unwrap_err()
-            .contains("not part of the single model"));
-        o.fixed = vec![(ImParam::Rs, -1.0)];
-        assert!(fit_lm(&data(&c, 0.003), &o).unwrap_err().contains("> 0"));
+            .to_string()
+            .contains("> 0"));
     }
 
     #[test]
@@ -1050,8 +1065,8 @@ mod tests {
         for v in [&mut d.slip, &mut d.voltage, &mut d.current, &mut d.power] {
             v.truncate(2);
         }
-        assert!(fit_lm(&d, &LmOptions::new(ImModel::Single))
-            .unwrap_err()
-            .contains("fewer than needed"));
+        let e = fit_lm(&d, &LmOptions::new(ImModel::Single)).unwrap_err();
+        assert!(matches!(e, ImFitError::Missing(_)), "{e:?}");
+        assert!(e.to_string().contains("fewer than needed"));
     }
 }

@@ -14,12 +14,14 @@
 //!   ends with physical parameters; no intervals.
 
 mod classical;
+mod error;
 mod identifiability;
 mod lm;
 mod recursive;
 mod sweep;
 
 pub use classical::{classical_single, classical_starts};
+pub use error::{ImFitError, SweepError};
 pub use identifiability::{weak_directions, Identifiability, WeakDirection, STRUCTURAL_LIMIT};
 pub use lm::{
     evaluation_bound, fit_lm, FittedParam, LmFit, LmOptions, ParamSource, ResidualScale,
@@ -350,7 +352,7 @@ fn lm_method(
     let opts = LmOptions::new(model);
     let fit = match fit_lm(&data, &opts) {
         Ok(f) => f,
-        Err(reason) => return (MethodReport::not_applicable(reason), None),
+        Err(reason) => return (MethodReport::not_applicable(reason.to_string()), None),
     };
     let mut values = Vec::new();
     for p in &fit.params {
@@ -441,7 +443,7 @@ fn recursive_method(
     let data = sweep.phase_data();
     let start = match classical_starts(&data, model, Default::default(), None) {
         Ok(s) => s[0],
-        Err(reason) => return (MethodReport::not_applicable(reason), None),
+        Err(reason) => return (MethodReport::not_applicable(reason.to_string()), None),
     };
     let pu = data.per_unit(base.phase_voltage, base.phase_current);
     let start_pu = start.to_per_unit(base);
@@ -492,7 +494,7 @@ pub fn identify_im(
         for key in ["lm", "recursive"] {
             report
                 .methods
-                .insert(key.into(), MethodReport::not_applicable(reason.clone()));
+                .insert(key.into(), MethodReport::not_applicable(reason.to_string()));
         }
         report.warnings = warnings;
         return ImIdentification {

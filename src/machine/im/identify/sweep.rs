@@ -6,6 +6,7 @@
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
+use super::error::SweepError;
 use crate::model::{Connection, ImCircuit, ImParam, ImSupply, C64};
 
 /// One averaged operating point of a sweep, line quantities, SI.
@@ -160,16 +161,20 @@ impl SlipSweep {
     }
 
     /// Check every point is usable; the error names the point.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), SweepError> {
         if self.points.is_empty() {
-            return Err("the sweep has no operating points".into());
+            return Err(SweepError::Empty);
         }
         for (k, p) in self.points.iter().enumerate() {
-            let bad = |field: &str, v: f64, why: &str| {
-                Err(format!(
-                    "operating point {k} (segment {}, slip {}): {field} = {v} {why}",
-                    p.segment, p.slip
-                ))
+            let bad = |field: &'static str, v: f64, why: &'static str| {
+                Err(SweepError::BadPoint {
+                    index: k,
+                    segment: p.segment,
+                    slip: p.slip,
+                    field,
+                    value: v,
+                    why,
+                })
             };
             if !(p.slip.is_finite() && (0.0..=1.0).contains(&p.slip)) {
                 return bad("slip", p.slip, "is outside [0, 1]");
@@ -323,7 +328,9 @@ mod tests {
         }
         let mut bad = sw.clone();
         bad.points[3].slip = 1.5;
-        assert!(bad.validate().unwrap_err().contains("operating point 3"));
+        let e = bad.validate().unwrap_err();
+        assert!(matches!(e, SweepError::BadPoint { index: 3, .. }), "{e:?}");
+        assert!(e.to_string().contains("operating point 3"));
     }
 
     #[test]

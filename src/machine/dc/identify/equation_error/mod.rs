@@ -37,6 +37,7 @@ pub use feedback::Feedback;
 
 use nalgebra::{SMatrix, SVector};
 
+use super::error::NotApplicable;
 use super::levels::white_noise;
 use super::output_error::{simulate_series, SegmentInput, SegmentStart};
 use super::{is_coastdown, nrmse, SimulatedSegment, SpeedReading};
@@ -98,7 +99,10 @@ struct Prepared<'a> {
 ///
 /// `reading` says what the speed channel reads. `Err` says why the method
 /// does not apply, in terms a user can act on.
-pub fn equation_error(record: &Record, reading: SpeedReading) -> Result<EquationErrorFit, String> {
+pub fn equation_error(
+    record: &Record,
+    reading: SpeedReading,
+) -> Result<EquationErrorFit, NotApplicable> {
     let mut warnings = Vec::new();
     let driven: Vec<&DcSegment> = record
         .segments
@@ -114,11 +118,11 @@ pub fn equation_error(record: &Record, reading: SpeedReading) -> Result<Equation
         }
     }
     if prepared.is_empty() {
-        return Err(if why_not.is_empty() {
+        return Err(NotApplicable::Missing(if why_not.is_empty() {
             "the record holds no driven segment".into()
         } else {
             format!("does not apply: {}", why_not.join("; "))
-        });
+        }));
     }
     let record_wide = excitation(&prepared)?;
     for w in why_not {
@@ -147,11 +151,13 @@ pub fn equation_error(record: &Record, reading: SpeedReading) -> Result<Equation
                     best = Some((sol, score, corner));
                 }
             }
-            Err(e) => last_err = e,
+            Err(e) => last_err = e.to_string(),
         }
     }
     let Some((sol, score, corner)) = best else {
-        return Err(format!("does not apply: {last_err}{record_wide}"));
+        return Err(NotApplicable::Unidentifiable(format!(
+            "does not apply: {last_err}{record_wide}"
+        )));
     };
     let filter = LowPass::new(corner, dt);
     let validation = if prepared.len() >= 2 {
@@ -262,14 +268,16 @@ impl EquationErrorFit {
 }
 
 /// Check a segment can take part; its rotor-moving mask.
-fn prepare(seg: &DcSegment, reading: SpeedReading) -> Result<Prepared<'_>, String> {
+fn prepare(seg: &DcSegment, reading: SpeedReading) -> Result<Prepared<'_>, NotApplicable> {
     let n = seg.time.len();
     if n < MIN_SAMPLES || seg.voltage.len() != n || seg.current.len() != n || seg.speed.len() != n {
-        return Err(format!("fewer than {MIN_SAMPLES} samples"));
+        return Err(NotApplicable::Missing(format!(
+            "fewer than {MIN_SAMPLES} samples"
+        )));
     }
     let dt = (seg.time[n - 1] - seg.time[0]) / (n - 1) as f64;
     if !(dt.is_finite() && dt > 0.0) {
-        return Err("its time does not increase".into());
+        return Err(NotApplicable::Missing("its time does not increase".into()));
     }
     let peak = seg.speed.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let threshold = (3.0 * white_noise(&seg.speed)).max(0.02 * peak);
@@ -291,7 +299,7 @@ const BLOCK: usize = 25;
 /// span of single samples against their own noise would call a coarse
 /// encoder's speed (±1 count is tens of rad/s at 2 kHz) constant although
 /// it changes by many counts: averaging resolves what one reading cannot.
-fn excitation(prepared: &[Prepared]) -> Result<String, String> {
+fn excitation(prepared: &[Prepared]) -> Result<String, NotApplicable> {
     let changes = |f: fn(&DcSegment) -> &Vec<f64>| {
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         let mut noise = 0.0f64;
@@ -308,23 +316,23 @@ fn excitation(prepared: &[Prepared]) -> Result<String, String> {
         span > 0.0 && span > 12.0 * noise / (BLOCK as f64).sqrt()
     };
     if !changes(|s| &s.voltage) {
-        return Err(
+        return Err(NotApplicable::Missing(
             "does not apply: the voltage never changes (the record has no excitation: apply \
              voltage steps, a ramp or a PRBS to the armature)"
                 .into(),
-        );
+        ));
     }
     if !changes(|s| &s.speed) {
-        return Err(
+        return Err(NotApplicable::Missing(
             "does not apply: the speed is constant (the rotor does not respond to the voltage: \
              is it blocked, or is the speed sensor connected?)"
                 .into(),
-        );
+        ));
     }
     if !changes(|s| &s.current) {
-        return Err(
+        return Err(NotApplicable::Missing(
             "does not apply: the current never changes (is the current sensor connected?)".into(),
-        );
+        ));
     }
     let moving = prepared
         .iter()
@@ -367,7 +375,7 @@ fn fit(
     reading: SpeedReading,
     filter: &LowPass,
     with_covariance: bool,
-) -> Result<Solution, String> {
+) -> Result<Solution, NotApplicable> {
     let measured: Vec<SegmentRows> = prepared
         .iter()
         .map(|p| {
@@ -460,7 +468,7 @@ const FLOOR_SHARE: f64 = 0.01;
 /// then lies on the bound; it is a start, not an estimate, and the
 /// output-error fit (started from several points in the held direction)
 /// takes it from there. The parameter is reported as not determined.
-fn solve(x: &[SegmentRows], z: &[SegmentRows], w: [f64; 2]) -> Result<Solution, String> {
+fn solve(x: &[SegmentRows], z: &[SegmentRows], w: [f64; 2]) -> Result<Solution, NotApplicable> {
     let mut fixed: [Option<f64>; NU] = [None; NU];
     let mut floored = [false; NU];
     // Each pass fixes one unknown at least, so NU + 1 passes end it.
@@ -484,11 +492,11 @@ fn solve(x: &[SegmentRows], z: &[SegmentRows], w: [f64; 2]) -> Result<Solution, 
             for c in out_of_range {
                 let floor = floor_of(c, x, &theta);
                 if !(floor.is_finite() && floor > 0.0) {
-                    return Err(format!(
+                    return Err(NotApplicable::Unidentifiable(format!(
                         "the fit gives {} = {:.3e}: the record does not excite the model enough \
                          to determine it",
                         KEYS[c], theta[c]
-                    ));
+                    )));
                 }
                 fixed[c] = Some(floor);
                 floored[c] = true;
@@ -505,7 +513,9 @@ fn solve(x: &[SegmentRows], z: &[SegmentRows], w: [f64; 2]) -> Result<Solution, 
             params: params_of(&theta),
         });
     }
-    Err("the record does not excite the model (no solution in the physical range)".into())
+    Err(NotApplicable::Unidentifiable(
+        "the record does not excite the model (no solution in the physical range)".into(),
+    ))
 }
 
 /// The data scale of unknown `c` (La, Ra, K or J) times [`FLOOR_SHARE`]:
@@ -584,7 +594,7 @@ fn solve_fixed(
     z: &[SegmentRows],
     w: [f64; 2],
     fixed: &[Option<f64>; NU],
-) -> Result<[f64; NU], String> {
+) -> Result<[f64; NU], NotApplicable> {
     // Plain arrays in the loop: nalgebra's indexing is slow unoptimised.
     let mut acc = [[0.0; NU]; NU];
     let mut gs = [0.0; NU];
@@ -626,15 +636,18 @@ fn solve_fixed(
         }
     });
     let scaled = Mat::from_fn(|r, c| a[(r, c)] * d[r] * d[c]);
-    let sol = scaled
-        .lu()
-        .solve(&g.component_mul(&d))
-        .ok_or("the record does not excite the model (singular equations)")?;
+    let sol = scaled.lu().solve(&g.component_mul(&d)).ok_or_else(|| {
+        NotApplicable::Unidentifiable(
+            "the record does not excite the model (singular equations)".into(),
+        )
+    })?;
     let theta: [f64; NU] = std::array::from_fn(|c| sol[c] * d[c]);
     if theta.iter().all(|v| v.is_finite()) {
         Ok(theta)
     } else {
-        Err("the record does not excite the model (singular equations)".into())
+        Err(NotApplicable::Unidentifiable(
+            "the record does not excite the model (singular equations)".into(),
+        ))
     }
 }
 
@@ -903,11 +916,16 @@ mod tests {
         seg.current.iter_mut().for_each(|v| *v = s.current);
         seg.speed.iter_mut().for_each(|v| *v = s.speed);
         let err = equation_error(&r, SpeedReading::IntervalMean).unwrap_err();
+        // No excitation is missing data, not a fit that failed.
+        assert!(matches!(err, NotApplicable::Missing(_)), "{err:?}");
+        let err = err.to_string();
         assert!(err.contains("the voltage never changes"), "{err}");
         // A voltage that changes while the speed reads a constant.
         let mut blocked = record(&p, 400, 400, |k| if k < 200 { 50.0 } else { 100.0 });
         blocked.segments[0].speed.iter_mut().for_each(|v| *v = 3.0);
-        let err = equation_error(&blocked, SpeedReading::IntervalMean).unwrap_err();
+        let err = equation_error(&blocked, SpeedReading::IntervalMean)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("the speed is constant"), "{err}");
     }
 

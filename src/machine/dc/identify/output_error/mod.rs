@@ -36,6 +36,7 @@ mod uncertainty;
 
 use std::fmt::Write;
 
+use super::error::NotApplicable;
 use super::{is_coastdown, nrmse, settled_level, SimulatedSegment};
 use crate::model::DcParams;
 use crate::record::{DcSegment, Record, SegmentKind};
@@ -150,7 +151,7 @@ pub fn output_error(
     record: &Record,
     start: Option<DcParams>,
     options: &OutputErrorOptions,
-) -> Result<OutputErrorFit, String> {
+) -> Result<OutputErrorFit, NotApplicable> {
     let mut warnings = Vec::new();
     let candidates: Vec<(usize, &DcSegment)> = record
         .segments
@@ -163,9 +164,9 @@ pub fn output_error(
         })
         .collect();
     if candidates.is_empty() {
-        return Err(format!(
+        return Err(NotApplicable::Missing(format!(
             "needs at least one step segment of {MIN_SAMPLES} samples or more"
-        ));
+        )));
     }
     let noise = channel_noise(candidates.iter().map(|(_, s)| *s), &mut warnings);
     let sigma = [noise.current, noise.speed];
@@ -174,15 +175,19 @@ pub fn output_error(
     let mut poorly_conditioned = false;
     let statics = match start {
         Some(p) => {
-            p.validate()
-                .map_err(|e| format!("the start values are not a motor: {e}"))?;
+            p.validate().map_err(|e| {
+                NotApplicable::Unidentifiable(format!("the start values are not a motor: {e}"))
+            })?;
             p
         }
         None => match steady_state_start(record) {
             Ok(p) => p,
             Err(why) => {
-                let ee = super::equation_error(record, options.speed_reading)
-                    .map_err(|e| format!("no start values: {why}; the equation-error fit {e}"))?;
+                let ee = super::equation_error(record, options.speed_reading).map_err(|e| {
+                    NotApplicable::Missing(format!(
+                        "no start values: {why}; the equation-error fit {e}"
+                    ))
+                })?;
                 warnings.push(format!(
                     "output_error: started from the equation-error estimate ({why})"
                 ));
@@ -212,7 +217,9 @@ pub fn output_error(
         }
     }
     if inputs.is_empty() {
-        return Err("no step segment starts from a known state".into());
+        return Err(NotApplicable::Missing(
+            "no step segment starts from a known state".into(),
+        ));
     }
     let data = FitData {
         segments: inputs,
@@ -247,10 +254,10 @@ pub fn output_error(
         minimise(&data, &start)
     };
     if best.at.refused() {
-        return Err(format!(
+        return Err(NotApplicable::Unidentifiable(format!(
             "the fit ended at parameters the model refuses ({})",
             best.termination
-        ));
+        )));
     }
     if !best.converged {
         warnings.push(format!(
@@ -394,7 +401,7 @@ fn channel_noise<'a>(
 }
 
 /// K, Ra, f, Tst from the steady-state fit (La and J placeholders).
-fn steady_state_start(record: &Record) -> Result<DcParams, String> {
+fn steady_state_start(record: &Record) -> Result<DcParams, NotApplicable> {
     let levels: Vec<_> = record
         .segments
         .iter()
@@ -402,14 +409,17 @@ fn steady_state_start(record: &Record) -> Result<DcParams, String> {
         .filter_map(settled_level)
         .filter(|l| l.settled)
         .collect();
-    let fit = super::steady_state::fit(record, &levels)
-        .map_err(|e| format!("no start values: the steady-state fit does not apply ({e})"))?;
+    let fit = super::steady_state::fit(record, &levels).map_err(|e| {
+        NotApplicable::Missing(format!(
+            "no start values: the steady-state fit does not apply ({e})"
+        ))
+    })?;
     let e = fit.estimate;
     if !(e.k > 0.0 && e.ra > 0.0) {
-        return Err(format!(
+        return Err(NotApplicable::Unidentifiable(format!(
             "no start values: the steady-state fit gives K = {:.4}, Ra = {:.4}",
             e.k, e.ra
-        ));
+        )));
     }
     Ok(DcParams {
         ra: e.ra,
@@ -457,7 +467,7 @@ fn segment_start(
     pos: usize,
     params: &DcParams,
     speed_noise: f64,
-) -> Result<(SegmentStart, Option<(u32, usize)>), String> {
+) -> Result<(SegmentStart, Option<(u32, usize)>), NotApplicable> {
     let seg = &record.segments[pos];
     let mut u0 = seg.voltage[0];
     let mut level_before = None;
@@ -477,10 +487,10 @@ fn segment_start(
                 }
                 Some(_) => return Ok((state_at_end_start(prev), None)),
                 None => {
-                    return Err(format!(
+                    return Err(NotApplicable::Missing(format!(
                         "the segment before it ({}) is too short to give its start",
                         prev.index
-                    ))
+                    )))
                 }
             }
         } else if !is_step || !adjacent {
@@ -923,6 +933,6 @@ mod tests {
     fn no_step_segment_is_an_error() {
         let err =
             output_error(&Record::default(), None, &OutputErrorOptions::default()).unwrap_err();
-        assert!(err.contains("step segment"), "{err}");
+        assert!(err.to_string().contains("step segment"), "{err}");
     }
 }
