@@ -18,11 +18,11 @@ use thiserror::Error;
 use tokio::sync::watch;
 
 use crate::bench::{
-    supervise_stages, BenchError, Outcome, Progress, RecordSink, SafetyMonitor, StopCause,
-    StopReport, SupervisorHandle, SupervisorSummary, SupervisorTiming,
+    supervise_stages, BenchError, MonitorError, Outcome, Progress, RecordSink, SafetyMonitor,
+    StopCause, StopReport, SupervisorHandle, SupervisorSummary, SupervisorTiming,
 };
 use crate::diagnose::{write_residual_svg, ResidualPlot};
-use crate::machine::{Analysed, Analysis, Machine, PlanRig, Truth};
+use crate::machine::{Analysed, Analysis, Machine, PlanRig, PlotFailure, Truth};
 use crate::record::{
     Entry, Event, EventLevel, Record, RecordError, Recorder, RecorderStats, TestMeta,
     QUEUE_CAPACITY, SCHEMA_VERSION,
@@ -52,17 +52,18 @@ pub enum SessionError {
     Rig(#[from] RigError),
     /// The machine's safety rules do not fit its rig's channels.
     #[error("safety supervisor: {0}")]
-    Safety(String),
+    Safety(#[from] MonitorError),
     /// The analysis task failed (a bug; the record is as written).
     #[error("identification task failed: {0}")]
-    Analysis(String),
+    Analysis(#[from] tokio::task::JoinError),
     /// A plot could not be written.
-    #[error("{what}: {reason}")]
+    #[error("{what}: {source}")]
     Plot {
         /// Which plot.
         what: &'static str,
         /// Why.
-        reason: String,
+        #[source]
+        source: PlotFailure,
     },
 }
 
@@ -138,15 +139,11 @@ impl Session {
         started_at: String,
         initial_rise_k: f64,
     ) -> Result<Supervised, SessionError> {
-        let monitor = self
-            .machine
-            .safety_rules()
-            .monitor(
-                self.sensors.channels(),
-                Some(self.counts_per_rev),
-                initial_rise_k,
-            )
-            .map_err(|e| SessionError::Safety(e.to_string()))?;
+        let monitor = self.machine.safety_rules().monitor(
+            self.sensors.channels(),
+            Some(self.counts_per_rev),
+            initial_rise_k,
+        )?;
         let stage_ids: Vec<&str> = self.stages.iter().map(|s| s.id()).collect();
         let channels = self
             .machine
@@ -266,8 +263,7 @@ impl Recording {
             let analysed = analyser(&record, diagnose);
             (analysed, record)
         })
-        .await
-        .map_err(|e| SessionError::Analysis(e.to_string()))?;
+        .await?;
         let stem = path
             .file_stem()
             .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
@@ -444,18 +440,18 @@ impl Concluded {
         let svg = dir.join(format!("{stem}.svg"));
         self.analysis
             .write_plot(&self.record, &svg)
-            .map_err(|reason| SessionError::Plot {
+            .map_err(|source| SessionError::Plot {
                 what: "plot",
-                reason,
+                source,
             })?;
         let residuals_svg = self
             .residuals
             .as_ref()
             .map(|plot| {
                 let path = dir.join(format!("{stem}.residuals.svg"));
-                write_residual_svg(plot, &path).map_err(|reason| SessionError::Plot {
+                write_residual_svg(plot, &path).map_err(|e| SessionError::Plot {
                     what: "residual plot",
-                    reason,
+                    source: Box::new(e),
                 })?;
                 Ok::<_, SessionError>(path)
             })

@@ -33,6 +33,6 @@ pub use settle::SettleDetector;
 pub use sink::{sensor_channels_with_speed, BenchError, Outcome, RecordSink};
 pub use stop_path::StopPath;
 pub use supervisor::{
-    HeatingBudget, Readings, SafetyMonitor, SafetyRules, StopCause, SUPERVISOR_ID,
+    HeatingBudget, MonitorError, Readings, SafetyMonitor, SafetyRules, StopCause, SUPERVISOR_ID,
 };
 pub use thermal::WindingTemperature;

@@ -30,7 +30,7 @@ pub enum BenchError {
     MissingChannel(&'static str),
     /// The safety checks cannot be set up for these sensors.
     #[error("safety monitor: {0}")]
-    Safety(String),
+    Safety(#[from] super::MonitorError),
 }
 
 /// Where readings go: the MCAP recorder (when recording) and the

@@ -70,7 +70,7 @@ impl SafetyRules {
         channels: &[ChannelInfo],
         counts_per_rev: Option<f64>,
         initial_rise_k: f64,
-    ) -> Result<SafetyMonitor, String> {
+    ) -> Result<SafetyMonitor, MonitorError> {
         let monitor = SafetyMonitor::new(
             self.limits,
             self.supervision.clone(),
@@ -278,6 +278,17 @@ pub struct SafetyMonitor {
     readings: Readings,
 }
 
+/// Why the safety checks cannot be set up for a rig's channels.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MonitorError {
+    /// The configured emergency-stop input is not among the channels.
+    #[error("supervisor.estop_channel: the rig has no `{channel}` channel")]
+    NoEstopChannel {
+        /// The configured channel.
+        channel: String,
+    },
+}
+
 impl SafetyMonitor {
     /// A monitor for a stream with `channels`. `counts_per_rev` lets it
     /// derive speed from an `encoder_count` channel; the winding estimate
@@ -289,7 +300,7 @@ impl SafetyMonitor {
         channels: &[ChannelInfo],
         counts_per_rev: Option<f64>,
         initial_rise_k: f64,
-    ) -> Result<SafetyMonitor, String> {
+    ) -> Result<SafetyMonitor, MonitorError> {
         let estop = supervision.estop_channel.as_deref();
         let roles: Vec<Role> = channels
             .iter()
@@ -305,9 +316,9 @@ impl SafetyMonitor {
             .collect();
         if let Some(q) = estop {
             if !roles.contains(&Role::EmergencyStop) {
-                return Err(format!(
-                    "supervisor.estop_channel: the rig has no `{q}` channel"
-                ));
+                return Err(MonitorError::NoEstopChannel {
+                    channel: q.to_string(),
+                });
             }
         }
         Ok(SafetyMonitor {
@@ -600,7 +611,16 @@ mod tests {
             0.0,
         )
         .unwrap_err();
-        assert!(e.contains("estop"), "{e}");
+        assert_eq!(
+            e,
+            MonitorError::NoEstopChannel {
+                channel: "estop".into()
+            }
+        );
+        assert_eq!(
+            e.to_string(),
+            "supervisor.estop_channel: the rig has no `estop` channel"
+        );
     }
 
     #[test]

@@ -189,7 +189,7 @@ fn bar(what: &str) -> ProgressBar {
     bar
 }
 
-fn fail(code: u8, message: &str) -> u8 {
+fn fail(code: u8, message: &dyn std::fmt::Display) -> u8 {
     eprintln!("motorbench: {message}");
     code
 }

@@ -24,7 +24,7 @@ pub use crate::contract::{
 };
 pub use crate::machine::dc::diagnose::diagnose_dc;
 pub use crate::machine::im::diagnose::diagnose_im;
-pub use plot::{write_residual_svg, ResidualPanel, ResidualPlot};
+pub use plot::{write_residual_svg, ResidualPanel, ResidualPlot, ResidualPlotError};
 pub use text::render_diagnosis_text;
 
 use crate::model::Connection;

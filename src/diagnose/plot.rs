@@ -34,11 +34,24 @@ pub struct ResidualPlot {
 const PANEL_W: u32 = 900;
 const PANEL_H: u32 = 260;
 
+/// The residual plot could not be drawn or written.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{}: {reason}", path.display())]
+pub struct ResidualPlotError {
+    /// The output file.
+    pub path: std::path::PathBuf,
+    /// What the plotting library reported.
+    pub reason: String,
+}
+
 /// Write `plot` as one SVG, panels stacked; before in red, after in blue.
-pub fn write_residual_svg(plot: &ResidualPlot, path: &Path) -> Result<(), String> {
+pub fn write_residual_svg(plot: &ResidualPlot, path: &Path) -> Result<(), ResidualPlotError> {
     let panels = plot.panels.len().max(1);
     let root = SVGBackend::new(path, (PANEL_W, PANEL_H * panels as u32)).into_drawing_area();
-    let err = |e: &dyn std::fmt::Display| format!("{}: {e}", path.display());
+    let err = |e: &dyn std::fmt::Display| ResidualPlotError {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    };
     root.fill(&WHITE).map_err(|e| err(&e))?;
     if plot.panels.is_empty() {
         root.titled("no residual to plot", ("sans-serif", 16))

@@ -93,6 +93,10 @@ pub struct PlanDurations {
     pub kinds: Vec<SegmentKind>,
 }
 
+/// Why a machine's plot could not be written: the machine's own plot
+/// error (each machine draws its own kind of plot).
+pub type PlotFailure = Box<dyn std::error::Error + Send + Sync>;
+
 /// A machine's analysis of a record: identification with its diagnosis.
 pub trait Analysis: Send {
     /// The report per the data contract.
@@ -102,7 +106,7 @@ pub trait Analysis: Send {
     /// The identification as text for a person (without the diagnosis).
     fn text(&self) -> String;
     /// Draw the record against the identified model to `path` (SVG).
-    fn write_plot(&self, record: &Record, path: &Path) -> Result<(), String>;
+    fn write_plot(&self, record: &Record, path: &Path) -> Result<(), PlotFailure>;
     /// Why nothing could be identified, for exit code 4; `None` when a
     /// method applied.
     fn refusal(&self) -> Option<String>;

@@ -82,9 +82,11 @@ impl From<StartError> for ApiError {
                 "the daemon is shutting down",
             ),
             StartError::BadRequest(m) => ApiError::new(StatusCode::BAD_REQUEST, "bad_request", m),
-            StartError::Setup(m) => {
-                ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "setup_failed", m)
-            }
+            StartError::Setup(e) => ApiError::new(
+                StatusCode::INTERNAL_SERVER_ERROR,
+                "setup_failed",
+                e.to_string(),
+            ),
         }
     }
 }

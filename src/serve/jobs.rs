@@ -13,12 +13,14 @@ use std::time::SystemTime;
 use serde::Serialize;
 use tokio::sync::{watch, Mutex};
 
-use super::records_index::{unix_s, IndexEntry, KeyResults, RecordOutcome, RecordsIndex};
+use super::records_index::{
+    unix_s, IndexEntry, IndexError, KeyResults, RecordOutcome, RecordsIndex,
+};
 use crate::bench::{Outcome, Progress, Readings, StopCause, StopReport, SupervisorHandle};
 use crate::diagnose::write_residual_svg;
 use crate::machine::{Machine, PlanDurations};
 use crate::record::SegmentKind;
-use crate::session::{Recording, RunEnd, Session, Supervised};
+use crate::session::{Recording, RunEnd, Session, SessionError, Supervised};
 
 /// Where a test is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -197,6 +199,17 @@ pub struct Job {
     ending: Ending,
 }
 
+/// Why a test could not be set up (nothing ran; the rig was not driven).
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    /// The rig, its supervisor or the record could not be set up.
+    #[error(transparent)]
+    Session(#[from] SessionError),
+    /// The records index could not be written.
+    #[error(transparent)]
+    Index(#[from] IndexError),
+}
+
 /// Open the rig, put it under supervision, start and index the record.
 /// Must be called on a tokio runtime (it starts the supervisor task).
 pub async fn prepare(
@@ -204,12 +217,10 @@ pub async fn prepare(
     machine: Box<dyn Machine>,
     initial_rise_k: f64,
     index: Arc<Mutex<RecordsIndex>>,
-) -> Result<(Arc<TestRun>, Job), String> {
+) -> Result<(Arc<TestRun>, Job), SetupError> {
     // Paced at the wall clock; a rig served behind a protocol keeps its
     // servers alive for as long as the session holds them.
-    let session = Session::open(machine, true)
-        .await
-        .map_err(|e| e.to_string())?;
+    let session = Session::open(machine, true).await?;
     let m = session.machine();
     let motor_id = m.motor_id().to_string();
     let kind = m.kind();
@@ -219,13 +230,11 @@ pub async fn prepare(
     let mut idx = index.lock().await;
     let name = idx.new_name(&motor_id, &started_at);
     let dir = idx.dir().to_path_buf();
-    let supervised = session
-        .record_to(
-            &dir.join(format!("{name}.mcap")),
-            started_at.clone(),
-            initial_rise_k,
-        )
-        .map_err(|e| e.to_string())?;
+    let supervised = session.record_to(
+        &dir.join(format!("{name}.mcap")),
+        started_at.clone(),
+        initial_rise_k,
+    )?;
     idx.insert(IndexEntry::running(
         &name,
         rig,
@@ -234,8 +243,7 @@ pub async fn prepare(
         &plan,
         started_at,
         unix_s(now),
-    ))
-    .map_err(|e| e.to_string())?;
+    ))?;
     drop(idx);
 
     let (status, _) = watch::channel(TestStatus::running(&name, rig, &motor_id, plan));

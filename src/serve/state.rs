@@ -13,7 +13,7 @@ use tokio::sync::Mutex;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
-use super::jobs::{prepare, StopStatus, TestRun};
+use super::jobs::{prepare, SetupError, StopStatus, TestRun};
 use super::records_index::{IndexError, RecordsIndex};
 use super::rig_config::RigConfig;
 use crate::bench::{StopCause, StopReport};
@@ -113,7 +113,7 @@ pub enum StartError {
     /// The request's override is invalid.
     BadRequest(String),
     /// The rig or the record could not be set up.
-    Setup(String),
+    Setup(SetupError),
 }
 
 /// Why a stop request failed.

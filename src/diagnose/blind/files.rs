@@ -5,6 +5,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
+use super::SuiteError;
 use crate::record::{Record, SegmentKind};
 
 /// Write `record` into `dir` (created if missing) as CSV files, plus
@@ -13,11 +14,11 @@ use crate::record::{Record, SegmentKind};
 pub fn write_case_files(
     record: &Record,
     dir: &Path,
-) -> Result<(Vec<PathBuf>, Option<PathBuf>), String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("{}: {e}", dir.display()))?;
-    let write = |name: String, text: String| -> Result<PathBuf, String> {
+) -> Result<(Vec<PathBuf>, Option<PathBuf>), SuiteError> {
+    std::fs::create_dir_all(dir).map_err(SuiteError::io(dir))?;
+    let write = |name: String, text: String| -> Result<PathBuf, SuiteError> {
         let path = dir.join(name);
-        std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+        std::fs::write(&path, text).map_err(SuiteError::io(&path))?;
         Ok(path)
     };
     let mut files = Vec::new();

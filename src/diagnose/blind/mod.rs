@@ -8,9 +8,11 @@
 //! - [`CaseTruth`]: what was withheld; written to a separate truth file.
 //! - `suite`: the case plan, the suite directory, the truth file.
 //! - `score`: diagnose every case from its files, then compare with the truth.
+//! - [`SuiteError`]: what went wrong, naming the suite's file.
 
 mod dc_case;
 mod dc_plan;
+mod error;
 mod files;
 mod im_case;
 mod score;
@@ -18,6 +20,7 @@ mod suite;
 
 pub use dc_case::{simulate_dc_case, simulate_dc_case_with};
 pub use dc_plan::{Coast, DcSetup, PlanKind, SpeedSensor};
+pub use error::SuiteError;
 pub use files::write_case_files;
 pub use im_case::simulate_im_case;
 pub use score::{score_suite, CaseScore, SuiteScore, Tally};

@@ -10,6 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use super::suite::{read_json, Manifest, TruthFile};
 use super::CaseTruth;
+use super::SuiteError;
 use crate::contract::Diagnosis;
 use crate::diagnose::{diagnose, DiagnoseOptions};
 use crate::record::{load_record_files, SegmentKind};
@@ -287,24 +288,20 @@ fn param_error(d: &Diagnosis, t: &CaseTruth) -> BTreeMap<String, f64> {
 
 /// Diagnose every case of the suite in `dir`, then score against its
 /// truth file. `progress` is told each case diagnosed.
-pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteScore, String> {
+pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteScore, SuiteError> {
     let manifest: Manifest = read_json(&dir.join("cases.json"))?;
     let total = manifest.cases.len();
     // First every verdict, from the public files only.
     let mut verdicts = Vec::with_capacity(total);
     for (n, case) in manifest.cases.iter().enumerate() {
-        let kind = SegmentKind::parse(&case.kind).ok_or_else(|| {
-            format!(
-                "{}: case {}: unknown kind {:?}",
-                dir.join("cases.json").display(),
-                case.id,
-                case.kind
-            )
+        let kind = SegmentKind::parse(&case.kind).ok_or_else(|| SuiteError::UnknownKind {
+            manifest: dir.join("cases.json"),
+            case: case.id.clone(),
+            kind: case.kind.clone(),
         })?;
         let files: Vec<_> = case.files.iter().map(|p| dir.join(p)).collect();
         let nameplate = case.nameplate.as_ref().map(|p| dir.join(p));
-        let record = load_record_files(kind, &files, nameplate.as_deref(), None)
-            .map_err(|e| e.to_string())?;
+        let record = load_record_files(kind, &files, nameplate.as_deref(), None)?;
         verdicts.push(diagnose(&record, kind, &DiagnoseOptions::default()).map(|run| run.report));
         progress(n + 1, total);
     }
@@ -316,12 +313,9 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
             .cases
             .iter()
             .find(|(id, _)| *id == case.id)
-            .ok_or_else(|| {
-                format!(
-                    "{}: no truth for {}",
-                    dir.join("truth.json").display(),
-                    case.id
-                )
+            .ok_or_else(|| SuiteError::NoTruth {
+                truth: dir.join("truth.json"),
+                case: case.id.clone(),
             })?;
         cases.push(match verdict {
             Ok(d) => {

@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use super::dc_plan::{DcSetup, PlanKind};
 use super::files::write_case_files;
+use super::SuiteError;
 use super::{simulate_dc_case_with, simulate_im_case, CaseTruth};
 use crate::model::{Effect, Machine};
 use crate::record::SegmentKind;
@@ -102,12 +103,9 @@ pub fn generate_suite(
     seed: u64,
     plans: SuitePlans,
     progress: &dyn Fn(usize, usize),
-) -> Result<Manifest, String> {
+) -> Result<Manifest, SuiteError> {
     if dir.exists() {
-        return Err(format!(
-            "{}: already exists; give a new directory for the suite",
-            dir.display()
-        ));
+        return Err(SuiteError::Exists(dir.to_path_buf()));
     }
     let mut rng = StdRng::seed_from_u64(seed);
     let plan = case_plan(&mut rng);
@@ -167,15 +165,18 @@ pub fn generate_suite(
     Ok(manifest)
 }
 
-fn write_json(path: &Path, value: &impl Serialize) -> Result<(), String> {
+fn write_json(path: &Path, value: &impl Serialize) -> Result<(), SuiteError> {
     let text = serde_json::to_string_pretty(value).expect("JSON serialises");
-    std::fs::write(path, text + "\n").map_err(|e| format!("{}: {e}", path.display()))
+    std::fs::write(path, text + "\n").map_err(SuiteError::io(path))
 }
 
 /// Read a JSON file of the suite, with errors naming it.
-pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, String> {
-    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    serde_json::from_str(&text).map_err(|e| format!("{}:{}: {e}", path.display(), e.line()))
+pub fn read_json<T: for<'de> Deserialize<'de>>(path: &Path) -> Result<T, SuiteError> {
+    let text = std::fs::read_to_string(path).map_err(SuiteError::io(path))?;
+    serde_json::from_str(&text).map_err(|source| SuiteError::Json {
+        path: path.to_path_buf(),
+        source,
+    })
 }
 
 #[cfg(test)]

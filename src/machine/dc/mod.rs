@@ -36,7 +36,8 @@ use async_trait::async_trait;
 use motorbench_drivers::ChannelInfo;
 
 use super::{
-    Analysed, Analyser, Analysis, Machine, OpenedRig, PlanDurations, PlanRig, RigStage, Truth,
+    Analysed, Analyser, Analysis, Machine, OpenedRig, PlanDurations, PlanRig, PlotFailure,
+    RigStage, Truth,
 };
 use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
 use crate::config::{Config, Plan, Retention};
@@ -65,8 +66,8 @@ impl Analysis for DcAnalysis {
         render_text(&self.id, self.truth.as_ref())
     }
 
-    fn write_plot(&self, record: &Record, path: &Path) -> Result<(), String> {
-        write_segments_svg(path, &segment_plots(record, &self.id)).map_err(|e| e.to_string())
+    fn write_plot(&self, record: &Record, path: &Path) -> Result<(), PlotFailure> {
+        Ok(write_segments_svg(path, &segment_plots(record, &self.id))?)
     }
 
     fn refusal(&self) -> Option<String> {

@@ -39,7 +39,8 @@ use async_trait::async_trait;
 use motorbench_drivers::ChannelInfo;
 
 use super::{
-    Analysed, Analyser, Analysis, Machine, OpenedRig, PlanDurations, PlanRig, RigStage, Truth,
+    Analysed, Analyser, Analysis, Machine, OpenedRig, PlanDurations, PlanRig, PlotFailure,
+    RigStage, Truth,
 };
 use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
 use crate::config::{recorded_im_model, Retention};
@@ -64,8 +65,8 @@ impl Analysis for ImAnalysis {
         render_im_text(&self.0)
     }
 
-    fn write_plot(&self, _record: &Record, path: &Path) -> Result<(), String> {
-        write_im_svg(path, &self.0).map_err(|e| e.to_string())
+    fn write_plot(&self, _record: &Record, path: &Path) -> Result<(), PlotFailure> {
+        Ok(write_im_svg(path, &self.0)?)
     }
 
     fn refusal(&self) -> Option<String> {
