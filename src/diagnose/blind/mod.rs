@@ -2,27 +2,25 @@
 //! none) at random magnitudes, noise and quantisation levels, with the
 //! truth kept apart from the record so that the diagnosis never sees it.
 //!
-//! - `dc_case` / `im_case`: simulate one record of each machine.
-//! - `dc_plan`: a DC case's test plan and sensors (the classic settled
-//!   staircase, or a wide draw of plans, holds, damping and sensors).
+//! - each machine simulates its own cases: `machine/dc/blind_case.rs` and
+//!   `machine/im/blind_case.rs` one record each; `machine/dc/blind_plan.rs`
+//!   a DC case's test plan and sensors (the classic settled staircase, or
+//!   a wide draw of plans, holds, damping and sensors).
 //! - [`CaseTruth`]: what was withheld; written to a separate truth file.
 //! - `suite`: the case plan, the suite directory, the truth file.
 //! - `score`: diagnose every case from its files, then compare with the truth.
 //! - [`SuiteError`]: what went wrong, naming the suite's file.
 
-mod dc_case;
-mod dc_plan;
 mod error;
 mod files;
-mod im_case;
 mod score;
 mod suite;
 
-pub use dc_case::{simulate_dc_case, simulate_dc_case_with};
-pub use dc_plan::{Coast, DcSetup, PlanKind, SpeedSensor};
+pub use crate::machine::dc::blind_case::{simulate_dc_case, simulate_dc_case_with};
+pub use crate::machine::dc::blind_plan::{Coast, DcSetup, PlanKind, SpeedSensor};
+pub use crate::machine::im::blind_case::simulate_im_case;
 pub use error::SuiteError;
 pub use files::write_case_files;
-pub use im_case::simulate_im_case;
 pub use score::{score_suite, CaseScore, SuiteScore, Tally};
 pub use suite::{
     case_plan, generate_suite, CaseEntry, Manifest, SuitePlans, TruthFile, DEFAULT_SEED,

@@ -16,10 +16,10 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
 
-use super::dc_plan::{DcSetup, PlanKind};
 use super::files::write_case_files;
 use super::SuiteError;
 use super::{simulate_dc_case_with, simulate_im_case, CaseTruth};
+use super::{DcSetup, PlanKind};
 use crate::model::{Effect, Machine};
 use crate::record::SegmentKind;
 

@@ -10,6 +10,8 @@
 //!   serial); `sim_rig`: the simulated supply and sensors; `served`: the
 //!   simulated rig behind the real protocols.
 
+pub(crate) mod blind_case;
+pub(crate) mod blind_plan;
 pub mod diagnose;
 pub mod identify;
 mod overlay;

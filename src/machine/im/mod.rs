@@ -9,6 +9,7 @@
 //!   machine, VFD and dynamometer; `served`: the simulated rig behind
 //!   Modbus.
 
+pub(crate) mod blind_case;
 mod config;
 pub mod diagnose;
 pub mod identify;

@@ -28,8 +28,8 @@ use rand::rngs::StdRng;
 use rand::RngExt;
 use rand_distr::{Distribution, Normal};
 
-use super::dc_plan::{drives, Coast, Controller, DcSetup, Drive, PlanKind, SpeedSensor};
-use super::{BlindRecord, CaseTruth};
+use super::blind_plan::{drives, Coast, Controller, DcSetup, Drive, PlanKind, SpeedSensor};
+use crate::diagnose::blind::{BlindRecord, CaseTruth};
 use crate::identify::nrmse;
 use crate::model::{DcParams, Effect};
 use crate::record::{DcSegment, Record, SegmentKind};
@@ -477,7 +477,7 @@ pub fn simulate_dc_case_with(
             ]),
             noise_floor,
             regions: regions.into_iter().map(str::to_string).collect(),
-            source: super::OWN_SOURCE.to_string(),
+            source: crate::diagnose::blind::OWN_SOURCE.to_string(),
             plan: setup.plan.name().to_string(),
             setup: setup_record(setup, &p, hold, lines, &plan),
         },

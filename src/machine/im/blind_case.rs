@@ -39,8 +39,8 @@ use rand::rngs::StdRng;
 use rand::RngExt;
 use rand_distr::{Distribution, Normal};
 
-use super::{BlindRecord, CaseTruth};
-use crate::machine::im::diagnose::effects::{increasing_root, leakage_factor, skin_effect as skin};
+use super::diagnose::effects::{increasing_root, leakage_factor, skin_effect as skin};
+use crate::diagnose::blind::{BlindRecord, CaseTruth};
 use crate::model::{Connection, Effect, C64};
 use crate::record::{OperatingPoint, Record, SegmentKind, TestMeta, SCHEMA_VERSION};
 
@@ -497,7 +497,7 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         ..Record::default()
     };
     let truth = CaseTruth {
-        effect: crate::machine::im::diagnose::effects::effect_name(effect),
+        effect: super::diagnose::effects::effect_name(effect),
         effect_params,
         nominal,
         noise: BTreeMap::from([
@@ -518,7 +518,7 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         ]),
         noise_floor: floor,
         regions,
-        source: super::OWN_SOURCE.to_string(),
+        source: crate::diagnose::blind::OWN_SOURCE.to_string(),
         plan: "sweep".to_string(),
         setup: BTreeMap::new(),
     };
