@@ -1,10 +1,8 @@
 //! How a running test is stopped, as the sequencers ([`super::run_test`],
 //! [`super::run_im_sweep`]) see it.
 //!
-//! Without a supervisor (`motorbench run`) the sequencer stops on an
-//! operator flag (raised at any time: the sequencer waits on it beside
-//! each read) or on a fault it sees, and commands the safe state itself.
-//! Under the daemon's safety supervisor every stop goes through the
+//! Every test of `motorbench run` and the daemon runs under the safety
+//! supervisor ([`crate::session`]), where every stop goes through the
 //! supervisor, whichever layer sees the reason first: a check of the
 //! sequencer's [`super::SafetyMonitor`] that fails before the supervisor's
 //! own (its monitor may lack the sweep's heating budget) is handed to the
@@ -12,6 +10,11 @@
 //! latches the rig and records the stop; the sequencer then records on
 //! until the supervisor ends the stream after a sample read in the safe
 //! state, so the record shows the rig safe.
+//!
+//! A sequencer driven on its own (the sequencer's tests, a library user's
+//! own loop) stops on an operator flag instead (raised at any time: the
+//! sequencer waits on it beside each read) or on a fault it sees, and
+//! commands the safe state itself.
 
 use tokio::sync::watch;
 

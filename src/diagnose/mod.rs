@@ -3,7 +3,7 @@
 //! vocabulary causes it, and how far the gap shrinks once that effect is
 //! modelled — every comparison on held-out data.
 //!
-//! - [`report`]: the diagnosis JSON of the data contract.
+//! - [`crate::contract`]: the diagnosis JSON of the data contract.
 //! - [`decision`]: the paired held-out test, the penalised score, noise
 //!   estimates; shared by both machines.
 //! - [`plot`]: residuals before and after per region, as SVG.
