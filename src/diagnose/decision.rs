@@ -237,12 +237,13 @@ pub fn median(values: &mut [f64]) -> Option<f64> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use rand::{rngs::StdRng, SeedableRng};
     use rand_distr::{Distribution, Normal};
 
-    fn noise(seed: u64, n: usize) -> Vec<f64> {
+    /// `n` draws of unit Gaussian noise from a generator seeded `seed`.
+    pub(crate) fn noise(seed: u64, n: usize) -> Vec<f64> {
         let mut rng = StdRng::seed_from_u64(seed);
         let d = Normal::new(0.0, 1.0).unwrap();
         (0..n).map(|_| d.sample(&mut rng)).collect()
