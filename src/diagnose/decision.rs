@@ -249,18 +249,24 @@ pub(crate) mod tests {
         (0..n).map(|_| d.sample(&mut rng)).collect()
     }
 
+    /// How many of `trials` pairs of independent squared-noise draws (40
+    /// points each) `significant` calls a gain: two models equally wrong.
+    fn false_alarms(trials: u64, significant: impl Fn(&[f64], &[f64]) -> bool) -> usize {
+        (0..trials)
+            .filter(|&s| {
+                let a: Vec<f64> = noise(2 * s, 40).iter().map(|x| x * x).collect();
+                let b: Vec<f64> = noise(2 * s + 1, 40).iter().map(|x| x * x).collect();
+                significant(&a, &b)
+            })
+            .count()
+    }
+
     #[test]
     fn pure_noise_gains_are_rarely_significant() {
         // Two independent noise draws stand in for two models that are
         // equally wrong: the test must alarm at about its nominal rate.
         let trials = 400;
-        let alarms = (0..trials)
-            .filter(|&s| {
-                let a: Vec<f64> = noise(2 * s, 40).iter().map(|x| x * x).collect();
-                let b: Vec<f64> = noise(2 * s + 1, 40).iter().map(|x| x * x).collect();
-                held_out_test(&a, &b, 1).significant()
-            })
-            .count();
+        let alarms = false_alarms(trials, |a, b| held_out_test(a, b, 1).significant());
         // 1 % nominal: 4 of 400 expected; 12 would be p < 0.001 binomially.
         assert!(alarms <= 12, "{alarms} false alarms in {trials}");
     }
@@ -283,13 +289,9 @@ pub(crate) mod tests {
     #[test]
     fn sign_flip_test_holds_its_rate_and_sees_a_localised_gain() {
         let trials = 200;
-        let alarms = (0..trials)
-            .filter(|&s| {
-                let a: Vec<f64> = noise(2 * s, 40).iter().map(|x| x * x).collect();
-                let b: Vec<f64> = noise(2 * s + 1, 40).iter().map(|x| x * x).collect();
-                held_out_sign_flip_test(&a, &b, 1).significant()
-            })
-            .count();
+        let alarms = false_alarms(trials, |a, b| {
+            held_out_sign_flip_test(a, b, 1).significant()
+        });
         // 1 % nominal: 2 of 200 expected; 8 would be p < 0.001 binomially.
         assert!(alarms <= 8, "{alarms} false alarms in {trials}");
         // Eight blocks of 60 points gain a lot, the rest nothing: the t
