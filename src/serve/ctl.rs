@@ -95,6 +95,22 @@ fn print_answer(json: bool, v: &Value, line: impl FnOnce(&Value) -> String) {
     }
 }
 
+/// Post `action` (`estop`, `reset`) to the rig `rig` (the only one when
+/// none is named) and print the answer: as JSON with `--json`, else the
+/// line `line` makes of the rig's name and the answer.
+async fn rig_action(
+    client: &Client,
+    rig: Option<String>,
+    action: &str,
+    json: bool,
+    line: impl FnOnce(&str, &Value) -> String,
+) -> Result<(), CtlFailure> {
+    let rig = rig_name(client, rig).await?;
+    let v = post_ok(client, &format!("/v1/rigs/{rig}/{action}"), None).await?;
+    print_answer(json, &v, |v| line(&rig, v));
+    Ok(())
+}
+
 fn opt_f(v: &Value, digits: usize, unit: &str) -> String {
     v.as_f64()
         .map_or_else(|| "—".to_string(), |x| format!("{x:.digits$} {unit}"))
@@ -197,23 +213,19 @@ pub async fn run(client: &Client, command: CtlCommand, json: bool) -> Result<(),
             Ok(())
         }
         CtlCommand::Estop { rig } => {
-            let rig = rig_name(client, rig).await?;
-            let v = post_ok(client, &format!("/v1/rigs/{rig}/estop"), None).await?;
-            print_answer(json, &v, |v| {
+            rig_action(client, rig, "estop", json, |rig, v| {
                 format!(
                     "{rig}: {} (latched until `motorbench ctl reset`)",
                     v["trip"]["message"].as_str().unwrap_or("emergency stop")
                 )
-            });
-            Ok(())
+            })
+            .await
         }
         CtlCommand::Reset { rig } => {
-            let rig = rig_name(client, rig).await?;
-            let v = post_ok(client, &format!("/v1/rigs/{rig}/reset"), None).await?;
-            print_answer(json, &v, |v| {
+            rig_action(client, rig, "reset", json, |rig, v| {
                 format!("{rig}: {}", v["state"].as_str().unwrap_or("?"))
-            });
-            Ok(())
+            })
+            .await
         }
         CtlCommand::Records => {
             let v = get_ok(client, "/v1/records").await?;
