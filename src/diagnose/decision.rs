@@ -237,15 +237,28 @@ pub fn median(values: &mut [f64]) -> Option<f64> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use rand::{rngs::StdRng, SeedableRng};
     use rand_distr::{Distribution, Normal};
 
-    fn noise(seed: u64, n: usize) -> Vec<f64> {
+    /// `n` draws of unit Gaussian noise from a generator seeded `seed`.
+    pub(crate) fn noise(seed: u64, n: usize) -> Vec<f64> {
         let mut rng = StdRng::seed_from_u64(seed);
         let d = Normal::new(0.0, 1.0).unwrap();
         (0..n).map(|_| d.sample(&mut rng)).collect()
+    }
+
+    /// How many of `trials` pairs of independent squared-noise draws (40
+    /// points each) `significant` calls a gain: two models equally wrong.
+    fn false_alarms(trials: u64, significant: impl Fn(&[f64], &[f64]) -> bool) -> usize {
+        (0..trials)
+            .filter(|&s| {
+                let a: Vec<f64> = noise(2 * s, 40).iter().map(|x| x * x).collect();
+                let b: Vec<f64> = noise(2 * s + 1, 40).iter().map(|x| x * x).collect();
+                significant(&a, &b)
+            })
+            .count()
     }
 
     #[test]
@@ -253,13 +266,7 @@ mod tests {
         // Two independent noise draws stand in for two models that are
         // equally wrong: the test must alarm at about its nominal rate.
         let trials = 400;
-        let alarms = (0..trials)
-            .filter(|&s| {
-                let a: Vec<f64> = noise(2 * s, 40).iter().map(|x| x * x).collect();
-                let b: Vec<f64> = noise(2 * s + 1, 40).iter().map(|x| x * x).collect();
-                held_out_test(&a, &b, 1).significant()
-            })
-            .count();
+        let alarms = false_alarms(trials, |a, b| held_out_test(a, b, 1).significant());
         // 1 % nominal: 4 of 400 expected; 12 would be p < 0.001 binomially.
         assert!(alarms <= 12, "{alarms} false alarms in {trials}");
     }
@@ -282,13 +289,9 @@ mod tests {
     #[test]
     fn sign_flip_test_holds_its_rate_and_sees_a_localised_gain() {
         let trials = 200;
-        let alarms = (0..trials)
-            .filter(|&s| {
-                let a: Vec<f64> = noise(2 * s, 40).iter().map(|x| x * x).collect();
-                let b: Vec<f64> = noise(2 * s + 1, 40).iter().map(|x| x * x).collect();
-                held_out_sign_flip_test(&a, &b, 1).significant()
-            })
-            .count();
+        let alarms = false_alarms(trials, |a, b| {
+            held_out_sign_flip_test(a, b, 1).significant()
+        });
         // 1 % nominal: 2 of 200 expected; 8 would be p < 0.001 binomially.
         assert!(alarms <= 8, "{alarms} false alarms in {trials}");
         // Eight blocks of 60 points gain a lot, the rest nothing: the t

@@ -241,7 +241,7 @@ impl DoubleCageForms {
 mod tests {
     use super::*;
     use crate::model::im_fixtures::supply;
-    use crate::model::{Connection, ImCircuit, ImParam, RotorCage};
+    use crate::model::{Connection, ImCircuit, RotorCage};
 
     const FE: SingleCageForms = SingleCageForms {
         rs: 1.93,
@@ -355,14 +355,8 @@ mod tests {
     #[test]
     fn appendix_derivatives_match_finite_differences_and_the_complex_model() {
         let v = 220.0;
-        let order = [
-            ImParam::Rr,
-            ImParam::Xr,
-            ImParam::Xs,
-            ImParam::Rs,
-            ImParam::Xm,
-            ImParam::Rfe,
-        ];
+        // The appendix's rows are the paper's θ of Eq. 17.
+        let order = crate::machine::im::identify::THETA_SINGLE_FE_L6;
         let c = fe_circuit();
         for s in [0.005, 0.05, 0.3, 1.0] {
             let gi = FE.current_gradient(v, s);

@@ -354,6 +354,19 @@ pub struct DcSegment {
 }
 
 impl DcSegment {
+    /// A test segment of `n` samples `dt` apart that holds the voltage
+    /// `u`, the current `i` and the speed `w` throughout.
+    #[cfg(test)]
+    pub(crate) fn held(n: usize, dt: f64, u: f64, i: f64, w: f64) -> DcSegment {
+        DcSegment {
+            time: (0..n).map(|k| k as f64 * dt).collect(),
+            voltage: vec![u; n],
+            current: vec![i; n],
+            speed: vec![w; n],
+            ..Default::default()
+        }
+    }
+
     /// Append one sample: time `t` (s), voltage (V), current (A) and
     /// speed (rad/s).
     pub fn push_sample(&mut self, t: f64, voltage: f64, current: f64, speed: f64) {

@@ -419,42 +419,77 @@ fn run(
                                 table.topics[index]
                             ),
                         };
-                        let pos = table.position_of_bench(TOPIC_EVENT);
-                        let data = serde_json::to_vec(&event).expect("an event serializes");
-                        write_message(&mut writer, &mut table, pos, *t_ns, &data)
-                            .map_err(mcap_err)?;
+                        write_bench_json(
+                            &mut writer,
+                            &mut table,
+                            TOPIC_EVENT,
+                            *t_ns,
+                            &event,
+                            "an event serializes",
+                        )
+                        .map_err(mcap_err)?;
                     }
                 }
                 (*t_ns, false)
             }
             Entry::Segment { t_ns, marker } => {
-                let pos = table.position_of_bench(TOPIC_SEGMENT);
-                let data = serde_json::to_vec(marker).expect("a marker serializes");
-                write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
+                write_bench_json(
+                    &mut writer,
+                    &mut table,
+                    TOPIC_SEGMENT,
+                    *t_ns,
+                    marker,
+                    "a marker serializes",
+                )
+                .map_err(mcap_err)?;
                 (*t_ns, true)
             }
             Entry::Event { t_ns, event } => {
-                let pos = table.position_of_bench(TOPIC_EVENT);
-                let data = serde_json::to_vec(event).expect("an event serializes");
-                write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
+                write_bench_json(
+                    &mut writer,
+                    &mut table,
+                    TOPIC_EVENT,
+                    *t_ns,
+                    event,
+                    "an event serializes",
+                )
+                .map_err(mcap_err)?;
                 (*t_ns, event.level == EventLevel::Abort)
             }
             Entry::OperatingPoint { t_ns, point } => {
-                let pos = table.position_of_bench(TOPIC_OPERATING_POINT);
-                let data = serde_json::to_vec(point).expect("a point serializes");
-                write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
+                write_bench_json(
+                    &mut writer,
+                    &mut table,
+                    TOPIC_OPERATING_POINT,
+                    *t_ns,
+                    point,
+                    "a point serializes",
+                )
+                .map_err(mcap_err)?;
                 (*t_ns, true)
             }
             Entry::SupplyLimit { t_ns, limit } => {
-                let pos = table.position_of_bench(TOPIC_SUPPLY_LIMIT);
-                let data = serde_json::to_vec(limit).expect("a supply limit serializes");
-                write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
+                write_bench_json(
+                    &mut writer,
+                    &mut table,
+                    TOPIC_SUPPLY_LIMIT,
+                    *t_ns,
+                    limit,
+                    "a supply limit serializes",
+                )
+                .map_err(mcap_err)?;
                 (*t_ns, true)
             }
             Entry::Result { t_ns, report } => {
-                let pos = table.position_of_bench(TOPIC_RESULT);
-                let data = serde_json::to_vec(report).expect("a JSON value serializes");
-                write_message(&mut writer, &mut table, pos, *t_ns, &data).map_err(mcap_err)?;
+                write_bench_json(
+                    &mut writer,
+                    &mut table,
+                    TOPIC_RESULT,
+                    *t_ns,
+                    report,
+                    "a JSON value serializes",
+                )
+                .map_err(mcap_err)?;
                 (*t_ns, true)
             }
         };
@@ -483,6 +518,21 @@ fn run(
         backpressure_waits: 0,
         path: path.to_path_buf(),
     })
+}
+
+/// Write `value` as JSON on the `/bench` topic `topic` at `t_ns`; `what`
+/// is the panic message should it not serialize.
+fn write_bench_json(
+    writer: &mut Writer<BufWriter<File>>,
+    table: &mut Channels,
+    topic: &str,
+    t_ns: u64,
+    value: &impl Serialize,
+    what: &str,
+) -> Result<(), mcap::McapError> {
+    let pos = table.position_of_bench(topic);
+    let data = serde_json::to_vec(value).expect(what);
+    write_message(writer, table, pos, t_ns, &data)
 }
 
 fn write_message(

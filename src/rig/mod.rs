@@ -19,8 +19,10 @@ use motorbench_drivers::{ChannelInfo, DriverError};
 use crate::config::{LinkSpec, ModbusDeviceLink};
 
 mod modbus_server;
+mod wall_clock;
 
 pub use modbus_server::serve_device;
+pub(crate) use wall_clock::WallClock;
 
 /// What `probe` needs to read every channel once.
 pub struct ModbusProbe {

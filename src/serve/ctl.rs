@@ -85,6 +85,32 @@ fn print_json(v: &Value) {
     println!("{}", serde_json::to_string_pretty(v).expect("JSON prints"));
 }
 
+/// Print the daemon's answer `v`: as JSON with `--json`, else the one
+/// line `line` makes of it.
+fn print_answer(json: bool, v: &Value, line: impl FnOnce(&Value) -> String) {
+    if json {
+        print_json(v);
+    } else {
+        println!("{}", line(v));
+    }
+}
+
+/// Post `action` (`estop`, `reset`) to the rig `rig` (the only one when
+/// none is named) and print the answer: as JSON with `--json`, else the
+/// line `line` makes of the rig's name and the answer.
+async fn rig_action(
+    client: &Client,
+    rig: Option<String>,
+    action: &str,
+    json: bool,
+    line: impl FnOnce(&str, &Value) -> String,
+) -> Result<(), CtlFailure> {
+    let rig = rig_name(client, rig).await?;
+    let v = post_ok(client, &format!("/v1/rigs/{rig}/{action}"), None).await?;
+    print_answer(json, &v, |v| line(&rig, v));
+    Ok(())
+}
+
 fn opt_f(v: &Value, digits: usize, unit: &str) -> String {
     v.as_f64()
         .map_or_else(|| "—".to_string(), |x| format!("{x:.digits$} {unit}"))
@@ -154,11 +180,7 @@ pub async fn run(client: &Client, command: CtlCommand, json: bool) -> Result<(),
             }
             let v = reply.json();
             let id = v["id"].as_str().unwrap_or_default().to_string();
-            if json {
-                print_json(&v);
-            } else {
-                println!("{id}");
-            }
+            print_answer(json, &v, |_| id.clone());
             if follow {
                 follow_test(client, &id, json).await
             } else {
@@ -182,38 +204,28 @@ pub async fn run(client: &Client, command: CtlCommand, json: bool) -> Result<(),
                 }
             };
             let v = post_ok(client, &format!("/v1/tests/{id}/abort"), None).await?;
-            if json {
-                print_json(&v);
-            } else {
-                println!(
+            print_answer(json, &v, |v| {
+                format!(
                     "{id}: {}",
                     v["stop"]["message"].as_str().unwrap_or("aborted")
-                );
-            }
+                )
+            });
             Ok(())
         }
         CtlCommand::Estop { rig } => {
-            let rig = rig_name(client, rig).await?;
-            let v = post_ok(client, &format!("/v1/rigs/{rig}/estop"), None).await?;
-            if json {
-                print_json(&v);
-            } else {
-                println!(
+            rig_action(client, rig, "estop", json, |rig, v| {
+                format!(
                     "{rig}: {} (latched until `motorbench ctl reset`)",
                     v["trip"]["message"].as_str().unwrap_or("emergency stop")
-                );
-            }
-            Ok(())
+                )
+            })
+            .await
         }
         CtlCommand::Reset { rig } => {
-            let rig = rig_name(client, rig).await?;
-            let v = post_ok(client, &format!("/v1/rigs/{rig}/reset"), None).await?;
-            if json {
-                print_json(&v);
-            } else {
-                println!("{rig}: {}", v["state"].as_str().unwrap_or("?"));
-            }
-            Ok(())
+            rig_action(client, rig, "reset", json, |rig, v| {
+                format!("{rig}: {}", v["state"].as_str().unwrap_or("?"))
+            })
+            .await
         }
         CtlCommand::Records => {
             let v = get_ok(client, "/v1/records").await?;

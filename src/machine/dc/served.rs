@@ -28,15 +28,13 @@ use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
 use crate::config::{SimulatedRig, SimulatedTransport};
-use crate::rig::{ready_now, register, serve_device, touches, ServeError, ServedLink};
+use crate::rig::{ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock};
 
 /// The simulated plant on the wall clock.
 struct RealtimePlant {
     stage: SimPowerStage,
     sensors: SimSensors,
-    start: Instant,
-    period_s: f64,
-    steps: u64,
+    clock: WallClock,
     last: Option<SampleBatch>,
     /// The sensor readings of the latest steps, `(step, batch)`, oldest
     /// first: for devices that sample on their own clock while the host is
@@ -49,16 +47,15 @@ const HISTORY: usize = 1024;
 
 impl RealtimePlant {
     fn catch_up(&mut self) {
-        let due = (self.start.elapsed().as_secs_f64() / self.period_s) as u64;
-        while self.steps < due {
-            let b = self.sensors.sample();
-            if self.history.len() == HISTORY {
-                self.history.pop_front();
+        let (sensors, history, last) = (&mut self.sensors, &mut self.history, &mut self.last);
+        self.clock.catch_up(|step| {
+            let b = sensors.sample();
+            if history.len() == HISTORY {
+                history.pop_front();
             }
-            self.history.push_back((self.steps, b.clone()));
-            self.last = Some(b);
-            self.steps += 1;
-        }
+            history.push_back((step, b.clone()));
+            *last = Some(b);
+        });
     }
 
     /// The readings at the plant instant `at`: the step taken there and
@@ -66,7 +63,7 @@ impl RealtimePlant {
     /// back as the history goes).
     fn readings_at(&mut self, at: Instant, channels: &[usize]) -> (u64, Vec<f64>) {
         self.catch_up();
-        let step = (at.saturating_duration_since(self.start).as_secs_f64() / self.period_s) as u64;
+        let step = self.clock.step_at(at);
         let i = self.history.partition_point(|(s, _)| *s <= step);
         let found = match i {
             0 => self.history.front(),
@@ -211,7 +208,7 @@ async fn stream_daq(
         let (step, t_us, values) = {
             let mut p = lock(&plant);
             let (step, readings) = p.readings_at(slot, &channels);
-            let t_us = (step as f64 * p.period_s * 1e6).round() as u64;
+            let t_us = (step as f64 * p.clock.period_s() * 1e6).round() as u64;
             let values = readings
                 .into_iter()
                 .zip(["armature_voltage", "armature_current", "encoder_count"])
@@ -287,9 +284,7 @@ impl ServedRig {
         let plant = Arc::new(Mutex::new(RealtimePlant {
             stage: stage.clone(),
             sensors,
-            start: Instant::now(),
-            period_s: 1.0 / plant_rate_hz,
-            steps: 0,
+            clock: WallClock::start(plant_rate_hz),
             last: None,
             history: std::collections::VecDeque::with_capacity(HISTORY),
         }));

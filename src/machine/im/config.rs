@@ -643,46 +643,77 @@ mod tests {
                 .unwrap_err()
                 .to_string()
         };
-        let e = bad("\"motor_rated_voltage\"", "\"volts\"");
-        assert!(
-            e.contains("rig.modbus.supply.voltage_register") && e.contains("volts"),
-            "{e}"
-        );
-        let e = bad("\"motor_rated_voltage\"", "\"output_current\"");
-        assert!(e.contains("read-only"), "{e}");
-        let e = bad("line_voltage = \"line12_voltage\", ", "");
-        assert!(
-            e.contains("rig.modbus.meter.channels") && e.contains("line_voltage"),
-            "{e}"
-        );
-        let e = bad("total_power", "total_powr");
-        assert!(e.contains("rig.modbus.meter.channels.input_power"), "{e}");
-        let e = bad(
-            "encoder_lines = 4096       # quadrature",
-            "encoder_lines = 1024 # q",
-        );
-        assert!(
-            e.contains("must equal rig.simulated.sensors.encoder_lines"),
-            "{e}"
-        );
-        let e = bad("merge_window_ms = 10 ", "merge_window_ms = 5000 ");
-        assert!(
-            e.contains("rig.modbus.merge_window_ms") && e.contains("at most 1000"),
-            "{e}"
-        );
-        let e = bad("merge_window_ms = 10 ", "merge_window_ms = -1 ");
-        assert!(e.contains("rig.modbus.merge_window_ms"), "{e}");
-        let e = bad("pole_pairs = 2 ", "pole_pairs = 0 ");
-        assert!(e.contains("rig.modbus.dynamometer.pole_pairs"), "{e}");
-        let e = bad("simulate = \"tcp\"", "simulate = \"udp\"");
-        assert!(e.contains("rig.modbus.simulate"), "{e}");
-        let e = bad("[rig.modbus.encoder]", "[rig.modbus.counter]");
-        assert!(e.contains("rig.modbus.encoder"), "{e}");
-        let e = bad("unit_id = 3", "unit_id = 3\nbaud = 9600");
-        assert!(e.contains("rig.modbus.meter") && e.contains("baud"), "{e}");
-        // Served devices take no address.
-        let e = bad("unit_id = 4", "unit_id = 4\ntransport = \"tcp\"");
-        assert!(e.contains("rig.modbus.encoder"), "{e}");
+        // Each edit `from` → `to`, and what its error must name.
+        let cases: [(&str, &str, &[&str]); 12] = [
+            (
+                "\"motor_rated_voltage\"",
+                "\"volts\"",
+                &["rig.modbus.supply.voltage_register", "volts"],
+            ),
+            (
+                "\"motor_rated_voltage\"",
+                "\"output_current\"",
+                &["read-only"],
+            ),
+            (
+                "line_voltage = \"line12_voltage\", ",
+                "",
+                &["rig.modbus.meter.channels", "line_voltage"],
+            ),
+            (
+                "total_power",
+                "total_powr",
+                &["rig.modbus.meter.channels.input_power"],
+            ),
+            (
+                "encoder_lines = 4096       # quadrature",
+                "encoder_lines = 1024 # q",
+                &["must equal rig.simulated.sensors.encoder_lines"],
+            ),
+            (
+                "merge_window_ms = 10 ",
+                "merge_window_ms = 5000 ",
+                &["rig.modbus.merge_window_ms", "at most 1000"],
+            ),
+            (
+                "merge_window_ms = 10 ",
+                "merge_window_ms = -1 ",
+                &["rig.modbus.merge_window_ms"],
+            ),
+            (
+                "pole_pairs = 2 ",
+                "pole_pairs = 0 ",
+                &["rig.modbus.dynamometer.pole_pairs"],
+            ),
+            (
+                "simulate = \"tcp\"",
+                "simulate = \"udp\"",
+                &["rig.modbus.simulate"],
+            ),
+            (
+                "[rig.modbus.encoder]",
+                "[rig.modbus.counter]",
+                &["rig.modbus.encoder"],
+            ),
+            (
+                "unit_id = 3",
+                "unit_id = 3\nbaud = 9600",
+                &["rig.modbus.meter", "baud"],
+            ),
+            // Served devices take no address.
+            (
+                "unit_id = 4",
+                "unit_id = 4\ntransport = \"tcp\"",
+                &["rig.modbus.encoder"],
+            ),
+        ];
+        for (from, to, names) in cases {
+            let e = bad(from, to);
+            assert!(
+                names.iter().all(|n| e.contains(n)),
+                "{from:?} → {to:?}: {e}"
+            );
+        }
         // A real rig has no simulated section.
         let e = bad("simulate = \"tcp\"", "");
         assert!(

@@ -108,6 +108,22 @@ fn take<T: serde::de::DeserializeOwned>(
         .transpose()
 }
 
+/// The count `key` of `section`, taken out of `table`: required, and zero
+/// refused with the reason `if_zero`.
+fn take_count(
+    table: &mut toml::Table,
+    section: &str,
+    key: &str,
+    if_zero: &str,
+) -> Result<u32, Bad> {
+    let n: u32 =
+        take(table, section, key)?.ok_or_else(|| (format!("{section}.{key}"), "missing".into()))?;
+    if n == 0 {
+        return Err((format!("{section}.{key}"), if_zero.into()));
+    }
+    Ok(n)
+}
+
 fn section(rig: &mut toml::Table, name: &str) -> Result<toml::Table, Bad> {
     let key = format!("rig.modbus.{name}");
     match rig.remove(name) {
@@ -205,11 +221,7 @@ impl ImModbusRig {
 
         let key = "rig.modbus.dynamometer";
         let mut t = section(&mut rig, "dynamometer")?;
-        let dyno_pole_pairs: u32 = take(&mut t, key, "pole_pairs")?
-            .ok_or_else(|| (format!("{key}.pole_pairs"), "missing".into()))?;
-        if dyno_pole_pairs == 0 {
-            return Err((format!("{key}.pole_pairs"), "must be ≥ 1".into()));
-        }
+        let dyno_pole_pairs = take_count(&mut t, key, "pole_pairs", "must be ≥ 1")?;
         let dynamometer = link(t, key, dir, sim)?;
         for (k, d) in [
             ("rig.modbus.supply.profile", &supply),
@@ -234,11 +246,7 @@ impl ImModbusRig {
 
         let key = "rig.modbus.encoder";
         let mut t = section(&mut rig, "encoder")?;
-        let encoder_lines: u32 = take(&mut t, key, "encoder_lines")?
-            .ok_or_else(|| (format!("{key}.encoder_lines"), "missing".into()))?;
-        if encoder_lines == 0 {
-            return Err((format!("{key}.encoder_lines"), "must be > 0".into()));
-        }
+        let encoder_lines = take_count(&mut t, key, "encoder_lines", "must be > 0")?;
         let map = channel_map(&mut t, key)?;
         let encoder = link(t, key, dir, sim)?;
         let encoder_channels = channels(map, key, &encoder)?;

@@ -21,7 +21,6 @@
 
 use std::f64::consts::TAU;
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::Instant;
 
 use motorbench_drivers::modbus::server::{
     BankService, ExceptionCode, RegisterBank, SharedBank, SimulatedDevice, WriteSpan,
@@ -34,27 +33,23 @@ use tokio::task::JoinHandle;
 use super::sim_rig::{channel, sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd};
 use crate::config::{ModbusDeviceLink, SimulatedTransport};
 use crate::model::Connection;
-use crate::rig::{ready_now, register, serve_device, touches, ServeError, ServedLink};
+use crate::rig::{ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock};
 
 /// The simulated machine, supply and dynamometer on the wall clock.
 struct Plant {
     vfd: SimVfd,
     dyno: SimDyno,
     sensors: SimImSensors,
-    start: Instant,
-    period_s: f64,
-    steps: u64,
+    clock: WallClock,
     last: Option<SampleBatch>,
     previous: Option<SampleBatch>,
 }
 
 impl Plant {
     fn catch_up(&mut self) {
-        let due = (self.start.elapsed().as_secs_f64() / self.period_s) as u64;
-        while self.steps < due {
-            self.previous = self.last.replace(self.sensors.sample());
-            self.steps += 1;
-        }
+        let (sensors, last, previous) = (&mut self.sensors, &mut self.last, &mut self.previous);
+        self.clock
+            .catch_up(|_| *previous = last.replace(sensors.sample()));
     }
 
     /// The encoder count now: the latest step's, carried on at the speed
@@ -66,8 +61,8 @@ impl Plant {
         let (Some(c1), Some(c0)) = (count(&self.last), count(&self.previous)) else {
             return self.reading(channel::ENCODER);
         };
-        let since = self.start.elapsed().as_secs_f64() - self.steps as f64 * self.period_s;
-        (c1 + (c1 - c0) * (since / self.period_s).clamp(0.0, 1.0)).floor()
+        let since = self.clock.since_steps();
+        (c1 + (c1 - c0) * (since / self.clock.period_s()).clamp(0.0, 1.0)).floor()
     }
 
     fn reading(&self, ch: usize) -> f64 {
@@ -397,9 +392,7 @@ impl ServedImRig {
             vfd: vfd.clone(),
             dyno: dyno.clone(),
             sensors,
-            start: Instant::now(),
-            period_s: 1.0 / plant_rate_hz,
-            steps: 0,
+            clock: WallClock::start(plant_rate_hz),
             last: None,
             previous: None,
         }));

@@ -387,14 +387,7 @@ fn evidence(series: &[HeldOutSeries], measured: &[Measured], w: [f64; 2]) -> Vec
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rand::{rngs::StdRng, SeedableRng};
-    use rand_distr::{Distribution, Normal};
-
-    fn noise(seed: u64, n: usize) -> Vec<f64> {
-        let mut rng = StdRng::seed_from_u64(seed);
-        let d = Normal::new(0.0, 1.0).unwrap();
-        (0..n).map(|_| d.sample(&mut rng)).collect()
-    }
+    use crate::diagnose::decision::tests::noise;
 
     #[test]
     fn a_ringing_residual_has_a_peak_and_white_noise_has_none() {

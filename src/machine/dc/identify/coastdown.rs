@@ -271,13 +271,7 @@ mod tests {
 
     #[test]
     fn a_driven_segment_is_no_coastdown() {
-        let seg = DcSegment {
-            time: (0..100).map(|k| k as f64 * 1e-3).collect(),
-            voltage: vec![60.0; 100],
-            current: vec![0.11; 100],
-            speed: vec![40.0; 100],
-            ..Default::default()
-        };
+        let seg = DcSegment::held(100, 1e-3, 60.0, 0.11, 40.0);
         assert!(fit_decay(&seg)
             .unwrap_err()
             .to_string()

@@ -28,6 +28,8 @@ pub(crate) mod steady_state;
 mod step;
 mod transient;
 
+use std::collections::BTreeMap;
+
 use crate::identify::nrmse;
 pub use abacus::{
     invert_delta, paper_delta, paper_t1_over_tau_e, real_pole_threshold, AbacusError, CurrentStep,
@@ -381,56 +383,33 @@ pub fn identify_dc(record: &Record) -> Identification {
                 }
             }
         };
-        match outcome {
-            Ok(fit) => {
-                report.warnings.extend(fit.warnings.iter().cloned());
-                simulated.extend(transient::simulate_steps(&fit.params, record, name));
-                report.methods.insert(name.into(), fit.method_report());
-                transient.push(fit);
-            }
-            Err(reason) => {
-                report.methods.insert(
-                    name.into(),
-                    MethodReport::not_applicable(reason.to_string()),
-                );
-            }
+        if let Some(fit) = enter_method(&mut report.methods, name, outcome, |f| f.method_report()) {
+            report.warnings.extend(fit.warnings.iter().cloned());
+            simulated.extend(transient::simulate_steps(&fit.params, record, name));
+            transient.push(fit);
         }
     }
 
-    let coastdown = match coastdown_method(record, steady_state.as_ref()) {
-        Ok(fit) => {
-            simulated.extend(fit.simulate(record));
-            report
-                .methods
-                .insert("coastdown".into(), fit.method_report());
-            Some(fit)
-        }
-        Err(reason) => {
-            report.methods.insert(
-                "coastdown".into(),
-                MethodReport::not_applicable(reason.to_string()),
-            );
-            None
-        }
-    };
+    let coastdown = enter_method(
+        &mut report.methods,
+        "coastdown",
+        coastdown_method(record, steady_state.as_ref()),
+        |f| f.method_report(),
+    );
+    if let Some(fit) = &coastdown {
+        simulated.extend(fit.simulate(record));
+    }
 
-    let equation_error = match equation_error(record, SpeedReading::default()) {
-        Ok(fit) => {
-            report.warnings.extend(fit.warnings.iter().cloned());
-            simulated.extend(fit.simulated.iter().cloned());
-            report
-                .methods
-                .insert("equation_error".into(), fit.method_report());
-            Some(fit)
-        }
-        Err(reason) => {
-            report.methods.insert(
-                "equation_error".into(),
-                MethodReport::not_applicable(reason.to_string()),
-            );
-            None
-        }
-    };
+    let equation_error = enter_method(
+        &mut report.methods,
+        "equation_error",
+        equation_error(record, SpeedReading::default()),
+        |f| f.method_report(),
+    );
+    if let Some(fit) = &equation_error {
+        report.warnings.extend(fit.warnings.iter().cloned());
+        simulated.extend(fit.simulated.iter().cloned());
+    }
 
     // The full model, fitted to every step at once, started from the
     // transient method that validated best (moments or Pasek) when one
@@ -440,23 +419,16 @@ pub fn identify_dc(record: &Record) -> Identification {
         .iter()
         .min_by(|a, b| score(a).total_cmp(&score(b)))
         .map(|t| t.params);
-    let output_error = match output_error(record, start, &OutputErrorOptions::default()) {
-        Ok(fit) => {
-            report.warnings.extend(fit.warnings.iter().cloned());
-            simulated.extend(fit.simulated.iter().cloned());
-            report
-                .methods
-                .insert("output_error".into(), fit.method_report());
-            Some(fit)
-        }
-        Err(reason) => {
-            report.methods.insert(
-                "output_error".into(),
-                MethodReport::not_applicable(reason.to_string()),
-            );
-            None
-        }
-    };
+    let output_error = enter_method(
+        &mut report.methods,
+        "output_error",
+        output_error(record, start, &OutputErrorOptions::default()),
+        |f| f.method_report(),
+    );
+    if let Some(fit) = &output_error {
+        report.warnings.extend(fit.warnings.iter().cloned());
+        simulated.extend(fit.simulated.iter().cloned());
+    }
 
     report.refuse_unphysical();
     report.best = best_method(&report);
@@ -485,6 +457,22 @@ pub fn identify_dc(record: &Record) -> Identification {
         output_error,
         equation_error,
     }
+}
+
+/// Enter method `name`'s outcome in `methods`: the fit's report (made by
+/// `report_of`), or not applicable with the reason; the fit, if any.
+fn enter_method<T, E: std::fmt::Display>(
+    methods: &mut BTreeMap<String, MethodReport>,
+    name: &str,
+    outcome: Result<T, E>,
+    report_of: impl FnOnce(&T) -> MethodReport,
+) -> Option<T> {
+    let entry = match &outcome {
+        Ok(fit) => report_of(fit),
+        Err(reason) => MethodReport::not_applicable(reason.to_string()),
+    };
+    methods.insert(name.into(), entry);
+    outcome.ok()
 }
 
 /// The identification of a record whose values no motor produces: every

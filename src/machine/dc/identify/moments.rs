@@ -365,12 +365,7 @@ mod tests {
         }
         let lv = |u: f64, segment| SettledLevel::exact(&p, u, segment, 400);
         let step = super::super::step::voltage_step(&seg, &lv(60.0, 0), &lv(248.0, 1)).unwrap();
-        let ss = SteadyStateEstimate {
-            k: p.k,
-            ra: p.ra,
-            f: p.f,
-            tst: p.tst,
-        };
+        let ss = SteadyStateEstimate::of(&p);
         let e = estimate(&seg, &step, &ss).unwrap();
         assert!(
             ((e.params.la - p.la) / p.la).abs() < 0.005,

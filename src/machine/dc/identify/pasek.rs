@@ -423,12 +423,7 @@ mod tests {
         let seg = step_segment(&p, 60.0, 150.0, 2e-4, 8000, 0.002);
         let (b, a) = levels(&p, 60.0, 150.0, 2000);
         let step = super::super::step::voltage_step(&seg, &b, &a).unwrap();
-        let ss = SteadyStateEstimate {
-            k: p.k,
-            ra: p.ra,
-            f: p.f,
-            tst: p.tst,
-        };
+        let ss = SteadyStateEstimate::of(&p);
         let e = estimate(&seg, &step, &ss).unwrap();
         let lambda = p.tau_m() / p.tau_e();
         assert!(

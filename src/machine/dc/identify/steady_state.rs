@@ -46,6 +46,17 @@ pub struct SteadyStateEstimate {
 }
 
 impl SteadyStateEstimate {
+    /// The exact steady-state parameters of the motor `p`.
+    #[cfg(test)]
+    pub(crate) fn of(p: &crate::model::DcParams) -> SteadyStateEstimate {
+        SteadyStateEstimate {
+            k: p.k,
+            ra: p.ra,
+            f: p.f,
+            tst: p.tst,
+        }
+    }
+
     /// The static model's current and speed under a constant voltage.
     pub fn response(&self, u: f64) -> (f64, f64) {
         let current =

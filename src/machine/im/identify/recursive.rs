@@ -301,6 +301,15 @@ mod tests {
         .phase_data()
     }
 
+    /// A start near `c` for Rr, Xr and Xm: its Xm times `xm_factor`, its
+    /// single cage `rr`, `xr`.
+    fn near(c: ImCircuit, xm_factor: f64, rr: f64, xr: f64) -> ImCircuit {
+        let mut start = c;
+        start.xm *= xm_factor;
+        start.rotor = RotorCage::Single { rr, xr };
+        start
+    }
+
     #[test]
     fn exact_start_stops_at_once_on_the_threshold() {
         let c = machine();
@@ -320,12 +329,7 @@ mod tests {
         // solution θ0 + (W0⁻¹ + ΣGGᵀ)⁻¹·ΣG·r (matrix inversion lemma).
         let c = machine();
         let d = data(&c);
-        let mut start = c;
-        start.xm *= 1.03;
-        start.rotor = RotorCage::Single {
-            rr: 0.031,
-            xr: 0.088,
-        };
+        let start = near(c, 1.03, 0.031, 0.088);
         let free = [ImParam::Rr, ImParam::Xr, ImParam::Xm];
         let w0 = DMatrix::identity(3, 3) * 1e3;
         let mut info = DMatrix::identity(3, 3) * 1e-3;
@@ -374,12 +378,7 @@ mod tests {
     #[test]
     fn linearised_estimator_converges_from_a_near_start() {
         let c = machine();
-        let mut start = c;
-        start.xm *= 1.05;
-        start.rotor = RotorCage::Single {
-            rr: 0.033,
-            xr: 0.085,
-        };
+        let start = near(c, 1.05, 0.033, 0.085);
         let free = [ImParam::Rr, ImParam::Xr, ImParam::Xm];
         let opts = RecursiveOptions {
             j_threshold: 1e-8,

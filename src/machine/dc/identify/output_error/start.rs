@@ -150,13 +150,7 @@ mod tests {
 
     #[test]
     fn flat_data_falls_back() {
-        let seg = DcSegment {
-            time: (0..100).map(|k| k as f64 * 1e-3).collect(),
-            voltage: vec![10.0; 100],
-            current: vec![0.1; 100],
-            speed: vec![7.0; 100],
-            ..Default::default()
-        };
+        let seg = DcSegment::held(100, 1e-3, 10.0, 0.1, 7.0);
         let inputs = [SegmentInput::new(&seg, SegmentStart::Settled(10.0))];
         let p = DcParams::SEED_TABLE4_MOMENTS;
         let (start, from_data) = crude_start(&p, &inputs, [0.002, 0.5], SpeedReading::IntervalMean);
