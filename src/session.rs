@@ -150,45 +150,25 @@ impl Session {
             .record_channels(self.sensors.channels(), &stage_ids);
         let meta = self.meta(started_at);
         let recorder = Recorder::start(path, &meta, &channels, QUEUE_CAPACITY)?;
-        let recording = Recording {
-            sink: RecordSink::new(Some(recorder), Some(meta.clone()), channels),
-            session: self,
-            meta,
-            path: path.to_path_buf(),
-        };
-        Ok(recording.supervise(monitor))
-    }
-}
-
-/// A session that records: run its plan, then conclude.
-pub struct Recording {
-    session: Session,
-    sink: RecordSink,
-    meta: TestMeta,
-    /// The MCAP file.
-    path: PathBuf,
-}
-
-/// A supervised recording's supervisor task.
-pub type SupervisorTask = tokio::task::JoinHandle<SupervisorSummary>;
-
-impl Recording {
-    /// The test.
-    pub fn machine(&self) -> &dyn Machine {
-        self.session.machine()
+        let sink = RecordSink::new(Some(recorder), Some(meta.clone()), channels);
+        let (session, handle, task) = self.supervise(monitor);
+        Ok(Supervised {
+            recording: Recording {
+                session,
+                sink,
+                meta,
+                path: path.to_path_buf(),
+            },
+            handle,
+            task,
+        })
     }
 
     /// Put the rig under the safety supervisor task checking every batch
     /// with `monitor`: every stop then goes through it (the sequencer's own
     /// trips and the operator's too), and it commands every stage safe,
     /// the one that feeds the machine first.
-    fn supervise(self, monitor: SafetyMonitor) -> Supervised {
-        let Recording {
-            session,
-            sink,
-            meta,
-            path,
-        } = self;
+    fn supervise(self, monitor: SafetyMonitor) -> (Session, SupervisorHandle, SupervisorTask) {
         let Session {
             machine,
             stages,
@@ -197,7 +177,7 @@ impl Recording {
             counts_per_rev,
             truth,
             keep_alive,
-        } = session;
+        } = self;
         let (bus_loss_s, rate_hz) = machine.bus_loss_and_rate();
         let supervised = supervise_stages(
             stages.into_iter().zip(bounds.iter().copied()).collect(),
@@ -218,16 +198,26 @@ impl Recording {
             truth,
             keep_alive,
         };
-        Supervised {
-            recording: Recording {
-                session,
-                sink,
-                meta,
-                path,
-            },
-            handle: supervised.handle,
-            task: supervised.task,
-        }
+        (session, supervised.handle, supervised.task)
+    }
+}
+
+/// A session that records: run its plan, then conclude.
+pub struct Recording {
+    session: Session,
+    sink: RecordSink,
+    meta: TestMeta,
+    /// The MCAP file.
+    path: PathBuf,
+}
+
+/// A supervised recording's supervisor task.
+pub type SupervisorTask = tokio::task::JoinHandle<SupervisorSummary>;
+
+impl Recording {
+    /// The test.
+    pub fn machine(&self) -> &dyn Machine {
+        self.session.machine()
     }
 
     /// Record `entry` (e.g. the supervisor's account of a stop).

@@ -61,7 +61,7 @@ use super::sensor_channels::{ChannelField, RawChannel, SensorChannel};
 /// Raw `[rig.modbus]` table.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct RawModbusRig {
+pub(crate) struct RawModbusRig {
     simulate: Option<String>,
     #[serde(default = "default_timeout")]
     timeout_ms: u64,
@@ -272,7 +272,7 @@ impl RawModbusRig {
     /// Validate; `dir` resolves relative profile paths; `default_rate`
     /// (`rig.sample_rate_Hz`) is the rate of channels that name none;
     /// errors are `(key, reason)`.
-    pub(super) fn validate(
+    pub(crate) fn validate(
         self,
         dir: &Path,
         simulated_present: bool,

@@ -8,10 +8,15 @@
 //!   detector (`supply_limits`);
 //! - `rig`: the rig a configuration names (simulated, Modbus, CAN,
 //!   serial); `sim_rig`: the simulated supply and sensors; `served`: the
-//!   simulated rig behind the real protocols.
+//!   simulated rig behind the real protocols;
+//! - `config`: the test's file format and its validation ([`Config`]);
+//! - `identify/`, `diagnose/`: the DC methods and the sim-to-real gap;
+//!   `text`, `overlay`: the text report and the plot;
+//! - `blind_case`, `blind_plan`: the blind benchmark's DC cases.
 
 pub(crate) mod blind_case;
 pub(crate) mod blind_plan;
+pub(crate) mod config;
 pub mod diagnose;
 pub mod identify;
 mod overlay;

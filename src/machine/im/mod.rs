@@ -7,7 +7,10 @@
 //!   the VFD and dynamometer behind their Modbus profiles;
 //! - `rig`: the rig a configuration names; `sim_rig`: the simulated
 //!   machine, VFD and dynamometer; `served`: the simulated rig behind
-//!   Modbus.
+//!   Modbus;
+//! - `identify/`, `diagnose/`: the circuit fits and the sim-to-real gap;
+//!   `text`, `plot`: the text report and the plot;
+//! - `blind_case`: the blind benchmark's induction-machine cases.
 
 pub(crate) mod blind_case;
 mod config;
