@@ -13,10 +13,14 @@
 //! [`crate::config::TestConfig::into_machine`] is the one place a plan is
 //! mapped to its machine.
 //!
-//! A third machine would be a folder beside `dc.rs` and `im.rs`
-//! implementing this trait, plus a [`crate::config::TestConfig`] variant
-//! (with its [`crate::config::PlanKind`]s) and the record's
-//! [`SegmentKind`]s.
+//! A third machine would be a folder beside `dc/` and `im/` holding what
+//! those hold (its configuration file format, plan, rig builder,
+//! simulated and protocol-served rigs, `identify/`, `diagnose/`, text,
+//! plot, blind-case simulator) and implementing this trait, plus a
+//! [`crate::config::TestConfig`] variant (with its
+//! [`crate::config::PlanKind`]s), the record's [`SegmentKind`]s and a
+//! branch in [`analyse_record`] (the one place a record is mapped to its
+//! machine, as `into_machine` is for a plan).
 
 pub mod dc;
 pub mod im;
