@@ -319,3 +319,49 @@ fn a_supply_current_limit_below_the_steps_peak_is_recorded_reported_and_named() 
         assert_eq!(replayed, json);
     }
 }
+
+#[test]
+fn sigint_during_run_aborts_through_the_supervisor_and_keeps_the_record() {
+    // Paced at the wall clock, the default test runs for several seconds:
+    // SIGINT one second in is an operator abort through the supervisor
+    // (exit code 3), the stage is commanded safe, and the record is
+    // finished and replays up to the stop.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("records");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_motorbench"))
+        .args(["run", "--realtime", "--quiet", "--no-diagnose", "--out"])
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(1));
+    let kill = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(kill.success());
+    let done = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&done.stderr);
+    assert_eq!(done.status.code(), Some(3), "{stderr}");
+    assert!(
+        stderr.contains("stopped by the safety supervisor: operator abort"),
+        "{stderr}"
+    );
+    let mcap = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "mcap"))
+        .expect("the record is written");
+    let record = read_mcap(&mcap).unwrap();
+    assert!(record
+        .events
+        .iter()
+        .any(|(_, e)| e.message.starts_with("safety supervisor: operator abort")));
+    let t_end = record
+        .segments
+        .iter()
+        .filter_map(|s| s.time.last())
+        .fold(0.0_f64, |a, &b| a.max(b));
+    assert!(t_end > 0.0 && t_end < 5.0, "recorded up to {t_end} s");
+}
