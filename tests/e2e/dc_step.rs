@@ -328,7 +328,7 @@ fn sigint_during_run_aborts_through_the_supervisor_and_keeps_the_record() {
     // finished and replays up to the stop.
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("records");
-    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_motorbench"))
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_motorbench"))
         .args(["run", "--realtime", "--quiet", "--no-diagnose", "--out"])
         .arg(&out)
         .stdout(std::process::Stdio::piped())
