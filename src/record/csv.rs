@@ -67,10 +67,10 @@ pub fn read_dc_csv(
     };
 
     let kind = csv.decl.kind.unwrap_or(default_kind);
-    if kind == SegmentKind::ImSlipSweep {
+    if kind.is_im() {
         return Err(RecordError::Unsupported {
             path: path.to_path_buf(),
-            reason: "an im_slip_sweep file holds operating points, not DC samples (read it with read_im_csv)".to_string(),
+            reason: format!("an {kind} file holds induction-machine readings, not DC samples (give --kind {kind})"),
         });
     }
 
