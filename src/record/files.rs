@@ -6,7 +6,8 @@
 use std::path::{Path, PathBuf};
 
 use super::{
-    im_file_kind, read_dc_csv, read_dc_resistance_csv, read_im_csv, read_mcap, read_supply_test_csv, LoadError, Record, SegmentKind, TestMeta, SCHEMA_VERSION,
+    im_file_kind, read_dc_csv, read_dc_resistance_csv, read_im_csv, read_mcap,
+    read_supply_test_csv, LoadError, Record, SegmentKind, TestMeta, SCHEMA_VERSION,
 };
 
 /// Read `files` as a record of `kind`. An IM record (any IM kind) reads
