@@ -223,12 +223,19 @@ pub fn reduce_standard_tests(
          the nameplate's \"design\" picks it, 0.5 when it gives none)",
         opts.split.stator_share
     ));
-    let temp = |t: Option<f64>| t.map_or("not given".to_string(), |t| format!("{t:.1} °C"));
+    let at = match (dc.temperature, t_lr) {
+        (Some(a), Some(b)) => format!(
+            "taken at {a:.1} °C and corrected to the locked-rotor test's {b:.1} °C (copper, \
+             α = 0.00393/K at 20 °C)"
+        ),
+        (Some(a), None) => format!(
+            "at its own {a:.1} °C (the locked-rotor test gives no winding temperature to \
+             correct it to)"
+        ),
+        (None, _) => "at the DC reading's unstated winding temperature".to_string(),
+    };
     warnings.push(format!(
-        "standard_tests: Rs is the DC reading (winding {}) per phase for the {connection} \
-         connection, at the locked-rotor test's winding temperature ({}; copper α = 0.00393/K)",
-        temp(dc.temperature),
-        temp(t_lr)
+        "standard_tests: Rs is the DC reading per phase for the {connection} connection, {at}"
     ));
     if (t_nl.is_some() || t_lr.is_some()) && dc.temperature.is_none() {
         warnings.push(
