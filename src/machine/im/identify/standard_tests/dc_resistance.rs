@@ -84,6 +84,14 @@ mod tests {
     }
 
     #[test]
+    fn a_textbook_dc_test() {
+        // The same textbook example: 13.6 V at 28.0 A, star: R1 = 0.243 Ω.
+        let d = dc_resistance(&[reading(13.6, 28.0, None)], Connection::Star).unwrap();
+        assert!((d.rs - 0.243).abs() < 5e-4, "{d:?}");
+        assert_eq!(d.half_width, None);
+    }
+
+    #[test]
     fn readings_at_two_temperatures_are_brought_to_their_mean() {
         // 2 Ω at 20 °C; the second reading at 40 °C reads 2·(1 + 20α).
         let hot = 2.0 * (1.0 + 20.0 * COPPER_ALPHA);

@@ -141,6 +141,24 @@ mod tests {
     }
 
     #[test]
+    fn a_textbook_locked_rotor_test_at_quarter_frequency() {
+        // A textbook worked example: 7.5 hp, 208 V, 60 Hz, star; locked
+        // rotor at 15 Hz, 25 V, 27.9 A (mean of the three lines), 920 W.
+        // The book's numbers: Z_lr = 0.517 Ω, R_lr = 0.394 Ω,
+        // X_lr = 0.335 Ω at 15 Hz, so 1.34 Ω at 60 Hz.
+        let lr = locked_rotor(&[reading(25.0, 27.9, 920.0, 15.0)], Connection::Star).unwrap();
+        let row = &lr.rows[0];
+        assert!((row.zlr - 0.517).abs() < 5e-4, "{row:?}");
+        assert!((lr.rlr.0 - 0.394).abs() < 5e-4 && (lr.xlr.0 - 0.335).abs() < 5e-4);
+        assert!((4.0 * lr.xlr.0 - 1.34).abs() < 5e-3);
+        assert_eq!(
+            (lr.rlr.1, lr.xlr.1),
+            (None, None),
+            "one reading, no interval"
+        );
+    }
+
+    #[test]
     fn the_rotor_branch_is_what_the_magnetising_branch_leaves() {
         let zr = C64::new(1.2, 2.5);
         let ym = C64::new(1.0 / 800.0, -1.0 / 60.0);
