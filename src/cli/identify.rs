@@ -90,6 +90,12 @@ pub(crate) enum KindArg {
     DcCoastdown,
     #[value(name = "im_slip_sweep", alias = "im-slip-sweep")]
     ImSlipSweep,
+    #[value(name = "im_dc_resistance", alias = "im-dc-resistance")]
+    ImDcResistance,
+    #[value(name = "im_no_load", alias = "im-no-load")]
+    ImNoLoad,
+    #[value(name = "im_locked_rotor", alias = "im-locked-rotor")]
+    ImLockedRotor,
 }
 
 impl From<KindArg> for SegmentKind {
@@ -98,6 +104,9 @@ impl From<KindArg> for SegmentKind {
             KindArg::DcStep => SegmentKind::DcStep,
             KindArg::DcCoastdown => SegmentKind::DcCoastdown,
             KindArg::ImSlipSweep => SegmentKind::ImSlipSweep,
+            KindArg::ImDcResistance => SegmentKind::ImDcResistance,
+            KindArg::ImNoLoad => SegmentKind::ImNoLoad,
+            KindArg::ImLockedRotor => SegmentKind::ImLockedRotor,
         }
     }
 }
@@ -109,7 +118,7 @@ pub fn identify(args: IdentifyArgs) -> Result<(), Failure> {
         .map_err(Failure::bad_input)?;
     warn_if_damaged(&args.files[0], &record);
     let svg = args.svg.as_deref();
-    let analysed = if kind == SegmentKind::ImSlipSweep {
+    let analysed = if kind.is_im() {
         analyse_im(
             &record,
             args.connection.map(Into::into),

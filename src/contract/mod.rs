@@ -8,12 +8,14 @@
 
 mod diagnosis;
 mod report;
+mod standard_tests;
 
 pub use diagnosis::{
     reportable, Candidate, Diagnosis, Gap, GapRegion, LookAlike, NominalFit, ParamCorrection,
     RegionAxis, ResidualEvidence, Verdict,
 };
 pub use report::{unphysical_param, IdentificationReport, MethodReport, ParamEstimate, Provenance};
+pub use standard_tests::{LockedRotorRow, NoLoadRow, StandardTestTables, XmCurve};
 
 /// The contract version this motorbench writes.
 pub const SCHEMA_VERSION: &str = "1";

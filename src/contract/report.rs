@@ -1,12 +1,12 @@
 //! The identification report as the data contract defines it
 //! (`motorbench identify … --json`, `/bench/result`), with motorbench's
-//! additive keys (`diagnosis`, `provenance`).
+//! additive keys (`diagnosis`, `provenance`, `standard_tests`).
 
 use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
-use super::{Diagnosis, SCHEMA_VERSION};
+use super::{Diagnosis, StandardTestTables, SCHEMA_VERSION};
 
 /// One identified parameter.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -25,8 +25,8 @@ pub struct ParamEstimate {
 const POSITIVE_UNITS: [&str; 4] = ["ohm", "H", "kg*m^2", "V*s/rad"];
 
 /// Units whose quantity is never negative: a friction or load torque, a
-/// viscous friction coefficient.
-const NON_NEGATIVE_UNITS: [&str; 2] = ["N*m", "N*m*s/rad"];
+/// viscous friction coefficient, a loss (friction and windage, core loss).
+const NON_NEGATIVE_UNITS: [&str; 3] = ["N*m", "N*m*s/rad", "W"];
 
 impl ParamEstimate {
     /// Why this estimate of `name` lies outside the physical range its
@@ -118,6 +118,11 @@ pub struct IdentificationReport {
     /// daemon, `replay`): an additive extension of the contract.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub provenance: Option<Provenance>,
+    /// The tables of the induction machine's classical reduction (method
+    /// `standard_tests`), when the record holds a no-load or locked-rotor
+    /// test: an additive extension of the contract.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub standard_tests: Option<StandardTestTables>,
 }
 
 /// Where a report comes from: the motor, the test's start, the record and
@@ -163,6 +168,7 @@ impl IdentificationReport {
             warnings: Vec::new(),
             diagnosis: None,
             provenance: None,
+            standard_tests: None,
         }
     }
 

@@ -63,7 +63,7 @@ pub fn run_diagnose(args: DiagnoseArgs) -> u8 {
     if let Some(r) = &record.recovery {
         eprintln!("motorbench: {} is damaged: {r}", args.files[0].display());
     }
-    if args.kind != SegmentKind::ImSlipSweep {
+    if !args.kind.is_im() {
         if let Err(e) = crate::identify::check_plausible_files(&record, args.kind, &args.files) {
             return fail(2, &e.to_string());
         }

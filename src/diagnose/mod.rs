@@ -59,7 +59,10 @@ pub fn diagnose(
     options: &DiagnoseOptions,
 ) -> Result<DiagnosisRun, DiagnoseError> {
     match kind {
-        SegmentKind::ImSlipSweep => diagnose_im(record, options),
+        SegmentKind::ImSlipSweep
+        | SegmentKind::ImDcResistance
+        | SegmentKind::ImNoLoad
+        | SegmentKind::ImLockedRotor => diagnose_im(record, options),
         SegmentKind::DcStep | SegmentKind::DcCoastdown => diagnose_dc(record, options),
     }
 }

@@ -6,7 +6,8 @@
 //! and coast-down methods: `steady_state`, `pasek`, `moments`,
 //! `coastdown`, `equation_error`, `output_error`) and
 //! `machine/im/identify/` (the slip sweep's `recursive` estimator and
-//! Levenberg–Marquardt `lm`). Both are pure functions of the record, so a
+//! Levenberg–Marquardt `lm`; the standard tests' classical reduction
+//! `standard_tests`). Both are pure functions of the record, so a
 //! replayed record gives the same report, bit for bit.
 
 mod nrmse;

@@ -18,6 +18,7 @@ mod im_equivalent;
 #[cfg(test)]
 pub(crate) mod im_fixtures;
 mod im_lab;
+mod im_standard_tests;
 
 pub use im::{
     Connection, ImCircuit, ImCircuitError, ImModel, ImOperatingPoint, ImParam, ImSupply,
@@ -29,3 +30,6 @@ pub use im_equivalent::{
     with_stator_leakage, EquivalentError, LeakageSplit,
 };
 pub use im_lab::{LabMachine, LabMeters, LabPoint, LabSegment, LabTerminal};
+pub use im_standard_tests::{
+    at_frequency, locked_rotor_reading, no_load_reading, terminal_resistance, StandardReading,
+};

@@ -208,6 +208,7 @@ impl RecordBuilder {
             segments,
             events,
             operating_points: points,
+            standard_tests: Default::default(),
             supply_limits,
             recorded_result: result,
             recovery: None,

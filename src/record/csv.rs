@@ -67,10 +67,10 @@ pub fn read_dc_csv(
     };
 
     let kind = csv.decl.kind.unwrap_or(default_kind);
-    if kind == SegmentKind::ImSlipSweep {
+    if kind.is_im() {
         return Err(RecordError::Unsupported {
             path: path.to_path_buf(),
-            reason: "an im_slip_sweep file holds operating points, not DC samples (read it with read_im_csv)".to_string(),
+            reason: format!("an {kind} file holds induction-machine readings, not DC samples (give --kind {kind})"),
         });
     }
 
@@ -541,7 +541,9 @@ mod tests {
     fn im_slip_sweep_is_not_a_dc_file() {
         let e = read("# motorbench segment 0 kind=im_slip_sweep label=sweep\nslip\n").unwrap_err();
         assert!(matches!(e, RecordError::Unsupported { .. }), "{e}");
-        assert!(e.to_string().contains("read_im_csv"), "{e}");
+        assert!(e.to_string().contains("--kind im_slip_sweep"), "{e}");
+        let e = read("# motorbench segment 0 kind=im_no_load\nline_voltage_V\n").unwrap_err();
+        assert!(e.to_string().contains("an im_no_load file"), "{e}");
         let dir = tempfile::tempdir().unwrap();
         let p = write(&dir, "s.csv", "slip\n0.1\n");
         let e = read_dc_csv(&p, SegmentKind::ImSlipSweep, 0).unwrap_err();

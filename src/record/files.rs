@@ -6,12 +6,15 @@
 use std::path::{Path, PathBuf};
 
 use super::{
-    read_dc_csv, read_im_csv, read_mcap, LoadError, Record, SegmentKind, TestMeta, SCHEMA_VERSION,
+    im_file_kind, read_dc_csv, read_dc_resistance_csv, read_im_csv, read_mcap,
+    read_supply_test_csv, LoadError, Record, SegmentKind, TestMeta, SCHEMA_VERSION,
 };
 
-/// Read `files` as a record of `kind`. An IM record takes its supply
-/// frequency from `frequency`, else the nameplate's `frequency_Hz`, and
-/// its pole pairs from the nameplate's `poles`. Errors name the file (and
+/// Read `files` as a record of `kind`. An IM record (any IM kind) reads
+/// each file as the kind it declares, else `kind`: the slip sweep and the
+/// standard tests (DC resistance, no load, locked rotor) may be mixed. It
+/// takes its supply frequency from `frequency`, else the nameplate's
+/// `frequency_Hz`, and its pole pairs from the nameplate's `poles`. Errors name the file (and
 /// line and field where there is one).
 pub fn load_record_files(
     kind: SegmentKind,
@@ -42,7 +45,7 @@ pub fn load_record_files(
         seen.push((index, n));
         Ok(())
     };
-    if kind == SegmentKind::ImSlipSweep {
+    if kind.is_im() {
         let number = |key: &str| {
             plate
                 .as_ref()
@@ -52,9 +55,28 @@ pub fn load_record_files(
         let frequency = frequency.or_else(|| number("frequency_Hz"));
         let pole_pairs = number("poles").map(|p| (p / 2.0).round() as u32);
         for (n, path) in files.iter().enumerate() {
-            let seg = read_im_csv(path, n as u32, frequency, pole_pairs)?;
-            claim(seg.index, n)?;
-            record.operating_points.extend(seg.points);
+            let tests = &mut record.standard_tests;
+            match im_file_kind(path, kind)? {
+                SegmentKind::ImDcResistance => {
+                    let seg = read_dc_resistance_csv(path, n as u32)?;
+                    claim(seg.index, n)?;
+                    tests.dc_resistance.extend(seg.readings);
+                }
+                k @ (SegmentKind::ImNoLoad | SegmentKind::ImLockedRotor) => {
+                    let seg = read_supply_test_csv(path, k, n as u32, frequency)?;
+                    claim(seg.index, n)?;
+                    if k == SegmentKind::ImNoLoad {
+                        tests.no_load.extend(seg.readings);
+                    } else {
+                        tests.locked_rotor.extend(seg.readings);
+                    }
+                }
+                _ => {
+                    let seg = read_im_csv(path, n as u32, frequency, pole_pairs)?;
+                    claim(seg.index, n)?;
+                    record.operating_points.extend(seg.points);
+                }
+            }
         }
         record.meta = plate.map(|nameplate| TestMeta {
             schema_version: SCHEMA_VERSION.to_string(),

@@ -6,14 +6,18 @@
 //! - [`RecordBuilder`] turns entries into a [`Record`]; the live bench and
 //!   the reader share it, so a replay gives bit-identical data.
 //! - [`read_dc_csv`] imports one DC segment from CSV, [`read_im_csv`] one
-//!   induction-machine slip sweep.
+//!   induction-machine slip sweep, [`read_dc_resistance_csv`] and
+//!   [`read_supply_test_csv`] its standard tests (DC resistance, no load,
+//!   locked rotor).
 //! - [`schema`] holds the topic and schema names and the JSON Schemas.
 
 mod builder;
 mod csv;
 mod csv_im;
+mod csv_im_tests;
 mod error;
 mod files;
+mod im_tests;
 mod mcap_walk;
 mod reader;
 pub mod schema;
@@ -23,6 +27,10 @@ mod writer;
 pub use builder::{RecordBuilder, INCOMPLETE_SUFFIX};
 pub use csv::read_dc_csv;
 pub use csv_im::{read_im_csv, ImCsvSegment};
+pub use csv_im_tests::{
+    im_file_kind, read_dc_resistance_csv, read_supply_test_csv, ImTestCsvSegment, COL_DC_CURRENT,
+    COL_DC_VOLTAGE, COL_WINDING_TEMPERATURE,
+};
 pub use error::{LoadError, RecordError};
 pub use files::load_record_files;
 pub use reader::{read_entries, read_mcap, Entries};

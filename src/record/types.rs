@@ -3,6 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
+pub use super::im_tests::{DcResistanceReading, ImStandardTests, SupplyReading};
+
 /// Contract version written to every record and report.
 pub use crate::contract::SCHEMA_VERSION;
 
@@ -14,8 +16,14 @@ pub enum SegmentKind {
     DcStep,
     /// Armature opened from a steady speed; the speed decays to rest.
     DcCoastdown,
-    /// Induction-machine slip sweep.
+    /// Induction-machine slip sweep (the load test).
     ImSlipSweep,
+    /// Induction-machine DC winding-resistance reading (an additive kind).
+    ImDcResistance,
+    /// Induction-machine no-load test at several voltages (an additive kind).
+    ImNoLoad,
+    /// Induction-machine locked-rotor test (an additive kind).
+    ImLockedRotor,
 }
 
 impl SegmentKind {
@@ -25,6 +33,9 @@ impl SegmentKind {
             SegmentKind::DcStep => "dc_step",
             SegmentKind::DcCoastdown => "dc_coastdown",
             SegmentKind::ImSlipSweep => "im_slip_sweep",
+            SegmentKind::ImDcResistance => "im_dc_resistance",
+            SegmentKind::ImNoLoad => "im_no_load",
+            SegmentKind::ImLockedRotor => "im_locked_rotor",
         }
     }
 
@@ -34,8 +45,22 @@ impl SegmentKind {
             "dc_step" => Some(SegmentKind::DcStep),
             "dc_coastdown" => Some(SegmentKind::DcCoastdown),
             "im_slip_sweep" => Some(SegmentKind::ImSlipSweep),
+            "im_dc_resistance" => Some(SegmentKind::ImDcResistance),
+            "im_no_load" => Some(SegmentKind::ImNoLoad),
+            "im_locked_rotor" => Some(SegmentKind::ImLockedRotor),
             _ => None,
         }
+    }
+
+    /// Whether the kind is one of the induction machine's tests.
+    pub fn is_im(self) -> bool {
+        matches!(
+            self,
+            SegmentKind::ImSlipSweep
+                | SegmentKind::ImDcResistance
+                | SegmentKind::ImNoLoad
+                | SegmentKind::ImLockedRotor
+        )
     }
 }
 
@@ -406,6 +431,9 @@ pub struct Record {
     pub segments: Vec<DcSegment>,
     /// Induction-machine operating points in recording order.
     pub operating_points: Vec<OperatingPoint>,
+    /// Induction-machine standard tests other than the slip sweep (DC
+    /// resistance, no load, locked rotor); CSV import only for now.
+    pub standard_tests: ImStandardTests,
     /// Bench events in time order.
     pub events: Vec<(u64, Event)>,
     /// Where the supply did not follow its set point, in recording order.

@@ -1,10 +1,87 @@
 //! The text report of an induction-machine identification: each method's
 //! parameters in Ω and per unit with their intervals, what the data do not
-//! determine, the warnings.
+//! determine, the standard tests' tables (no-load per voltage, locked
+//! rotor per point, the fitted `Xm(V)`), the warnings.
 
 use std::fmt::Write;
 
+use crate::contract::StandardTestTables;
 use crate::identify::{ImIdentification, ParamSource};
+
+/// The standard tests' tables, for a person.
+fn render_tables(out: &mut String, t: &StandardTestTables) {
+    let opt = |v: Option<f64>, w: usize, p: usize| {
+        v.map_or(format!("{:>w$}", "-"), |v| format!("{v:>w$.p$}"))
+    };
+    let _ = writeln!(
+        out,
+        "\nno load (per phase){}",
+        if t.no_load.iter().any(|r| r.in_friction_fit) {
+            "; * = in the friction-and-windage fit"
+        } else {
+            ""
+        }
+    );
+    let _ = writeln!(
+        out,
+        "  {:>9} {:>9} {:>10} {:>11} {:>10} {:>9} {:>10} {:>11}",
+        "V line", "I line", "P in W", "P-Pcu W", "Pfe W", "E V", "Xm ohm", "Rfe ohm"
+    );
+    for r in &t.no_load {
+        let _ = writeln!(
+            out,
+            "  {:>9.2} {:>9.4} {:>10.2} {:>11.2} {} {:>9.2} {} {}{}",
+            r.line_voltage,
+            r.line_current,
+            r.input_power,
+            r.constant_losses,
+            opt(r.core_loss, 10, 2),
+            r.air_gap_voltage,
+            opt(r.xm, 10, 3),
+            opt(r.rfe, 11, 1),
+            if r.in_friction_fit { " *" } else { "" }
+        );
+    }
+    if let Some(c) = &t.xm_curve {
+        let terms: Vec<String> = c
+            .coefficients
+            .iter()
+            .enumerate()
+            .map(|(k, a)| match k {
+                0 => format!("{a:.5}"),
+                1 => format!("{a:+.5e}*V"),
+                _ => format!("{a:+.5e}*V^{k}"),
+            })
+            .collect();
+        let _ = writeln!(
+            out,
+            "  Xm(V) = {} ohm, {:.1} to {:.1} V, rms residual {:.4} ohm",
+            terms.join(" "),
+            c.from_v,
+            c.to_v,
+            c.rms_residual
+        );
+    }
+    let _ = writeln!(out, "\nlocked rotor (per phase)");
+    let _ = writeln!(
+        out,
+        "  {:>9} {:>9} {:>10} {:>8} {:>10} {:>10} {:>10}",
+        "V line", "I line", "P in W", "f Hz", "Zlr ohm", "Rlr ohm", "Xlr ohm"
+    );
+    for r in &t.locked_rotor {
+        let _ = writeln!(
+            out,
+            "  {:>9.2} {:>9.4} {:>10.2} {} {:>10.4} {:>10.4} {:>10.4}",
+            r.line_voltage,
+            r.line_current,
+            r.input_power,
+            opt(r.frequency, 8, 2),
+            r.zlr,
+            r.rlr,
+            r.xlr
+        );
+    }
+}
 
 /// The report as text for a person.
 pub fn render_im_text(id: &ImIdentification) -> String {
@@ -55,11 +132,15 @@ pub fn render_im_text(id: &ImIdentification) -> String {
                                 ""
                             }
                         });
+                    let (unit, per_unit) = if p.unit == "ohm" {
+                        ("ohm", pu(p.value))
+                    } else {
+                        (p.unit.as_str(), String::new())
+                    };
                     let _ = writeln!(
                         out,
-                        "  {name:<4} {:>12.5} ohm {} {ci}{source}",
-                        p.value,
-                        pu(p.value)
+                        "  {name:<4} {:>12.5} {unit:<3} {per_unit} {ci}{source}",
+                        p.value
                     );
                 }
                 if let Some(v) = method.validation_nrmse {
@@ -94,6 +175,9 @@ pub fn render_im_text(id: &ImIdentification) -> String {
                 let _ = writeln!(out, "  {name:<4} {}", row.join(" "));
             }
         }
+    }
+    if let Some(t) = &id.report.standard_tests {
+        render_tables(&mut out, t);
     }
     if !id.report.warnings.is_empty() {
         let _ = writeln!(out, "\nwarnings:");

@@ -1,6 +1,8 @@
 //! Induction-machine identification of a record: the operating points of
 //! its `im_slip_sweep` segments in, the contract report (methods
-//! `recursive` and `lm`) out.
+//! `recursive` and `lm`) out; and, when the record holds the standard
+//! tests (`im_dc_resistance`, `im_no_load`, `im_locked_rotor`), their
+//! classical reduction, method `standard_tests` ([`reduce_standard_tests`]).
 //!
 //! - `lm` ([`fit_lm`]): parameters in Ω with 95 % intervals; an element the
 //!   data do not determine is left out of `params` and named in the
@@ -18,6 +20,7 @@ mod error;
 mod identifiability;
 mod lm;
 mod recursive;
+mod standard_tests;
 mod sweep;
 
 pub use classical::{classical_single, classical_starts};
@@ -32,13 +35,17 @@ pub use recursive::{
     RecursiveOptions, RecursiveStop, THETA_DOUBLE_L5, THETA_DOUBLE_L7, THETA_SINGLE_FE_L6,
     THETA_SINGLE_L4,
 };
+pub use standard_tests::{
+    reduce_standard_tests, standard_tests_method, StandardTestsOptions, StandardTestsReduction,
+    FRICTION_VOLTAGE_SHARE, STANDARD_TESTS,
+};
 pub use sweep::{
     predict, predict_gradient, predict_gradient_into, slip_grid, Channels, PhaseData, SlipSweep,
     SweepNoise, SweepPoint, MAX_PARAMS,
 };
 
 use crate::identify::nrmse;
-use crate::model::{Connection, ImCircuit, ImModel, PerUnitBase};
+use crate::model::{Connection, ImCircuit, ImModel, LeakageSplit, PerUnitBase};
 use crate::record::{Record, SegmentKind};
 use crate::report::{IdentificationReport, MethodReport, ParamEstimate};
 
@@ -60,6 +67,32 @@ pub struct ImIdentification {
 
 fn nameplate_number(record: &Record, key: &str) -> Option<f64> {
     record.meta.as_ref()?.nameplate.get(key)?.as_f64()
+}
+
+/// The standard tests' options from the nameplate: rated voltage and
+/// frequency, and the leakage split from its NEMA design class
+/// (`"design"`: `A`–`D`, `wound`, or a share such as `0.45`).
+fn standard_tests_options(record: &Record, warnings: &mut Vec<String>) -> StandardTestsOptions {
+    let design = record
+        .meta
+        .as_ref()
+        .and_then(|m| m.nameplate.get("design"))
+        .and_then(|v| v.as_str());
+    let split = match design.map(|d| (d, LeakageSplit::parse(d))) {
+        Some((_, Some(split))) => split,
+        Some((d, None)) if !record.standard_tests.is_empty() => {
+            warnings.push(format!(
+                "standard_tests: the nameplate's design {d:?} is not a NEMA class (A, B, C, D,                  wound) nor a share in (0, 1): the 0.5/0.5 leakage split is used"
+            ));
+            LeakageSplit::default()
+        }
+        _ => LeakageSplit::default(),
+    };
+    StandardTestsOptions {
+        split,
+        rated_voltage: nameplate_number(record, "voltage_V"),
+        rated_frequency: nameplate_number(record, "frequency_Hz"),
+    }
 }
 
 /// The connection to use: the caller's, else the nameplate's.
@@ -490,12 +523,30 @@ pub fn identify_im(
             r.messages, r.reason
         ));
     }
+    let standard = standard_tests_method(
+        &record.standard_tests,
+        conn,
+        &standard_tests_options(record, &mut warnings),
+    );
+    if let Some((method, reduction)) = standard {
+        report.methods.insert(STANDARD_TESTS.into(), method);
+        if let Some(r) = reduction {
+            warnings.extend(r.warnings);
+            report.standard_tests = Some(r.tables);
+        }
+    }
     if let Err(reason) = sweep.validate() {
         for key in ["lm", "recursive"] {
             report
                 .methods
                 .insert(key.into(), MethodReport::not_applicable(reason.to_string()));
         }
+        report.refuse_unphysical();
+        report.best = report
+            .methods
+            .get(STANDARD_TESTS)
+            .filter(|m| m.applies)
+            .map(|_| STANDARD_TESTS.to_string());
         report.warnings = warnings;
         return ImIdentification {
             report,
@@ -530,9 +581,9 @@ pub fn identify_im(
     report.methods.insert("lm".into(), lm_report);
     report.methods.insert("recursive".into(), rec_report);
     report.refuse_unphysical();
-    report.best = ["lm", "recursive"]
+    report.best = ["lm", "recursive", STANDARD_TESTS]
         .into_iter()
-        .find(|m| report.methods[*m].applies)
+        .find(|m| report.methods.get(*m).is_some_and(|r| r.applies))
         .map(String::from);
     report.warnings = warnings;
     ImIdentification {

@@ -1,0 +1,260 @@
+//! `motorbench identify` on the induction machine's standard tests end to
+//! end: CSV files of a DC-resistance reading, a no-load test at nine
+//! voltages and a locked-rotor test at four (simulated from a known
+//! single-cage circuit with core loss and friction, 0.1 % meter errors),
+//! with and without a slip sweep beside them, in; method `standard_tests`
+//! with every element's interval covering its truth, the tables, and the
+//! other methods unchanged, out. A missing test makes the method not apply
+//! with its reason; a bad file is refused with file, line and column.
+
+use crate::common;
+
+use std::path::{Path, PathBuf};
+
+use common::{motorbench, text};
+use motorbench::identify::{slip_grid, SlipSweep, SweepNoise};
+use motorbench::model::{
+    locked_rotor_reading, no_load_reading, terminal_resistance, Connection, ImCircuit, ImSupply,
+    RotorCage,
+};
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use rand_distr::{Distribution, Normal};
+
+const PFW: f64 = 45.0;
+
+/// Star, 400 V, 50 Hz, Xs = Xr.
+fn machine() -> ImCircuit {
+    ImCircuit {
+        rs: 0.9,
+        xs: 1.8,
+        xm: 60.0,
+        rfe: Some(900.0),
+        rotor: RotorCage::Single { rr: 1.1, xr: 1.8 },
+    }
+}
+
+struct Files {
+    dc: PathBuf,
+    no_load: PathBuf,
+    locked: PathBuf,
+    sweep: PathBuf,
+    nameplate: PathBuf,
+}
+
+fn write_tests(dir: &Path) -> Files {
+    let mut rng = StdRng::seed_from_u64(3);
+    let noise = Normal::new(0.0, 0.001).unwrap();
+    let mut read = |v: f64| v * (1.0 + noise.sample(&mut rng));
+    let c = machine();
+    let conn = Connection::Star;
+    let r_ll = terminal_resistance(c.rs, conn);
+    let mut dc = String::from(
+        "# motorbench segment 0 kind=im_dc_resistance label=cold winding\n\
+         dc_voltage_V,dc_current_A,winding_temperature_C\n",
+    );
+    for i in [2.0, 4.0, 6.0, 8.0] {
+        dc.push_str(&format!("{},{i},22.0\n", read(r_ll * i)));
+    }
+    let mut nl = String::from(
+        "# motorbench segment 1 kind=im_no_load label=no load\n\
+         line_voltage_V,line_current_A,input_power_W,frequency_Hz,winding_temperature_C\n",
+    );
+    for v in [440.0, 400.0, 360.0, 300.0, 240.0, 200.0, 160.0, 120.0, 80.0] {
+        let r = no_load_reading(&c, conn, v, PFW).unwrap();
+        nl.push_str(&format!(
+            "{},{},{},50,22.0\n",
+            read(r.line_voltage),
+            read(r.line_current),
+            read(r.input_power)
+        ));
+    }
+    let mut lr = String::from(
+        "# motorbench segment 2 kind=im_locked_rotor label=locked rotor\n\
+         line_voltage_V,line_current_A,input_power_W,frequency_Hz,winding_temperature_C\n",
+    );
+    for v in [30.0, 45.0, 60.0, 75.0] {
+        let r = locked_rotor_reading(&c, conn, v, 50.0, 50.0);
+        lr.push_str(&format!(
+            "{},{},{},50,22.0\n",
+            read(r.line_voltage),
+            read(r.line_current),
+            read(r.input_power)
+        ));
+    }
+    let supply = ImSupply {
+        line_voltage: 400.0,
+        frequency: 50.0,
+        connection: conn,
+        pole_pairs: 2,
+    };
+    let sw = SlipSweep::simulate(
+        &c,
+        &supply,
+        &slip_grid(30, 0.005),
+        &SweepNoise::relative(0.001),
+        3,
+        &mut StdRng::seed_from_u64(5),
+    );
+    let mut sweep = String::from(
+        "# motorbench segment 3 kind=im_slip_sweep label=load\n\
+         slip,line_voltage_V,line_current_A,input_power_W\n",
+    );
+    for p in &sw.points {
+        sweep.push_str(&format!(
+            "{},{},{},{}\n",
+            p.slip, p.line_voltage, p.line_current, p.input_power
+        ));
+    }
+    let files = Files {
+        dc: dir.join("dc.csv"),
+        no_load: dir.join("no_load.csv"),
+        locked: dir.join("locked_rotor.csv"),
+        sweep: dir.join("sweep.csv"),
+        nameplate: dir.join("nameplate.json"),
+    };
+    std::fs::write(&files.dc, dc).unwrap();
+    std::fs::write(&files.no_load, nl).unwrap();
+    std::fs::write(&files.locked, lr).unwrap();
+    std::fs::write(&files.sweep, sweep).unwrap();
+    std::fs::write(
+        &files.nameplate,
+        r#"{"voltage_V": 400, "current_A": 8, "frequency_Hz": 50, "poles": 4, "connection": "star", "design": "A"}"#,
+    )
+    .unwrap();
+    files
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn standard_tests_from_csv_recover_the_circuit_with_intervals() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = write_tests(dir.path());
+    let out = motorbench(&[
+        "identify",
+        "--kind",
+        "im_no_load",
+        s(&f.dc),
+        s(&f.no_load),
+        s(&f.locked),
+        "--nameplate",
+        s(&f.nameplate),
+        "--json",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(v["best"], "standard_tests", "{v}");
+    assert_eq!(v["methods"]["lm"]["applies"], false);
+    let m = &v["methods"]["standard_tests"];
+    assert_eq!(m["applies"], true, "{m}");
+    for (key, truth, unit) in [
+        ("Rs", 0.9, "ohm"),
+        ("Xs", 1.8, "ohm"),
+        ("Xr", 1.8, "ohm"),
+        ("Rr", 1.1, "ohm"),
+        ("Xm", 60.0, "ohm"),
+        ("Rfe", 900.0, "ohm"),
+        ("Pfw", PFW, "W"),
+    ] {
+        let p = &m["params"][key];
+        let (lo, hi) = (
+            p["ci95"][0].as_f64().unwrap(),
+            p["ci95"][1].as_f64().unwrap(),
+        );
+        eprintln!("{key}: {} [{lo}, {hi}] (true {truth})", p["value"]);
+        assert!(
+            lo <= truth && truth <= hi,
+            "{key}: {truth} outside [{lo}, {hi}]"
+        );
+        assert_eq!(p["unit"], unit);
+    }
+    let tables = &v["standard_tests"];
+    assert_eq!(tables["no_load"].as_array().unwrap().len(), 9);
+    assert_eq!(tables["locked_rotor"].as_array().unwrap().len(), 4);
+    assert!(tables["xm_curve"]["coefficients"].is_array());
+    let warnings = v["warnings"].as_array().unwrap();
+    assert!(warnings
+        .iter()
+        .any(|w| w.as_str().unwrap().contains("Xs/(Xs + Xr) = 0.5")));
+
+    // The text report prints the tables.
+    let out = motorbench(&[
+        "identify",
+        "--kind",
+        "im_no_load",
+        s(&f.dc),
+        s(&f.no_load),
+        s(&f.locked),
+        "--nameplate",
+        s(&f.nameplate),
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stdout.contains("standard_tests  (best)")
+            && stdout.contains("no load (per phase)")
+            && stdout.contains("locked rotor (per phase)")
+            && stdout.contains("Xm(V) =")
+            && stdout.contains("Pfw"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn beside_a_sweep_every_method_runs_and_a_missing_test_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let f = write_tests(dir.path());
+    let out = motorbench(&[
+        "identify",
+        "--kind",
+        "im_slip_sweep",
+        s(&f.sweep),
+        s(&f.dc),
+        s(&f.no_load),
+        "--nameplate",
+        s(&f.nameplate),
+        "--model",
+        "single-fe",
+        "--json",
+    ]);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    assert_eq!(v["best"], "lm", "{v}");
+    assert_eq!(v["methods"]["lm"]["applies"], true);
+    let m = &v["methods"]["standard_tests"];
+    assert_eq!(m["applies"], false);
+    assert!(
+        m["reason"]
+            .as_str()
+            .unwrap()
+            .contains("no im_locked_rotor segment"),
+        "{m}"
+    );
+    assert!(v.get("standard_tests").is_none());
+}
+
+#[test]
+fn a_bad_standard_test_file_is_refused_with_file_line_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("lr.csv");
+    std::fs::write(
+        &path,
+        "# motorbench segment 2 kind=im_locked_rotor\n\
+         line_voltage_V,line_current_A,input_power_W\n60,8,300\n60,-8,300\n",
+    )
+    .unwrap();
+    let out = motorbench(&["identify", "--kind", "im_slip_sweep", s(&path)]);
+    let (_, stderr) = text(&out);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("lr.csv:4")
+            && stderr.contains("line_current_A")
+            && stderr.contains("must be > 0"),
+        "{stderr}"
+    );
+}
