@@ -13,7 +13,7 @@
 
 use std::path::{Path, PathBuf};
 
-use motorbench_drivers::{ChannelInfo, PowerStage, SensorStream};
+use motorbench_drivers::{PowerStage, SensorStream};
 use thiserror::Error;
 use tokio::sync::watch;
 
@@ -102,16 +102,6 @@ impl Session {
     /// The test.
     pub fn machine(&self) -> &dyn Machine {
         self.machine.as_ref()
-    }
-
-    /// The sensors' channels.
-    pub fn sensor_channels(&self) -> &[ChannelInfo] {
-        self.sensors.channels()
-    }
-
-    /// Encoder counts per revolution.
-    pub fn counts_per_rev(&self) -> f64 {
-        self.counts_per_rev
     }
 
     /// The record's metadata for a test started at `started_at` (RFC 3339).
@@ -221,7 +211,7 @@ impl Recording {
     }
 
     /// Record `entry` (e.g. the supervisor's account of a stop).
-    pub async fn push(&mut self, entry: Entry) -> Result<(), RecordError> {
+    async fn push(&mut self, entry: Entry) -> Result<(), RecordError> {
         self.sink.push(entry).await
     }
 
