@@ -92,6 +92,10 @@ impl StopReport {
 #[derive(Debug)]
 struct Shared {
     stopped: AtomicBool,
+    /// Why, from the moment `stopped` is set (the report comes once the
+    /// safe-state commands have returned), so a command refused meanwhile
+    /// names the cause.
+    cause: StdMutex<Option<StopCause>>,
     stop: StdMutex<Option<StopReport>>,
     safe_state_failed: AtomicBool,
     /// Milliseconds since `epoch` at the task's latest loop.
@@ -212,9 +216,9 @@ pub struct InterlockedStage {
 
 impl InterlockedStage {
     fn refuse(&self, what: &str) -> DriverError {
-        let why = lock(&self.shared.stop).as_ref().map_or_else(
+        let why = lock(&self.shared.cause).as_ref().map_or_else(
             || "the test was stopped".to_string(),
-            |s| s.cause.to_string(),
+            |cause| cause.to_string(),
         );
         DriverError::Device {
             device: SUPERVISOR_ID.into(),
@@ -435,6 +439,7 @@ pub fn supervise_stages(
 ) -> SupervisedStages {
     let shared = Arc::new(Shared {
         stopped: AtomicBool::new(false),
+        cause: StdMutex::new(None),
         stop: StdMutex::new(None),
         safe_state_failed: AtomicBool::new(false),
         alive_ms: AtomicU64::new(0),
@@ -718,6 +723,7 @@ impl Task {
         if let Some(first) = lock(&self.shared.stop).clone() {
             return first;
         }
+        *lock(&self.shared.cause) = Some(cause.clone());
         self.shared.stopped.store(true, Ordering::SeqCst);
         // Every stage at once; each under its lock, so no command of the
         // sequencer's gets past it.
