@@ -5,57 +5,26 @@ use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
 
-use super::output::{print_analysis, warn_if_damaged};
-use super::Failure;
-use crate::identify::check_plausible_files;
+use super::output::print_analysis;
+use super::{Failure, RecordInput};
 use crate::machine::{analyse_dc, analyse_im};
-use crate::model::{Connection, ImModel};
-use crate::record::{load_record_files, SegmentKind};
+use crate::model::ImModel;
 
 /// `motorbench identify`.
 #[derive(Debug, Args)]
 pub struct IdentifyArgs {
-    /// Test kind of the data.
-    #[arg(long, value_enum)]
-    pub(crate) kind: KindArg,
-    /// CSV files, or one MCAP file.
-    #[arg(required = true)]
-    pub files: Vec<PathBuf>,
-    /// Nameplate (JSON object with the contract's keys).
-    #[arg(long)]
-    pub nameplate: Option<PathBuf>,
+    /// The data: kind, files, nameplate.
+    #[command(flatten)]
+    pub input: RecordInput,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
     /// Also write the measured-vs-model plot here (SVG).
     #[arg(long)]
     pub svg: Option<PathBuf>,
-    /// Induction machine: winding connection (overrides the nameplate's).
-    #[arg(long, value_enum)]
-    pub(crate) connection: Option<ConnectionArg>,
     /// Induction machine: equivalent circuit to fit.
     #[arg(long, value_enum, default_value = "single-fe")]
     pub(crate) model: ModelArg,
-    /// Induction machine, CSV: supply frequency in Hz where the files
-    /// have no frequency_Hz column (overrides the nameplate's).
-    #[arg(long)]
-    pub frequency: Option<f64>,
-}
-
-/// Winding connection of an induction machine.
-#[derive(Debug, Clone, Copy, ValueEnum)]
-pub(crate) enum ConnectionArg {
-    Star,
-    Delta,
-}
-
-impl From<ConnectionArg> for Connection {
-    fn from(c: ConnectionArg) -> Connection {
-        match c {
-            ConnectionArg::Star => Connection::Star,
-            ConnectionArg::Delta => Connection::Delta,
-        }
-    }
 }
 
 /// Equivalent circuit of an induction machine.
@@ -79,55 +48,18 @@ impl From<ModelArg> for ImModel {
     }
 }
 
-/// The test kind of the data given to `identify`.
-#[derive(Debug, Clone, Copy, ValueEnum)]
-#[value(rename_all = "snake_case")]
-pub(crate) enum KindArg {
-    /// The contract's names (`dc_step`, …); the kebab-case forms too.
-    #[value(name = "dc_step", alias = "dc-step")]
-    DcStep,
-    #[value(name = "dc_coastdown", alias = "dc-coastdown")]
-    DcCoastdown,
-    #[value(name = "im_slip_sweep", alias = "im-slip-sweep")]
-    ImSlipSweep,
-    #[value(name = "im_dc_resistance", alias = "im-dc-resistance")]
-    ImDcResistance,
-    #[value(name = "im_no_load", alias = "im-no-load")]
-    ImNoLoad,
-    #[value(name = "im_locked_rotor", alias = "im-locked-rotor")]
-    ImLockedRotor,
-}
-
-impl From<KindArg> for SegmentKind {
-    fn from(k: KindArg) -> SegmentKind {
-        match k {
-            KindArg::DcStep => SegmentKind::DcStep,
-            KindArg::DcCoastdown => SegmentKind::DcCoastdown,
-            KindArg::ImSlipSweep => SegmentKind::ImSlipSweep,
-            KindArg::ImDcResistance => SegmentKind::ImDcResistance,
-            KindArg::ImNoLoad => SegmentKind::ImNoLoad,
-            KindArg::ImLockedRotor => SegmentKind::ImLockedRotor,
-        }
-    }
-}
-
-/// Identify the motor in `args.files`.
+/// Identify the motor in `args.input`.
 pub fn identify(args: IdentifyArgs) -> Result<(), Failure> {
-    let kind = SegmentKind::from(args.kind);
-    let record = load_record_files(kind, &args.files, args.nameplate.as_deref(), args.frequency)
-        .map_err(Failure::bad_input)?;
-    warn_if_damaged(&args.files[0], &record);
-    let svg = args.svg.as_deref();
-    let analysed = if kind.is_im() {
-        analyse_im(
-            &record,
-            args.connection.map(Into::into),
-            args.model.into(),
-            false,
-        )
+    let record = args.input.load()?;
+    let analysed = if args.input.kind().is_im() {
+        analyse_im(&record, args.input.connection(), args.model.into(), false)
     } else {
-        check_plausible_files(&record, kind, &args.files).map_err(Failure::bad_input)?;
         analyse_dc(&record, None, false)
     };
-    print_analysis(analysed.analysis.as_ref(), &record, args.json, svg)
+    print_analysis(
+        analysed.analysis.as_ref(),
+        &record,
+        args.json,
+        args.svg.as_deref(),
+    )
 }

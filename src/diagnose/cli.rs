@@ -9,69 +9,33 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::blind::{generate_suite, score_suite, SuitePlans, DEFAULT_SEED};
 use super::{diagnose, render_diagnosis_text, write_residual_svg, DiagnoseOptions};
-use crate::model::Connection;
-use crate::record::{load_record_files, SegmentKind};
+use crate::cli::RecordInput;
 
 /// `motorbench diagnose`.
 #[derive(Debug, Args)]
 pub struct DiagnoseArgs {
-    /// Test kind of the data: `dc_step` or `im_slip_sweep`.
-    #[arg(long, value_parser = parse_kind)]
-    pub kind: SegmentKind,
-    /// CSV files (one segment each), or one MCAP file.
-    #[arg(required = true)]
-    pub files: Vec<PathBuf>,
-    /// Nameplate (JSON object with the contract's keys).
-    #[arg(long)]
-    pub nameplate: Option<PathBuf>,
+    /// The data: kind, files, nameplate.
+    #[command(flatten)]
+    pub input: RecordInput,
     /// Print the contract's diagnosis JSON instead of text.
     #[arg(long)]
     pub json: bool,
     /// Also write the residuals before and after, per region, here (SVG).
     #[arg(long)]
     pub svg: Option<PathBuf>,
-    /// Induction machine: winding connection, `star` or `delta` (overrides the nameplate's).
-    #[arg(long, value_parser = parse_connection)]
-    pub connection: Option<Connection>,
-    /// Induction machine, CSV: supply frequency in Hz where the files have
-    /// no frequency_Hz column (overrides the nameplate's).
-    #[arg(long)]
-    pub frequency: Option<f64>,
-}
-
-fn parse_kind(s: &str) -> Result<SegmentKind, String> {
-    SegmentKind::parse(&s.replace('-', "_"))
-        .ok_or_else(|| format!("unknown kind {s:?}: use dc_step, dc_coastdown or im_slip_sweep"))
-}
-
-fn parse_connection(s: &str) -> Result<Connection, String> {
-    Connection::parse(s).ok_or_else(|| format!("unknown connection {s:?}: use star or delta"))
 }
 
 /// Run `diagnose`; the exit code (0 done, 1 output failed, 2 bad input,
 /// 4 the data cannot be diagnosed).
 pub fn run_diagnose(args: DiagnoseArgs) -> u8 {
-    let record = match load_record_files(
-        args.kind,
-        &args.files,
-        args.nameplate.as_deref(),
-        args.frequency,
-    ) {
+    let record = match args.input.load() {
         Ok(r) => r,
-        Err(e) => return fail(2, &e.to_string()),
+        Err(e) => return fail(e.code, &e.message),
     };
-    if let Some(r) = &record.recovery {
-        eprintln!("motorbench: {} is damaged: {r}", args.files[0].display());
-    }
-    if !args.kind.is_im() {
-        if let Err(e) = crate::identify::check_plausible_files(&record, args.kind, &args.files) {
-            return fail(2, &e.to_string());
-        }
-    }
     let options = DiagnoseOptions {
-        connection: args.connection,
+        connection: args.input.connection(),
     };
-    let run = match diagnose(&record, args.kind, &options) {
+    let run = match diagnose(&record, args.input.kind(), &options) {
         Ok(run) => run,
         Err(e) => return fail(4, &e.to_string()),
     };

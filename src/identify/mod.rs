@@ -11,6 +11,7 @@
 //! replayed record gives the same report, bit for bit.
 
 mod nrmse;
+pub(crate) mod square_root;
 pub(crate) mod stats;
 
 pub use crate::machine::dc::identify::*;

@@ -19,6 +19,7 @@ use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 
 use super::model::{AugModel, SegmentRun};
+use crate::identify::square_root::square_root_problem;
 use crate::model::DcParams;
 
 /// How one fitted parameter maps to its physical value.
@@ -209,41 +210,21 @@ impl FitProblem<'_> {
     }
 }
 
-/// The `P+1`-row problem equivalent to `(jac, r)`: `R = Λ^½·Vᵀ` from
-/// `JᵀJ = V·Λ·Vᵀ`, `r' = [R⁻ᵀ·Jᵀr; ‖r − projection‖]`.
+/// The `P+1`-row problem equivalent to `(jac, r)`
+/// ([`square_root_problem`]); a non-finite linearisation is refused like a
+/// refused `x`.
 fn reduce(jac: &DMatrix<f64>, r: &DVector<f64>) -> (DVector<f64>, DMatrix<f64>) {
     let np = jac.ncols();
-    // A non-finite linearisation is refused like a refused `x` (the
-    // eigen-decomposition need not converge on a NaN).
-    let g = jac.tr_mul(r);
-    let jtj = jac.tr_mul(jac);
-    if !jtj
-        .iter()
-        .chain(g.iter())
-        .chain(r.iter())
-        .all(|v| v.is_finite())
-    {
+    let r_norm_sq = if r.iter().all(|v| v.is_finite()) {
+        r.norm_squared()
+    } else {
+        f64::NAN
+    };
+    square_root_problem(jac.tr_mul(jac), &jac.tr_mul(r), r_norm_sq).unwrap_or_else(|| {
         let mut refused = DVector::zeros(np + 1);
         refused[np] = REFUSED;
-        return (refused, DMatrix::zeros(np + 1, np));
-    }
-    let eig = jtj.symmetric_eigen();
-    let largest = eig.eigenvalues.max();
-    let mut rr = DVector::zeros(np + 1);
-    let mut rj = DMatrix::zeros(np + 1, np);
-    let mut explained = 0.0;
-    for i in 0..np {
-        let l = eig.eigenvalues[i];
-        if l > 1e-14 * largest && l > 0.0 {
-            let v = eig.eigenvectors.column(i);
-            let root = l.sqrt();
-            rj.row_mut(i).copy_from(&(v.transpose() * root));
-            rr[i] = v.dot(&g) / root;
-            explained += rr[i] * rr[i];
-        }
-    }
-    rr[np] = (r.norm_squared() - explained).max(0.0).sqrt();
-    (rr, rj)
+        (refused, DMatrix::zeros(np + 1, np))
+    })
 }
 
 impl LeastSquaresProblem<f64, Dyn, Dyn> for FitProblem<'_> {

@@ -22,9 +22,10 @@ use std::cell::RefCell;
 use std::rc::Rc;
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
-use nalgebra::{DVector, Dyn, OMatrix, Owned, SMatrix, SVector, Vector6, U6, U7};
+use nalgebra::{DMatrix, DVector, Dyn, OMatrix, Owned, SMatrix, SVector, Vector6, U6, U7};
 
 use super::simulation::{simulate, SegmentInput, SpeedReading};
+use crate::identify::square_root::square_root_problem;
 use crate::model::DcParams;
 
 /// Number of fitted parameters.
@@ -257,41 +258,33 @@ impl<'d, 'a> OutputErrorProblem<'d, 'a> {
     }
 }
 
-/// The 7-row problem equivalent to `(jac, r)` (see [`Linearisation`]),
-/// from the eigen-decomposition `JᵀJ = V·Λ·Vᵀ`: `R = Λ^½·Vᵀ`; directions
-/// with no weight in `JᵀJ` get zero rows.
+/// The 7-row problem equivalent to `(jac, r)` (see [`Linearisation`] and
+/// [`square_root_problem`]); a non-finite linearisation is refused like a
+/// refused `x`.
 fn reduce(jac: &OMatrix<f64, Dyn, U6>, r: &DVector<f64>) -> (SVector<f64, 7>, SMatrix<f64, 7, 6>) {
-    // A non-finite linearisation is refused like a refused `x` (the
-    // eigen-decomposition need not converge on a NaN).
-    let g = jac.tr_mul(r);
     let jtj = jac.tr_mul(jac);
-    if !jtj
-        .iter()
-        .chain(g.iter())
-        .chain(r.iter())
-        .all(|v| v.is_finite())
-    {
-        let mut refused = SVector::<f64, 7>::zeros();
-        refused[6] = REFUSED * (r.len() as f64).sqrt();
-        return (refused, SMatrix::zeros());
-    }
-    let eig = jtj.symmetric_eigen();
-    let largest = eig.eigenvalues.max();
-    let mut reduced_r = SVector::<f64, 7>::zeros();
-    let mut reduced_j = SMatrix::<f64, 7, 6>::zeros();
-    let mut explained = 0.0;
-    for i in 0..NP {
-        let l = eig.eigenvalues[i];
-        if l > 1e-14 * largest && l > 0.0 {
-            let v = eig.eigenvectors.column(i);
-            let root = l.sqrt();
-            reduced_j.row_mut(i).copy_from(&(v.transpose() * root));
-            reduced_r[i] = v.dot(&g) / root;
-            explained += reduced_r[i] * reduced_r[i];
+    let g = jac.tr_mul(r);
+    let r_norm_sq = if r.iter().all(|v| v.is_finite()) {
+        r.norm_squared()
+    } else {
+        f64::NAN
+    };
+    let dynamic = square_root_problem(
+        DMatrix::from_iterator(NP, NP, jtj.iter().copied()),
+        &DVector::from_iterator(NP, g.iter().copied()),
+        r_norm_sq,
+    );
+    match dynamic {
+        Some((rr, rj)) => (
+            SVector::from_iterator(rr.iter().copied()),
+            SMatrix::from_iterator(rj.iter().copied()),
+        ),
+        None => {
+            let mut refused = SVector::<f64, 7>::zeros();
+            refused[6] = REFUSED * (r.len() as f64).sqrt();
+            (refused, SMatrix::zeros())
         }
     }
-    reduced_r[6] = (r.norm_squared() - explained).max(0.0).sqrt();
-    (reduced_r, reduced_j)
 }
 
 impl LeastSquaresProblem<f64, U7, U6> for OutputErrorProblem<'_, '_> {
