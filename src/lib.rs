@@ -59,6 +59,7 @@ pub mod config;
 pub mod contract;
 pub mod diagnose;
 pub mod excerpt;
+pub mod fuzz;
 pub mod identify;
 pub mod machine;
 pub mod model;

@@ -133,7 +133,11 @@ fn a_dominant_effect_that_leaves_more_than_twice_the_floor_is_named_with_a_warni
     let v = &run.report.verdict;
     let floor = run.report.gap.noise_floor;
     assert_eq!(v.effect, "sensor_lag", "{:?}", run.report.warnings);
-    assert!(v.gap_after > 2.0 * floor, "{} vs floor {floor}", v.gap_after);
+    assert!(
+        v.gap_after > 2.0 * floor,
+        "{} vs floor {floor}",
+        v.gap_after
+    );
     assert!(
         run.report
             .warnings

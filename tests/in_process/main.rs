@@ -11,6 +11,7 @@ mod common;
 mod coastdown;
 mod diagnose_dc_blind;
 mod diagnose_im;
+mod fuzz_corpus;
 mod identify_coverage;
 mod identify_methods;
 mod identify_property;

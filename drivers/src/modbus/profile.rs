@@ -278,6 +278,17 @@ impl DeviceProfile {
             if !r.offset.is_finite() {
                 return Err(invalid(&format!("{key}.offset"), "must be finite".into()));
             }
+            let largest = r.data_type.largest_raw() * r.scale.abs() + r.offset.abs();
+            if !largest.is_finite() {
+                return Err(invalid(
+                    &format!("{key}.scale"),
+                    format!(
+                        "{} overflows: the largest raw {} value would read as infinity",
+                        r.scale,
+                        r.data_type.name()
+                    ),
+                ));
+            }
             let bit_table = matches!(r.kind, RegisterKind::Coil | RegisterKind::DiscreteInput);
             if bit_table != (r.data_type == DataType::Bool) {
                 return Err(invalid(
@@ -456,6 +467,16 @@ max_setpoint = 60
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("p.toml: registers.v_set.scale:"), "{e}");
+
+        // Found by fuzzing: a finite scale whose largest raw value reads
+        // as infinity.
+        let e = DeviceProfile::parse("p.toml", &GOOD.replace("scale = 0.01", "scale = 1e306"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("p.toml: registers.v_set.scale:") && e.contains("overflows"),
+            "{e}"
+        );
 
         let e = DeviceProfile::parse("p.toml", &GOOD.replace("type = \"f32\"", "type = \"bool\""))
             .unwrap_err()

@@ -48,6 +48,30 @@ impl DataType {
             DataType::U32 | DataType::I32 | DataType::F32 => 2,
         }
     }
+
+    /// The largest magnitude of a raw value (a finite one, for `f32`).
+    pub fn largest_raw(self) -> f64 {
+        match self {
+            DataType::Bool => 1.0,
+            DataType::U16 => f64::from(u16::MAX),
+            DataType::I16 => 32_768.0,
+            DataType::U32 => f64::from(u32::MAX),
+            DataType::I32 => 2_147_483_648.0,
+            DataType::F32 => f64::from(f32::MAX),
+        }
+    }
+
+    /// The type's name in a profile (`u16`, `f32`, …).
+    pub fn name(self) -> &'static str {
+        match self {
+            DataType::U16 => "u16",
+            DataType::I16 => "i16",
+            DataType::U32 => "u32",
+            DataType::I32 => "i32",
+            DataType::F32 => "f32",
+            DataType::Bool => "bool",
+        }
+    }
 }
 
 /// Order of the 16-bit words of a 32-bit value.
