@@ -26,6 +26,9 @@ use motorbench_drivers::serial::binary::{self, BinaryDecoder};
 use motorbench_drivers::serial::StreamRecord;
 
 use crate::config::TestConfig;
+use crate::contract::{unphysical_param, IdentificationReport};
+use crate::machine::{analyse_dc, analyse_im};
+use crate::model::ImModel;
 use crate::record::{load_record_files, read_mcap, Record, SegmentKind};
 
 /// A fuzz target: arbitrary bytes in, a panic only for a broken promise.
@@ -34,6 +37,7 @@ pub type Target = fn(&[u8]);
 /// Every target, by the name of its corpus folder and `cargo fuzz` binary.
 pub const TARGETS: &[(&str, Target)] = &[
     ("csv_segment", csv_segment),
+    ("identify_segment", identify_segment),
     ("nameplate", nameplate),
     ("mcap_record", mcap_record),
     ("rig_config", rig_config),
@@ -59,6 +63,56 @@ pub fn csv_segment(data: &[u8]) {
             load_record_files(kind, &[file.path.clone()], None, Some(50.0)),
             &file.path,
         );
+    }
+}
+
+/// A CSV segment that reads, identified as `identify` does (without the
+/// diagnosis), as a DC step and as a slip sweep: every parameter reported
+/// is finite and in its physical range, every interval and validation
+/// NRMSE finite. Segments over [`IDENTIFY_MAX_SAMPLES`] are passed over,
+/// to keep a run's inputs many.
+pub fn identify_segment(data: &[u8]) {
+    let file = Scratch::write("segment.csv", data);
+    for kind in [SegmentKind::DcStep, SegmentKind::ImSlipSweep] {
+        let Ok(record) = load_record_files(kind, &[file.path.clone()], None, Some(50.0)) else {
+            continue;
+        };
+        let samples: usize = record.segments.iter().map(|s| s.time.len()).sum::<usize>()
+            + record.operating_points.len();
+        if samples > IDENTIFY_MAX_SAMPLES {
+            continue;
+        }
+        let analysed = if kind.is_im() {
+            analyse_im(&record, None, ImModel::SingleFe, false)
+        } else {
+            analyse_dc(&record, None, false)
+        };
+        check_report(analysed.analysis.report());
+    }
+}
+
+/// Largest segment [`identify_segment`] identifies.
+pub const IDENTIFY_MAX_SAMPLES: usize = 2_000;
+
+/// Every number of an identification report is finite and physical.
+fn check_report(report: &IdentificationReport) {
+    for (name, method) in &report.methods {
+        if let Some(params) = &method.params {
+            if let Some(why) = unphysical_param(params) {
+                panic!("method {name}: {why}");
+            }
+            for (key, p) in params {
+                if let Some([lo, hi]) = p.ci95 {
+                    assert!(
+                        lo.is_finite() && hi.is_finite(),
+                        "{name}.{key}: interval [{lo}, {hi}]"
+                    );
+                }
+            }
+        }
+        if let Some(v) = method.validation_nrmse {
+            assert!(v.is_finite(), "{name}: validation NRMSE {v}");
+        }
     }
 }
 

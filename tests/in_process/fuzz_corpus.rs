@@ -5,7 +5,7 @@
 //! (`fuzz/README.md`); inputs they found that once broke a promise are in
 //! the corpus too.
 //!
-//! `MOTORBENCH_FUZZ_CASES=N` sets the mutations per target (default 300).
+//! `MOTORBENCH_FUZZ_CASES=N` sets the mutations per target (default 1000).
 //! An input that breaks a promise is written to
 //! `target/fuzz-failures/<target>-<n>` and named in the failure.
 
@@ -110,15 +110,15 @@ fn every_fuzz_target_keeps_its_promises_on_its_corpus_and_mutations() {
     let cases: usize = std::env::var("MOTORBENCH_FUZZ_CASES")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(300);
+        .unwrap_or(1000);
     for (name, target) in TARGETS {
         let seeds = corpus(name);
         assert!(!seeds.is_empty(), "fuzz/corpus/{name} is empty");
         let ran = run(name, *target, seeds.clone().into_iter());
         assert_eq!(ran, seeds.len());
         let mut rng = StdRng::seed_from_u64(0x5eed_f022 ^ name.len() as u64);
-        // The MCAP seed is 110 KB: fewer rounds keep its share of the
-        // run like the others'.
+        // The MCAP seed is 110 KB: fewer rounds keep its share of the run
+        // like the others'.
         let rounds = if *name == "mcap_record" {
             cases / 10
         } else {
