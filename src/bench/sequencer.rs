@@ -286,11 +286,19 @@ fn trip_reason(cause: &StopCause) -> String {
 /// safety supervisor (see [`super::supervise`]) is named as such, any
 /// other error is a sensor fault.
 fn sensor_stop_reason(e: &DriverError) -> String {
+    driver_stop_reason("sensor", e)
+}
+
+/// How a driver's error reads in the abort event: a stop by the safety
+/// supervisor (a stream ended or a command refused after the stop) is
+/// named as such, any other error as a fault of `what` (`sensor`,
+/// `power stage`).
+pub fn driver_stop_reason(what: &str, e: &DriverError) -> String {
     match e {
         DriverError::Device { device, reason } if device == SUPERVISOR_ID => {
             format!("stopped by the safety supervisor: {reason}")
         }
-        _ => format!("sensor fault: {e}"),
+        _ => format!("{what} fault: {e}"),
     }
 }
 
@@ -301,4 +309,28 @@ pub(crate) async fn safe_state_all(
     stages: &mut [&mut dyn PowerStage],
 ) -> Vec<Result<(), DriverError>> {
     futures_util::future::join_all(stages.iter_mut().map(|s| s.safe_state())).await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_command_the_supervisor_refused_names_the_supervisor_not_a_fault() {
+        let refused = DriverError::Device {
+            device: SUPERVISOR_ID.into(),
+            reason: "set point refused after the stop: operator abort".into(),
+        };
+        assert_eq!(
+            driver_stop_reason("power stage", &refused),
+            "stopped by the safety supervisor: set point refused after the stop: operator abort"
+        );
+        let broken = DriverError::Device {
+            device: "supply".into(),
+            reason: "no reply".into(),
+        };
+        let reason = driver_stop_reason("power stage", &broken);
+        assert!(reason.starts_with("power stage fault: "), "{reason}");
+        assert!(sensor_stop_reason(&broken).starts_with("sensor fault: "));
+    }
 }

@@ -13,7 +13,9 @@
 use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
 
 use super::{PlanStep, SupplyLimitDetector};
-use crate::bench::sequencer::{safe_state_all, Halt, Read, Sequencer, SpeedChannel};
+use crate::bench::sequencer::{
+    driver_stop_reason, safe_state_all, Halt, Read, Sequencer, SpeedChannel,
+};
 use crate::bench::{
     sensor_channels_with_speed, BenchError, Outcome, Progress, RecordSink, SafetyRules,
     SettleDetector, StopPath,
@@ -144,7 +146,7 @@ impl Bench<'_> {
 
     async fn command(&mut self, volts: f64) -> Result<(), Halt> {
         if let Err(e) = self.stage.set_setpoint(volts).await {
-            return Err(Halt::Fault(format!("power stage fault: {e}")));
+            return Err(Halt::Fault(driver_stop_reason("power stage", &e)));
         }
         self.seq.command(self.ch.command_rec, volts).await?;
         Ok(())
@@ -197,7 +199,7 @@ impl Bench<'_> {
     /// count for one settle window) or the coast-down timeout.
     async fn coastdown(&mut self) -> Result<(), Halt> {
         if let Err(e) = self.stage.set_output_enabled(false).await {
-            return Err(Halt::Fault(format!("power stage fault: {e}")));
+            return Err(Halt::Fault(driver_stop_reason("power stage", &e)));
         }
         self.seq
             .event(
@@ -237,14 +239,20 @@ impl Bench<'_> {
         match self.stage.set_current_limit(supply_limit).await {
             Ok(()) => self.supply = SupplyLimitDetector::new(Some(supply_limit)),
             Err(DriverError::Unsupported { .. }) => {}
-            Err(e) => return self.abort(None, format!("power stage fault: {e}")).await,
+            Err(e) => {
+                return self
+                    .abort(None, driver_stop_reason("power stage", &e))
+                    .await
+            }
         }
         let start = async {
             self.stage.set_setpoint(0.0).await?;
             self.stage.set_output_enabled(true).await
         };
         if let Err(e) = start.await {
-            return self.abort(None, format!("power stage fault: {e}")).await;
+            return self
+                .abort(None, driver_stop_reason("power stage", &e))
+                .await;
         }
         for (index, step) in steps.iter().enumerate() {
             self.seq.segment(index, steps.len(), step.label());
