@@ -23,7 +23,7 @@ use crate::record::SegmentKind;
 use crate::session::{Recording, RunEnd, Session, SessionError, Supervised};
 
 /// Where a test is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum TestState {
     /// The plan is running on the rig.
@@ -35,7 +35,7 @@ pub enum TestState {
 }
 
 /// The segment being run.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct SegmentStatus {
     /// Index, from 0.
     pub index: usize,
@@ -43,12 +43,13 @@ pub struct SegmentStatus {
     pub total: usize,
     /// Label, e.g. `60 V → 248 V`.
     pub label: String,
-    /// Test kind of the segment.
+    /// Test kind of the segment (`dc_step`, `dc_coastdown`, `im_slip_sweep`, …).
+    #[schema(value_type = String)]
     pub kind: SegmentKind,
 }
 
 /// What the supervisor did to stop the test.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct StopStatus {
     /// Machine-readable cause (`operator_abort`, `limit`, …).
     pub kind: String,
@@ -79,7 +80,7 @@ impl From<&StopReport> for StopStatus {
 }
 
 /// A test's status, as the API shows it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct TestStatus {
     /// Test id (also the record name).
     pub id: String,
@@ -100,6 +101,7 @@ pub struct TestStatus {
     /// Longest it can still take (every remaining step to its timeout), s.
     pub eta_max_s: Option<f64>,
     /// The latest readings the supervisor checked.
+    #[schema(value_type = crate::serve::api::openapi::ReadingsDoc)]
     pub values: Readings,
     /// How it ended, once finished.
     pub outcome: Option<RecordOutcome>,
@@ -191,6 +193,10 @@ pub struct JobEnd {
     pub latch: Option<StopReport>,
     /// Winding rise above ambient at the end, K.
     pub winding_rise_k: f64,
+    /// Messages the recorder wrote (0 when it failed).
+    pub messages: u64,
+    /// Times the recorder's queue was full.
+    pub recorder_waits: u64,
 }
 
 /// A prepared test, ready to run.
@@ -303,9 +309,11 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
         stop,
         winding_rise_k,
     } = ran;
-    let end = JobEnd {
+    let mut end = JobEnd {
         latch: stop.clone().filter(|s| s.cause.latches()),
         winding_rise_k,
+        messages: 0,
+        recorder_waits: 0,
     };
     // Every segment is on disk (the recorder flushes at each marker): a
     // daemon killed from here on leaves a record that only lacks its
@@ -336,6 +344,10 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
         .as_ref()
         .err()
         .map(|e| format!("recording failed: {e}"));
+    if let Ok(stats) = &concluded.recorded {
+        end.messages = stats.messages;
+        end.recorder_waits = stats.backpressure_waits;
+    }
     let report_name = format!("{name}.report.json");
     let svg_name = format!("{name}.svg");
     // File writing, like the analysis, stays off the reactor.

@@ -31,7 +31,7 @@ pub const INDEX_FILE: &str = "index.json";
 const INDEX_VERSION: u32 = 1;
 
 /// How a recorded test ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum RecordOutcome {
     /// The test is running now.
@@ -50,8 +50,22 @@ pub enum RecordOutcome {
     Failed,
 }
 
+impl RecordOutcome {
+    /// The outcome's name, as in the index (`completed`, `aborted`, …).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RecordOutcome::Running => "running",
+            RecordOutcome::Completed => "completed",
+            RecordOutcome::Aborted => "aborted",
+            RecordOutcome::Interrupted => "interrupted",
+            RecordOutcome::Unanalysed => "unanalysed",
+            RecordOutcome::Failed => "failed",
+        }
+    }
+}
+
 /// What could be read back from an interrupted record.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Recovered {
     /// Messages read before the damage.
@@ -63,7 +77,7 @@ pub struct Recovered {
 }
 
 /// Headline results: the best method and its parameter values (SI).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct KeyResults {
     /// The method whose parameters to use.
@@ -73,7 +87,7 @@ pub struct KeyResults {
 }
 
 /// One record in the index.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct IndexEntry {
     /// Record name: the file stem, also the test id.

@@ -14,12 +14,13 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 use super::jobs::{prepare, SetupError, StopStatus, TestRun};
+use super::metrics::{Metrics, TestEnd};
 use super::records_index::{IndexError, RecordsIndex};
 use super::rig_config::RigConfig;
 use crate::bench::{StopCause, StopReport};
 
 /// A latched stop: the rig refuses new tests until an operator resets it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct Latch {
     /// Machine-readable cause (`emergency_stop`, `limit`, …).
     pub kind: String,
@@ -72,7 +73,7 @@ impl Rig {
 }
 
 /// A rig's state as the API shows it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct RigStatus {
     /// Rig name.
     pub name: String,
@@ -133,6 +134,7 @@ pub struct Daemon {
     tests: StdMutex<BTreeMap<String, Arc<TestRun>>>,
     jobs: StdMutex<Vec<JoinHandle<()>>>,
     stopping: AtomicBool,
+    metrics: Arc<Metrics>,
 }
 
 fn lock<T>(m: &StdMutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -187,12 +189,18 @@ impl Daemon {
             tests: StdMutex::new(BTreeMap::new()),
             jobs: StdMutex::new(Vec::new()),
             stopping: AtomicBool::new(false),
+            metrics: Arc::new(Metrics::new()),
         })
     }
 
     /// The records index.
     pub fn index(&self) -> &Arc<Mutex<RecordsIndex>> {
         &self.index
+    }
+
+    /// The daemon's metrics.
+    pub fn metrics(&self) -> &Metrics {
+        &self.metrics
     }
 
     /// Rig names.
@@ -292,9 +300,24 @@ impl Daemon {
         rt.running = Some(run.clone());
         lock(&self.tests).insert(id, run.clone());
         drop(rt);
+        self.metrics.test_started(rig_name);
         let rig = rig.clone();
+        let metrics = self.metrics.clone();
+        let (index, started) = (self.index.clone(), std::time::Instant::now());
+        let ran = run.clone();
         let handle = tokio::spawn(async move {
             let end = job.run().await;
+            let status = ran.status();
+            let bytes = index.lock().await.get(&status.id).map_or(0, |e| e.bytes);
+            metrics.test_ended(&TestEnd {
+                rig: rig.name.clone(),
+                outcome: status.outcome.map_or("failed", |o| o.as_str()).to_string(),
+                stop_cause: status.stop.map(|s| s.kind),
+                duration_s: started.elapsed().as_secs_f64(),
+                bytes,
+                messages: end.messages,
+                recorder_waits: end.recorder_waits,
+            });
             let mut rt = rig.runtime.lock().await;
             rt.winding_rise_k = end.winding_rise_k;
             rt.winding_at = Instant::now();
@@ -341,6 +364,7 @@ impl Daemon {
         let cause = StopCause::EmergencyStop {
             source: source.to_string(),
         };
+        self.metrics.emergency_stop(rig_name, source);
         let latch = match running.filter(|r| !r.finished()) {
             Some(run) => match run.stop(cause.clone()).await {
                 Some(report) => Latch::from_report(&report),
