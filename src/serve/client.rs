@@ -90,6 +90,8 @@ pub enum ClientError {
 pub struct Reply {
     /// HTTP status code.
     pub status: u16,
+    /// The `Content-Type` header, when there was one.
+    pub content_type: Option<String>,
     /// The body.
     pub body: Bytes,
 }
@@ -220,13 +222,22 @@ impl Client {
     /// Read the whole answer.
     async fn read_reply(&self, response: Response<Incoming>) -> Result<Reply, ClientError> {
         let status = response.status().as_u16();
+        let content_type = response
+            .headers()
+            .get(hyper::header::CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .map(str::to_string);
         let body = response
             .into_body()
             .collect()
             .await
             .map_err(|e| self.connect_err(e))?
             .to_bytes();
-        Ok(Reply { status, body })
+        Ok(Reply {
+            status,
+            content_type,
+            body,
+        })
     }
 
     /// GET `path`.

@@ -13,6 +13,7 @@ use std::time::SystemTime;
 use serde::Serialize;
 use tokio::sync::{watch, Mutex};
 
+use super::metrics::{Metrics, TestEnd};
 use super::records_index::{
     unix_s, IndexEntry, IndexError, KeyResults, RecordOutcome, RecordsIndex,
 };
@@ -193,10 +194,6 @@ pub struct JobEnd {
     pub latch: Option<StopReport>,
     /// Winding rise above ambient at the end, K.
     pub winding_rise_k: f64,
-    /// Messages the recorder wrote (0 when it failed).
-    pub messages: u64,
-    /// Times the recorder's queue was full.
-    pub recorder_waits: u64,
 }
 
 /// A prepared test, ready to run.
@@ -223,6 +220,7 @@ pub async fn prepare(
     machine: Box<dyn Machine>,
     initial_rise_k: f64,
     index: Arc<Mutex<RecordsIndex>>,
+    metrics: Arc<Metrics>,
 ) -> Result<(Arc<TestRun>, Job), SetupError> {
     // Paced at the wall clock; a rig served behind a protocol keeps its
     // servers alive for as long as the session holds them.
@@ -264,6 +262,8 @@ pub async fn prepare(
             index,
             dir,
             name,
+            metrics,
+            started: std::time::Instant::now(),
         },
     };
     Ok((run, job))
@@ -290,6 +290,31 @@ struct Ending {
     dir: PathBuf,
     /// The record's name.
     name: String,
+    /// The daemon's metrics.
+    metrics: Arc<Metrics>,
+    /// When the test started (wall clock).
+    started: std::time::Instant,
+}
+
+impl Ending {
+    /// Count the test's end in the metrics.
+    async fn count(&self, outcome: RecordOutcome, stop: Option<&StopReport>, recorder: (u64, u64)) {
+        let bytes = self
+            .index
+            .lock()
+            .await
+            .get(&self.name)
+            .map_or(0, |e| e.bytes);
+        self.metrics.test_ended(&TestEnd {
+            rig: self.run.status.borrow().rig.clone(),
+            outcome: outcome.as_str().to_string(),
+            stop_cause: stop.map(|s| s.cause.kind().to_string()),
+            duration_s: self.started.elapsed().as_secs_f64(),
+            bytes,
+            messages: recorder.0,
+            recorder_waits: recorder.1,
+        });
+    }
 }
 
 /// The end of every test, once the sequencer has returned (the rig is
@@ -297,23 +322,21 @@ struct Ending {
 /// record analysed (off the reactor), finished and indexed with its
 /// report and plot, the status published.
 async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
-    let Ending {
-        run,
-        index,
-        dir,
-        name,
-    } = ending;
+    let (run, index, dir, name) = (
+        ending.run.clone(),
+        ending.index.clone(),
+        ending.dir.clone(),
+        ending.name.clone(),
+    );
     let retention = recording.machine().retention();
     let RunEnd {
         outcome,
         stop,
         winding_rise_k,
     } = ran;
-    let mut end = JobEnd {
+    let end = JobEnd {
         latch: stop.clone().filter(|s| s.cause.latches()),
         winding_rise_k,
-        messages: 0,
-        recorder_waits: 0,
     };
     // Every segment is on disk (the recorder flushes at each marker): a
     // daemon killed from here on leaves a record that only lacks its
@@ -335,6 +358,9 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
             // (it replays).
             tracing::error!("{name}: {e}");
             let reason = Some(e.to_string());
+            ending
+                .count(RecordOutcome::Failed, stop.as_ref(), (0, 0))
+                .await;
             finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
             return end;
         }
@@ -344,10 +370,10 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
         .as_ref()
         .err()
         .map(|e| format!("recording failed: {e}"));
-    if let Ok(stats) = &concluded.recorded {
-        end.messages = stats.messages;
-        end.recorder_waits = stats.backpressure_waits;
-    }
+    let (messages, recorder_waits) = concluded
+        .recorded
+        .as_ref()
+        .map_or((0, 0), |s| (s.messages, s.backpressure_waits));
     let report_name = format!("{name}.report.json");
     let svg_name = format!("{name}.svg");
     // File writing, like the analysis, stays off the reactor.
@@ -373,6 +399,13 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
         Err(e) => {
             tracing::error!("{name}: writing the report failed: {e}");
             let reason = Some(format!("writing the report failed: {e}"));
+            ending
+                .count(
+                    RecordOutcome::Failed,
+                    stop.as_ref(),
+                    (messages, recorder_waits),
+                )
+                .await;
             finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
             return end;
         }
@@ -425,6 +458,9 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
             reason.as_deref().unwrap_or("")
         ),
     }
+    ending
+        .count(outcome, stop.as_ref(), (messages, recorder_waits))
+        .await;
     let values = *run.supervisor.readings().borrow();
     run.status.send_modify(|s| {
         s.state = TestState::Finished;

@@ -14,7 +14,7 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 use super::jobs::{prepare, SetupError, StopStatus, TestRun};
-use super::metrics::{Metrics, TestEnd};
+use super::metrics::Metrics;
 use super::records_index::{IndexError, RecordsIndex};
 use super::rig_config::RigConfig;
 use crate::bench::{StopCause, StopReport};
@@ -289,9 +289,15 @@ impl Daemon {
             None => rig.cfg.clone(),
         };
         let rise = Rig::rise_now(&rt, &rig.cfg);
-        let (run, job) = prepare(rig_name, cfg.into_machine(), rise, self.index.clone())
-            .await
-            .map_err(StartError::Setup)?;
+        let (run, job) = prepare(
+            rig_name,
+            cfg.into_machine(),
+            rise,
+            self.index.clone(),
+            self.metrics.clone(),
+        )
+        .await
+        .map_err(StartError::Setup)?;
         let id = run.id();
         tracing::info!(
             "{id}: test started on rig {rig_name} ({})",
@@ -302,22 +308,8 @@ impl Daemon {
         drop(rt);
         self.metrics.test_started(rig_name);
         let rig = rig.clone();
-        let metrics = self.metrics.clone();
-        let (index, started) = (self.index.clone(), std::time::Instant::now());
-        let ran = run.clone();
         let handle = tokio::spawn(async move {
             let end = job.run().await;
-            let status = ran.status();
-            let bytes = index.lock().await.get(&status.id).map_or(0, |e| e.bytes);
-            metrics.test_ended(&TestEnd {
-                rig: rig.name.clone(),
-                outcome: status.outcome.map_or("failed", |o| o.as_str()).to_string(),
-                stop_cause: status.stop.map(|s| s.kind),
-                duration_s: started.elapsed().as_secs_f64(),
-                bytes,
-                messages: end.messages,
-                recorder_waits: end.recorder_waits,
-            });
             let mut rt = rig.runtime.lock().await;
             rt.winding_rise_k = end.winding_rise_k;
             rt.winding_at = Instant::now();

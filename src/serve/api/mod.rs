@@ -131,13 +131,16 @@ fn documented() -> OpenApiRouter<Arc<Daemon>> {
 
 /// The OpenAPI document of the API, as served at `/v1/openapi.json`.
 pub fn openapi_document() -> utoipa::openapi::OpenApi {
-    documented().split_for_parts().1
+    let mut doc = documented().split_for_parts().1;
+    openapi::finish(&mut doc);
+    doc
 }
 
 /// The router; with `token`, every request but the status page's own
 /// files must carry it.
 pub fn router(daemon: Arc<Daemon>, token: Option<Token>) -> Router {
-    let (api, doc) = documented().split_for_parts();
+    let (api, mut doc) = documented().split_for_parts();
+    openapi::finish(&mut doc);
     let api = api
         .layer(axum::Extension(Arc::new(doc)))
         .fallback(|| async { ApiError::not_found("no such endpoint") })

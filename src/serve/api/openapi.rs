@@ -75,6 +75,38 @@ pub fn base() -> Document {
     Base::openapi()
 }
 
+/// Complete a document assembled from the routes: every operation may
+/// answer `401` (a daemon with a token, a request without it).
+pub fn finish(doc: &mut Document) {
+    use utoipa::openapi::{ContentBuilder, Ref, RefOr, ResponseBuilder};
+    let unauthorized = ResponseBuilder::new()
+        .description("the daemon has a token and the request does not carry it")
+        .content(
+            "application/json",
+            ContentBuilder::new()
+                .schema(Some(Ref::from_schema_name("ErrorBody")))
+                .build(),
+        )
+        .build();
+    for item in doc.paths.paths.values_mut() {
+        let operations = [
+            &mut item.get,
+            &mut item.put,
+            &mut item.post,
+            &mut item.delete,
+            &mut item.options,
+            &mut item.head,
+            &mut item.patch,
+            &mut item.trace,
+        ];
+        for op in operations.into_iter().flatten() {
+            op.responses
+                .responses
+                .insert("401".into(), RefOr::T(unauthorized.clone()));
+        }
+    }
+}
+
 /// This document.
 #[utoipa::path(get, path = "/v1/openapi.json", tag = "daemon",
     responses((status = 200, description = "the OpenAPI 3 document of this API", body = Object)))]

@@ -215,7 +215,8 @@ function showProgress(card, s) {
   card.eta.textContent = s.state === "finished"
     ? `${s.outcome}${s.reason ? ": " + s.reason : ""}`
     : `ETA ${fmt(s.eta_s, 1, "s")} (at most ${fmt(s.eta_max_s, 0, "s")})`;
-  const done = seg ? (seg.index + (s.state === "running" ? 0 : 1)) / seg.total : 0;
+  // Segments done: those before this one, and this one once completed.
+  const done = seg ? (seg.index + (s.outcome === "completed" ? 1 : 0)) / seg.total : 0;
   card.bar.style.width = `${Math.round(Math.min(1, done) * 100)}%`;
   const v = s.values || {};
   card.values.textContent =
