@@ -5,12 +5,12 @@
 //! brought in by `scripts/vendor-web.sh`), all embedded in the binary: no
 //! network at run time, no CDN.
 //!
-//! These files hold no data and are served without the token; the page
+//! These files hold no data and are served without the token (any other
+//! path under `/ui/` is the API's and needs it); the page
 //! asks for the token once (kept in the browser tab's session storage)
 //! and sends it with every API call, which needs it like any other.
 
-use axum::extract::Path;
-use axum::http::{header, StatusCode};
+use axum::http::header;
 use axum::response::{IntoResponse, Response};
 use axum::routing::get;
 use axum::Router;
@@ -46,22 +46,20 @@ const FILES: [(&str, &str, &str); 5] = [
 
 const INDEX: &str = include_str!("page/index.html");
 
-/// The page's routes: `/` and `/ui/{file}`.
+/// The page's routes: `/` and `/ui/FILE` for each of its files, each
+/// route its own (any other path is the API's, token and all).
 pub fn router<S: Clone + Send + Sync + 'static>() -> Router<S> {
-    Router::new()
-        .route("/", get(index))
-        .route("/ui/{file}", get(file))
-}
-
-async fn index() -> Response {
-    page_answer("text/html; charset=utf-8", INDEX)
-}
-
-async fn file(Path(name): Path<String>) -> Response {
-    match FILES.iter().find(|(n, _, _)| *n == name) {
-        Some((_, content_type, body)) => page_answer(content_type, body),
-        None => (StatusCode::NOT_FOUND, "no such file").into_response(),
+    let mut router = Router::new().route(
+        "/",
+        get(|| async { page_answer("text/html; charset=utf-8", INDEX) }),
+    );
+    for (name, content_type, body) in FILES {
+        router = router.route(
+            &format!("/ui/{name}"),
+            get(move || async move { page_answer(content_type, body) }),
+        );
     }
+    router
 }
 
 fn page_answer(content_type: &'static str, body: &'static str) -> Response {
