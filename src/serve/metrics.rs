@@ -17,7 +17,7 @@ use prometheus_client::encoding::EncodeLabelSet;
 use prometheus_client::metrics::counter::Counter;
 use prometheus_client::metrics::family::Family;
 use prometheus_client::metrics::gauge::Gauge;
-use prometheus_client::registry::{Registry, Unit};
+use prometheus_client::registry::{Metric, Registry, Unit};
 
 use super::state::Daemon;
 
@@ -114,88 +114,24 @@ impl Default for Metrics {
 impl Metrics {
     /// Every metric registered, none counted yet.
     pub fn new() -> Metrics {
-        let mut registry = Registry::with_prefix("motorbench");
-        let m = Metrics {
-            tests_started: Family::default(),
-            tests_finished: Family::default(),
-            tests_stopped: Family::default(),
-            emergency_stops: Family::default(),
-            rig_state: Family::default(),
-            winding: Family::default(),
-            records_written: Family::default(),
-            record_bytes: Family::default(),
-            recorded_messages: Family::default(),
-            recorder_waits: Family::default(),
-            last_duration: Family::default(),
-            api_requests: Family::default(),
+        let mut r = Registry::with_prefix("motorbench");
+        let celsius = || Some(Unit::Other("celsius".into()));
+        Metrics {
+            tests_started: registered(&mut r, "tests_started", "Tests started, per rig", None),
+            tests_finished: registered(&mut r, "tests_finished", HELP_FINISHED, None),
+            tests_stopped: registered(&mut r, "tests_stopped", HELP_STOPPED, None),
+            emergency_stops: registered(&mut r, "emergency_stops", HELP_ESTOPS, None),
+            rig_state: registered(&mut r, "rig_state", HELP_STATE, None),
+            winding: registered(&mut r, "winding_temperature", HELP_WINDING, celsius()),
+            records_written: registered(&mut r, "records_written", HELP_RECORDS, None),
+            record_bytes: registered(&mut r, "record_written", HELP_BYTES, Some(Unit::Bytes)),
+            recorded_messages: registered(&mut r, "recorded_messages", HELP_MESSAGES, None),
+            recorder_waits: registered(&mut r, "recorder_queue_full", HELP_WAITS, None),
+            last_duration: registered(&mut r, "last_test_duration", HELP_LAST, Some(Unit::Seconds)),
+            api_requests: registered(&mut r, "api_requests", HELP_REQUESTS, None),
             scrape: Mutex::new(()),
-            registry: Registry::default(),
-        };
-        registry.register(
-            "tests_started",
-            "Tests started, per rig",
-            m.tests_started.clone(),
-        );
-        registry.register(
-            "tests_finished",
-            "Tests finished, per rig and outcome (completed, aborted, failed)",
-            m.tests_finished.clone(),
-        );
-        registry.register(
-            "tests_stopped",
-            "Tests stopped by the safety supervisor, per rig and cause (operator_abort, \
-             emergency_stop, limit, winding_temperature, stale_channel, bus_loss, device_fault, …)",
-            m.tests_stopped.clone(),
-        );
-        registry.register(
-            "emergency_stops",
-            "Emergency stops requested, per rig and source (API, SIGUSR1), idle or not",
-            m.emergency_stops.clone(),
-        );
-        registry.register(
-            "rig_state",
-            "1 for the rig's state (idle, running, tripped: latched after a stop), 0 for the others",
-            m.rig_state.clone(),
-        );
-        registry.register_with_unit(
-            "winding_temperature",
-            "Estimated winding temperature, per rig",
-            Unit::Other("celsius".into()),
-            m.winding.clone(),
-        );
-        registry.register(
-            "records_written",
-            "Records finished (report and index written), per rig",
-            m.records_written.clone(),
-        );
-        registry.register_with_unit(
-            "record_written",
-            "Size of the records' files written, per rig",
-            Unit::Bytes,
-            m.record_bytes.clone(),
-        );
-        registry.register(
-            "recorded_messages",
-            "MCAP messages the recorder wrote, per rig",
-            m.recorded_messages.clone(),
-        );
-        registry.register(
-            "recorder_queue_full",
-            "Times a sample batch waited for room in the recorder's queue (its backlog was full), per rig",
-            m.recorder_waits.clone(),
-        );
-        registry.register_with_unit(
-            "last_test_duration",
-            "Wall-clock duration of the rig's last finished test",
-            Unit::Seconds,
-            m.last_duration.clone(),
-        );
-        registry.register(
-            "api_requests",
-            "API requests answered, per method, route (the path template) and status",
-            m.api_requests.clone(),
-        );
-        Metrics { registry, ..m }
+            registry: r,
+        }
     }
 
     /// A test was started on `rig`.
@@ -271,6 +207,39 @@ impl Metrics {
         encode(&mut text, &self.registry).expect("writing to a String cannot fail");
         text
     }
+}
+
+const HELP_FINISHED: &str = "Tests finished, per rig and outcome (completed, aborted, failed)";
+const HELP_STOPPED: &str = "Tests stopped by the safety supervisor, per rig and cause \
+     (operator_abort, emergency_stop, limit, winding_temperature, stale_channel, bus_loss, \
+     device_fault, …)";
+const HELP_ESTOPS: &str =
+    "Emergency stops requested, per rig and source (API, SIGUSR1), idle or not";
+const HELP_STATE: &str =
+    "1 for the rig's state (idle, running, tripped: latched after a stop), 0 for the others";
+const HELP_WINDING: &str = "Estimated winding temperature, per rig";
+const HELP_RECORDS: &str = "Records finished (report and index written), per rig";
+const HELP_BYTES: &str = "Size of the records' files written, per rig";
+const HELP_MESSAGES: &str = "MCAP messages the recorder wrote, per rig";
+const HELP_WAITS: &str =
+    "Times a sample batch waited for room in the recorder's queue (its backlog was full), per rig";
+const HELP_LAST: &str = "Wall-clock duration of the rig's last finished test";
+const HELP_REQUESTS: &str =
+    "API requests answered, per method, route (the path template) and status";
+
+/// A new metric, registered in `registry` as `name` (with `unit`).
+fn registered<M: Metric + Default + Clone>(
+    registry: &mut Registry,
+    name: &str,
+    help: &str,
+    unit: Option<Unit>,
+) -> M {
+    let metric = M::default();
+    match unit {
+        Some(unit) => registry.register_with_unit(name, help, unit, metric.clone()),
+        None => registry.register(name, help, metric.clone()),
+    }
+    metric
 }
 
 fn rig_label(rig: &str) -> RigLabel {

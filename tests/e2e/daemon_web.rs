@@ -19,23 +19,35 @@ use serde_json::{json, Value};
 
 use common::daemon::{finished, python_script, start_with_token, wait_test, WEB_TOKEN};
 
+/// A metric's label: name and value.
+type Label<'a> = (&'a str, &'a str);
+
 /// The exchanges made, for the document check.
 #[derive(Default)]
 struct Exchanges(Vec<Value>);
 
+/// `route` with its path parameter (`{…}`, at most one) set to `value`.
+fn fill(route: &str, value: &str) -> String {
+    match (route.find('{'), route.find('}')) {
+        (Some(a), Some(b)) => format!("{}{value}{}", &route[..a], &route[b + 1..]),
+        _ => route.to_string(),
+    }
+}
+
 impl Exchanges {
-    /// `method path` (of the path template `route`) with an optional JSON
-    /// body; the answer, noted.
+    /// `method` on `route` with its parameter `value`, with an optional
+    /// JSON body; the answer, noted.
     async fn call(
         &mut self,
         c: &Client,
         method: &str,
         route: &str,
-        path: &str,
+        value: &str,
         body: Option<Value>,
     ) -> Reply {
+        let path = fill(route, value);
         let r = c
-            .request(method.parse().unwrap(), path, body.as_ref())
+            .request(method.parse().unwrap(), &path, body.as_ref())
             .await
             .unwrap();
         let text = match r.content_type.as_deref() {
@@ -50,21 +62,18 @@ impl Exchanges {
         r
     }
 
+    /// [`Exchanges::call`] without a body, which must answer `status`.
     async fn expect(
         &mut self,
         c: &Client,
         method: &str,
         route: &str,
-        path: &str,
+        value: &str,
         status: u16,
     ) -> Reply {
-        let r = self.call(c, method, route, path, None).await;
-        assert_eq!(
-            r.status,
-            status,
-            "{method} {path}: {}",
-            String::from_utf8_lossy(&r.body)
-        );
+        let r = self.call(c, method, route, value, None).await;
+        let body = String::from_utf8_lossy(&r.body);
+        assert_eq!(r.status, status, "{method} {route} ({value}): {body}");
         r
     }
 }
@@ -78,7 +87,7 @@ async fn every_documented_route_answers_as_documented_and_metrics_count_it() {
     let mut ex = Exchanges::default();
 
     let doc = ex
-        .expect(&c, "GET", "/v1/openapi.json", "/v1/openapi.json", 200)
+        .expect(&c, "GET", "/v1/openapi.json", "", 200)
         .await
         .json();
     assert!(
@@ -86,110 +95,53 @@ async fn every_documented_route_answers_as_documented_and_metrics_count_it() {
         "{}",
         doc["openapi"]
     );
-    let r = ex.expect(&anon, "GET", "/v1/rigs", "/v1/rigs", 401).await;
+    let r = ex.expect(&anon, "GET", "/v1/rigs", "", 401).await;
     assert_eq!(r.json()["error"], "unauthorized");
 
-    let health = ex.expect(&c, "GET", "/v1/health", "/v1/health", 200).await;
+    let health = ex.expect(&c, "GET", "/v1/health", "", 200).await;
     assert_eq!(health.json()["healthy"], true);
-    ex.expect(&c, "GET", "/v1/rigs", "/v1/rigs", 200).await;
-    ex.expect(&c, "GET", "/v1/rigs/{rig}", "/v1/rigs/rig", 200)
-        .await;
-    ex.expect(&c, "GET", "/v1/rigs/{rig}", "/v1/rigs/nope", 404)
-        .await;
+    ex.expect(&c, "GET", "/v1/rigs", "", 200).await;
+    ex.expect(&c, "GET", "/v1/rigs/{rig}", "rig", 200).await;
+    ex.expect(&c, "GET", "/v1/rigs/{rig}", "nope", 404).await;
 
     // A short test, followed to its end.
+    let start = "/v1/rigs/{rig}/tests";
     let short = json!({"test": {"levels_V": [60, 248], "coastdown": false}});
-    let r = ex
-        .call(
-            &c,
-            "POST",
-            "/v1/rigs/{rig}/tests",
-            "/v1/rigs/rig/tests",
-            Some(short.clone()),
-        )
-        .await;
+    let r = ex.call(&c, "POST", start, "rig", Some(short.clone())).await;
     assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
     let id = r.json()["id"].as_str().unwrap().to_string();
-    let r = ex
-        .call(
-            &c,
-            "POST",
-            "/v1/rigs/{rig}/tests",
-            "/v1/rigs/rig/tests",
-            Some(short),
-        )
-        .await;
+    let r = ex.call(&c, "POST", start, "rig", Some(short)).await;
     assert_eq!(r.status, 409);
     assert_eq!(r.json()["running_test"], id.as_str());
-    ex.expect(
-        &c,
-        "POST",
-        "/v1/rigs/{rig}/tests",
-        "/v1/rigs/nope/tests",
-        404,
-    )
-    .await;
-    ex.expect(&c, "GET", "/v1/tests", "/v1/tests", 200).await;
-    ex.expect(&c, "GET", "/v1/tests/{id}", &format!("/v1/tests/{id}"), 200)
+    ex.expect(&c, "POST", start, "nope", 404).await;
+    ex.expect(&c, "GET", "/v1/tests", "", 200).await;
+    ex.expect(&c, "GET", "/v1/tests/{id}", &id, 200).await;
+    ex.expect(&c, "GET", "/v1/tests/{id}", "nope", 404).await;
+    ex.expect(&c, "GET", "/v1/tests/{id}/events", "nope", 404)
         .await;
-    ex.expect(&c, "GET", "/v1/tests/{id}", "/v1/tests/nope", 404)
-        .await;
-    ex.expect(
-        &c,
-        "GET",
-        "/v1/tests/{id}/events",
-        "/v1/tests/nope/events",
-        404,
-    )
-    .await;
     let events = ex
-        .expect(
-            &c,
-            "GET",
-            "/v1/tests/{id}/events",
-            &format!("/v1/tests/{id}/events"),
-            200,
-        )
+        .expect(&c, "GET", "/v1/tests/{id}/events", &id, 200)
         .await;
     assert_eq!(events.content_type.as_deref(), Some("text/event-stream"));
     assert!(String::from_utf8_lossy(&events.body).contains("event: done"));
     wait_test(&c, &id, finished).await;
 
     // The record and its files, each with its own media type.
-    ex.expect(&c, "GET", "/v1/records", "/v1/records", 200)
-        .await;
+    ex.expect(&c, "GET", "/v1/records", "", 200).await;
     let entry = ex
-        .expect(
-            &c,
-            "GET",
-            "/v1/records/{name}",
-            &format!("/v1/records/{id}"),
-            200,
-        )
+        .expect(&c, "GET", "/v1/records/{name}", &id, 200)
         .await
         .json();
     assert_eq!(entry["outcome"], "completed");
-    ex.expect(
-        &c,
-        "GET",
-        "/v1/records/{name}/report",
-        &format!("/v1/records/{id}/report"),
-        200,
-    )
-    .await;
+    ex.expect(&c, "GET", "/v1/records/{name}/report", &id, 200)
+        .await;
     assert_eq!(
         entry["svg"],
         format!("{id}.svg"),
         "the index lists the plot"
     );
     let svg = ex
-        .expect(
-            &c,
-            "GET",
-            "/v1/records/{name}/svg",
-            &format!("/v1/records/{id}/svg"),
-            200,
-        )
+        .expect(&c, "GET", "/v1/records/{name}/svg", &id, 200)
         .await;
     assert_eq!(svg.content_type.as_deref(), Some("image/svg+xml"));
     assert!(
@@ -197,126 +149,46 @@ async fn every_documented_route_answers_as_documented_and_metrics_count_it() {
         "an SVG"
     );
     let mcap = ex
-        .expect(
-            &c,
-            "GET",
-            "/v1/records/{name}/mcap",
-            &format!("/v1/records/{id}/mcap"),
-            200,
-        )
+        .expect(&c, "GET", "/v1/records/{name}/mcap", &id, 200)
         .await;
     assert_eq!(mcap.content_type.as_deref(), Some("application/vnd.mcap"));
     assert!(mcap.body.starts_with(b"\x89MCAP"), "an MCAP file");
-    for route in [
-        "/v1/records/{name}",
-        "/v1/records/{name}/report",
-        "/v1/records/{name}/svg",
-        "/v1/records/{name}/mcap",
-    ] {
-        ex.expect(&c, "GET", route, &route.replace("{name}", "nope"), 404)
-            .await;
+    for route in ["", "/report", "/svg", "/mcap"] {
+        let route = format!("/v1/records/{{name}}{route}");
+        ex.expect(&c, "GET", &route, "nope", 404).await;
     }
 
     // Aborts: of a finished test, of none, of a running one.
-    ex.expect(
-        &c,
-        "POST",
-        "/v1/tests/{id}/abort",
-        &format!("/v1/tests/{id}/abort"),
-        409,
-    )
-    .await;
-    ex.expect(
-        &c,
-        "POST",
-        "/v1/tests/{id}/abort",
-        "/v1/tests/nope/abort",
-        404,
-    )
-    .await;
+    let abort = "/v1/tests/{id}/abort";
+    ex.expect(&c, "POST", abort, &id, 409).await;
+    ex.expect(&c, "POST", abort, "nope", 404).await;
     let bad = json!({"test": {"levels_V": [900]}});
-    let r = ex
-        .call(
-            &c,
-            "POST",
-            "/v1/rigs/{rig}/tests",
-            "/v1/rigs/rig/tests",
-            Some(bad),
-        )
-        .await;
+    let r = ex.call(&c, "POST", start, "rig", Some(bad)).await;
     assert_eq!(r.status, 400, "{}", String::from_utf8_lossy(&r.body));
-    let r = ex
-        .expect(
-            &c,
-            "POST",
-            "/v1/rigs/{rig}/tests",
-            "/v1/rigs/rig/tests",
-            201,
-        )
-        .await;
+    let r = ex.expect(&c, "POST", start, "rig", 201).await;
     let id2 = r.json()["id"].as_str().unwrap().to_string();
     wait_test(&c, &id2, |s| {
         s["segment"]["index"].as_u64().unwrap_or(0) >= 1
     })
     .await;
-    let r = ex
-        .expect(
-            &c,
-            "POST",
-            "/v1/tests/{id}/abort",
-            &format!("/v1/tests/{id2}/abort"),
-            200,
-        )
-        .await;
+    let r = ex.expect(&c, "POST", abort, &id2, 200).await;
     assert_eq!(r.json()["stop"]["kind"], "operator_abort");
     wait_test(&c, &id2, finished).await;
 
     // Emergency stop, refused start, reset.
     let r = ex
-        .expect(
-            &c,
-            "POST",
-            "/v1/rigs/{rig}/estop",
-            "/v1/rigs/rig/estop",
-            200,
-        )
+        .expect(&c, "POST", "/v1/rigs/{rig}/estop", "rig", 200)
         .await;
     assert_eq!(r.json()["state"], "tripped");
-    let r = ex
-        .expect(
-            &c,
-            "POST",
-            "/v1/rigs/{rig}/tests",
-            "/v1/rigs/rig/tests",
-            409,
-        )
-        .await;
+    let r = ex.expect(&c, "POST", start, "rig", 409).await;
     assert_eq!(r.json()["error"], "tripped");
-    ex.expect(
-        &c,
-        "POST",
-        "/v1/rigs/{rig}/reset",
-        "/v1/rigs/rig/reset",
-        200,
-    )
-    .await;
-    ex.expect(
-        &c,
-        "POST",
-        "/v1/rigs/{rig}/estop",
-        "/v1/rigs/nope/estop",
-        404,
-    )
-    .await;
-    ex.expect(
-        &c,
-        "POST",
-        "/v1/rigs/{rig}/reset",
-        "/v1/rigs/nope/reset",
-        404,
-    )
-    .await;
-    let metrics = ex.expect(&c, "GET", "/metrics", "/metrics", 200).await;
+    ex.expect(&c, "POST", "/v1/rigs/{rig}/reset", "rig", 200)
+        .await;
+    ex.expect(&c, "POST", "/v1/rigs/{rig}/estop", "nope", 404)
+        .await;
+    ex.expect(&c, "POST", "/v1/rigs/{rig}/reset", "nope", 404)
+        .await;
+    let metrics = ex.expect(&c, "GET", "/metrics", "", 200).await;
 
     // Every answer against the document, every operation exercised.
     let documented: BTreeSet<String> = doc["paths"]
@@ -370,67 +242,46 @@ async fn every_documented_route_answers_as_documented_and_metrics_count_it() {
     let value = |name: &str, labels: &[(&str, &str)]| -> f64 {
         samples
             .iter()
-            .filter(|s| s["name"] == name && labels.iter().all(|(k, v)| s["labels"][*k] == *v))
+            .filter(|s| {
+                s["name"] == format!("motorbench_{name}")
+                    && labels.iter().all(|(k, v)| s["labels"][*k] == *v)
+            })
             .map(|s| s["value"].as_f64().unwrap())
             .sum()
     };
     let rig = ("rig", "rig");
-    assert_eq!(value("motorbench_tests_started_total", &[rig]), 2.0);
-    assert_eq!(
-        value(
-            "motorbench_tests_finished_total",
-            &[rig, ("outcome", "completed")]
-        ),
-        1.0
-    );
-    assert_eq!(
-        value(
-            "motorbench_tests_finished_total",
-            &[rig, ("outcome", "aborted")]
-        ),
-        1.0
-    );
-    assert_eq!(
-        value(
-            "motorbench_tests_stopped_total",
-            &[rig, ("cause", "operator_abort")]
-        ),
-        1.0
-    );
-    assert_eq!(
-        value(
-            "motorbench_emergency_stops_total",
-            &[rig, ("source", "API")]
-        ),
-        1.0
-    );
-    assert_eq!(
-        value("motorbench_rig_state", &[rig, ("state", "idle")]),
-        1.0
-    );
-    assert_eq!(
-        value("motorbench_rig_state", &[rig, ("state", "tripped")]),
-        0.0
-    );
-    assert_eq!(value("motorbench_records_written_total", &[rig]), 2.0);
-    assert!(value("motorbench_record_written_bytes_total", &[rig]) > 1000.0);
-    assert!(value("motorbench_recorded_messages_total", &[rig]) > 100.0);
-    assert!(value("motorbench_last_test_duration_seconds", &[rig]) > 0.0);
-    let winding = value("motorbench_winding_temperature_celsius", &[rig]);
+    let post_201 = [
+        ("method", "POST"),
+        ("route", "/v1/rigs/{rig}/tests"),
+        ("status", "201"),
+    ];
+    let (completed, aborted) = (("outcome", "completed"), ("outcome", "aborted"));
+    let (by_operator, by_api) = (("cause", "operator_abort"), ("source", "API"));
+    let (idle, tripped) = (("state", "idle"), ("state", "tripped"));
+    let refused = [("route", "/v1/rigs"), ("status", "401")];
+    let exact: [(&str, &[Label], f64); 10] = [
+        ("tests_started_total", &[rig], 2.0),
+        ("tests_finished_total", &[rig, completed], 1.0),
+        ("tests_finished_total", &[rig, aborted], 1.0),
+        ("tests_stopped_total", &[rig, by_operator], 1.0),
+        ("emergency_stops_total", &[rig, by_api], 1.0),
+        ("rig_state", &[rig, idle], 1.0),
+        ("rig_state", &[rig, tripped], 0.0),
+        ("records_written_total", &[rig], 2.0),
+        ("api_requests_total", &post_201, 2.0),
+        ("api_requests_total", &refused, 1.0),
+    ];
+    for (name, labels, want) in exact {
+        assert_eq!(value(name, labels), want, "{name} {labels:?}");
+    }
+    let at_least: [(&str, f64); 3] = [
+        ("record_written_bytes_total", 1000.0),
+        ("recorded_messages_total", 100.0),
+        ("last_test_duration_seconds", 0.0),
+    ];
+    for (name, above) in at_least {
+        assert!(value(name, &[rig]) > above, "{name}");
+    }
+    let winding = value("winding_temperature_celsius", &[rig]);
     assert!((20.0..200.0).contains(&winding), "winding {winding}");
-    let posts = [("method", "POST"), ("route", "/v1/rigs/{rig}/tests")];
-    assert_eq!(
-        value(
-            "motorbench_api_requests_total",
-            &[posts[0], posts[1], ("status", "201")]
-        ),
-        2.0
-    );
-    assert_eq!(
-        value(
-            "motorbench_api_requests_total",
-            &[("route", "/v1/rigs"), ("status", "401")]
-        ),
-        1.0
-    );
 }

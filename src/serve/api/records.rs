@@ -58,13 +58,26 @@ pub async fn record(
     ))]
 pub async fn report(State(d): Shared, Path(name): Path<String>) -> Result<Response, ApiError> {
     let e = entry(&d, &name).await?;
-    let file = e.report.ok_or_else(|| {
+    listed_file(&d, &e, e.report.as_deref(), "report", "application/json").await
+}
+
+/// The entry's file `file` (`None`: not written, or not yet) as
+/// `content_type`.
+async fn listed_file(
+    d: &Daemon,
+    e: &IndexEntry,
+    file: Option<&str>,
+    what: &str,
+    content_type: &'static str,
+) -> Result<Response, ApiError> {
+    let file = file.ok_or_else(|| {
         ApiError::not_found(format!(
-            "record `{name}` has no report (yet): {:?}",
-            e.outcome
+            "record `{}` has no {what} (yet): {}",
+            e.name,
+            e.outcome.as_str()
         ))
     })?;
-    record_file(&d, &file, "application/json").await
+    record_file(d, file, content_type).await
 }
 
 /// The record's plot (`NAME.svg`), as listed in its index entry.
@@ -77,13 +90,7 @@ pub async fn report(State(d): Shared, Path(name): Path<String>) -> Result<Respon
     ))]
 pub async fn svg(State(d): Shared, Path(name): Path<String>) -> Result<Response, ApiError> {
     let e = entry(&d, &name).await?;
-    let file = e.svg.ok_or_else(|| {
-        ApiError::not_found(format!(
-            "record `{name}` has no plot (yet): {:?}",
-            e.outcome
-        ))
-    })?;
-    record_file(&d, &file, "image/svg+xml").await
+    listed_file(&d, &e, e.svg.as_deref(), "plot", "image/svg+xml").await
 }
 
 /// The record's MCAP file, streamed.
