@@ -379,22 +379,23 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
     // File writing, like the analysis, stays off the reactor.
     let report_path = dir.join(&report_name);
     let svg_path = dir.join(&svg_name);
-    let residuals_path = dir.join(format!("{name}.residuals.svg"));
+    let residuals_name = format!("{name}.residuals.svg");
+    let residuals_path = dir.join(&residuals_name);
     let written = tokio::task::spawn_blocking(move || {
         let report_text = concluded.analysis.report().to_json_pretty() + "\n";
         let written = (
             std::fs::write(report_path, report_text).map_err(|e| e.to_string()),
             concluded.analysis.write_plot(&concluded.record, &svg_path),
         );
-        if let Some(plot) = &concluded.residuals {
-            if let Err(e) = write_residual_svg(plot, &residuals_path) {
-                tracing::error!("writing the residual plot failed: {e}");
-            }
-        }
-        (written, concluded.analysis)
+        let residuals_written = concluded.residuals.as_ref().is_some_and(|plot| {
+            write_residual_svg(plot, &residuals_path)
+                .map_err(|e| tracing::error!("writing the residual plot failed: {e}"))
+                .is_ok()
+        });
+        (written, residuals_written, concluded.analysis)
     })
     .await;
-    let ((report_written, svg_written), analysis) = match written {
+    let ((report_written, svg_written), residuals_ok, analysis) = match written {
         Ok(w) => w,
         Err(e) => {
             tracing::error!("{name}: writing the report failed: {e}");
@@ -438,6 +439,7 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
             e.key_results = key_results;
             e.report = report_ok.then_some(report_name);
             e.svg = svg_ok.then_some(svg_name);
+            e.residuals_svg = residuals_ok.then_some(residuals_name);
         });
         if let Err(e) = updated {
             tracing::error!("{name}: updating the index failed: {e}");

@@ -123,6 +123,10 @@ pub struct IndexEntry {
     /// The plot file name, once written.
     #[serde(default)]
     pub svg: Option<String>,
+    /// The residual plot's file name (`NAME.residuals.svg`), once written
+    /// (only a diagnosed record has one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residuals_svg: Option<String>,
     /// Size of the record's files, bytes.
     #[serde(default)]
     pub bytes: u64,
@@ -161,17 +165,19 @@ impl IndexEntry {
             mcap: format!("{name}.mcap"),
             report: None,
             svg: None,
+            residuals_svg: None,
             bytes: 0,
             recovered: None,
             data_complete: false,
         }
     }
 
-    /// The record's files that exist (MCAP, report, plot).
+    /// The record's files that exist (MCAP, report, plots).
     pub fn files(&self) -> Vec<&str> {
         std::iter::once(self.mcap.as_str())
             .chain(self.report.as_deref())
             .chain(self.svg.as_deref())
+            .chain(self.residuals_svg.as_deref())
             .collect()
     }
 }
@@ -337,7 +343,7 @@ impl RecordsIndex {
     pub fn new_name(&self, motor_id: &str, started_at: &str) -> String {
         crate::session::record_name(motor_id, started_at, |s| {
             self.get(s).is_some()
-                || ["mcap", "report.json", "svg"]
+                || ["mcap", "report.json", "svg", "residuals.svg"]
                     .iter()
                     .any(|x| self.dir.join(format!("{s}.{x}")).exists())
         })
@@ -504,6 +510,7 @@ fn entry_from_file(dir: &Path, path: &Path) -> IndexEntry {
         .unwrap_or_else(|_| unix_s(modified));
     let report = format!("{name}.report.json");
     let svg = format!("{name}.svg");
+    let residuals_svg = format!("{name}.residuals.svg");
     let (outcome, reason, key_results) = match &read {
         Some((_, _, entries, None)) => outcome_of(entries),
         _ => (
@@ -527,6 +534,7 @@ fn entry_from_file(dir: &Path, path: &Path) -> IndexEntry {
         key_results,
         report: dir.join(&report).exists().then_some(report),
         svg: dir.join(&svg).exists().then_some(svg),
+        residuals_svg: dir.join(&residuals_svg).exists().then_some(residuals_svg),
         mcap,
         bytes: 0,
         recovered,

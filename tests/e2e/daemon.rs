@@ -292,7 +292,7 @@ async fn sigterm_stops_the_test_safely_finishes_the_mcap_and_exits_0() {
 }
 
 /// Every endpoint, with a method and a path that exists.
-const ENDPOINTS: [(&str, &str); 18] = [
+const ENDPOINTS: [(&str, &str); 19] = [
     ("GET", "/v1/health"),
     ("GET", "/v1/openapi.json"),
     ("GET", "/metrics"),
@@ -310,6 +310,7 @@ const ENDPOINTS: [(&str, &str); 18] = [
     ("GET", "/v1/records/x/report"),
     ("GET", "/v1/records/x/mcap"),
     ("GET", "/v1/records/x/svg"),
+    ("GET", "/v1/records/x/residuals"),
     ("GET", "/no/such/path"),
 ];
 

@@ -148,12 +148,17 @@ async fn every_documented_route_answers_as_documented_and_metrics_count_it() {
         String::from_utf8_lossy(&svg.body).contains("<svg"),
         "an SVG"
     );
+    assert_eq!(entry["residuals_svg"], format!("{id}.residuals.svg"));
+    let residuals = ex
+        .expect(&c, "GET", "/v1/records/{name}/residuals", &id, 200)
+        .await;
+    assert_eq!(residuals.content_type.as_deref(), Some("image/svg+xml"));
     let mcap = ex
         .expect(&c, "GET", "/v1/records/{name}/mcap", &id, 200)
         .await;
     assert_eq!(mcap.content_type.as_deref(), Some("application/vnd.mcap"));
     assert!(mcap.body.starts_with(b"\x89MCAP"), "an MCAP file");
-    for route in ["", "/report", "/svg", "/mcap"] {
+    for route in ["", "/report", "/svg", "/residuals", "/mcap"] {
         let route = format!("/v1/records/{{name}}{route}");
         ex.expect(&c, "GET", &route, "nope", 404).await;
     }

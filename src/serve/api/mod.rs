@@ -125,6 +125,7 @@ fn documented() -> OpenApiRouter<Arc<Daemon>> {
         .routes(routes!(records::report))
         .routes(routes!(records::mcap))
         .routes(routes!(records::svg))
+        .routes(routes!(records::residuals))
         .routes(routes!(openapi::document))
         .routes(routes!(super::metrics::metrics))
 }

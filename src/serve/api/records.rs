@@ -93,6 +93,21 @@ pub async fn svg(State(d): Shared, Path(name): Path<String>) -> Result<Response,
     listed_file(&d, &e, e.svg.as_deref(), "plot", "image/svg+xml").await
 }
 
+/// The record's residual plot (`NAME.residuals.svg`: where the model
+/// misses the measurement), as listed in its index entry.
+#[utoipa::path(get, path = "/v1/records/{name}/residuals", tag = "records",
+    params(("name" = String, Path, description = "record name")),
+    responses(
+        (status = 200, description = "the residual plot", content_type = "image/svg+xml", body = String),
+        (status = 404, description = "no such record, or it has no residual plot (not diagnosed, or not yet)", body = ErrorBody),
+        (status = 500, description = "the file could not be read", body = ErrorBody),
+    ))]
+pub async fn residuals(State(d): Shared, Path(name): Path<String>) -> Result<Response, ApiError> {
+    let e = entry(&d, &name).await?;
+    let file = e.residuals_svg.as_deref();
+    listed_file(&d, &e, file, "residual plot", "image/svg+xml").await
+}
+
 /// The record's MCAP file, streamed.
 #[utoipa::path(get, path = "/v1/records/{name}/mcap", tag = "records",
     params(("name" = String, Path, description = "record name")),

@@ -329,14 +329,16 @@ async function showRecord(r) {
       if (!(e instanceof Unauthorized)) view.append(el("p", { class: "error" }, `report: ${e.message}`));
     }
   }
-  if (r.svg) {
+  const plots = [[r.svg, "svg", "plot"], [r.residuals_svg, "residuals", "residual plot"]];
+  for (const [file, path, what] of plots) {
+    if (!file) continue;
     try {
-      const resp = await call("GET", `${base}/svg`);
+      const resp = await call("GET", `${base}/${path}`);
       if (!resp.ok) throw new Error(`HTTP ${resp.status}`);
       const url = URL.createObjectURL(await resp.blob());
-      view.append(el("img", { src: url, alt: `plot of ${r.name}`, class: "record-plot" }));
+      view.append(el("img", { src: url, alt: `${what} of ${r.name}`, class: `record-${path}` }));
     } catch (e) {
-      if (!(e instanceof Unauthorized)) view.append(el("p", { class: "error" }, `plot: ${e.message}`));
+      if (!(e instanceof Unauthorized)) view.append(el("p", { class: "error" }, `${what}: ${e.message}`));
     }
   }
 }
