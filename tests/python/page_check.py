@@ -195,10 +195,15 @@ async def run(url, token, rig, test_id, out_dir):
         await b.send("Input.insertText", {"text": token})
         await b.js("document.querySelector('#token-form button[type=submit]').click()")
 
-        # The running test: state, progress and a plot fed by the event stream.
-        seen["running"] = await b.wait("the test running with 20 plotted points", card(
+        # The running test: state, progress and a plot fed by the event
+        # stream, from its second step on (the plot then shows a step response).
+        first = await b.wait("the test's second step with 20 plotted points", card(
             rig, f"c.dataset.state === 'running' && Number(c.dataset.points || 0) >= 20 && "
+                 f"Number((c.querySelector('.segment').textContent.match(/^segment (\\d+)\\//) || [])[1]) >= 2 && "
                  f"c.querySelector('.test').textContent.includes('{test_id}') && {CARD_TEXT}"))
+        seen["running"] = await b.wait("10 more points", card(
+            rig, f"c.dataset.state === 'running' && Number(c.dataset.points) >= {first['points'] + 10} "
+                 f"&& {CARD_TEXT}"))
         seen["shots"].append(await b.screenshot("02-running"))
 
         # Abort from the page.

@@ -124,6 +124,7 @@ function rigCard(rig) {
     estop: el("button", { type: "button", class: "estop" }, "EMERGENCY STOP"),
     reset: el("button", { type: "button", class: "reset" }, "Reset latch"),
     feedId: null,
+    plotId: null,
     runningId: null,
     plot: null,
     data: [[], [], []],
@@ -262,8 +263,13 @@ async function* sseEvents(body) {
 
 async function follow(card, id) {
   card.feedId = id;
-  if (card.plot) { card.plot.destroy(); card.plot = null; }
-  card.message.textContent = "";
+  if (card.plotId !== id) {
+    // A new test: a new plot (a feed picked up again keeps its points).
+    if (card.plot) { card.plot.destroy(); card.plot = null; }
+    card.plotId = id;
+    card.message.textContent = "";
+  }
+  let done = false;
   try {
     const r = await call("GET", `v1/tests/${encodeURIComponent(id)}/events`);
     if (!r.ok) throw new Error(`HTTP ${r.status}`);
@@ -271,14 +277,16 @@ async function follow(card, id) {
       const s = JSON.parse(ev.data);
       showProgress(card, s);
       if (ev.name === "done") {
+        done = true;
         refreshRecords();
         break;
       }
     }
   } catch (e) {
     if (!(e instanceof Unauthorized)) card.message.textContent = `live feed: ${e.message}`;
-    card.feedId = null;
   }
+  // A feed cut before the end is picked up again by the next poll.
+  if (!done && card.feedId === id) card.feedId = null;
 }
 
 // ---- records ------------------------------------------------------------
