@@ -24,6 +24,10 @@ if ! command -v systemd-analyze >/dev/null 2>&1; then
     echo "== installing systemd's tools (systemd-analyze verifies the unit)"
     apt_install systemd
 fi
+if ! command -v chromium >/dev/null 2>&1; then
+    echo "== installing Chromium (Debian's package): the status page's test drives it headless"
+    apt_install chromium
+fi
 venv=target/test-venv
 stamp="$venv/requirements.txt"
 if ! cmp -s tests/python/requirements.txt "$stamp" || [ ! -x "$venv/bin/python3" ]; then

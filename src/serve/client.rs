@@ -90,6 +90,8 @@ pub enum ClientError {
 pub struct Reply {
     /// HTTP status code.
     pub status: u16,
+    /// The `Content-Type` header, when there was one.
+    pub content_type: Option<String>,
     /// The body.
     pub body: Bytes,
 }
@@ -220,13 +222,22 @@ impl Client {
     /// Read the whole answer.
     async fn read_reply(&self, response: Response<Incoming>) -> Result<Reply, ClientError> {
         let status = response.status().as_u16();
+        let content_type = response
+            .headers()
+            .get(hyper::header::CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .map(str::to_string);
         let body = response
             .into_body()
             .collect()
             .await
             .map_err(|e| self.connect_err(e))?
             .to_bytes();
-        Ok(Reply { status, body })
+        Ok(Reply {
+            status,
+            content_type,
+            body,
+        })
     }
 
     /// GET `path`.
@@ -302,35 +313,58 @@ impl Client {
 }
 
 /// Splits a server-sent event stream into `(event name, data)` pairs.
+///
+/// Bytes are kept until an event's blank line has arrived, and only a
+/// whole event is decoded: a multi-byte character split across network
+/// chunks (`→`, `°`, `Ω`) comes out whole. Lines may end in `\n` or
+/// `\r\n`.
 #[derive(Debug, Default)]
 pub struct SseParser {
-    buffer: String,
+    buffer: Vec<u8>,
+    /// Where the next line starts in `buffer`.
+    line_start: usize,
+    /// Where the search for the next line end resumes.
+    scanned: usize,
 }
 
 impl SseParser {
     /// Feed bytes; the events completed by them.
     pub fn push(&mut self, bytes: &[u8]) -> Vec<(String, String)> {
-        self.buffer
-            .push_str(&String::from_utf8_lossy(bytes).replace("\r\n", "\n"));
+        self.buffer.extend_from_slice(bytes);
         let mut out = Vec::new();
-        while let Some(end) = self.buffer.find("\n\n") {
-            let block: String = self.buffer.drain(..end + 2).collect();
-            let mut name = "message".to_string();
-            let mut data: Vec<&str> = Vec::new();
-            for line in block.lines() {
-                if let Some(v) = line.strip_prefix("event:") {
-                    name = v.trim_start().to_string();
-                } else if let Some(v) = line.strip_prefix("data:") {
-                    data.push(v.strip_prefix(' ').unwrap_or(v));
-                }
+        while let Some(nl) = self.buffer[self.scanned..].iter().position(|&b| b == b'\n') {
+            let end = self.scanned + nl;
+            self.scanned = end + 1;
+            let line = &self.buffer[self.line_start..end];
+            let blank = line.is_empty() || line == b"\r";
+            self.line_start = end + 1;
+            if !blank {
+                continue;
             }
-            // Comment-only blocks (keep-alives) carry no data.
-            if !data.is_empty() {
-                out.push((name, data.join("\n")));
+            let block: Vec<u8> = self.buffer.drain(..=end).collect();
+            self.line_start = 0;
+            self.scanned = 0;
+            if let Some(event) = parse_block(&String::from_utf8_lossy(&block)) {
+                out.push(event);
             }
         }
         out
     }
+}
+
+/// One event's lines → `(name, data)`; `None` for a block without data
+/// (a comment, e.g. a keep-alive).
+fn parse_block(block: &str) -> Option<(String, String)> {
+    let mut name = "message".to_string();
+    let mut data: Vec<&str> = Vec::new();
+    for line in block.lines() {
+        if let Some(v) = line.strip_prefix("event:") {
+            name = v.trim_start().to_string();
+        } else if let Some(v) = line.strip_prefix("data:") {
+            data.push(v.strip_prefix(' ').unwrap_or(v));
+        }
+    }
+    (!data.is_empty()).then(|| (name, data.join("\n")))
 }
 
 #[cfg(test)]
@@ -371,5 +405,27 @@ mod tests {
                 ("done".to_string(), "a\nb".to_string())
             ]
         );
+    }
+
+    #[test]
+    fn a_character_split_across_chunks_comes_out_whole() {
+        let event = "event: progress\ndata: {\"label\":\"0 V → 60 V, 40 °C, 30 Ω\"}\n\n";
+        let bytes = event.as_bytes();
+        let want = [(
+            "progress".to_string(),
+            "{\"label\":\"0 V → 60 V, 40 °C, 30 Ω\"}".to_string(),
+        )];
+        // Every split point, including those inside `→` (3 bytes), `°` and `Ω` (2 each).
+        for cut in 1..bytes.len() {
+            let mut p = SseParser::default();
+            let mut got = p.push(&bytes[..cut]);
+            got.extend(p.push(&bytes[cut..]));
+            assert_eq!(got, want, "split at byte {cut}");
+        }
+        // One byte at a time, with CRLF line ends.
+        let crlf = event.replace('\n', "\r\n");
+        let mut p = SseParser::default();
+        let got: Vec<_> = crlf.as_bytes().iter().flat_map(|b| p.push(&[*b])).collect();
+        assert_eq!(got, want);
     }
 }

@@ -13,6 +13,7 @@ use std::time::SystemTime;
 use serde::Serialize;
 use tokio::sync::{watch, Mutex};
 
+use super::metrics::{Metrics, TestEnd};
 use super::records_index::{
     unix_s, IndexEntry, IndexError, KeyResults, RecordOutcome, RecordsIndex,
 };
@@ -23,7 +24,7 @@ use crate::record::SegmentKind;
 use crate::session::{Recording, RunEnd, Session, SessionError, Supervised};
 
 /// Where a test is.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum TestState {
     /// The plan is running on the rig.
@@ -35,7 +36,7 @@ pub enum TestState {
 }
 
 /// The segment being run.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct SegmentStatus {
     /// Index, from 0.
     pub index: usize,
@@ -43,12 +44,13 @@ pub struct SegmentStatus {
     pub total: usize,
     /// Label, e.g. `60 V → 248 V`.
     pub label: String,
-    /// Test kind of the segment.
+    /// Test kind of the segment (`dc_step`, `dc_coastdown`, `im_slip_sweep`, …).
+    #[schema(value_type = String)]
     pub kind: SegmentKind,
 }
 
 /// What the supervisor did to stop the test.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct StopStatus {
     /// Machine-readable cause (`operator_abort`, `limit`, …).
     pub kind: String,
@@ -79,7 +81,7 @@ impl From<&StopReport> for StopStatus {
 }
 
 /// A test's status, as the API shows it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct TestStatus {
     /// Test id (also the record name).
     pub id: String,
@@ -100,6 +102,7 @@ pub struct TestStatus {
     /// Longest it can still take (every remaining step to its timeout), s.
     pub eta_max_s: Option<f64>,
     /// The latest readings the supervisor checked.
+    #[schema(value_type = crate::serve::api::openapi::ReadingsDoc)]
     pub values: Readings,
     /// How it ended, once finished.
     pub outcome: Option<RecordOutcome>,
@@ -217,6 +220,7 @@ pub async fn prepare(
     machine: Box<dyn Machine>,
     initial_rise_k: f64,
     index: Arc<Mutex<RecordsIndex>>,
+    metrics: Arc<Metrics>,
 ) -> Result<(Arc<TestRun>, Job), SetupError> {
     // Paced at the wall clock; a rig served behind a protocol keeps its
     // servers alive for as long as the session holds them.
@@ -258,6 +262,8 @@ pub async fn prepare(
             index,
             dir,
             name,
+            metrics,
+            started: std::time::Instant::now(),
         },
     };
     Ok((run, job))
@@ -284,6 +290,31 @@ struct Ending {
     dir: PathBuf,
     /// The record's name.
     name: String,
+    /// The daemon's metrics.
+    metrics: Arc<Metrics>,
+    /// When the test started (wall clock).
+    started: std::time::Instant,
+}
+
+impl Ending {
+    /// Count the test's end in the metrics.
+    async fn count(&self, outcome: RecordOutcome, stop: Option<&StopReport>, recorder: (u64, u64)) {
+        let bytes = self
+            .index
+            .lock()
+            .await
+            .get(&self.name)
+            .map_or(0, |e| e.bytes);
+        self.metrics.test_ended(&TestEnd {
+            rig: self.run.status.borrow().rig.clone(),
+            outcome: outcome.as_str().to_string(),
+            stop_cause: stop.map(|s| s.cause.kind().to_string()),
+            duration_s: self.started.elapsed().as_secs_f64(),
+            bytes,
+            messages: recorder.0,
+            recorder_waits: recorder.1,
+        });
+    }
 }
 
 /// The end of every test, once the sequencer has returned (the rig is
@@ -291,12 +322,12 @@ struct Ending {
 /// record analysed (off the reactor), finished and indexed with its
 /// report and plot, the status published.
 async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
-    let Ending {
-        run,
-        index,
-        dir,
-        name,
-    } = ending;
+    let (run, index, dir, name) = (
+        ending.run.clone(),
+        ending.index.clone(),
+        ending.dir.clone(),
+        ending.name.clone(),
+    );
     let retention = recording.machine().retention();
     let RunEnd {
         outcome,
@@ -327,6 +358,9 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
             // (it replays).
             tracing::error!("{name}: {e}");
             let reason = Some(e.to_string());
+            ending
+                .count(RecordOutcome::Failed, stop.as_ref(), (0, 0))
+                .await;
             finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
             return end;
         }
@@ -336,31 +370,43 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
         .as_ref()
         .err()
         .map(|e| format!("recording failed: {e}"));
+    let (messages, recorder_waits) = concluded
+        .recorded
+        .as_ref()
+        .map_or((0, 0), |s| (s.messages, s.backpressure_waits));
     let report_name = format!("{name}.report.json");
     let svg_name = format!("{name}.svg");
     // File writing, like the analysis, stays off the reactor.
     let report_path = dir.join(&report_name);
     let svg_path = dir.join(&svg_name);
-    let residuals_path = dir.join(format!("{name}.residuals.svg"));
+    let residuals_name = format!("{name}.residuals.svg");
+    let residuals_path = dir.join(&residuals_name);
     let written = tokio::task::spawn_blocking(move || {
         let report_text = concluded.analysis.report().to_json_pretty() + "\n";
         let written = (
             std::fs::write(report_path, report_text).map_err(|e| e.to_string()),
             concluded.analysis.write_plot(&concluded.record, &svg_path),
         );
-        if let Some(plot) = &concluded.residuals {
-            if let Err(e) = write_residual_svg(plot, &residuals_path) {
-                tracing::error!("writing the residual plot failed: {e}");
-            }
-        }
-        (written, concluded.analysis)
+        let residuals_written = concluded.residuals.as_ref().is_some_and(|plot| {
+            write_residual_svg(plot, &residuals_path)
+                .map_err(|e| tracing::error!("writing the residual plot failed: {e}"))
+                .is_ok()
+        });
+        (written, residuals_written, concluded.analysis)
     })
     .await;
-    let ((report_written, svg_written), analysis) = match written {
+    let ((report_written, svg_written), residuals_ok, analysis) = match written {
         Ok(w) => w,
         Err(e) => {
             tracing::error!("{name}: writing the report failed: {e}");
             let reason = Some(format!("writing the report failed: {e}"));
+            ending
+                .count(
+                    RecordOutcome::Failed,
+                    stop.as_ref(),
+                    (messages, recorder_waits),
+                )
+                .await;
             finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
             return end;
         }
@@ -393,6 +439,7 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
             e.key_results = key_results;
             e.report = report_ok.then_some(report_name);
             e.svg = svg_ok.then_some(svg_name);
+            e.residuals_svg = residuals_ok.then_some(residuals_name);
         });
         if let Err(e) = updated {
             tracing::error!("{name}: updating the index failed: {e}");
@@ -413,6 +460,9 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
             reason.as_deref().unwrap_or("")
         ),
     }
+    ending
+        .count(outcome, stop.as_ref(), (messages, recorder_waits))
+        .await;
     let values = *run.supervisor.readings().borrow();
     run.status.send_modify(|s| {
         s.state = TestState::Finished;

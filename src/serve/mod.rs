@@ -6,7 +6,9 @@
 //!
 //! - [`serve`]: bind, announce, serve until the shutdown future resolves,
 //!   then stop running tests safely and finish their records.
-//! - [`api`]: the HTTP endpoints. [`auth`]: the bearer token.
+//! - [`api`]: the HTTP endpoints and their OpenAPI document. [`auth`]:
+//!   the bearer token. [`metrics`]: `/metrics`. [`page`]: the status page
+//!   at `/`.
 //! - [`state`]: rigs, tests, the index. [`rig_config`]: a DC or an
 //!   induction-machine rig. [`jobs`]: one test of any machine, over the
 //!   one session ([`crate::session`]).
@@ -20,6 +22,8 @@ pub mod client;
 pub mod connections;
 pub mod ctl;
 pub mod jobs;
+pub mod metrics;
+pub mod page;
 pub mod records_index;
 pub mod rig_config;
 pub mod state;

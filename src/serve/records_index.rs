@@ -31,7 +31,7 @@ pub const INDEX_FILE: &str = "index.json";
 const INDEX_VERSION: u32 = 1;
 
 /// How a recorded test ended.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "snake_case")]
 pub enum RecordOutcome {
     /// The test is running now.
@@ -50,8 +50,22 @@ pub enum RecordOutcome {
     Failed,
 }
 
+impl RecordOutcome {
+    /// The outcome's name, as in the index (`completed`, `aborted`, …).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            RecordOutcome::Running => "running",
+            RecordOutcome::Completed => "completed",
+            RecordOutcome::Aborted => "aborted",
+            RecordOutcome::Interrupted => "interrupted",
+            RecordOutcome::Unanalysed => "unanalysed",
+            RecordOutcome::Failed => "failed",
+        }
+    }
+}
+
 /// What could be read back from an interrupted record.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Recovered {
     /// Messages read before the damage.
@@ -63,7 +77,7 @@ pub struct Recovered {
 }
 
 /// Headline results: the best method and its parameter values (SI).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct KeyResults {
     /// The method whose parameters to use.
@@ -73,7 +87,7 @@ pub struct KeyResults {
 }
 
 /// One record in the index.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct IndexEntry {
     /// Record name: the file stem, also the test id.
@@ -109,6 +123,10 @@ pub struct IndexEntry {
     /// The plot file name, once written.
     #[serde(default)]
     pub svg: Option<String>,
+    /// The residual plot's file name (`NAME.residuals.svg`), once written
+    /// (only a diagnosed record has one).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub residuals_svg: Option<String>,
     /// Size of the record's files, bytes.
     #[serde(default)]
     pub bytes: u64,
@@ -147,17 +165,19 @@ impl IndexEntry {
             mcap: format!("{name}.mcap"),
             report: None,
             svg: None,
+            residuals_svg: None,
             bytes: 0,
             recovered: None,
             data_complete: false,
         }
     }
 
-    /// The record's files that exist (MCAP, report, plot).
+    /// The record's files that exist (MCAP, report, plots).
     pub fn files(&self) -> Vec<&str> {
         std::iter::once(self.mcap.as_str())
             .chain(self.report.as_deref())
             .chain(self.svg.as_deref())
+            .chain(self.residuals_svg.as_deref())
             .collect()
     }
 }
@@ -323,7 +343,7 @@ impl RecordsIndex {
     pub fn new_name(&self, motor_id: &str, started_at: &str) -> String {
         crate::session::record_name(motor_id, started_at, |s| {
             self.get(s).is_some()
-                || ["mcap", "report.json", "svg"]
+                || ["mcap", "report.json", "svg", "residuals.svg"]
                     .iter()
                     .any(|x| self.dir.join(format!("{s}.{x}")).exists())
         })
@@ -490,6 +510,7 @@ fn entry_from_file(dir: &Path, path: &Path) -> IndexEntry {
         .unwrap_or_else(|_| unix_s(modified));
     let report = format!("{name}.report.json");
     let svg = format!("{name}.svg");
+    let residuals_svg = format!("{name}.residuals.svg");
     let (outcome, reason, key_results) = match &read {
         Some((_, _, entries, None)) => outcome_of(entries),
         _ => (
@@ -513,6 +534,7 @@ fn entry_from_file(dir: &Path, path: &Path) -> IndexEntry {
         key_results,
         report: dir.join(&report).exists().then_some(report),
         svg: dir.join(&svg).exists().then_some(svg),
+        residuals_svg: dir.join(&residuals_svg).exists().then_some(residuals_svg),
         mcap,
         bytes: 0,
         recovered,

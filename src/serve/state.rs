@@ -14,12 +14,13 @@ use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 use super::jobs::{prepare, SetupError, StopStatus, TestRun};
+use super::metrics::Metrics;
 use super::records_index::{IndexError, RecordsIndex};
 use super::rig_config::RigConfig;
 use crate::bench::{StopCause, StopReport};
 
 /// A latched stop: the rig refuses new tests until an operator resets it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct Latch {
     /// Machine-readable cause (`emergency_stop`, `limit`, …).
     pub kind: String,
@@ -72,7 +73,7 @@ impl Rig {
 }
 
 /// A rig's state as the API shows it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct RigStatus {
     /// Rig name.
     pub name: String,
@@ -133,6 +134,7 @@ pub struct Daemon {
     tests: StdMutex<BTreeMap<String, Arc<TestRun>>>,
     jobs: StdMutex<Vec<JoinHandle<()>>>,
     stopping: AtomicBool,
+    metrics: Arc<Metrics>,
 }
 
 fn lock<T>(m: &StdMutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -187,12 +189,18 @@ impl Daemon {
             tests: StdMutex::new(BTreeMap::new()),
             jobs: StdMutex::new(Vec::new()),
             stopping: AtomicBool::new(false),
+            metrics: Arc::new(Metrics::new()),
         })
     }
 
     /// The records index.
     pub fn index(&self) -> &Arc<Mutex<RecordsIndex>> {
         &self.index
+    }
+
+    /// The daemon's metrics.
+    pub fn metrics(&self) -> &Metrics {
+        &self.metrics
     }
 
     /// Rig names.
@@ -281,9 +289,15 @@ impl Daemon {
             None => rig.cfg.clone(),
         };
         let rise = Rig::rise_now(&rt, &rig.cfg);
-        let (run, job) = prepare(rig_name, cfg.into_machine(), rise, self.index.clone())
-            .await
-            .map_err(StartError::Setup)?;
+        let (run, job) = prepare(
+            rig_name,
+            cfg.into_machine(),
+            rise,
+            self.index.clone(),
+            self.metrics.clone(),
+        )
+        .await
+        .map_err(StartError::Setup)?;
         let id = run.id();
         tracing::info!(
             "{id}: test started on rig {rig_name} ({})",
@@ -292,6 +306,7 @@ impl Daemon {
         rt.running = Some(run.clone());
         lock(&self.tests).insert(id, run.clone());
         drop(rt);
+        self.metrics.test_started(rig_name);
         let rig = rig.clone();
         let handle = tokio::spawn(async move {
             let end = job.run().await;
@@ -341,6 +356,7 @@ impl Daemon {
         let cause = StopCause::EmergencyStop {
             source: source.to_string(),
         };
+        self.metrics.emergency_stop(rig_name, source);
         let latch = match running.filter(|r| !r.finished()) {
             Some(run) => match run.stop(cause.clone()).await {
                 Some(report) => Latch::from_report(&report),

@@ -224,3 +224,38 @@ impl Drop for NotifySocket {
         }
     }
 }
+
+/// The token the web tests give their daemons.
+pub const WEB_TOKEN: &str = "status-page-token-0123456789abcdef";
+
+/// Start the daemon on the embedded default configuration, on loopback,
+/// behind [`WEB_TOKEN`] (written to `dir/token`).
+pub fn start_with_token(dir: &Path, records: &Path) -> Served {
+    let config = dir.join("rig.toml");
+    std::fs::write(&config, motorbench::config::DEFAULT_CONFIG).unwrap();
+    let token_file = dir.join("token");
+    std::fs::write(&token_file, format!("{WEB_TOKEN}\n")).unwrap();
+    Served::start(
+        &config,
+        records,
+        dir,
+        &[
+            "--listen",
+            "127.0.0.1:0",
+            "--token-file",
+            token_file.to_str().unwrap(),
+        ],
+    )
+}
+
+/// Run `tests/python/SCRIPT` with `args` in the test Python; its output.
+pub fn python_script(script: &str, args: &[&std::ffi::OsStr]) -> Output {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/python")
+        .join(script);
+    Command::new(super::python::interpreter())
+        .arg(path)
+        .args(args)
+        .output()
+        .expect("the test python runs")
+}

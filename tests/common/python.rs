@@ -17,7 +17,8 @@ use std::sync::OnceLock;
 pub const VAR: &str = "MOTORBENCH_PYTHON";
 
 /// The modules tests/python/*.py import, one per requirement.
-const MODULES: &str = "import mcap, pymodbus, serial, can";
+const MODULES: &str =
+    "import mcap, pymodbus, serial, can, jsonschema, prometheus_client, websockets";
 
 /// The interpreter, checked once per test process to import every
 /// required package; panics naming the interpreter and the fix when not.

@@ -292,8 +292,10 @@ async fn sigterm_stops_the_test_safely_finishes_the_mcap_and_exits_0() {
 }
 
 /// Every endpoint, with a method and a path that exists.
-const ENDPOINTS: [(&str, &str); 15] = [
+const ENDPOINTS: [(&str, &str); 19] = [
     ("GET", "/v1/health"),
+    ("GET", "/v1/openapi.json"),
+    ("GET", "/metrics"),
     ("GET", "/v1/rigs"),
     ("GET", "/v1/rigs/rig"),
     ("POST", "/v1/rigs/rig/tests"),
@@ -307,6 +309,8 @@ const ENDPOINTS: [(&str, &str); 15] = [
     ("GET", "/v1/records/x"),
     ("GET", "/v1/records/x/report"),
     ("GET", "/v1/records/x/mcap"),
+    ("GET", "/v1/records/x/svg"),
+    ("GET", "/v1/records/x/residuals"),
     ("GET", "/no/such/path"),
 ];
 
@@ -364,6 +368,13 @@ async fn off_loopback_no_endpoint_answers_without_the_token() {
             assert_eq!(r.status, 401, "{method} {path} with {who:?}");
             assert_eq!(r.json()["error"], "unauthorized");
         }
+    }
+    // The status page's own files (code, no data) load without the token:
+    // a browser needs them to ask for it.
+    let anon = served.client(None);
+    for path in ["/", "/ui/app.js", "/ui/uplot.js"] {
+        let r = anon.get(path).await.unwrap();
+        assert_eq!(r.status, 200, "{path}");
     }
     // Nothing was started, stopped or latched by those requests.
     let c = served.client(Some(token));

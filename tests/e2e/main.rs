@@ -13,6 +13,8 @@ mod bad_input;
 mod blind_benchmark;
 mod daemon;
 mod daemon_modbus;
+mod daemon_page;
+mod daemon_web;
 mod dc_step;
 mod diagnose_cli;
 mod diagnose_dc_shaft;

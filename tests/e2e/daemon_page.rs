@@ -1,0 +1,130 @@
+//! End to end: the daemon's status page in a real browser. Debian's
+//! Chromium runs headless, driven through its DevTools protocol by
+//! `tests/python/page_check.py`, against a daemon behind a token running
+//! the full DC staircase on the simulated rig (paced at the wall clock).
+//!
+//! The page must ask for the token, then show the rig running with the
+//! test's segment, time, ETA and a plot fed from the event stream; its
+//! Abort button must abort the test (the daemon's record says who
+//! stopped it); the record's report and plot open from the records list;
+//! its emergency stop latches the rig and its reset clears it. The page
+//! loads nothing but the daemon's own files. Screenshots are kept in
+//! `target/daemon-page/` for a person to look at. Without Chromium the
+//! test fails (tests/run.sh installs it).
+
+use crate::common;
+
+use std::path::Path;
+
+use serde_json::Value;
+
+use common::daemon::{finished, get, python_script, start_with_token, wait_test, WEB_TOKEN};
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_status_page_shows_the_test_and_aborts_it_in_chromium() {
+    let dir = tempfile::tempdir().unwrap();
+    let served = start_with_token(dir.path(), &dir.path().join("records"));
+    let c = served.client(Some(WEB_TOKEN));
+    // The full staircase, each level held 6 s: long enough to load the
+    // page, watch and abort however slow the browser starts.
+    let slow =
+        serde_json::json!({"test": {"settle": {"min_hold_s": 6, "hold_s": 2, "timeout_s": 20}}});
+    let r = c.post("/v1/rigs/rig/tests", Some(&slow)).await.unwrap();
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    let id = r.json()["id"].as_str().unwrap().to_string();
+
+    let shots = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/daemon-page");
+    let url = format!("{}/", served.url);
+    let out = python_script(
+        "page_check.py",
+        &[
+            url.as_ref(),
+            WEB_TOKEN.as_ref(),
+            "rig".as_ref(),
+            id.as_ref(),
+            shots.as_os_str(),
+        ],
+    );
+    let (stdout, stderr) = common::text(&out);
+    assert!(
+        out.status.success(),
+        "the page check failed (screenshots in {}):\n{stderr}\n{}",
+        shots.display(),
+        served.log()
+    );
+    let seen: Value = serde_json::from_str(&stdout).unwrap();
+    println!("{}", serde_json::to_string_pretty(&seen).unwrap());
+
+    assert!(seen["token_form"].as_str().unwrap().contains("token"));
+    let running = &seen["running"];
+    assert_eq!(running["badge"], "running");
+    let shown = [
+        ("segment", "segment "),
+        ("segment", " V → "),
+        ("eta", "ETA "),
+        ("values", " A · ω "),
+    ];
+    for (field, text) in shown {
+        let value = running[field].as_str().unwrap();
+        assert!(value.contains(text), "{field}: {value:?} lacks {text:?}");
+    }
+    assert_eq!(running["canvas"], true, "the plot is drawn");
+    assert!(running["points"].as_u64().unwrap() >= 20, "{running}");
+
+    // The abort came from the page: the daemon says so.
+    let aborted = &seen["aborted"];
+    assert_eq!(aborted["badge"], "idle");
+    assert!(
+        aborted["message"]
+            .as_str()
+            .unwrap()
+            .starts_with("Aborted: operator abort"),
+        "{aborted}"
+    );
+    let s = wait_test(&c, &id, finished).await;
+    assert_eq!(s["outcome"], "aborted");
+    assert_eq!(s["stop"]["kind"], "operator_abort");
+
+    let record = &seen["record_view"];
+    assert!(
+        record["text"].as_str().unwrap().contains("best method"),
+        "{record}"
+    );
+    assert!(record["plot_width"].as_u64().unwrap() > 100, "{record}");
+
+    assert_eq!(seen["latched"]["badge"], "latched");
+    assert!(
+        seen["latched"]["trip"]
+            .as_str()
+            .unwrap()
+            .contains("emergency stop"),
+        "{}",
+        seen["latched"]
+    );
+    assert_eq!(seen["reset"]["badge"], "idle");
+    let rig = get(&c, "/v1/rigs/rig").await;
+    assert_eq!(rig["state"], "idle", "reset from the page");
+
+    // Only the daemon's own files and API were requested.
+    for u in seen["requests"].as_array().unwrap() {
+        let u = u.as_str().unwrap();
+        assert!(
+            u.starts_with(&served.url) || u.starts_with("blob:") || u.starts_with("data:"),
+            "the page requested {u}"
+        );
+    }
+    assert_eq!(
+        seen["console_errors"],
+        Value::Array(vec![]),
+        "no script errors"
+    );
+    for shot in [
+        "01-token",
+        "02-running",
+        "03-aborted",
+        "04-record",
+        "05-latched",
+    ] {
+        assert!(shots.join(format!("{shot}.png")).exists(), "{shot}.png");
+    }
+}
