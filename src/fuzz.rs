@@ -60,7 +60,7 @@ pub fn csv_segment(data: &[u8]) {
         SegmentKind::ImDcResistance,
     ] {
         check_record(
-            load_record_files(kind, &[file.path.clone()], None, Some(50.0)),
+            load_record_files(kind, std::slice::from_ref(&file.path), None, Some(50.0)),
             &file.path,
         );
     }
@@ -74,7 +74,9 @@ pub fn csv_segment(data: &[u8]) {
 pub fn identify_segment(data: &[u8]) {
     let file = Scratch::write("segment.csv", data);
     for kind in [SegmentKind::DcStep, SegmentKind::ImSlipSweep] {
-        let Ok(record) = load_record_files(kind, &[file.path.clone()], None, Some(50.0)) else {
+        let Ok(record) =
+            load_record_files(kind, std::slice::from_ref(&file.path), None, Some(50.0))
+        else {
             continue;
         };
         let samples: usize = record.segments.iter().map(|s| s.time.len()).sum::<usize>()
@@ -127,7 +129,7 @@ pub fn nameplate(data: &[u8]) {
     check_record(
         load_record_files(
             SegmentKind::ImSlipSweep,
-            &[csv.path.clone()],
+            std::slice::from_ref(&csv.path),
             Some(&plate.path),
             None,
         ),
