@@ -24,6 +24,7 @@ mod modbus_stage;
 mod peers_modbus;
 mod peers_serial;
 mod peers_slcan;
+mod record_v2;
 mod shell_docs;
 mod sim_can;
 mod sim_merged_sensors;
