@@ -14,6 +14,7 @@ mod blind_benchmark;
 mod daemon;
 mod daemon_modbus;
 mod dc_step;
+mod foxglove_layout;
 mod diagnose_cli;
 mod diagnose_dc_shaft;
 mod identify_csv;
