@@ -520,9 +520,11 @@ pub async fn commission(
     })?;
     let session = Session::open(machine, opts.realtime).await?;
     let start = crate::record::TestStart::now();
-    let stem = record_name(session.machine().motor_id(), &start.rfc3339_seconds(), |s| {
-        dir.join(format!("{s}.mcap")).exists()
-    });
+    let stem = record_name(
+        session.machine().motor_id(),
+        &start.rfc3339_seconds(),
+        |s| dir.join(format!("{s}.mcap")).exists(),
+    );
     let mcap_path = dir.join(format!("{stem}.mcap"));
     // A cold motor: `run` keeps no thermal memory between tests.
     let supervised = session.record_to(&mcap_path, start.rfc3339(), 0.0)?;

@@ -152,7 +152,10 @@ mod tests {
             EventLevel::Abort
         );
         assert_eq!(read(r#"{"level":1,"message":"x"}"#).level, EventLevel::Info);
-        assert_eq!(read(r#"{"level":5,"message":"x"}"#).level, EventLevel::Abort);
+        assert_eq!(
+            read(r#"{"level":5,"message":"x"}"#).level,
+            EventLevel::Abort
+        );
         assert!(serde_json::from_str::<AnyEvent>(r#"{"level":"loud","message":"x"}"#).is_err());
         assert!(serde_json::from_str::<AnyEvent>(r#"{"level":2}"#).is_err());
     }

@@ -87,13 +87,19 @@ pub fn read_mcap(path: &Path) -> Result<Record, RecordError> {
             reason: format!("{}; not one message before the damage", r.reason),
         });
     }
-    let mut builder = RecordBuilder::new(Some(meta), channels);
-    for e in &entries {
-        builder.push(e);
-    }
-    let mut record = builder.finish();
+    let mut record = build_record(meta, channels, &entries);
     record.recovery = recovery;
     Ok(record)
+}
+
+/// The [`Record`] of what [`read_entries`] read (through
+/// [`RecordBuilder`], like the live bench); its `recovery` is not set.
+pub fn build_record(meta: TestMeta, channels: Vec<ChannelSpec>, entries: &[Entry]) -> Record {
+    let mut builder = RecordBuilder::new(Some(meta), channels);
+    for e in entries {
+        builder.push(e);
+    }
+    builder.finish()
 }
 
 /// Reads a record file into its metadata, sample channels and entries.
@@ -139,8 +145,8 @@ pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
         });
     };
     // Damage may be what broke the metadata or a message: say both.
-    let read_meta = meta_from(path, &metadata)
-        .and_then(|meta| Ok((origin_ns(path, &meta, &metadata)?, meta)));
+    let read_meta =
+        meta_from(path, &metadata).and_then(|meta| Ok((origin_ns(path, &meta, &metadata)?, meta)));
     let (origin, meta) = match (read_meta, failure, &damage) {
         (Ok(read), None, _) => read,
         (Err(e), _, Some(d)) | (Ok(_), Some(e), Some(d)) => {

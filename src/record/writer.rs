@@ -449,8 +449,7 @@ fn run(
                                 table.topics[index]
                             ),
                         };
-                        write_event(&mut writer, &mut table, *t_ns, &event)
-                            .map_err(mcap_err)?;
+                        write_event(&mut writer, &mut table, *t_ns, &event).map_err(mcap_err)?;
                     }
                 }
                 (*t_ns, false)
@@ -558,7 +557,14 @@ fn write_event(
     event: &Event,
 ) -> Result<(), mcap::McapError> {
     let log = LogMessage::new(event, table.log_time(t_ns));
-    write_bench_json(writer, table, TOPIC_EVENT, t_ns, &log, "an event serializes")
+    write_bench_json(
+        writer,
+        table,
+        TOPIC_EVENT,
+        t_ns,
+        &log,
+        "an event serializes",
+    )
 }
 
 fn write_message(

@@ -95,7 +95,11 @@ fn a_v2_record_s_log_time_is_the_wall_clock_at_its_start() {
     // The reader gives times since the start, as identification wants,
     // and an independent reader accepts the file as version 2.
     let record = read_mcap(&mcap_path).unwrap();
-    assert!(record.segments[0].time[0] < 1.0, "{}", record.segments[0].time[0]);
+    assert!(
+        record.segments[0].time[0] < 1.0,
+        "{}",
+        record.segments[0].time[0]
+    );
     common::python_check_mcap(&mcap_path, &[]);
 }
 
@@ -126,9 +130,8 @@ async fn the_v1_fixture_replays_bit_identically_to_its_v2_copy() {
     // Both replay to the same report, to the last digit.
     let v1 = read_mcap(&seed_path()).unwrap();
     let v2 = read_mcap(&copy).unwrap();
-    let report = |r| {
-        serde_json::to_string(analyse_record(r, false).analysis.report()).expect("serialises")
-    };
+    let report =
+        |r| serde_json::to_string(analyse_record(r, false).analysis.report()).expect("serialises");
     assert_eq!(report(&v1), report(&v2));
 
     // The CLI replays the fixture; the Python reader accepts it as v1.
