@@ -9,6 +9,8 @@ use std::path::PathBuf;
 use clap::{Args, ValueEnum};
 
 use super::Failure;
+use crate::config::recorded_im_model;
+use crate::model::ImModel;
 use crate::record::export::{export_record, ExportError, Exported, Formats};
 
 /// `motorbench export`.
@@ -96,9 +98,11 @@ pub fn export(args: ExportArgs) -> Result<(), Failure> {
     Ok(())
 }
 
-/// `motorbench identify --kind K --nameplate N FILES…`, when CSV files
-/// were written.
+/// `motorbench identify --kind K [--model M] --nameplate N FILES…`, when
+/// CSV files were written: an induction machine's record fits the
+/// equivalent circuit its configuration named, as a replay does.
 fn identify_command(e: &Exported) -> Option<Vec<String>> {
+    let meta = e.meta.as_ref()?;
     if e.csv.is_empty() {
         return None;
     }
@@ -106,8 +110,13 @@ fn identify_command(e: &Exported) -> Option<Vec<String>> {
         "motorbench".to_string(),
         "identify".to_string(),
         "--kind".to_string(),
-        e.kind.clone(),
+        meta.kind.as_str().to_string(),
     ];
+    if meta.kind.is_im() {
+        let model = recorded_im_model(&meta.config).unwrap_or(ImModel::SingleFe);
+        cmd.push("--model".to_string());
+        cmd.push(model.as_str().to_string());
+    }
     if let Some(n) = &e.nameplate {
         cmd.push("--nameplate".to_string());
         cmd.push(n.display().to_string());

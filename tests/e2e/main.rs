@@ -16,6 +16,7 @@ mod daemon_modbus;
 mod dc_step;
 mod diagnose_cli;
 mod diagnose_dc_shaft;
+mod export;
 mod foxglove_layout;
 mod identify_csv;
 mod im_identify_cli;

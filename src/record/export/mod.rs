@@ -67,8 +67,8 @@ pub struct Exported {
     pub csv: Vec<PathBuf>,
     /// The nameplate, with the CSV files.
     pub nameplate: Option<PathBuf>,
-    /// The record's test kind (`identify --kind`).
-    pub kind: String,
+    /// The record's metadata (its `kind` is `identify --kind`).
+    pub meta: Option<super::TestMeta>,
     /// Set when the record was damaged: what was exported is what was read
     /// before the damage.
     pub recovery: Option<super::Recovery>,
@@ -106,7 +106,7 @@ pub fn export_record(
     std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
     let (meta, channels, entries, recovery) = read_entries(record_path)?;
     let mut out = Exported {
-        kind: meta.kind.as_str().to_string(),
+        meta: Some(meta.clone()),
         recovery,
         ..Exported::default()
     };
