@@ -343,22 +343,11 @@ impl SupplyLimit {
     }
 }
 
-impl Entry {
-    /// The entry's time, ns since the start of the test.
-    pub fn t_ns(&self) -> u64 {
-        match self {
-            Entry::Samples { t_ns, .. }
-            | Entry::OperatingPoint { t_ns, .. }
-            | Entry::Segment { t_ns, .. }
-            | Entry::Event { t_ns, .. }
-            | Entry::SupplyLimit { t_ns, .. }
-            | Entry::Result { t_ns, .. } => *t_ns,
-        }
-    }
-
-    /// The entry's time, to change.
-    pub fn t_ns_mut(&mut self) -> &mut u64 {
-        match self {
+/// The `t_ns` field of an entry (`&Entry` gives `&u64`, `&mut Entry`
+/// gives `&mut u64`).
+macro_rules! t_ns_field {
+    ($entry:expr) => {
+        match $entry {
             Entry::Samples { t_ns, .. }
             | Entry::OperatingPoint { t_ns, .. }
             | Entry::Segment { t_ns, .. }
@@ -366,6 +355,18 @@ impl Entry {
             | Entry::SupplyLimit { t_ns, .. }
             | Entry::Result { t_ns, .. } => t_ns,
         }
+    };
+}
+
+impl Entry {
+    /// The entry's time, ns since the start of the test.
+    pub fn t_ns(&self) -> u64 {
+        *t_ns_field!(self)
+    }
+
+    /// The entry's time, to change.
+    pub fn t_ns_mut(&mut self) -> &mut u64 {
+        t_ns_field!(self)
     }
 }
 

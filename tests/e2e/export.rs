@@ -52,7 +52,10 @@ fn export(record: &Path, out: &Path, format: &str) -> serde_json::Value {
     serde_json::from_slice(&run.stdout).unwrap()
 }
 
-fn without_provenance(mut v: serde_json::Value) -> serde_json::Value {
+/// The report file a run wrote, without its `provenance`.
+fn recorded_without_provenance(report: &Path) -> serde_json::Value {
+    let mut v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
     v.as_object_mut().unwrap().remove("provenance");
     v
 }
@@ -87,10 +90,8 @@ fn export_to_csv_then_identify_gives_the_report_of_the_run() {
     );
     assert_eq!(exported["identify"][3], "dc_step");
     let from_csv = identify_as_told(&exported);
-    let recorded: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
     assert!(from_csv["methods"]["output_error"]["applies"] == true);
-    assert_eq!(from_csv, without_provenance(recorded));
+    assert_eq!(from_csv, recorded_without_provenance(&report));
 }
 
 #[test]
@@ -100,10 +101,8 @@ fn an_im_export_identifies_to_the_report_of_the_run() {
     let exported = export(&record, &dir.path().join("export"), "csv");
     assert_eq!(exported["identify"][5], "double", "the configured circuit");
     let from_csv = identify_as_told(&exported);
-    let recorded: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
     assert!(from_csv["methods"]["lm"]["params"]["Rr2"]["value"].is_number());
-    assert_eq!(from_csv, without_provenance(recorded));
+    assert_eq!(from_csv, recorded_without_provenance(&report));
 }
 
 #[test]

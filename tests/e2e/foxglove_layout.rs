@@ -125,18 +125,21 @@ fn check(layout: &str, record: &Path) -> usize {
     paths.len()
 }
 
+/// Runs `config`'s test and checks `layout` against its record: at least
+/// `min_paths` paths named, every one found.
+fn layout_fits_a_fresh_record(config: &str, layout: &str, min_paths: usize) {
+    let dir = tempfile::tempdir().unwrap();
+    let record = fresh_record(config, dir.path());
+    let n = check(layout, &record);
+    assert!(n >= min_paths, "{layout}: {n} paths");
+}
+
 #[test]
 fn the_dc_layout_names_only_what_a_dc_record_holds() {
-    let dir = tempfile::tempdir().unwrap();
-    let record = fresh_record("tests/mcap_corpus/seed.toml", dir.path());
-    let n = check("layouts/foxglove/dc.json", &record);
-    assert!(n >= 7, "{n} paths");
+    layout_fits_a_fresh_record("tests/mcap_corpus/seed.toml", "layouts/foxglove/dc.json", 7);
 }
 
 #[test]
 fn the_im_layout_names_only_what_an_im_record_holds() {
-    let dir = tempfile::tempdir().unwrap();
-    let record = fresh_record("config/sim-im.toml", dir.path());
-    let n = check("layouts/foxglove/im.json", &record);
-    assert!(n >= 12, "{n} paths");
+    layout_fits_a_fresh_record("config/sim-im.toml", "layouts/foxglove/im.json", 12);
 }
