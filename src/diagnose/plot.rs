@@ -49,6 +49,8 @@ const BEFORE: RGBColor = RGBColor(214, 39, 40);
 const AFTER: RGBColor = RGBColor(31, 119, 180);
 /// Most samples a moving mean spans.
 const MAX_WINDOW: usize = 50;
+/// Most points a panel marks one by one (operating points, not samples).
+const MARKED: usize = 60;
 
 /// The residual plot could not be drawn or written.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -207,7 +209,7 @@ fn draw_panel<DB: DrawingBackend>(
             ys.clone()
         };
         chart.draw_series(LineSeries::new(series(&mean), colour.stroke_width(2)))?;
-        if w == 1 {
+        if panel.x.len() <= MARKED {
             // A few operating points: each one marked.
             chart.draw_series(
                 series(ys)
