@@ -605,6 +605,22 @@ mod tests {
     }
 
     #[test]
+    fn the_measurement_is_a_wide_band_drawn_under_the_models() {
+        let svg = render_segments_svg(&[segment("band", 400)]).unwrap();
+        // The last panel (after the legend band): its band, then its models.
+        let measured = svg
+            .rfind(r##"stroke="#AFAFAF" stroke-width="5" points"##)
+            .expect("the measured band");
+        let model = svg
+            .rfind(r##"stroke="#1F77B4" stroke-width="2" points"##)
+            .expect("the first model's line");
+        assert!(
+            measured < model,
+            "the band is drawn first, under the models"
+        );
+    }
+
+    #[test]
     fn every_second_model_is_dashed_by_the_svg() {
         let svg = render_segments_svg(&[segment("dashes", 400)]).unwrap();
         // "model friction" is the second model: red, dashed.
