@@ -13,7 +13,8 @@ use std::process::ExitCode;
 
 use clap::{CommandFactory, Parser, Subcommand};
 use motorbench::cli::{
-    self, CompletionsArgs, Failure, IdentifyArgs, ManArgs, ProbeArgs, ReplayArgs, RunArgs,
+    self, CompletionsArgs, ExportArgs, Failure, IdentifyArgs, ManArgs, ProbeArgs, ReplayArgs,
+    RunArgs,
 };
 use motorbench::diagnose::cli::{run_blind, run_diagnose, BlindArgs, DiagnoseArgs};
 use motorbench::serve::cli::{run_ctl, run_serve, CtlArgs, ServeArgs};
@@ -43,6 +44,10 @@ enum Command {
     Replay(ReplayArgs),
     /// Identify a motor from CSV files (one segment each) or one MCAP record.
     Identify(IdentifyArgs),
+    /// Export a record for other tools: each segment as contract CSV
+    /// (`identify` reads it back to the same report), every channel as one
+    /// Parquet file (pandas, polars, MATLAB).
+    Export(ExportArgs),
     /// Diagnose the sim-to-real gap: where the identified model misfits the
     /// record, which unmodelled effect causes it, how far the gap shrinks
     /// once it is modelled (all on held-out segments).
@@ -93,6 +98,7 @@ fn main() -> ExitCode {
         Command::Probe(args) => block_on_cli(cli::probe(args)),
         Command::Replay(args) => Failure::exit(cli::replay(args)),
         Command::Identify(args) => Failure::exit(cli::identify(args)),
+        Command::Export(args) => Failure::exit(cli::export(args)),
         Command::Diagnose(args) => ExitCode::from(run_diagnose(args)),
         Command::Blind(args) => ExitCode::from(run_blind(args)),
         Command::Serve(args) => block_on(async {

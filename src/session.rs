@@ -519,13 +519,15 @@ pub async fn commission(
         source,
     })?;
     let session = Session::open(machine, opts.realtime).await?;
-    let started_at = humantime::format_rfc3339_seconds(std::time::SystemTime::now()).to_string();
-    let stem = record_name(session.machine().motor_id(), &started_at, |s| {
-        dir.join(format!("{s}.mcap")).exists()
-    });
+    let start = crate::record::TestStart::now();
+    let stem = record_name(
+        session.machine().motor_id(),
+        &start.rfc3339_seconds(),
+        |s| dir.join(format!("{s}.mcap")).exists(),
+    );
     let mcap_path = dir.join(format!("{stem}.mcap"));
     // A cold motor: `run` keeps no thermal memory between tests.
-    let supervised = session.record_to(&mcap_path, started_at, 0.0)?;
+    let supervised = session.record_to(&mcap_path, start.rfc3339(), 0.0)?;
     let operator = supervised.handle().clone();
     let mut flag = shutdown.clone();
     let operator_stop = tokio::spawn(async move {

@@ -10,6 +10,7 @@
 //! identification method applied to the data; 5 `replay --check` found a
 //! result that differs from the recorded one.
 
+mod export;
 mod failure;
 mod identify;
 mod output;
@@ -21,6 +22,7 @@ mod run;
 mod shell_docs;
 mod signal;
 
+pub use export::{export, ExportArgs};
 pub use failure::Failure;
 pub use identify::{identify, IdentifyArgs};
 pub use probe::{probe, ProbeArgs};

@@ -105,7 +105,9 @@ fn compare_with_recorded(
 }
 
 /// Whether `replayed` equals `recorded`. The provenance (file names,
-/// version) is not compared. The diagnosis is compared only when both have
+/// version) is not compared, nor the contract version the report was
+/// written under (a version 1 record replays under version 2: the report's
+/// JSON is the same in both). The diagnosis is compared only when both have
 /// one to compare: a replay with `--no-diagnose` (not `diagnosed`) leaves
 /// the record's out, and a record made with `--no-diagnose` (or before the
 /// diagnosis existed) has none.
@@ -120,6 +122,7 @@ fn same_result(
         if let Some(obj) = v.as_object_mut() {
             // Where the report came from is not part of the result.
             obj.remove("provenance");
+            obj.remove("schema_version");
         }
     }
     if !diagnosed || recorded.get("diagnosis").is_none() {
@@ -153,6 +156,10 @@ mod tests {
         let mut moved = plain.clone();
         moved["provenance"] = serde_json::json!({"record": "renamed.mcap"});
         assert!(same_result(&moved, &replayed, true));
+        // Nor is the contract version it was written under.
+        let mut v1 = plain.clone();
+        v1["schema_version"] = "1".into();
+        assert!(same_result(&v1, &replayed, true));
         // Anything else that differs still differs.
         let mut other = diagnosed.clone();
         other["best"] = "steady_state".into();

@@ -18,4 +18,12 @@ pub use report::{unphysical_param, IdentificationReport, MethodReport, ParamEsti
 pub use standard_tests::{LockedRotorRow, NoLoadRow, StandardTestTables, XmCurve};
 
 /// The contract version this motorbench writes.
-pub const SCHEMA_VERSION: &str = "1";
+///
+/// Version 2 changed only the MCAP record (wall-clock `log_time`, events
+/// in Foxglove's log shape; see `docs/data-contract.md`); a report's JSON
+/// is the same in both but for its `schema_version`.
+pub const SCHEMA_VERSION: &str = "2";
+
+/// Every contract version this motorbench reads, oldest first: a record
+/// written under any of them replays.
+pub const READ_SCHEMA_VERSIONS: [&str; 2] = ["1", "2"];

@@ -278,7 +278,7 @@ mod tests {
         );
         r.best = Some("output_error".into());
         let v: serde_json::Value = serde_json::from_str(&r.to_json_pretty()).unwrap();
-        assert_eq!(v["schema_version"], "1");
+        assert_eq!(v["schema_version"], "2");
         assert_eq!(
             v["methods"]["output_error"]["params"]["Ra"]["ci95"][1],
             31.7

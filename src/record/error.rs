@@ -62,7 +62,7 @@ pub enum RecordError {
         path: PathBuf,
         /// The message's topic.
         topic: String,
-        /// The message's log time, ns since the start of the test.
+        /// The message's `log_time` as the file has it.
         log_time: u64,
         /// What is wrong.
         reason: String,
@@ -82,9 +82,9 @@ pub enum RecordError {
     /// The record was written under a contract version this build does
     /// not read.
     #[error(
-        "{}: schema_version \"{found}\" is not supported (this build reads schema_version \"{}\")",
+        "{}: schema_version \"{found}\" is not supported (this build reads schema_version {})",
         path.display(),
-        crate::record::SCHEMA_VERSION
+        crate::contract::READ_SCHEMA_VERSIONS.map(|v| format!("\"{v}\"")).join(" and ")
     )]
     UnsupportedVersion {
         /// The file.
@@ -340,11 +340,11 @@ mod tests {
     fn version_message_is_clear() {
         let e = RecordError::UnsupportedVersion {
             path: PathBuf::from("run.mcap"),
-            found: "2".into(),
+            found: "3".into(),
         };
         let s = e.to_string();
-        assert!(s.starts_with("run.mcap: schema_version \"2\" is not supported"));
-        assert!(s.contains("\"1\""));
+        assert!(s.starts_with("run.mcap: schema_version \"3\" is not supported"));
+        assert!(s.ends_with("reads schema_version \"1\" and \"2\")"), "{s}");
         assert!(!s.contains('\n'));
     }
 

@@ -9,18 +9,25 @@
 //!   induction-machine slip sweep, [`read_dc_resistance_csv`] and
 //!   [`read_supply_test_csv`] its standard tests (DC resistance, no load,
 //!   locked rotor).
+//! - [`export`] writes a record as contract CSV (one file per segment)
+//!   and as one Parquet file (`motorbench export`).
 //! - [`schema`] holds the topic and schema names and the JSON Schemas.
+//! - [`TestStart`] is the wall-clock start, the origin of a version 2
+//!   record's `log_time`; [`log_event`] the events' `foxglove.Log` shape.
 
 mod builder;
 mod csv;
 mod csv_im;
 mod csv_im_tests;
 mod error;
+pub mod export;
 mod files;
 mod im_tests;
+pub mod log_event;
 mod mcap_walk;
 mod reader;
 pub mod schema;
+mod start;
 mod types;
 mod writer;
 
@@ -33,6 +40,7 @@ pub use csv_im_tests::{
 };
 pub use error::{LoadError, RecordError};
 pub use files::load_record_files;
-pub use reader::{read_entries, read_mcap, Entries};
+pub use reader::{build_record, read_entries, read_mcap, Entries};
+pub use start::TestStart;
 pub use types::*;
 pub use writer::{library_name, Recorder, RecorderStats, QUEUE_CAPACITY};

@@ -12,8 +12,16 @@
 //! file damaged before its MCAP header or its `motorbench.test` metadata,
 //! and (by [`read_mcap`]) one with not a single message before the damage.
 //!
+//! Both contract versions read: in version 1 `log_time` is the time since
+//! the start of the test; in version 2 it is wall-clock Unix time and the
+//! metadata's `start_time_ns` is subtracted, so the entries (and all that
+//! is computed from them) are the same whichever version wrote the file.
+//! Events are read in either shape ([`super::log_event`]).
+//!
 //! Refused: files without the `motorbench.test` metadata record, with a
-//! `schema_version` other than [`SCHEMA_VERSION`], with a missing metadata
+//! `schema_version` this build does not read ([`READ_SCHEMA_VERSIONS`]),
+//! a version 2 file without a `start_time_ns` or with a message before
+//! it, with a missing metadata
 //! key, a sample channel without its `unit`/`quantity`/`source` metadata,
 //! a channel not encoded as JSON, or a message that does not decode (the
 //! error names the file, the topic and the log time).
@@ -32,12 +40,15 @@ use serde::Deserialize;
 
 use super::builder::RecordBuilder;
 use super::error::{DecodeError, RecordError};
+use super::log_event::AnyEvent;
 use super::mcap_walk::{walk_records, Damage};
 use super::schema::{
-    is_sample_topic_for, COMMAND_PREFIX, MESSAGE_ENCODING, METADATA_NAME, SENSOR_PREFIX,
-    TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT, TOPIC_SUPPLY_LIMIT,
+    is_sample_topic_for, COMMAND_PREFIX, MESSAGE_ENCODING, METADATA_NAME, METADATA_START_TIME_NS,
+    SENSOR_PREFIX, TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT,
+    TOPIC_SUPPLY_LIMIT,
 };
-use super::types::{ChannelSpec, Entry, Record, Recovery, SegmentKind, TestMeta, SCHEMA_VERSION};
+use super::types::{ChannelSpec, Entry, Record, Recovery, SegmentKind, TestMeta};
+use crate::contract::READ_SCHEMA_VERSIONS;
 
 /// Everything [`read_entries`] finds in a file: the metadata, the sample
 /// channels (in the order their channel records appear; [`Entry::Samples`]
@@ -76,13 +87,19 @@ pub fn read_mcap(path: &Path) -> Result<Record, RecordError> {
             reason: format!("{}; not one message before the damage", r.reason),
         });
     }
-    let mut builder = RecordBuilder::new(Some(meta), channels);
-    for e in &entries {
-        builder.push(e);
-    }
-    let mut record = builder.finish();
+    let mut record = build_record(meta, channels, &entries);
     record.recovery = recovery;
     Ok(record)
+}
+
+/// The [`Record`] of what [`read_entries`] read (through
+/// [`RecordBuilder`], like the live bench); its `recovery` is not set.
+pub fn build_record(meta: TestMeta, channels: Vec<ChannelSpec>, entries: &[Entry]) -> Record {
+    let mut builder = RecordBuilder::new(Some(meta), channels);
+    for e in entries {
+        builder.push(e);
+    }
+    builder.finish()
 }
 
 /// Reads a record file into its metadata, sample channels and entries.
@@ -128,8 +145,10 @@ pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
         });
     };
     // Damage may be what broke the metadata or a message: say both.
-    let meta = match (meta_from(path, &metadata), failure, &damage) {
-        (Ok(meta), None, _) => meta,
+    let read_meta =
+        meta_from(path, &metadata).and_then(|meta| Ok((origin_ns(path, &meta, &metadata)?, meta)));
+    let (origin, meta) = match (read_meta, failure, &damage) {
+        (Ok(read), None, _) => read,
         (Err(e), _, Some(d)) | (Ok(_), Some(e), Some(d)) => {
             let text = e.to_string();
             let prefix = format!("{}: ", path.display());
@@ -138,7 +157,19 @@ pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
         }
         (Err(e), _, None) | (Ok(_), Some(e), None) => return Err(e),
     };
-    let (channels, entries, messages) = state.finish();
+    let (channels, mut entries, messages) = state.finish();
+    for e in &mut entries {
+        let t = e.t_ns_mut();
+        *t = t.checked_sub(origin).ok_or_else(|| {
+            RecordError::not_motorbench(
+                path,
+                format!(
+                    "a message at log_time {t} is before the test's start \
+                     ({METADATA_START_TIME_NS} {origin})"
+                ),
+            )
+        })?;
+    }
     let recovery = damage.map(|d| Recovery {
         messages,
         offset: d.offset,
@@ -225,7 +256,9 @@ impl<'p> Reading<'p> {
                     }),
                     Route::Event => Some(Entry::Event {
                         t_ns,
-                        event: decode(&data).map_err(|e| bad(e.to_string()))?,
+                        event: decode::<AnyEvent>(&data)
+                            .map_err(|e| bad(e.to_string()))?
+                            .into(),
                     }),
                     Route::Result => {
                         let report: serde_json::Value =
@@ -335,6 +368,34 @@ fn route_of(
     Ok(route)
 }
 
+/// The origin of `log_time` in a file of `meta`'s version, Unix ns: 0 in
+/// version 1 (`log_time` counts from the start), the metadata's
+/// `start_time_ns` from version 2 on.
+fn origin_ns(
+    path: &Path,
+    meta: &TestMeta,
+    md: &BTreeMap<String, String>,
+) -> Result<u64, RecordError> {
+    if meta.schema_version == "1" {
+        return Ok(0);
+    }
+    let text = md.get(METADATA_START_TIME_NS).ok_or_else(|| {
+        RecordError::not_motorbench(
+            path,
+            format!("{METADATA_NAME} metadata has no \"{METADATA_START_TIME_NS}\""),
+        )
+    })?;
+    text.parse().map_err(|_| {
+        RecordError::not_motorbench(
+            path,
+            format!(
+                "{METADATA_NAME} {METADATA_START_TIME_NS} {} is not a whole number of ns",
+                crate::excerpt::quoted(text)
+            ),
+        )
+    })
+}
+
 /// The [`TestMeta`] of a `motorbench.test` metadata record.
 fn meta_from(path: &Path, md: &BTreeMap<String, String>) -> Result<TestMeta, RecordError> {
     let get = |key: &str| {
@@ -343,7 +404,7 @@ fn meta_from(path: &Path, md: &BTreeMap<String, String>) -> Result<TestMeta, Rec
         })
     };
     let schema_version = get("schema_version")?;
-    if schema_version != SCHEMA_VERSION {
+    if !READ_SCHEMA_VERSIONS.contains(&schema_version.as_str()) {
         return Err(RecordError::UnsupportedVersion {
             path: path.to_path_buf(),
             found: schema_version,
@@ -384,7 +445,7 @@ fn meta_from(path: &Path, md: &BTreeMap<String, String>) -> Result<TestMeta, Rec
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::record::types::{Event, EventLevel, SegmentPhase};
+    use crate::record::types::{Event, EventLevel, SegmentPhase, SCHEMA_VERSION};
     use crate::record::writer::Recorder;
     use mcap::records::{MessageHeader, Metadata};
     use std::io::BufWriter;
@@ -686,7 +747,8 @@ mod tests {
         chunks.sort_by_key(|c| c.chunk_start_offset);
         let kept = chunks
             .iter()
-            .rfind(|c| c.message_end_time <= 5_500_000_000)
+            // log_time is wall clock: the start (meta's started_at) + t.
+            .rfind(|c| c.message_end_time <= 1_795_255_200_000_000_000 + 5_500_000_000)
             .unwrap();
         let end = (kept.chunk_start_offset + kept.chunk_length) as usize;
         let cut = dir.path().join("cut.mcap");
@@ -709,6 +771,16 @@ mod tests {
     }
 
     fn raw_file(path: &Path, metadata: Option<BTreeMap<String, String>>, event: &[u8]) {
+        raw_file_at(path, metadata, event, 42);
+    }
+
+    /// A file of `metadata` with one `event` at `log_time`.
+    fn raw_file_at(
+        path: &Path,
+        metadata: Option<BTreeMap<String, String>>,
+        event: &[u8],
+        log_time: u64,
+    ) {
         let file = std::fs::File::create(path).unwrap();
         let mut w = mcap::WriteOptions::new()
             .create(BufWriter::new(file))
@@ -734,8 +806,8 @@ mod tests {
             &MessageHeader {
                 channel_id: ch,
                 sequence: 0,
-                log_time: 42,
-                publish_time: 42,
+                log_time,
+                publish_time: log_time,
             },
             event,
         )
@@ -790,13 +862,13 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("v2.mcap");
         let mut md = good_metadata();
-        md.insert("schema_version".into(), "2".into());
+        md.insert("schema_version".into(), "3".into());
         // A message that does not decode under version 1 does not hide
         // the version.
         raw_file(&path, Some(md), br#"{"level":"fatal","message":"x"}"#);
         let e = read_mcap(&path).unwrap_err();
         assert!(matches!(e, RecordError::UnsupportedVersion { .. }), "{e}");
-        assert!(e.to_string().contains("schema_version \"2\""), "{e}");
+        assert!(e.to_string().contains("schema_version \"3\""), "{e}");
     }
 
     #[test]
@@ -808,6 +880,55 @@ mod tests {
         assert_eq!(r.events.len(), 1);
         assert_eq!(r.events[0].0, 42);
         assert!(r.recovery.is_none());
+    }
+
+    fn v2_metadata() -> BTreeMap<String, String> {
+        let mut md = good_metadata();
+        md.insert("schema_version".into(), "2".into());
+        md.insert("start_time_ns".into(), "1795255200000000000".into());
+        md
+    }
+
+    const LOG: &[u8] = br#"{"timestamp":{"sec":1795255200,"nsec":42},"level":3,"message":"hi","name":"motorbench","file":"","line":0}"#;
+
+    #[test]
+    fn version_2_times_count_from_start_time_ns() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("v2.mcap");
+        raw_file_at(&path, Some(v2_metadata()), LOG, 1_795_255_200_000_000_042);
+        let r = read_mcap(&path).unwrap();
+        assert_eq!(
+            r.events,
+            vec![(
+                42,
+                Event {
+                    level: EventLevel::Warn,
+                    message: "hi".into()
+                }
+            )]
+        );
+        assert_eq!(r.meta.unwrap().schema_version, "2");
+    }
+
+    #[test]
+    fn version_2_without_its_start_or_before_it_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("early.mcap");
+        raw_file_at(&path, Some(v2_metadata()), LOG, 1_795_255_199_000_000_000);
+        let s = read_mcap(&path).unwrap_err().to_string();
+        assert!(s.contains("before the test's start"), "{s}");
+        let path = dir.path().join("nostart.mcap");
+        let mut md = v2_metadata();
+        md.remove("start_time_ns");
+        raw_file_at(&path, Some(md), LOG, 1_795_255_200_000_000_042);
+        let s = read_mcap(&path).unwrap_err().to_string();
+        assert!(s.contains("no \"start_time_ns\""), "{s}");
+        let path = dir.path().join("badstart.mcap");
+        let mut md = v2_metadata();
+        md.insert("start_time_ns".into(), "2026-11-21".into());
+        raw_file_at(&path, Some(md), LOG, 1_795_255_200_000_000_042);
+        let s = read_mcap(&path).unwrap_err().to_string();
+        assert!(s.contains("not a whole number of ns"), "{s}");
     }
 
     #[test]

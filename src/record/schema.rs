@@ -23,6 +23,11 @@ pub const METADATA_KEYS: [&str; 6] = [
     "config",
 ];
 
+/// Key of the `motorbench.test` metadata that version 2 adds: the test
+/// start as Unix time in ns (an integer, as text), the origin of
+/// `log_time` (see [`super::TestStart`]).
+pub const METADATA_START_TIME_NS: &str = "start_time_ns";
+
 /// Topic prefix of measured channels.
 pub const SENSOR_PREFIX: &str = "/sensor/";
 /// Topic prefix of commanded channels.
@@ -46,8 +51,11 @@ pub const SCHEMA_SAMPLE: &str = "motorbench.Sample";
 pub const SCHEMA_SEGMENT: &str = "motorbench.Segment";
 /// Schema of `/bench/operating_point` messages.
 pub const SCHEMA_OPERATING_POINT: &str = "motorbench.OperatingPoint";
-/// Schema of `/bench/event` messages.
+/// Schema of `/bench/event` messages in version 1 records.
 pub const SCHEMA_EVENT: &str = "motorbench.Event";
+/// Schema of `/bench/event` messages in version 2 records: Foxglove's log
+/// message, so that Foxglove's Log panel shows the events.
+pub const SCHEMA_LOG: &str = "foxglove.Log";
 /// Schema of `/bench/result` messages.
 pub const SCHEMA_RESULT: &str = "motorbench.Result";
 /// Schema of `/bench/supply_limit` messages.
@@ -103,7 +111,36 @@ pub const OPERATING_POINT_JSON_SCHEMA: &str = r#"{
   "additionalProperties": false
 }"#;
 
-/// JSON Schema of `motorbench.Event`.
+/// JSON Schema of `foxglove.Log` as version 2 writes it on `/bench/event`
+/// (Foxglove's fields; see [`super::log_event`] for the level numbers).
+pub const LOG_JSON_SCHEMA: &str = r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "foxglove.Log",
+  "description": "Something the bench did or saw, for a person (Foxglove's log message).",
+  "type": "object",
+  "properties": {
+    "timestamp": {
+      "type": "object",
+      "description": "Wall-clock time of the event (equal to the message's log_time).",
+      "properties": {
+        "sec": {"type": "integer", "minimum": 0},
+        "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}
+      },
+      "required": ["sec", "nsec"]
+    },
+    "level": {
+      "description": "Foxglove log level: 2 INFO (info), 3 WARNING (warn), 4 ERROR (abort: the test was stopped and the rig put in its safe state).",
+      "enum": [0, 1, 2, 3, 4, 5]
+    },
+    "message": {"type": "string"},
+    "name": {"type": "string", "description": "Always motorbench."},
+    "file": {"type": "string"},
+    "line": {"type": "integer", "minimum": 0}
+  },
+  "required": ["timestamp", "level", "message", "name", "file", "line"]
+}"#;
+
+/// JSON Schema of `motorbench.Event` (version 1; read, no longer written).
 pub const EVENT_JSON_SCHEMA: &str = r#"{
   "$schema": "https://json-schema.org/draft/2020-12/schema",
   "title": "motorbench.Event",
@@ -147,7 +184,7 @@ pub const SUPPLY_LIMIT_JSON_SCHEMA: &str = r#"{
 }"#;
 
 /// The `/bench/*` topics with their schema names and schema texts, in the
-/// order the recorder declares them.
+/// order the recorder declares them (version 2).
 pub const BENCH_TOPICS: [(&str, &str, &str); 5] = [
     (TOPIC_SEGMENT, SCHEMA_SEGMENT, SEGMENT_JSON_SCHEMA),
     (
@@ -155,7 +192,7 @@ pub const BENCH_TOPICS: [(&str, &str, &str); 5] = [
         SCHEMA_OPERATING_POINT,
         OPERATING_POINT_JSON_SCHEMA,
     ),
-    (TOPIC_EVENT, SCHEMA_EVENT, EVENT_JSON_SCHEMA),
+    (TOPIC_EVENT, SCHEMA_LOG, LOG_JSON_SCHEMA),
     (TOPIC_RESULT, SCHEMA_RESULT, RESULT_JSON_SCHEMA),
     (
         TOPIC_SUPPLY_LIMIT,
@@ -184,6 +221,7 @@ mod tests {
             (SCHEMA_SEGMENT, SEGMENT_JSON_SCHEMA),
             (SCHEMA_OPERATING_POINT, OPERATING_POINT_JSON_SCHEMA),
             (SCHEMA_EVENT, EVENT_JSON_SCHEMA),
+            (SCHEMA_LOG, LOG_JSON_SCHEMA),
             (SCHEMA_RESULT, RESULT_JSON_SCHEMA),
             (SCHEMA_SUPPLY_LIMIT, SUPPLY_LIMIT_JSON_SCHEMA),
         ];

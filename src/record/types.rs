@@ -170,7 +170,8 @@ pub struct TestMeta {
 
 /// What the bench hands the recorder; the MCAP reader yields the same.
 ///
-/// `t_ns` is nanoseconds since the start of the test (MCAP `log_time`).
+/// `t_ns` is nanoseconds since the start of the test (MCAP `log_time`
+/// in a version 1 record; `log_time − start_time_ns` in version 2).
 #[derive(Debug, Clone, PartialEq)]
 pub enum Entry {
     /// Readings taken at one instant: `(channel index, value)` pairs, the
@@ -342,17 +343,30 @@ impl SupplyLimit {
     }
 }
 
-impl Entry {
-    /// The entry's time, ns since the start of the test.
-    pub fn t_ns(&self) -> u64 {
-        match self {
+/// The `t_ns` field of an entry (`&Entry` gives `&u64`, `&mut Entry`
+/// gives `&mut u64`).
+macro_rules! t_ns_field {
+    ($entry:expr) => {
+        match $entry {
             Entry::Samples { t_ns, .. }
             | Entry::OperatingPoint { t_ns, .. }
             | Entry::Segment { t_ns, .. }
             | Entry::Event { t_ns, .. }
             | Entry::SupplyLimit { t_ns, .. }
-            | Entry::Result { t_ns, .. } => *t_ns,
+            | Entry::Result { t_ns, .. } => t_ns,
         }
+    };
+}
+
+impl Entry {
+    /// The entry's time, ns since the start of the test.
+    pub fn t_ns(&self) -> u64 {
+        *t_ns_field!(self)
+    }
+
+    /// The entry's time, to change.
+    pub fn t_ns_mut(&mut self) -> &mut u64 {
+        t_ns_field!(self)
     }
 }
 

@@ -13,9 +13,12 @@
 //!   non-finite value is not written as a sample; a `/bench/event` warning
 //!   names the channel and the value at that time instead.
 //! - Segment markers, events and the result go to their `/bench/*` topics;
-//!   the result payload is the report JSON as it is.
-//! - `log_time = publish_time = t_ns`; sequence numbers count up from 0 per
-//!   channel.
+//!   the result payload is the report JSON as it is; events in the shape
+//!   of Foxglove's `foxglove.Log` ([`super::log_event`]).
+//! - `log_time = publish_time` = the test's start (the metadata's
+//!   `started_at`, also written as `start_time_ns`) + `t_ns`: wall-clock
+//!   Unix time in ns (contract version 2); sequence numbers count up from
+//!   0 per channel.
 //!
 //! Crash safety: the current chunk is closed and the file buffer flushed
 //! whenever log time has advanced by 1 s or more since the last flush, and
@@ -38,11 +41,13 @@ use serde::Serialize;
 use tokio::sync::{mpsc, oneshot};
 
 use super::error::RecordError;
+use super::log_event::LogMessage;
 use super::schema::{
-    is_sample_topic_for, BENCH_TOPICS, MESSAGE_ENCODING, METADATA_NAME, SAMPLE_JSON_SCHEMA,
-    SCHEMA_ENCODING, SCHEMA_SAMPLE, TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT,
-    TOPIC_SEGMENT, TOPIC_SUPPLY_LIMIT,
+    is_sample_topic_for, BENCH_TOPICS, MESSAGE_ENCODING, METADATA_NAME, METADATA_START_TIME_NS,
+    SAMPLE_JSON_SCHEMA, SCHEMA_ENCODING, SCHEMA_SAMPLE, TOPIC_EVENT, TOPIC_OPERATING_POINT,
+    TOPIC_RESULT, TOPIC_SEGMENT, TOPIC_SUPPLY_LIMIT,
 };
+use super::start::TestStart;
 use super::types::{ChannelSpec, Entry, Event, EventLevel, TestMeta, SCHEMA_VERSION};
 
 /// Log time between two flushes, ns.
@@ -90,6 +95,8 @@ pub struct Recorder {
 /// `0..n` are the sample channels in the caller's order, then the
 /// `/bench/*` topics in [`BENCH_TOPICS`] order.
 struct Channels {
+    /// The test's start, Unix ns: `log_time` = this + the entry's time.
+    origin_ns: u64,
     topics: Vec<String>,
     ids: Vec<u16>,
     sequence: Vec<u32>,
@@ -98,6 +105,11 @@ struct Channels {
 }
 
 impl Channels {
+    /// The MCAP `log_time` of an entry `t_ns` after the start.
+    fn log_time(&self, t_ns: u64) -> u64 {
+        self.origin_ns.saturating_add(t_ns)
+    }
+
     fn position_of_bench(&self, topic: &str) -> usize {
         let k = BENCH_TOPICS
             .iter()
@@ -127,7 +139,8 @@ impl Recorder {
     ///
     /// `queue_capacity` is the number of entries the queue holds (at least
     /// 1). Refuses a `meta` whose `schema_version` is not
-    /// [`SCHEMA_VERSION`] or whose nameplate is not a JSON object, and
+    /// [`SCHEMA_VERSION`], whose `started_at` is not an RFC 3339 UTC time
+    /// (the origin of `log_time`) or whose nameplate is not a JSON object, and
     /// channels whose topic is not `/sensor/<quantity>` or
     /// `/command/<quantity>` or appears twice.
     pub fn start(
@@ -136,7 +149,7 @@ impl Recorder {
         channels: &[ChannelSpec],
         queue_capacity: usize,
     ) -> Result<Recorder, RecordError> {
-        validate(path, meta, channels)?;
+        let start = validate(path, meta, channels)?;
         let file = OpenOptions::new()
             .write(true)
             .create_new(true)
@@ -154,7 +167,7 @@ impl Recorder {
         writer
             .write_metadata(&Metadata {
                 name: METADATA_NAME.to_string(),
-                metadata: metadata_map(meta),
+                metadata: metadata_map(meta, start),
             })
             .map_err(mcap_err)?;
 
@@ -166,6 +179,7 @@ impl Recorder {
             )
             .map_err(mcap_err)?;
         let mut table = Channels {
+            origin_ns: start.unix_ns(),
             topics: Vec::new(),
             ids: Vec::new(),
             sequence: Vec::new(),
@@ -345,9 +359,14 @@ impl Recorder {
     }
 }
 
-/// The `motorbench.test` metadata of `meta` (all values strings).
-fn metadata_map(meta: &TestMeta) -> BTreeMap<String, String> {
+/// The `motorbench.test` metadata of `meta` started at `start` (all
+/// values strings).
+fn metadata_map(meta: &TestMeta, start: TestStart) -> BTreeMap<String, String> {
     BTreeMap::from([
+        (
+            METADATA_START_TIME_NS.to_string(),
+            start.unix_ns().to_string(),
+        ),
         ("schema_version".to_string(), meta.schema_version.clone()),
         ("kind".to_string(), meta.kind.as_str().to_string()),
         ("motor_id".to_string(), meta.motor_id.clone()),
@@ -357,7 +376,12 @@ fn metadata_map(meta: &TestMeta) -> BTreeMap<String, String> {
     ])
 }
 
-fn validate(path: &Path, meta: &TestMeta, channels: &[ChannelSpec]) -> Result<(), RecordError> {
+/// Checks what [`Recorder::start`] refuses; the test's start.
+fn validate(
+    path: &Path,
+    meta: &TestMeta,
+    channels: &[ChannelSpec],
+) -> Result<TestStart, RecordError> {
     let invalid = |reason: String| RecordError::InvalidInput {
         path: path.to_path_buf(),
         reason,
@@ -368,6 +392,12 @@ fn validate(path: &Path, meta: &TestMeta, channels: &[ChannelSpec]) -> Result<()
             meta.schema_version
         )));
     }
+    let start = TestStart::parse_rfc3339(&meta.started_at).ok_or_else(|| {
+        invalid(format!(
+            "started_at \"{}\" is not an RFC 3339 UTC time (e.g. 2026-12-03T15:48:50.123456789Z)",
+            meta.started_at
+        ))
+    })?;
     if !meta.nameplate.is_object() {
         return Err(invalid("the nameplate is not a JSON object".to_string()));
     }
@@ -385,7 +415,7 @@ fn validate(path: &Path, meta: &TestMeta, channels: &[ChannelSpec]) -> Result<()
             )));
         }
     }
-    Ok(())
+    Ok(start)
 }
 
 /// The writer thread's body: writes queued entries until the queue closes,
@@ -419,15 +449,7 @@ fn run(
                                 table.topics[index]
                             ),
                         };
-                        write_bench_json(
-                            &mut writer,
-                            &mut table,
-                            TOPIC_EVENT,
-                            *t_ns,
-                            &event,
-                            "an event serializes",
-                        )
-                        .map_err(mcap_err)?;
+                        write_event(&mut writer, &mut table, *t_ns, &event).map_err(mcap_err)?;
                     }
                 }
                 (*t_ns, false)
@@ -445,15 +467,7 @@ fn run(
                 (*t_ns, true)
             }
             Entry::Event { t_ns, event } => {
-                write_bench_json(
-                    &mut writer,
-                    &mut table,
-                    TOPIC_EVENT,
-                    *t_ns,
-                    event,
-                    "an event serializes",
-                )
-                .map_err(mcap_err)?;
+                write_event(&mut writer, &mut table, *t_ns, event).map_err(mcap_err)?;
                 (*t_ns, event.level == EventLevel::Abort)
             }
             Entry::OperatingPoint { t_ns, point } => {
@@ -535,6 +549,24 @@ fn write_bench_json(
     write_message(writer, table, pos, t_ns, &data)
 }
 
+/// Write `event` on `/bench/event` at `t_ns`, as `foxglove.Log`.
+fn write_event(
+    writer: &mut Writer<BufWriter<File>>,
+    table: &mut Channels,
+    t_ns: u64,
+    event: &Event,
+) -> Result<(), mcap::McapError> {
+    let log = LogMessage::new(event, table.log_time(t_ns));
+    write_bench_json(
+        writer,
+        table,
+        TOPIC_EVENT,
+        t_ns,
+        &log,
+        "an event serializes",
+    )
+}
+
 fn write_message(
     writer: &mut Writer<BufWriter<File>>,
     table: &mut Channels,
@@ -545,8 +577,8 @@ fn write_message(
     let header = MessageHeader {
         channel_id: table.ids[pos],
         sequence: table.sequence[pos],
-        log_time: t_ns,
-        publish_time: t_ns,
+        log_time: table.log_time(t_ns),
+        publish_time: table.log_time(t_ns),
     };
     writer.write_to_known_channel(&header, data)?;
     table.sequence[pos] = table.sequence[pos].wrapping_add(1);
@@ -651,7 +683,10 @@ mod tests {
         );
         let md = metadata.unwrap();
         assert_eq!(md.name, "motorbench.test");
-        assert_eq!(md.metadata["schema_version"], "1");
+        assert_eq!(md.metadata["schema_version"], "2");
+        // The start to the ns, as the origin of log_time.
+        assert_eq!(md.metadata["started_at"], "2026-11-21T10:00:00Z");
+        assert_eq!(md.metadata["start_time_ns"], "1795255200000000000");
         assert_eq!(md.metadata["kind"], "dc_coastdown");
         assert_eq!(md.metadata["nameplate"], r#"{"power_W":100.0}"#);
 
@@ -674,11 +709,26 @@ mod tests {
         assert_eq!(schema.name, "motorbench.Sample");
         assert_eq!(schema.encoding, "jsonschema");
 
-        // Sequence numbers count up per channel; log_time == publish_time.
+        // Sequence numbers count up per channel; log_time == publish_time,
+        // the wall clock: the start plus the entry's time.
         let mut seq: BTreeMap<String, Vec<u32>> = BTreeMap::new();
         for m in mcap::MessageStream::new(&bytes).unwrap() {
             let m = m.unwrap();
             assert_eq!(m.log_time, m.publish_time);
+            if m.channel.topic == "/sensor/speed" {
+                let t_ns = 1_000_000 * u64::from(m.sequence);
+                assert_eq!(m.log_time, 1_795_255_200_000_000_000 + t_ns);
+            }
+            if m.channel.topic == "/bench/event" {
+                assert_eq!(m.channel.schema.as_ref().unwrap().name, "foxglove.Log");
+                let log: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+                assert_eq!(log["level"], 4, "abort is Foxglove's ERROR");
+                assert_eq!(log["message"], "limit");
+                assert_eq!(
+                    log["timestamp"],
+                    serde_json::json!({"sec": 1_795_255_200u64, "nsec": 5})
+                );
+            }
             seq.entry(m.channel.topic.clone())
                 .or_default()
                 .push(m.sequence);
@@ -702,8 +752,12 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("bad.mcap");
         let mut m = meta();
-        m.schema_version = "2".into();
+        m.schema_version = "1".into();
         assert!(Recorder::start(&path, &m, &channels(), 8).is_err());
+        let mut m = meta();
+        m.started_at = "2026-11-21 10:00".into();
+        let e = Recorder::start(&path, &m, &channels(), 8).unwrap_err();
+        assert!(e.to_string().contains("started_at"), "{e}");
         let mut m = meta();
         m.nameplate = serde_json::json!([1]);
         assert!(Recorder::start(&path, &m, &channels(), 8).is_err());

@@ -3,6 +3,7 @@
 //! live with the machine: `machine/dc/text.rs`, `overlay.rs`;
 //! `machine/im/text.rs`, `plot.rs`).
 
+pub mod legend;
 pub mod plot;
 
 pub use crate::contract::{

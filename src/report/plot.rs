@@ -1,10 +1,14 @@
 //! SVG plots of measured and modelled segment responses.
 //!
 //! Each test segment becomes one row of two panels: armature current \[A\] and
-//! speed \[rad/s\], both against time \[s\]. The first trace of each panel is the
-//! measurement, drawn as a thin grey line; every further trace is a model
-//! response, drawn in its own colour. Model `k` has the same colour in both
-//! panels of every row, so one legend entry reads the same everywhere.
+//! speed \[rad/s\], both against the time since the start of the test \[s\].
+//! The first trace of each panel is the measurement, drawn first as a wide
+//! light-grey band, so that it stays visible around the models drawn over
+//! it; every further trace is a model response, a narrower line in its own
+//! colour, every second one dashed so that two models that agree both show.
+//! Model `k` has the same colour and dash in both panels of every row, and
+//! the row's legend sits in a band of its own under the row's title, never
+//! on the data.
 //!
 //! Records are long (kilohertz sampling, seconds per segment), so every trace
 //! is reduced with min/max bucketing before drawing: the samples are split
@@ -25,10 +29,12 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
+use super::legend;
+
 /// Total width of the picture in pixels.
 const WIDTH: u32 = 1200;
 /// Height of one segment row in pixels.
-const ROW_HEIGHT: u32 = 260;
+const ROW_HEIGHT: u32 = 300;
 /// Most buckets a trace is reduced to; each bucket yields at most two points,
 /// so a drawn trace has at most `2 * MAX_BUCKETS` points.
 const MAX_BUCKETS: usize = 750;
@@ -39,8 +45,12 @@ const Y_MARGIN: f64 = 0.05;
 /// Font family for all text.
 const FONT: &str = "sans-serif";
 
-/// Colour of the measured trace.
-const MEASURED_COLOUR: RGBColor = RGBColor(90, 90, 90);
+/// Colour of the measured trace: a light band under the models.
+const MEASURED_COLOUR: RGBColor = RGBColor(175, 175, 175);
+/// Width of the measured band, px.
+const MEASURED_WIDTH: u32 = 5;
+/// Width of a model's line, px.
+const MODEL_WIDTH: u32 = 2;
 /// Colours of model traces, cycled when there are more models than colours.
 const MODEL_COLOURS: [RGBColor; 8] = [
     RGBColor(31, 119, 180),
@@ -114,9 +124,9 @@ fn render_error(err: impl fmt::Display) -> PlotError {
 
 /// Render all segments into one SVG: one row per segment, two panels per row
 /// (armature current \[A\], speed \[rad/s\] against time \[s\]), measured drawn as a
-/// thin grey line and each model trace in a distinct colour, legend naming
-/// each trace, row title = segment title. Width 1200 px, height 260 px per
-/// row.
+/// wide light-grey band under the models, each model trace in a distinct
+/// colour (every second dashed), a legend band naming each trace under the
+/// row title = segment title. Width 1200 px, height 300 px per row.
 ///
 /// Every trace is reduced to at most 1500 points by min/max bucketing, so the
 /// output size does not grow with the record length. Non-finite samples are
@@ -151,7 +161,32 @@ pub fn render_segments_svg(plots: &[SegmentPlot]) -> Result<String, PlotError> {
         }
         root.present().map_err(render_error)?;
     }
-    Ok(svg)
+    Ok(dash(svg, plots))
+}
+
+/// The stroke attributes of the model lines drawn dashed: every model
+/// whose position makes it dashed (see `curves`), by its colour.
+fn dashed_strokes(plots: &[SegmentPlot]) -> Vec<String> {
+    let most = plots
+        .iter()
+        .map(|p| p.current.len().max(p.speed.len()))
+        .max()
+        .unwrap_or(0);
+    (2..most)
+        .filter(|&i| is_dashed(i))
+        .map(|i| {
+            let RGBColor(r, g, b) = MODEL_COLOURS[(i - 1) % MODEL_COLOURS.len()];
+            format!("stroke=\"#{r:02X}{g:02X}{b:02X}\" stroke-width=\"{MODEL_WIDTH}\"")
+        })
+        .collect()
+}
+
+/// `svg` with every dashed model's lines given a dash pattern.
+fn dash(mut svg: String, plots: &[SegmentPlot]) -> String {
+    for stroke in dashed_strokes(plots) {
+        svg = svg.replace(&stroke, &format!("{stroke} stroke-dasharray=\"7 5\""));
+    }
+    svg
 }
 
 /// Render with [`render_segments_svg`] and write the SVG to `path`,
@@ -181,6 +216,20 @@ struct Curve<'a> {
     points: Vec<(f64, f64)>,
     colour: RGBColor,
     width: u32,
+    dashed: bool,
+}
+
+impl Curve<'_> {
+    fn legend_entry(&self) -> legend::Entry {
+        legend::Entry {
+            name: self.name.to_string(),
+            swatch: legend::Swatch::Line {
+                colour: self.colour.to_rgba(),
+                width: self.width,
+                dashed: self.dashed,
+            },
+        }
+    }
 }
 
 /// Which quantity a panel shows.
@@ -210,6 +259,17 @@ fn draw_row<DB: DrawingBackend>(
     let current = curves(&plot.time, &plot.current);
     let speed = curves(&plot.time, &plot.speed);
 
+    // One legend for the row: every name of either panel, once.
+    let mut entries: Vec<legend::Entry> = Vec::new();
+    for c in current.iter().chain(&speed) {
+        if !entries.iter().any(|e| e.name == c.name) {
+            entries.push(c.legend_entry());
+        }
+    }
+    let band = legend::lines_needed(&entries, WIDTH) * legend::LINE_HEIGHT + 2;
+    let (band_area, body) = body.split_vertically(band);
+    legend::draw(&band_area, &entries).map_err(render_error)?;
+
     // Both panels share the time axis so they line up.
     let time_range = padded_range(
         current
@@ -225,6 +285,12 @@ fn draw_row<DB: DrawingBackend>(
     Ok(())
 }
 
+/// Whether the trace at position `i` of a panel (0: the measurement) is
+/// drawn dashed: every second model, so two models that agree both show.
+fn is_dashed(i: usize) -> bool {
+    i >= 2 && i % 2 == 0
+}
+
 /// Decimated curves of one panel, with colours by position.
 fn curves<'a>(time: &[f64], traces: &'a [Trace]) -> Vec<Curve<'a>> {
     traces
@@ -232,15 +298,16 @@ fn curves<'a>(time: &[f64], traces: &'a [Trace]) -> Vec<Curve<'a>> {
         .enumerate()
         .map(|(i, trace)| {
             let (colour, width) = if i == 0 {
-                (MEASURED_COLOUR, 1)
+                (MEASURED_COLOUR, MEASURED_WIDTH)
             } else {
-                (MODEL_COLOURS[(i - 1) % MODEL_COLOURS.len()], 2)
+                (MODEL_COLOURS[(i - 1) % MODEL_COLOURS.len()], MODEL_WIDTH)
             };
             Curve {
                 name: &trace.name,
                 points: decimate_min_max(time, &trace.values, MAX_BUCKETS),
                 colour,
                 width,
+                dashed: is_dashed(i),
             }
         })
         .collect()
@@ -273,7 +340,7 @@ fn draw_panel<DB: DrawingBackend>(
     let y_format = move |v: &f64| format_tick(*v, y_span);
     chart
         .configure_mesh()
-        .x_desc("time [s]")
+        .x_desc("time since the start [s]")
         .y_desc(quantity.axis_label())
         .x_labels(8)
         .y_labels(6)
@@ -288,7 +355,6 @@ fn draw_panel<DB: DrawingBackend>(
 
     for curve in curves {
         let style = ShapeStyle::from(&curve.colour).stroke_width(curve.width);
-        let legend_style = style;
         // Clamp so out-of-range values (beyond `AXIS_LIMIT`) stay inside the
         // panel instead of reaching far outside the picture.
         let points = curve.points.iter().map(|&(t, v)| {
@@ -297,21 +363,10 @@ fn draw_panel<DB: DrawingBackend>(
                 v.clamp(value_range.0, value_range.1),
             )
         });
+        // Dashed curves are dashed by the SVG itself (see `dash`): one
+        // polyline, not one element per dash.
         chart
             .draw_series(LineSeries::new(points, style))
-            .map_err(render_error)?
-            .label(curve.name)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], legend_style));
-    }
-
-    if !curves.is_empty() {
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(RGBColor(160, 160, 160))
-            .label_font((FONT, 12))
-            .draw()
             .map_err(render_error)?;
     }
     Ok(())
@@ -481,11 +536,11 @@ mod tests {
             "model friction",
             "armature current [A]",
             "speed [rad/s]",
-            "time [s]",
+            "time since the start [s]",
         ] {
             assert!(svg.contains(needle), "missing {needle:?}");
         }
-        assert!(svg.contains(r#"height="520""#));
+        assert!(svg.contains(r#"height="600""#));
         assert!(svg.contains(r#"width="1200""#));
     }
 
@@ -547,6 +602,32 @@ mod tests {
         );
         assert!(range.1 > 1000.0 && range.1 < 1100.0, "{range:?}");
         assert!(svg.contains(">\n1000") || svg.contains(">\n1000.0"));
+    }
+
+    #[test]
+    fn the_measurement_is_a_wide_band_drawn_under_the_models() {
+        let svg = render_segments_svg(&[segment("band", 400)]).unwrap();
+        // The last panel (after the legend band): its band, then its models.
+        let measured = svg
+            .rfind(r##"stroke="#AFAFAF" stroke-width="5" points"##)
+            .expect("the measured band");
+        let model = svg
+            .rfind(r##"stroke="#1F77B4" stroke-width="2" points"##)
+            .expect("the first model's line");
+        assert!(
+            measured < model,
+            "the band is drawn first, under the models"
+        );
+    }
+
+    #[test]
+    fn every_second_model_is_dashed_by_the_svg() {
+        let svg = render_segments_svg(&[segment("dashes", 400)]).unwrap();
+        // "model friction" is the second model: red, dashed.
+        assert!(svg.contains(r##"stroke="#D62728" stroke-width="2" stroke-dasharray="7 5""##));
+        // The first model is solid.
+        assert!(svg.contains(r##"stroke="#1F77B4" stroke-width="2" points"##));
+        assert!(!svg.contains(r##"stroke="#1F77B4" stroke-width="2" stroke-dasharray"##));
     }
 
     #[test]

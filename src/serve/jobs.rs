@@ -236,7 +236,7 @@ pub async fn prepare(
     let dir = idx.dir().to_path_buf();
     let supervised = session.record_to(
         &dir.join(format!("{name}.mcap")),
-        started_at.clone(),
+        crate::record::TestStart::from_system_time(now).rfc3339(),
         initial_rise_k,
     )?;
     idx.insert(IndexEntry::running(

@@ -194,7 +194,7 @@ fn cli_run_then_replay_prints_the_same_json_to_the_last_digit() {
     assert!(replay.status.success(), "{stderr}");
     assert!(stderr.contains("identical to the recorded"), "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&run_json).unwrap();
-    assert_eq!(v["schema_version"], "1");
+    assert_eq!(v["schema_version"], "2");
     // The seed motor has complex poles: Pasek does not apply; the full
     // model fitted to every step validates best.
     assert_eq!(v["methods"]["pasek"]["applies"], false);

@@ -1,17 +1,22 @@
 #!/usr/bin/env python3
-"""Check that an MCAP file follows the motorbench data contract (version 1).
+"""Check that an MCAP file follows the motorbench data contract (version 1 or 2).
 
 An independent reader (the PyPI `mcap` package, pinned in requirements.txt)
 checks what the Rust recorder wrote:
 
 - header: profile "" and library "motorbench/<version>";
-- the `motorbench.test` metadata record with all its keys, schema_version "1";
+- the `motorbench.test` metadata record with all its keys, schema_version "1"
+  or "2"; version 2 adds `start_time_ns`, the same instant as `started_at`;
+- version 1: log_time counts from the start of the test; version 2: log_time
+  is wall-clock Unix time in ns, no message before `start_time_ns`;
 - every channel: message encoding "json", a schema with encoding
   "jsonschema" whose data parses as JSON, the contract's schema name;
   /sensor/ and /command/ channels carry unit, quantity and source metadata
   and their topic is the prefix plus the quantity;
 - every message: log_time == publish_time, the payload is JSON with the
-  shape of its schema (Sample value a number; Segment and Event fields and enums; ...);
+  shape of its schema (Sample value a number; Segment and Event fields and
+  enums; version 2 events in the shape of `foxglove.Log`, its timestamp the
+  message's log_time; ...);
 - segment start/end markers pair up;
 - chunks are zstd-compressed (from the summary's chunk indexes);
 - message counts agree with the summary statistics and with any
@@ -24,6 +29,8 @@ Usage: python3 check_mcap.py FILE.mcap [--expect-topic TOPIC=COUNT ...]
 """
 
 import argparse
+import calendar
+import datetime
 import json
 import re
 import sys
@@ -32,6 +39,9 @@ from mcap.reader import make_reader
 
 METADATA_NAME = "motorbench.test"
 METADATA_KEYS = ("schema_version", "kind", "motor_id", "started_at", "nameplate", "config")
+VERSIONS = ("1", "2")
+# Foxglove's log levels motorbench writes in version 2: INFO, WARNING, ERROR.
+LOG_LEVELS = (2, 3, 4)
 KINDS = ("dc_step", "dc_coastdown", "im_slip_sweep")
 PHASES = ("start", "end")
 LEVELS = ("info", "warn", "abort")
@@ -90,6 +100,16 @@ def is_int(v):
     return isinstance(v, int) and not isinstance(v, bool)
 
 
+def rfc3339_ns(text):
+    """Unix time in ns of an RFC 3339 UTC time with up to 9 fractional digits."""
+    m = re.match(r"^(\d{4}-\d{2}-\d{2}T\d{2}:\d{2}:\d{2})(?:\.(\d{1,9}))?(?:Z|\+00:00)$", text)
+    if not m:
+        raise ValueError(f"{text!r} is not an RFC 3339 UTC time")
+    whole = datetime.datetime.strptime(m.group(1), "%Y-%m-%dT%H:%M:%S")
+    seconds = calendar.timegm(whole.timetuple())
+    return seconds * 1_000_000_000 + int((m.group(2) or "").ljust(9, "0"))
+
+
 def shape_problem(schema_name, msg):
     """What is wrong with a decoded message for its schema, or None."""
     if not isinstance(msg, dict):
@@ -119,6 +139,22 @@ def shape_problem(schema_name, msg):
             return f"level {msg['level']!r} is not one of {LEVELS}"
         if not isinstance(msg["message"], str):
             return "message is not a string"
+        return None
+    if schema_name == "foxglove.Log":
+        keys = {"timestamp", "level", "message", "name", "file", "line"}
+        if not keys <= set(msg):
+            return f"keys {sorted(msg)}, want at least {sorted(keys)}"
+        ts = msg["timestamp"]
+        if not (isinstance(ts, dict) and is_int(ts.get("sec")) and is_int(ts.get("nsec"))
+                and 0 <= ts["nsec"] < 1_000_000_000):
+            return f"timestamp {ts!r} is not {{sec, nsec}}"
+        if msg["level"] not in LOG_LEVELS:
+            return f"level {msg['level']!r} is not one of {LOG_LEVELS}"
+        for k in ("message", "name", "file"):
+            if not isinstance(msg[k], str):
+                return f"{k} is not a string"
+        if not is_int(msg["line"]):
+            return "line is not an integer"
         return None
     if schema_name == "motorbench.OperatingPoint":
         keys = {"segment", "slip", "line_voltage", "line_current", "input_power",
@@ -153,25 +189,41 @@ def shape_problem(schema_name, msg):
     return f"unknown schema {schema_name!r}"
 
 
-def expected_schema(topic):
+def expected_schema(topic, version):
     if topic.startswith(SAMPLE_PREFIXES):
         return SAMPLE_SCHEMA
+    if topic == "/bench/event" and version != "1":
+        return "foxglove.Log"
     return BENCH_SCHEMAS.get(topic)
 
 
 def check_metadata(reader, fail, out):
+    """Checks the metadata; returns (schema_version, origin of log_time in ns)."""
     records = [m for m in reader.iter_metadata() if m.name == METADATA_NAME]
     if not records:
         fail.add(f"no {METADATA_NAME} metadata record: not a motorbench record")
-        return
+        return None, 0
     if len(records) > 1:
         fail.add(f"{len(records)} {METADATA_NAME} metadata records, want 1")
     md = records[0].metadata
     for key in METADATA_KEYS:
         if key not in md:
             fail.add(f"{METADATA_NAME} metadata has no {key!r}")
-    if "schema_version" in md and md["schema_version"] != "1":
-        fail.add(f"schema_version is {md['schema_version']!r}, want '1'")
+    version = md.get("schema_version")
+    if version not in VERSIONS:
+        fail.add(f"schema_version is {version!r}, want one of {VERSIONS}")
+    origin = 0
+    if version == "2":
+        text = md.get("start_time_ns", "")
+        if not text.isdigit():
+            fail.add(f"start_time_ns {text!r} is not a whole number of ns")
+        else:
+            origin = int(text)
+            try:
+                if rfc3339_ns(md.get("started_at", "")) != origin:
+                    fail.add(f"started_at {md.get('started_at')!r} is not start_time_ns {origin}")
+            except ValueError as e:
+                fail.add(f"started_at: {e}")
     if "kind" in md and md["kind"] not in KINDS:
         fail.add(f"kind {md['kind']!r} is not one of {KINDS}")
     if "started_at" in md and not RFC3339.match(md["started_at"]):
@@ -187,14 +239,15 @@ def check_metadata(reader, fail, out):
         f"metadata: schema_version={md.get('schema_version')!r} kind={md.get('kind')!r} "
         f"motor_id={md.get('motor_id')!r} started_at={md.get('started_at')!r}"
     )
+    return version, origin
 
 
-def check_channels(summary, fail, out):
+def check_channels(summary, version, fail, out):
     """Checks every channel; returns {channel id: schema name} of good ones."""
     schema_of = {}
     for cid, ch in sorted(summary.channels.items()):
         where = f"channel {ch.topic}"
-        want = expected_schema(ch.topic)
+        want = expected_schema(ch.topic, version)
         if want is None:
             fail.add(f"{where}: topic is not in the contract")
             continue
@@ -231,7 +284,7 @@ def check_channels(summary, fail, out):
     return schema_of
 
 
-def check_messages(reader, summary, schema_of, fail, out):
+def check_messages(reader, summary, schema_of, origin, fail, out):
     counts = {ch.topic: 0 for ch in summary.channels.values()}
     per_channel = {cid: 0 for cid in summary.channels}
     open_segments = {}  # index -> (kind, log_time)
@@ -245,6 +298,8 @@ def check_messages(reader, summary, schema_of, fail, out):
         where = f"{topic} at log_time {message.log_time}"
         if message.log_time != message.publish_time:
             fail.add(f"{where}: publish_time {message.publish_time} != log_time")
+        if message.log_time < origin:
+            fail.add(f"{where}: before the test's start ({origin})")
         name = schema_of.get(channel.id)
         if name is None:
             continue  # the channel itself was reported
@@ -257,6 +312,10 @@ def check_messages(reader, summary, schema_of, fail, out):
         if problem:
             fail.add(f"{where}: {problem}")
             continue
+        if name == "foxglove.Log":
+            ts = msg["timestamp"]
+            if ts["sec"] * 1_000_000_000 + ts["nsec"] != message.log_time:
+                fail.add(f"{where}: timestamp {ts} is not the log_time")
         if name == "motorbench.Segment":
             idx, kind = msg["index"], msg["kind"]
             if msg["phase"] == "start":
@@ -329,6 +388,7 @@ def main(argv=None):
     fail = Failures()
     out = [f"file: {args.file}"]
     counts = {}
+    version = None
     try:
         with open(args.file, "rb") as f:
             f.seek(0, 2)
@@ -351,10 +411,10 @@ def main(argv=None):
             if summary is None:
                 fail.add("no summary section (the file was not finished)")
             else:
-                check_metadata(reader, fail, out)
-                schema_of = check_channels(summary, fail, out)
+                version, origin = check_metadata(reader, fail, out)
+                schema_of = check_channels(summary, version, fail, out)
                 check_chunks(summary, fail, out)
-                counts = check_messages(reader, summary, schema_of, fail, out)
+                counts = check_messages(reader, summary, schema_of, origin, fail, out)
     except Exception as e:  # a damaged or foreign file: report, do not trace back
         fail.add(f"cannot read the file: {type(e).__name__}: {e}")
 
@@ -372,7 +432,7 @@ def main(argv=None):
             print(f"FAIL: ... and {fail.dropped} more problems", file=sys.stderr)
         print(f"{args.file}: does not follow the motorbench data contract", file=sys.stderr)
         return 1
-    print("ok: follows the motorbench data contract (schema_version 1)")
+    print(f"ok: follows the motorbench data contract (schema_version {version})")
     print(json.dumps(dict(sorted(counts.items())), sort_keys=True))
     return 0
 

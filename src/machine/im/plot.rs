@@ -1,22 +1,28 @@
-//! SVG of an induction-machine slip sweep: line current and input power
-//! against slip, the measured operating points as dots (one colour per
-//! segment) and the fitted models as curves at each segment's mean voltage.
+//! SVG of an induction-machine slip sweep: line current, input power and
+//! (where measured) shaft torque against slip, the measured operating
+//! points as dots and the fitted models as curves at each segment's mean
+//! voltage, in one colour per segment (supply voltage), so each voltage's
+//! points are read against its own curve; the legend sits above the
+//! panels, off the data.
 
 use std::path::{Path, PathBuf};
 
 use plotters::prelude::*;
 
-use crate::identify::{predict, ImIdentification};
+use crate::identify::{predict, ImIdentification, SweepPoint};
 use crate::model::ImCircuit;
+use crate::report::legend;
 
 const FONT: &str = "sans-serif";
-const SEGMENT_COLOURS: [RGBColor; 4] = [
-    RGBColor(60, 60, 60),
-    RGBColor(120, 120, 120),
+/// One colour per supply voltage (segment), for its points and curves.
+const SEGMENT_COLOURS: [RGBColor; 6] = [
     RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
     RGBColor(148, 103, 189),
+    RGBColor(255, 127, 14),
+    RGBColor(140, 86, 75),
 ];
-const MODEL_COLOURS: [RGBColor; 2] = [RGBColor(214, 39, 40), RGBColor(44, 160, 44)];
 
 /// The models worth drawing: LM, and the recursive estimate when it applies.
 fn models(id: &ImIdentification) -> Vec<(&'static str, ImCircuit)> {
@@ -60,103 +66,156 @@ pub enum SweepPlotError {
     },
 }
 
-/// Render the sweep and the fitted curves as an SVG document.
+/// What a panel plots against slip.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Quantity {
+    LineCurrent,
+    InputPower,
+    Torque,
+}
+
+impl Quantity {
+    fn title(self) -> &'static str {
+        match self {
+            Quantity::LineCurrent => "line current",
+            Quantity::InputPower => "input power",
+            Quantity::Torque => "shaft torque (measured only)",
+        }
+    }
+
+    fn axis(self) -> &'static str {
+        match self {
+            Quantity::LineCurrent => "line current (RMS) [A]",
+            Quantity::InputPower => "input power [W]",
+            Quantity::Torque => "torque [N·m]",
+        }
+    }
+
+    /// The measured value of a point, if it has one.
+    fn measured(self, p: &SweepPoint) -> Option<f64> {
+        match self {
+            Quantity::LineCurrent => Some(p.line_current),
+            Quantity::InputPower => Some(p.input_power),
+            Quantity::Torque => p.torque,
+        }
+    }
+}
+
+/// Render the sweep and the fitted curves as an SVG document: one panel
+/// per quantity against slip (line current, input power, and the
+/// measured shaft torque where the record has one), one colour per supply
+/// voltage for its points and its model curves (LM solid, the recursive
+/// estimate dashed), the legend in a band above the panels.
 pub fn render_im_svg(id: &ImIdentification) -> Result<String, DrawError> {
+    let draw_err = |e: &dyn std::fmt::Display| DrawError(e.to_string());
+    let mut quantities = vec![Quantity::LineCurrent, Quantity::InputPower];
+    if id.sweep.points.iter().any(|p| p.torque.is_some()) {
+        quantities.push(Quantity::Torque);
+    }
+    let width = 600 * quantities.len() as u32;
+    let conn = id.sweep.connection;
+    let mut segments: Vec<u32> = id.sweep.points.iter().map(|p| p.segment).collect();
+    segments.sort_unstable();
+    segments.dedup();
+    let mean_voltage = |seg: u32| {
+        let v: Vec<f64> = id
+            .sweep
+            .points
+            .iter()
+            .filter(|p| p.segment == seg)
+            .map(|p| p.line_voltage)
+            .collect();
+        v.iter().sum::<f64>() / v.len().max(1) as f64
+    };
+    let models = models(id);
+
+    let mut entries = Vec::new();
+    for (k, &seg) in segments.iter().enumerate() {
+        let colour = SEGMENT_COLOURS[k % SEGMENT_COLOURS.len()].to_rgba();
+        entries.push(legend::Entry {
+            name: format!("measured, segment {seg} ({:.0} V)", mean_voltage(seg)),
+            swatch: legend::Swatch::Dot(colour),
+        });
+    }
+    for (m, (name, _)) in models.iter().enumerate() {
+        entries.push(legend::Entry {
+            name: format!("{name} (a curve per segment voltage)"),
+            swatch: legend::Swatch::Line {
+                colour: BLACK.to_rgba(),
+                width: 2,
+                dashed: m > 0,
+            },
+        });
+    }
+    let band = legend::lines_needed(&entries, width) * legend::LINE_HEIGHT + 8;
+
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (1200, 460)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| DrawError(e.to_string()))?;
-        let panels = root.split_evenly((1, 2));
-        let conn = id.sweep.connection;
-        let mut segments: Vec<u32> = id.sweep.points.iter().map(|p| p.segment).collect();
-        segments.sort_unstable();
-        segments.dedup();
-        for (panel, power) in panels.iter().zip([false, true]) {
-            let value = |line_current: f64, input_power: f64| {
-                if power {
-                    input_power
-                } else {
-                    line_current
-                }
-            };
-            let ymax = id
+        let root = SVGBackend::with_string(&mut svg, (width, 460 + band)).into_drawing_area();
+        root.fill(&WHITE).map_err(|e| draw_err(&e))?;
+        let (band_area, root) = root.split_vertically(band);
+        legend::draw(&band_area.margin(6, 0, 0, 0), &entries).map_err(|e| draw_err(&e))?;
+        let panels = root.split_evenly((1, quantities.len()));
+        for (panel, &q) in panels.iter().zip(&quantities) {
+            let values: Vec<f64> = id
                 .sweep
                 .points
                 .iter()
-                .map(|p| value(p.line_current, p.input_power))
-                .fold(0.0f64, f64::max)
-                * 1.1;
-            let ymin = id
-                .sweep
-                .points
-                .iter()
-                .map(|p| value(p.line_current, p.input_power))
-                .fold(0.0f64, f64::min);
+                .filter_map(|p| q.measured(p))
+                .collect();
+            let ymax = values.iter().copied().fold(0.0f64, f64::max) * 1.1;
+            let ymin = values.iter().copied().fold(0.0f64, f64::min) * 1.1;
             let mut chart = ChartBuilder::on(panel)
-                .caption(
-                    if power { "input power" } else { "line current" },
-                    (FONT, 16),
-                )
+                .caption(q.title(), (FONT, 16))
                 .margin(10)
                 .x_label_area_size(36)
                 .y_label_area_size(64)
                 .build_cartesian_2d(0.0..1.0, ymin..ymax.max(1e-9))
-                .map_err(|e| DrawError(e.to_string()))?;
+                .map_err(|e| draw_err(&e))?;
             chart
                 .configure_mesh()
-                .x_desc("slip")
-                .y_desc(if power { "P [W]" } else { "I [A]" })
+                .x_desc("slip (0 synchronous, 1 locked rotor)")
+                .y_desc(q.axis())
                 .label_style((FONT, 12))
                 .draw()
-                .map_err(|e| DrawError(e.to_string()))?;
-            for (k, seg) in segments.iter().enumerate() {
-                let pts: Vec<_> = id
-                    .sweep
-                    .points
-                    .iter()
-                    .filter(|p| p.segment == *seg)
-                    .collect();
+                .map_err(|e| draw_err(&e))?;
+            for (k, &seg) in segments.iter().enumerate() {
                 let colour = SEGMENT_COLOURS[k % SEGMENT_COLOURS.len()];
-                let mean_v = pts.iter().map(|p| p.line_voltage).sum::<f64>() / pts.len() as f64;
-                chart
-                    .draw_series(pts.iter().map(|p| {
-                        Circle::new(
-                            (p.slip, value(p.line_current, p.input_power)),
-                            3,
-                            colour.filled(),
-                        )
-                    }))
-                    .map_err(|e| DrawError(e.to_string()))?
-                    .label(format!("measured, segment {seg} ({mean_v:.0} V)"))
-                    .legend(move |(x, y)| Circle::new((x + 8, y), 3, colour.filled()));
-                for (m, (name, circuit)) in models(id).into_iter().enumerate() {
-                    let colour = MODEL_COLOURS[m % MODEL_COLOURS.len()];
-                    let v_phase = conn.phase_voltage(mean_v);
-                    let curve = (0..=400).map(|j| {
-                        let s = f64::from(j) / 400.0;
-                        let (i, p) = predict(&circuit, s, v_phase);
-                        (s, if power { p } else { conn.line_current(i) })
-                    });
-                    let series = chart
-                        .draw_series(LineSeries::new(curve, colour.stroke_width(2)))
-                        .map_err(|e| DrawError(e.to_string()))?;
-                    if k == 0 {
-                        series.label(name).legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 18, y)], colour.stroke_width(2))
+                if q != Quantity::Torque {
+                    let v_phase = conn.phase_voltage(mean_voltage(seg));
+                    for (m, (_, circuit)) in models.iter().enumerate() {
+                        let curve = (0..=400).map(|j| {
+                            let s = f64::from(j) / 400.0;
+                            let (i, p) = predict(circuit, s, v_phase);
+                            let y = if q == Quantity::InputPower {
+                                p
+                            } else {
+                                conn.line_current(i)
+                            };
+                            (s, y.clamp(ymin, ymax))
                         });
+                        let style = colour.stroke_width(2);
+                        if m == 0 {
+                            chart.draw_series(LineSeries::new(curve, style))
+                        } else {
+                            chart.draw_series(DashedLineSeries::new(curve, 7, 5, style))
+                        }
+                        .map_err(|e| draw_err(&e))?;
                     }
                 }
+                chart
+                    .draw_series(
+                        id.sweep
+                            .points
+                            .iter()
+                            .filter(|p| p.segment == seg)
+                            .filter_map(|p| Some((p.slip, q.measured(p)?)))
+                            .map(|xy| Circle::new(xy, 4, colour.filled())),
+                    )
+                    .map_err(|e| draw_err(&e))?;
             }
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::LowerRight)
-                .background_style(WHITE.mix(0.85))
-                .border_style(RGBColor(160, 160, 160))
-                .label_font((FONT, 12))
-                .draw()
-                .map_err(|e| DrawError(e.to_string()))?;
         }
-        root.present().map_err(|e| DrawError(e.to_string()))?;
+        root.present().map_err(|e| draw_err(&e))?;
     }
     Ok(svg)
 }
@@ -225,10 +284,14 @@ mod tests {
             .map(str::trim)
             .collect();
         assert_eq!(
-            texts.iter().filter(|t| **t == "lm").count(),
-            2,
-            "legend names the LM curve in both panels"
+            texts
+                .iter()
+                .filter(|t| **t == "lm (a curve per segment voltage)")
+                .count(),
+            1,
+            "the legend names the LM curve once, above both panels"
         );
+        assert!(!svg.contains("shaft torque"), "no torque was measured");
         // A file that cannot be written is told from a plot that cannot
         // be drawn.
         let path = Path::new("/nonexistent-directory/sweep.svg");

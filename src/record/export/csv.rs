@@ -1,0 +1,194 @@
+//! Writes a record's segments as the contract's CSV import files, one file
+//! per segment, so that `motorbench identify` on them gives the report a
+//! replay of the record gives.
+//!
+//! - DC segments: `time_s` (s since the start of the test),
+//!   `armature_voltage_V`, `armature_current_A`, `speed_rad_s`: the series
+//!   identification reads (on the armature-current instants, see
+//!   [`crate::record::RecordBuilder`]).
+//! - Induction-machine sweeps: one row per operating point, `slip`,
+//!   `line_voltage_V`, `line_current_A`, `input_power_W`, `frequency_Hz`,
+//!   and `torque_Nm` when every point of the sweep has a torque.
+//!
+//! Every file opens with the contract's declaration
+//! (`# motorbench segment <index> kind=<kind> label=<label>`) and a
+//! comment naming the record. Numbers are written in Rust's shortest
+//! form that reads back to the same `f64`, so the round trip is exact.
+
+use std::fmt::Write as _;
+
+use crate::record::csv::{COL_CURRENT, COL_SPEED, COL_TIME, COL_VOLTAGE};
+use crate::record::csv_im::{
+    COL_FREQUENCY, COL_INPUT_POWER, COL_LINE_CURRENT, COL_LINE_VOLTAGE, COL_SLIP, COL_TORQUE,
+};
+use crate::record::{DcSegment, OperatingPoint, Record, SegmentKind};
+
+/// One CSV file's name suffix and text.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CsvFile {
+    /// The segment it holds.
+    pub segment: u32,
+    /// The file's text.
+    pub text: String,
+}
+
+/// The CSV files of `record`'s segments that hold data, in index order;
+/// `source` (the record's file name) goes into a comment.
+pub fn segment_files(record: &Record, source: &str) -> Vec<CsvFile> {
+    let mut out: Vec<CsvFile> = record
+        .segments
+        .iter()
+        .filter(|s| !s.time.is_empty())
+        .map(|s| CsvFile {
+            segment: s.index,
+            text: dc_text(s, source),
+        })
+        .collect();
+    let mut sweeps: Vec<u32> = record.operating_points.iter().map(|p| p.segment).collect();
+    sweeps.sort_unstable();
+    sweeps.dedup();
+    for index in sweeps {
+        let points: Vec<&OperatingPoint> = record
+            .operating_points
+            .iter()
+            .filter(|p| p.segment == index)
+            .collect();
+        let label = record
+            .segments
+            .iter()
+            .find(|s| s.index == index)
+            .map_or_else(|| format!("sweep {index}"), |s| s.label.clone());
+        out.push(CsvFile {
+            segment: index,
+            text: im_text(index, &label, &points, source),
+        });
+    }
+    out.sort_by_key(|f| f.segment);
+    out
+}
+
+/// The declaration and the provenance comment.
+fn preamble(index: u32, kind: SegmentKind, label: &str, source: &str) -> String {
+    let label: String = label
+        .chars()
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .collect();
+    format!(
+        "# motorbench segment {index} kind={kind} label={label}\n\
+         # exported by {} from {source}\n",
+        crate::record::library_name()
+    )
+}
+
+fn dc_text(s: &DcSegment, source: &str) -> String {
+    let kind = s.kind.unwrap_or(SegmentKind::DcStep);
+    let mut text = preamble(s.index, kind, &s.label, source);
+    let _ = writeln!(text, "{COL_TIME},{COL_VOLTAGE},{COL_CURRENT},{COL_SPEED}");
+    for k in 0..s.time.len() {
+        let _ = writeln!(
+            text,
+            "{:?},{:?},{:?},{:?}",
+            s.time[k], s.voltage[k], s.current[k], s.speed[k]
+        );
+    }
+    text
+}
+
+fn im_text(index: u32, label: &str, points: &[&OperatingPoint], source: &str) -> String {
+    let mut text = preamble(index, SegmentKind::ImSlipSweep, label, source);
+    let torque = points.iter().all(|p| p.torque.is_some());
+    let torque_column = if torque {
+        format!(",{COL_TORQUE}")
+    } else {
+        String::new()
+    };
+    let _ = writeln!(
+        text,
+        "{COL_SLIP},{COL_LINE_VOLTAGE},{COL_LINE_CURRENT},{COL_INPUT_POWER},{COL_FREQUENCY}{torque_column}"
+    );
+    for p in points {
+        let _ = write!(
+            text,
+            "{:?},{:?},{:?},{:?},{:?}",
+            p.slip, p.line_voltage, p.line_current, p.input_power, p.frequency
+        );
+        match p.torque.filter(|_| torque) {
+            Some(t) => {
+                let _ = writeln!(text, ",{t:?}");
+            }
+            None => text.push('\n'),
+        }
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::{read_dc_csv, read_im_csv};
+
+    #[test]
+    fn a_dc_segment_reads_back_bit_for_bit() {
+        let seg = DcSegment {
+            index: 3,
+            kind: Some(SegmentKind::DcCoastdown),
+            label: "248 V → 0 V".into(),
+            time: vec![0.1 + 0.2, 1.0 / 3.0, 7.0],
+            voltage: vec![-0.0, 1e-300, 248.000_000_000_1],
+            current: vec![0.001, -2.5e-17, 3.0],
+            speed: vec![f64::MAX, 5e-324, 12.5],
+        };
+        let record = Record {
+            segments: vec![seg.clone()],
+            ..Record::default()
+        };
+        let files = segment_files(&record, "r.mcap");
+        assert_eq!(files.len(), 1);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.csv");
+        std::fs::write(&path, &files[0].text).unwrap();
+        let back = read_dc_csv(&path, SegmentKind::DcStep, 0).unwrap();
+        assert_eq!(back.index, 3);
+        assert_eq!(back.kind, Some(SegmentKind::DcCoastdown));
+        assert_eq!(back.label, seg.label);
+        for (a, b) in [
+            (&back.time, &seg.time),
+            (&back.voltage, &seg.voltage),
+            (&back.current, &seg.current),
+            (&back.speed, &seg.speed),
+        ] {
+            let a: Vec<u64> = a.iter().map(|v| v.to_bits()).collect();
+            let b: Vec<u64> = b.iter().map(|v| v.to_bits()).collect();
+            assert_eq!(a, b);
+        }
+    }
+
+    #[test]
+    fn an_im_sweep_reads_back_with_its_torque() {
+        let point = |slip: f64| OperatingPoint {
+            segment: 1,
+            slip,
+            line_voltage: 400.1,
+            line_current: 7.25,
+            input_power: 3100.5,
+            speed: (1.0 - slip) * 157.079_632_679_489_66,
+            frequency: 50.0,
+            torque: Some(20.0 * slip),
+        };
+        let record = Record {
+            operating_points: vec![point(0.03), point(1.0)],
+            ..Record::default()
+        };
+        let files = segment_files(&record, "r.mcap");
+        assert!(files[0].text.contains("torque_Nm"), "{}", files[0].text);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.csv");
+        std::fs::write(&path, &files[0].text).unwrap();
+        let back = read_im_csv(&path, 0, None, Some(2)).unwrap();
+        assert_eq!(back.index, 1);
+        assert_eq!(back.label, "sweep 1");
+        assert_eq!(back.points.len(), 2);
+        assert_eq!(back.points[1].torque, Some(20.0));
+        assert_eq!(back.points[0].slip, 0.03);
+    }
+}

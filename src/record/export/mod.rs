@@ -1,0 +1,132 @@
+//! `motorbench export`: a record as files users' own tools read.
+//!
+//! - [`csv`]: each segment as the contract's CSV import file, so that
+//!   `motorbench identify` on the exported files gives the report a replay
+//!   of the record gives (with the exported nameplate);
+//! - [`parquet`]: every channel of the record in one Parquet file, a
+//!   column per channel and the segment index ([`table`]), for pandas,
+//!   polars or MATLAB in one call;
+//! - the nameplate as JSON, for `identify --nameplate`.
+//!
+//! Files are named after the record (`<stem>.parquet`,
+//! `<stem>.segment-<index>.csv`, `<stem>.nameplate.json`) and replace
+//! earlier exports of the same record.
+
+pub mod csv;
+pub mod parquet;
+pub mod table;
+
+use std::path::{Path, PathBuf};
+
+use super::{build_record, read_entries, RecordError};
+
+/// What can go wrong in an export.
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    /// The record could not be read.
+    #[error(transparent)]
+    Read(#[from] RecordError),
+    /// An output file could not be written.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The Parquet writer failed.
+    #[error("{}: Parquet: {source}", path.display())]
+    Parquet {
+        /// The file.
+        path: PathBuf,
+        /// The writer's error.
+        #[source]
+        source: ::parquet::errors::ParquetError,
+    },
+    /// A column name the Parquet schema refused.
+    #[error("Parquet schema: {0}")]
+    Schema(#[source] ::parquet::errors::ParquetError),
+}
+
+/// Which files to write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Formats {
+    /// The segments as contract CSV (and the nameplate).
+    pub csv: bool,
+    /// The channels as one Parquet file.
+    pub parquet: bool,
+}
+
+/// What an export wrote.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Exported {
+    /// The Parquet file, when asked for.
+    pub parquet: Option<PathBuf>,
+    /// The CSV files, one per segment with data, in index order.
+    pub csv: Vec<PathBuf>,
+    /// The nameplate, with the CSV files.
+    pub nameplate: Option<PathBuf>,
+    /// The record's metadata (its `kind` is `identify --kind`).
+    pub meta: Option<super::TestMeta>,
+    /// Set when the record was damaged: what was exported is what was read
+    /// before the damage.
+    pub recovery: Option<super::Recovery>,
+}
+
+impl Exported {
+    /// Every file written.
+    pub fn files(&self) -> Vec<PathBuf> {
+        self.parquet
+            .iter()
+            .chain(&self.csv)
+            .chain(&self.nameplate)
+            .cloned()
+            .collect()
+    }
+}
+
+/// Exports the record at `record_path` into `out_dir` (created if
+/// missing).
+pub fn export_record(
+    record_path: &Path,
+    out_dir: &Path,
+    formats: Formats,
+) -> Result<Exported, ExportError> {
+    let stem = record_path
+        .file_stem()
+        .map_or_else(|| "record".into(), |s| s.to_string_lossy().into_owned());
+    let source = record_path
+        .file_name()
+        .map_or_else(|| stem.clone(), |s| s.to_string_lossy().into_owned());
+    let io = |path: &Path| {
+        let path = path.to_path_buf();
+        move |source| ExportError::Io { path, source }
+    };
+    std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
+    let (meta, channels, entries, recovery) = read_entries(record_path)?;
+    let mut out = Exported {
+        meta: Some(meta.clone()),
+        recovery,
+        ..Exported::default()
+    };
+    if formats.parquet {
+        let path = out_dir.join(format!("{stem}.parquet"));
+        let table = table::SampleTable::build(&channels, &entries);
+        parquet::write_parquet(&path, &table, &meta)?;
+        out.parquet = Some(path);
+    }
+    if formats.csv {
+        let record = build_record(meta.clone(), channels, &entries);
+        for file in csv::segment_files(&record, &source) {
+            let path = out_dir.join(format!("{stem}.segment-{}.csv", file.segment));
+            std::fs::write(&path, file.text).map_err(io(&path))?;
+            out.csv.push(path);
+        }
+        let path = out_dir.join(format!("{stem}.nameplate.json"));
+        let text = serde_json::to_string_pretty(&meta.nameplate).expect("JSON serialises");
+        std::fs::write(&path, text + "\n").map_err(io(&path))?;
+        out.nameplate = Some(path);
+    }
+    Ok(out)
+}
