@@ -35,7 +35,8 @@ use super::error::{DecodeError, RecordError};
 use super::mcap_walk::{walk_records, Damage};
 use super::schema::{
     is_sample_topic_for, COMMAND_PREFIX, MESSAGE_ENCODING, METADATA_NAME, SENSOR_PREFIX,
-    TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT, TOPIC_SUPPLY_LIMIT,
+    TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT, TOPIC_STANDARD_TEST,
+    TOPIC_SUPPLY_LIMIT,
 };
 use super::types::{ChannelSpec, Entry, Record, Recovery, SegmentKind, TestMeta, SCHEMA_VERSION};
 
@@ -54,6 +55,7 @@ enum Route {
     Event,
     Result,
     SupplyLimit,
+    StandardTest,
     Ignore,
 }
 
@@ -243,6 +245,10 @@ impl<'p> Reading<'p> {
                         t_ns,
                         limit: decode(&data).map_err(|e| bad(e.to_string()))?,
                     }),
+                    Route::StandardTest => Some(Entry::StandardTest {
+                        t_ns,
+                        reading: decode(&data).map_err(|e| bad(e.to_string()))?,
+                    }),
                     Route::Sample(_) | Route::Ignore => None,
                 };
                 if let Some(entry) = entry {
@@ -295,6 +301,7 @@ fn route_of(
         TOPIC_EVENT => Route::Event,
         TOPIC_RESULT => Route::Result,
         TOPIC_SUPPLY_LIMIT => Route::SupplyLimit,
+        TOPIC_STANDARD_TEST => Route::StandardTest,
         _ => return Ok(Route::Ignore),
     };
     if c.message_encoding != MESSAGE_ENCODING {

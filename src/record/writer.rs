@@ -41,6 +41,7 @@ use super::error::RecordError;
 use super::schema::{
     is_sample_topic_for, BENCH_TOPICS, MESSAGE_ENCODING, METADATA_NAME, SAMPLE_JSON_SCHEMA,
     SCHEMA_ENCODING, SCHEMA_SAMPLE, TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT,
+    TOPIC_STANDARD_TEST,
     TOPIC_SEGMENT, TOPIC_SUPPLY_LIMIT,
 };
 use super::types::{ChannelSpec, Entry, Event, EventLevel, TestMeta, SCHEMA_VERSION};
@@ -333,6 +334,11 @@ impl Recorder {
                     "operating point field {field} = {v} is not a finite number (JSON has none)"
                 )
             }),
+            Entry::StandardTest { reading, .. } => reading.non_finite_field().map(|(field, v)| {
+                format!(
+                    "standard-test reading field {field} = {v} is not a finite number (JSON has none)"
+                )
+            }),
             _ => None,
         };
         match reason {
@@ -476,6 +482,18 @@ fn run(
                     *t_ns,
                     limit,
                     "a supply limit serializes",
+                )
+                .map_err(mcap_err)?;
+                (*t_ns, true)
+            }
+            Entry::StandardTest { t_ns, reading } => {
+                write_bench_json(
+                    &mut writer,
+                    &mut table,
+                    TOPIC_STANDARD_TEST,
+                    *t_ns,
+                    reading,
+                    "a standard-test reading serializes",
                 )
                 .map_err(mcap_err)?;
                 (*t_ns, true)
