@@ -275,17 +275,17 @@ impl ImRunConfig {
             "im_standard_tests" => true,
             "im_slip_sweep" => {
                 if let Some(key) = standard_tables.first_given() {
-                    return Err(bad(
-                        key,
-                        "is for test.plan = \"im_standard_tests\"".into(),
-                    ));
+                    return Err(bad(key, "is for test.plan = \"im_standard_tests\"".into()));
                 }
                 false
             }
             other => {
                 return Err(bad(
                     "test.plan",
-                    format!("{} is not im_slip_sweep nor im_standard_tests", quoted(other)),
+                    format!(
+                        "{} is not im_slip_sweep nor im_standard_tests",
+                        quoted(other)
+                    ),
                 ))
             }
         };

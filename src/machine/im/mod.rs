@@ -20,12 +20,12 @@ mod config;
 pub mod diagnose;
 pub mod identify;
 mod modbus_config;
-mod standard_config;
 mod plot;
 mod rig;
 mod served;
 mod sim_rig;
 mod stages;
+mod standard_config;
 mod standard_plan;
 mod sweep;
 mod text;
@@ -39,13 +39,13 @@ pub use sim_rig::{
     sim_im_rig, SimDcSource, SimDyno, SimImRigConfig, SimImSensors, SimRigError, SimVfd,
     COPPER_ALPHA,
 };
+pub use stages::{VfdDyno, VfdSupply};
 pub use standard_plan::{
     StandardTestsPlan, DC_RESISTANCE_SEGMENT, LOCKED_ROTOR_SEGMENT, NO_LOAD_SEGMENT,
     STANDARD_SEGMENTS,
 };
-pub use stages::{VfdDyno, VfdSupply};
-pub use sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
 use sweep::{run_im_plan, ImStages};
+pub use sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
 pub use text::render_im_text;
 
 use std::path::Path;

@@ -72,7 +72,10 @@ impl RawStandardTests<'_> {
         let list = |key: &str, given: Option<&Vec<f64>>, top: f64, unit: &str| match given {
             None => Ok(None),
             Some(v) => {
-                let bad = (key.to_string(), format!("must be a non-empty list in (0, {top:.1}] {unit}"));
+                let bad = (
+                    key.to_string(),
+                    format!("must be a non-empty list in (0, {top:.1}] {unit}"),
+                );
                 if v.is_empty() || v.iter().any(|x| !(x.is_finite() && *x > 0.0 && *x <= top)) {
                     return Err(bad);
                 }

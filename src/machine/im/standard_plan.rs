@@ -191,9 +191,7 @@ impl Sweep<'_> {
             return Ok(());
         }
         let t_ns = self.t_ns();
-        self.seq
-            .push(Entry::StandardTest { t_ns, reading })
-            .await?;
+        self.seq.push(Entry::StandardTest { t_ns, reading }).await?;
         Ok(())
     }
 
@@ -212,7 +210,9 @@ impl Sweep<'_> {
             }
         }
         self.dc_source(None).await?;
-        self.seq.marker(index, kind, SegmentPhase::End, &label).await?;
+        self.seq
+            .marker(index, kind, SegmentPhase::End, &label)
+            .await?;
         Ok(())
     }
 
@@ -224,7 +224,9 @@ impl Sweep<'_> {
         amperes: f64,
     ) -> Result<Option<DcResistanceReading>, Halt> {
         let Some((_, current)) = self.ix.dc else {
-            return Err(Halt::Fault("the rig reads no DC voltage and current".into()));
+            return Err(Halt::Fault(
+                "the rig reads no DC voltage and current".into(),
+            ));
         };
         let plan = self.plan;
         let mut detector = SettleDetector::new(plan.settle_window, plan.settle_tolerance, 2);
@@ -290,7 +292,9 @@ impl Sweep<'_> {
         let label = format!("no load, {} voltages", tests.no_load_voltages.len());
         self.begin(index, total, kind, &label).await?;
         let Some(&first) = tests.no_load_voltages.first() else {
-            self.seq.marker(index, kind, SegmentPhase::End, &label).await?;
+            self.seq
+                .marker(index, kind, SegmentPhase::End, &label)
+                .await?;
             return Ok(());
         };
         // The dynamometer brings the shaft up to synchronous speed with the
@@ -313,7 +317,9 @@ impl Sweep<'_> {
             }
         }
         self.supply(None).await?;
-        self.seq.marker(index, kind, SegmentPhase::End, &label).await?;
+        self.seq
+            .marker(index, kind, SegmentPhase::End, &label)
+            .await?;
         Ok(())
     }
 
@@ -348,7 +354,9 @@ impl Sweep<'_> {
             }
         }
         self.supply(None).await?;
-        self.seq.marker(index, kind, SegmentPhase::End, &label).await?;
+        self.seq
+            .marker(index, kind, SegmentPhase::End, &label)
+            .await?;
         Ok(())
     }
 }
@@ -367,10 +375,7 @@ mod tests {
         // the friction-and-windage regression.
         let low = p.no_load_voltages.iter().filter(|v| **v <= 240.0).count();
         assert!(low >= 3, "{low}");
-        assert!(p
-            .locked_rotor_voltages
-            .windows(2)
-            .all(|w| w[0] < w[1]));
+        assert!(p.locked_rotor_voltages.windows(2).all(|w| w[0] < w[1]));
         assert_eq!(p.locked_rotor_max_current, 10.0);
         assert_eq!(p.points(), [3, 11, 8]);
         assert!(

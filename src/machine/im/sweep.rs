@@ -19,6 +19,7 @@
 //! and followed by a cool-down with the supply off: a real rig burns the
 //! winding otherwise.
 
+use super::standard_plan::StandardTestsPlan;
 use crate::bench::sequencer::{safe_state_all, Halt, Read, Sequencer, SpeedChannel};
 use crate::bench::{
     sensor_channels_with_speed, BenchError, HeatingBudget, Outcome, Progress, RecordSink,
@@ -27,7 +28,6 @@ use crate::bench::{
 use crate::config::{Limits, Supervision};
 use crate::identify::slip_grid;
 use crate::record::{ChannelSpec, Entry, EventLevel, OperatingPoint, SegmentKind, SegmentPhase};
-use super::standard_plan::StandardTestsPlan;
 use motorbench_drivers::{ChannelInfo, DriverError, PowerStage, SensorStream};
 
 /// The plan of a slip sweep.
@@ -489,7 +489,17 @@ pub async fn run_im_sweep<'s>(
         dyno,
         dc: None,
     };
-    run_im_plan(plan, None, rules, stages, sensors, sink, progress, stops.into()).await
+    run_im_plan(
+        plan,
+        None,
+        rules,
+        stages,
+        sensors,
+        sink,
+        progress,
+        stops.into(),
+    )
+    .await
 }
 
 /// The stages of an induction-machine rig as a plan drives them.
