@@ -644,7 +644,7 @@ mod tests {
         });
         assert_eq!(stats.messages, 201);
         assert_eq!(stats.path, path);
-        assert_eq!(stats.per_topic.len(), 7);
+        assert_eq!(stats.per_topic.len(), 8);
         assert_eq!(stats.per_topic["/bench/supply_limit"], 0);
         assert_eq!(stats.per_topic["/sensor/armature_current"], 100);
         assert_eq!(stats.per_topic["/bench/event"], 1);

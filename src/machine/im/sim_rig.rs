@@ -617,6 +617,71 @@ mod tests {
         SimImRigConfig::new(circuit, supply)
     }
 
+    #[tokio::test]
+    async fn the_dc_source_reads_the_terminal_resistance_and_is_interlocked_with_the_supply() {
+        let mut cfg = rig();
+        cfg.noise_relative = 0.0;
+        cfg.thermal_resistance_k_per_w = 0.0;
+        assert!(sim_im_rig(cfg.clone()).unwrap().0.dc_source().is_none());
+        cfg.dc_source_max_current = Some(5.0);
+        let (mut vfd, _, mut sensors) = sim_im_rig(cfg).unwrap();
+        let mut dc = vfd.dc_source().unwrap();
+        let names: Vec<&str> = sensors
+            .channels()
+            .iter()
+            .map(|c| c.quantity.as_str())
+            .collect();
+        assert_eq!(names[5..], ["dc_voltage", "dc_current"]);
+        assert!(
+            dc.set_setpoint(6.0).await.is_err(),
+            "above its largest current"
+        );
+        dc.set_setpoint(4.0).await.unwrap();
+        dc.set_output_enabled(true).await.unwrap();
+        let e = vfd.set_output_enabled(true).await.unwrap_err();
+        assert!(e.to_string().contains("DC source"), "{e}");
+        let b = sensors.next_batch().await.unwrap();
+        // Star: two phases in series.
+        assert!((b.value(5).unwrap() - 4.0 * 2.0 * 0.8659).abs() < 1e-12);
+        assert_eq!(b.value(6), Some(4.0));
+        dc.safe_state().await.unwrap();
+        vfd.set_setpoint(400.0).await.unwrap();
+        vfd.set_output_enabled(true).await.unwrap();
+        sensors.next_batch().await.unwrap();
+        let e = dc.set_output_enabled(true).await.unwrap_err();
+        assert!(e.to_string().contains("supply is on"), "{e}");
+    }
+
+    #[tokio::test]
+    async fn the_free_rotor_turns_below_synchronous_speed_with_friction() {
+        let ws = std::f64::consts::PI * 50.0;
+        let mut speeds = Vec::new();
+        for friction in [0.0, 200.0] {
+            let mut cfg = rig();
+            cfg.noise_relative = 0.0;
+            cfg.supply.line_voltage = 400.0;
+            cfg.friction_windage_w = friction;
+            let (mut vfd, _, mut sensors) = sim_im_rig(cfg).unwrap();
+            vfd.set_setpoint(400.0).await.unwrap();
+            vfd.set_output_enabled(true).await.unwrap();
+            let mut last = None;
+            for _ in 0..2500 {
+                last = Some(sensors.next_batch().await.unwrap());
+            }
+            let b = last.unwrap();
+            let counts = b.value(channel::ENCODER).unwrap();
+            // The speed from the plant itself: the angle's growth per step.
+            let speed = lock(&sensors.plant).speed;
+            assert!(counts > 0.0);
+            // The torque sensor sees the shaft's torque: nothing is coupled.
+            assert!(b.value(channel::TORQUE).unwrap().abs() < 0.05, "{b:?}");
+            speeds.push(speed);
+        }
+        assert!((speeds[0] - ws).abs() < 1e-9, "{speeds:?}");
+        let slip = 1.0 - speeds[1] / ws;
+        assert!(slip > 1e-4 && slip < 0.02, "{slip}");
+    }
+
     #[test]
     fn a_bad_rate_and_a_bad_supply_are_told_apart() {
         let mut cfg = rig();
