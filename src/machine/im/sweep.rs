@@ -570,7 +570,7 @@ pub(super) async fn run_im_plan(
         sensors,
         sink,
         progress,
-        stops.into(),
+        stops,
         monitor,
         speed,
         f64::INFINITY,
