@@ -2,8 +2,9 @@
 //! machine's standard test set on the simulated rig (virtual clock) —
 //! a DC winding-resistance reading, a no-load voltage sweep with the rotor
 //! free, a locked-rotor test at reduced voltage, then the slip sweep —
-//! recorded, reduced and fitted; the classical reduction and the fit meet
-//! the simulated machine within stated tolerances; the Python reader
+//! recorded, reduced and fitted; the classical reduction, the load test's
+//! fit and the joint fit of every reading meet the simulated machine
+//! within stated tolerances; the Python reader
 //! accepts the record; `replay --check` reproduces the report exactly,
 //! and the text replay prints the reduction's tables.
 
@@ -90,6 +91,19 @@ fn the_standard_tests_run_on_the_simulated_rig_and_replay() {
     }
     let leakage = value(&v, "lm", "Xs") + value(&v, "lm", "Xr");
     assert!((leakage / 4.6 - 1.0).abs() < 0.05, "lm Xs + Xr = {leakage}");
+
+    // The joint fit of every reading, Rs bounded by the DC reading, is the
+    // best: every element to 1 % (Rs is the winding warmed by the tests,
+    // a few tenths of a per cent above the DC reading), Pfw to 3 %.
+    assert_eq!(v["best"], "joint", "{}", v["best"]);
+    for (key, truth) in TRUTH {
+        let got = value(&v, "joint", key);
+        let tol = if key == "Pfw" { 0.03 } else { 0.01 };
+        assert!(
+            (got / truth - 1.0).abs() < tol,
+            "joint {key} = {got}, truth {truth}"
+        );
+    }
 
     // The record: five segments of the four kinds, the readings on
     // /bench/standard_test, accepted by the Python reader.
