@@ -158,15 +158,11 @@ pub fn locked_rotor_reading(
 mod tests {
     use super::*;
 
+    use crate::model::im_fixtures::{single_cage, supply};
+
     #[test]
     fn the_no_load_rotor_delivers_its_friction_and_the_locked_one_nothing() {
-        let c = ImCircuit {
-            rs: 1.5,
-            xs: 3.0,
-            xm: 90.0,
-            rfe: Some(1500.0),
-            rotor: RotorCage::Single { rr: 1.6, xr: 3.0 },
-        };
+        let c = single_cage(1.5, 3.0, 90.0, Some(1500.0), 1.6, 3.0);
         let r = no_load_reading(&c, Connection::Delta, 400.0, 60.0).unwrap();
         assert!(r.slip > 0.0 && r.slip < 0.01, "{r:?}");
         let (_, pm) = at_slip(&c, Connection::Delta, 400.0, r.slip);
@@ -181,19 +177,8 @@ mod tests {
 
     #[test]
     fn the_free_rotor_turns_where_its_torque_meets_the_friction() {
-        let c = ImCircuit {
-            rs: 1.5,
-            xs: 3.0,
-            xm: 90.0,
-            rfe: Some(1500.0),
-            rotor: RotorCage::Single { rr: 1.6, xr: 3.0 },
-        };
-        let supply = ImSupply {
-            line_voltage: 400.0,
-            frequency: 50.0,
-            connection: Connection::Delta,
-            pole_pairs: 2,
-        };
+        let c = single_cage(1.5, 3.0, 90.0, Some(1500.0), 1.6, 3.0);
+        let supply = supply(400.0, 50.0, Connection::Delta, 2);
         let ws = std::f64::consts::PI * 50.0;
         let s = free_rotor_slip(&c, &supply, 60.0);
         assert!(s > 0.0 && s < 0.01, "{s}");

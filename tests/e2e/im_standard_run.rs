@@ -10,6 +10,7 @@
 
 use crate::common;
 
+use common::replay::{only_mcap, replay_identical, run_json};
 use common::{motorbench, text};
 
 /// The simulated machine of the shipped configuration, Ω per phase at
@@ -33,19 +34,7 @@ fn value(report: &serde_json::Value, method: &str, key: &str) -> f64 {
 #[test]
 fn the_standard_tests_run_on_the_simulated_rig_and_replay() {
     let dir = tempfile::tempdir().unwrap();
-    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-im-standard.toml");
-    let out = motorbench(&[
-        "run",
-        "--config",
-        config,
-        "--out",
-        dir.path().to_str().unwrap(),
-        "--json",
-        "--quiet",
-    ]);
-    let (stdout, stderr) = text(&out);
-    assert!(out.status.success(), "{stderr}");
-    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let v = run_json("sim-im-standard.toml", dir.path(), &["--quiet"]);
 
     // The classical reduction. Tolerances: 0.5 % on Rs (a DC reading of
     // 150 averaged samples at 0.5 % noise); 1 % on Xm; 2 % on Xs, Xr and
@@ -107,13 +96,8 @@ fn the_standard_tests_run_on_the_simulated_rig_and_replay() {
 
     // The record: five segments of the four kinds, the readings on
     // /bench/standard_test, accepted by the Python reader.
-    let mcap: Vec<_> = std::fs::read_dir(dir.path())
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
-        .collect();
-    assert_eq!(mcap.len(), 1);
-    let record = motorbench::record::read_mcap(&mcap[0]).unwrap();
+    let mcap = only_mcap(dir.path());
+    let record = motorbench::record::read_mcap(&mcap).unwrap();
     let kinds: Vec<&str> = record
         .segments
         .iter()
@@ -141,22 +125,14 @@ fn the_standard_tests_run_on_the_simulated_rig_and_replay() {
         .all(|r| r.segment == 1 && r.frequency == 50.0));
     assert!(record.operating_points.iter().all(|p| p.segment >= 3));
     let readings = 3 + 10 + locked.len();
-    let counts = common::python_check_mcap(&mcap[0], &[format!("/bench/standard_test={readings}")]);
+    let counts = common::python_check_mcap(&mcap, &[format!("/bench/standard_test={readings}")]);
     assert!(counts["/sensor/dc_current"].as_u64().unwrap() > 0);
 
     // The replay reduces the recorded readings to the same report.
-    let replay = motorbench(&["replay", mcap[0].to_str().unwrap(), "--check", "--json"]);
-    let (rstdout, rstderr) = text(&replay);
-    assert!(replay.status.success(), "{rstderr}");
-    assert!(
-        rstderr.contains("identical to the recorded /bench/result"),
-        "{rstderr}"
-    );
-    let r: serde_json::Value = serde_json::from_str(&rstdout).unwrap();
-    assert_eq!(r, v);
+    assert_eq!(replay_identical(&mcap, &[]), v);
 
     // As text: the reduction and its tables.
-    let replay = motorbench(&["replay", mcap[0].to_str().unwrap(), "--no-diagnose"]);
+    let replay = motorbench(&["replay", mcap.to_str().unwrap(), "--no-diagnose"]);
     let (rstdout, rstderr) = text(&replay);
     assert!(replay.status.success(), "{rstderr}");
     for want in [

@@ -134,6 +134,14 @@ impl Sweep<'_> {
         Ok(())
     }
 
+    /// End segment `index` of `kind`.
+    async fn end(&mut self, index: usize, kind: SegmentKind, label: &str) -> Result<(), Halt> {
+        self.seq
+            .marker(index, kind, SegmentPhase::End, label)
+            .await?;
+        Ok(())
+    }
+
     /// Set the supply to `volts` (on) or off (`None`), and record it.
     async fn supply(&mut self, volts: Option<f64>) -> Result<(), Halt> {
         match volts {
@@ -210,10 +218,7 @@ impl Sweep<'_> {
             }
         }
         self.dc_source(None).await?;
-        self.seq
-            .marker(index, kind, SegmentPhase::End, &label)
-            .await?;
-        Ok(())
+        self.end(index, kind, &label).await
     }
 
     /// Wait until the DC source's voltage and current settle, then
@@ -292,10 +297,7 @@ impl Sweep<'_> {
         let label = format!("no load, {} voltages", tests.no_load_voltages.len());
         self.begin(index, total, kind, &label).await?;
         let Some(&first) = tests.no_load_voltages.first() else {
-            self.seq
-                .marker(index, kind, SegmentPhase::End, &label)
-                .await?;
-            return Ok(());
+            return self.end(index, kind, &label).await;
         };
         // The dynamometer brings the shaft up to synchronous speed with the
         // supply on (no direct-on-line start), then lets it go.
@@ -317,10 +319,7 @@ impl Sweep<'_> {
             }
         }
         self.supply(None).await?;
-        self.seq
-            .marker(index, kind, SegmentPhase::End, &label)
-            .await?;
-        Ok(())
+        self.end(index, kind, &label).await
     }
 
     /// `im_locked_rotor`: the shaft held at rest, the supply stepped up
@@ -354,10 +353,7 @@ impl Sweep<'_> {
             }
         }
         self.supply(None).await?;
-        self.seq
-            .marker(index, kind, SegmentPhase::End, &label)
-            .await?;
-        Ok(())
+        self.end(index, kind, &label).await
     }
 }
 

@@ -200,14 +200,6 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for JointProblem<'_> {
     type JacobianStorage = Owned<f64, Dyn, Dyn>;
     type ParameterStorage = Owned<f64, Dyn>;
 
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.x.copy_from(x);
-    }
-
-    fn params(&self) -> DVector<f64> {
-        self.x.clone()
-    }
-
     fn residuals(&self) -> Option<DVector<f64>> {
         // Outside the valid region a large finite residual rejects the
         // step (`None` would end the run).
@@ -228,6 +220,14 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for JointProblem<'_> {
             jac.set_column(j, &((r - &r0) / h));
         }
         Some(jac)
+    }
+
+    fn params(&self) -> DVector<f64> {
+        self.x.clone()
+    }
+
+    fn set_params(&mut self, x: &DVector<f64>) {
+        self.x.copy_from(x);
     }
 }
 
@@ -446,22 +446,15 @@ mod tests {
     use crate::identify::{slip_grid, SlipSweep, SweepNoise};
     use crate::machine::im::identify::reduce_standard_tests;
     use crate::machine::im::identify::StandardTestsOptions;
+    use crate::model::im_fixtures::{single_cage, STAR_400V_50HZ};
     use crate::model::{locked_rotor_reading, terminal_resistance};
     use crate::record::{DcResistanceReading, SupplyReading};
-    use rand::rngs::StdRng;
-    use rand::SeedableRng;
 
     const PFW: f64 = 45.0;
 
     /// Star, 400 V, 50 Hz, Xs = Xr.
     fn machine() -> ImCircuit {
-        ImCircuit {
-            rs: 0.9,
-            xs: 1.8,
-            xm: 60.0,
-            rfe: Some(900.0),
-            rotor: RotorCage::Single { rr: 1.1, xr: 1.8 },
-        }
+        single_cage(0.9, 1.8, 60.0, Some(900.0), 1.1, 1.8)
     }
 
     /// Noise-free standard tests of `c`, the DC reading scaled by `dc`.
@@ -496,33 +489,14 @@ mod tests {
     }
 
     fn load_points(c: &ImCircuit) -> Vec<OperatingPoint> {
-        let supply = ImSupply {
-            line_voltage: 400.0,
-            frequency: 50.0,
-            connection: Connection::Star,
-            pole_pairs: 2,
-        };
-        let sw = SlipSweep::simulate(
+        SlipSweep::simulate_seeded(
             c,
-            &supply,
+            &STAR_400V_50HZ,
             &slip_grid(20, 0.005),
             &SweepNoise::relative(0.0),
-            3,
-            &mut StdRng::seed_from_u64(1),
-        );
-        sw.points
-            .iter()
-            .map(|p| OperatingPoint {
-                segment: 3,
-                slip: p.slip,
-                line_voltage: p.line_voltage,
-                line_current: p.line_current,
-                input_power: p.input_power,
-                speed: f64::NAN,
-                frequency: 50.0,
-                torque: None,
-            })
-            .collect()
+            1,
+        )
+        .operating_points(50.0)
     }
 
     fn fit(tests: &ImStandardTests, points: &[OperatingPoint]) -> Result<JointFit, JointFitError> {
