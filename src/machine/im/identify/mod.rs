@@ -41,8 +41,8 @@ pub use recursive::{
     THETA_SINGLE_L4,
 };
 pub use standard_tests::{
-    reduce_standard_tests, standard_tests_method, StandardTestsOptions, StandardTestsReduction,
-    FRICTION_VOLTAGE_SHARE, STANDARD_TESTS,
+    reduce_standard_tests, standard_tests_method, StandardTestsError, StandardTestsOptions,
+    StandardTestsReduction, FRICTION_VOLTAGE_SHARE, STANDARD_TESTS,
 };
 pub use sweep::{
     predict, predict_gradient, predict_gradient_into, slip_grid, Channels, PhaseData, SlipSweep,
