@@ -144,10 +144,13 @@ async fn a_stop_during_the_no_load_test_leaves_every_stage_safe() {
 }
 
 #[tokio::test]
-async fn the_plan_runs_with_no_progress_to_its_end_on_a_short_sweep() {
-    // A short load test (two voltages of five slips) after the standard
-    // tests: every segment completes, in order.
-    let text = SIM_IM_STANDARD.replace("points = 30", "points = 5");
+async fn the_plan_with_the_nameplate_defaults_runs_to_its_end() {
+    // The standard tests with the nameplate's defaults (the shipped
+    // file's tables left out), then a short load test (two voltages of
+    // five slips): every segment completes, in order.
+    let tables = SIM_IM_STANDARD.find("[test.dc_resistance]").unwrap();
+    let text = SIM_IM_STANDARD[..tables].replace("points = 30", "points = 5");
+    assert!(!text.contains("[test.no_load]"));
     let cfg = ImRunConfig::parse("sim-im-standard.toml", &text).unwrap();
     let mut rig = cfg.open_rig(false).await.unwrap();
     let ids: Vec<String> = rig

@@ -290,6 +290,25 @@ impl Sweep<'_> {
         }))
     }
 
+    /// Read until the shaft turns within 1 % of `speed` rad/s; a fault
+    /// when it does not within the plan's settle timeout.
+    async fn reach_speed(&mut self, speed: f64) -> Result<(), Halt> {
+        let start = self.t_ns();
+        loop {
+            let r = self.read().await?;
+            if r.speed.is_some_and(|w| (w - speed).abs() <= 0.01 * speed) {
+                return Ok(());
+            }
+            if (self.t_ns() - start) as f64 * 1e-9 > self.plan.max_point_s {
+                return Err(Halt::Fault(format!(
+                    "no-load run-up: the dynamometer did not bring the shaft to {speed:.2} rad/s \
+                     within {} s",
+                    self.plan.max_point_s
+                )));
+            }
+        }
+    }
+
     /// `im_no_load`: run up with the dynamometer, let the shaft go, step
     /// the supply down through the voltages.
     async fn no_load(&mut self, tests: &StandardTestsPlan, total: usize) -> Result<(), Halt> {
@@ -299,9 +318,12 @@ impl Sweep<'_> {
         let Some(&first) = tests.no_load_voltages.first() else {
             return self.end(index, kind, &label).await;
         };
-        // The dynamometer brings the shaft up to synchronous speed with the
-        // supply on (no direct-on-line start), then lets it go.
-        self.hold_shaft(self.plan.synchronous_speed()).await?;
+        // The dynamometer brings the shaft up to synchronous speed, the
+        // supply comes on there (no direct-on-line start), then the
+        // dynamometer lets it go.
+        let ws = self.plan.synchronous_speed();
+        self.hold_shaft(ws).await?;
+        self.reach_speed(ws).await?;
         self.supply(Some(first)).await?;
         self.steady(index as u32, "no-load run-up").await?;
         self.dyno.set_output_enabled(false).await?;

@@ -358,7 +358,8 @@ pub fn fit_joint(
     }
     let (lo, hi) = rs_bounds;
     let at_bound = |v: f64, b: f64| (v - b).abs() <= 1e-3 * b;
-    if at_bound(circuit.rs, lo) || at_bound(circuit.rs, hi) {
+    let rs_at_bound = at_bound(circuit.rs, lo) || at_bound(circuit.rs, hi);
+    if rs_at_bound {
         warnings.push(format!(
             "joint: Rs = {:.5} ohm sits at its bound [{lo:.5}, {hi:.5}] ohm (the DC reading \
              {rs_dc:.5} ohm less its error, to a winding {MAX_WINDING_RISE_K} K warmer): the AC \
@@ -366,14 +367,19 @@ pub fn fit_joint(
             circuit.rs
         ));
     }
-    // Intervals from the Jacobian at the solution.
+    // Intervals from the Jacobian at the solution; `Rs` at its bound
+    // (where the map is flat) is held there and gets none.
     let dof = m - Q;
     let sigma2 = rss / dof as f64;
+    let free: Vec<usize> = (usize::from(rs_at_bound)..Q).collect();
     let se: Option<Vec<f64>> = problem.jacobian().and_then(|j| {
+        let j = j.select_columns(&free);
         let cov = (j.transpose() * j).try_inverse()?;
-        (0..Q)
-            .map(|k| Some((sigma2 * cov[(k, k)]).sqrt()).filter(|v| v.is_finite()))
-            .collect()
+        let mut se = vec![f64::NAN; Q];
+        for (a, &k) in free.iter().enumerate() {
+            se[k] = Some((sigma2 * cov[(a, a)]).sqrt()).filter(|v| v.is_finite())?;
+        }
+        Some(se)
     });
     let t = t975(dof);
     let log_estimate = |value: f64, k: usize, unit: &str| ParamEstimate {
@@ -387,7 +393,10 @@ pub fn fit_joint(
         unreachable!("the joint fit's circuit is a single cage")
     };
     let mut params = BTreeMap::new();
-    let rs_hw = se.as_ref().map(|s| t * problem.rs_slope(x[0]).abs() * s[0]);
+    let rs_hw = se
+        .as_ref()
+        .map(|s| t * problem.rs_slope(x[0]).abs() * s[0])
+        .filter(|h| h.is_finite());
     params.insert(
         "Rs".to_string(),
         ParamEstimate {
@@ -562,11 +571,14 @@ mod tests {
             "{:?}",
             f.warnings
         );
-        // Every element stays in its physical range all the same.
+        // Every element stays in its physical range all the same; Rs,
+        // held at its bound, has no interval, the others have theirs.
         assert!(f
             .params
             .values()
             .all(|p| p.value > 0.0 && p.value.is_finite()));
+        assert_eq!(f.params["Rs"].ci95, None);
+        assert!(f.params["Xm"].ci95.is_some(), "{:?}", f.params);
     }
 
     #[test]
