@@ -6,7 +6,7 @@
 //!
 //! Each machine validates its own schema: a DC machine's ([`Config`],
 //! `dc_step` / `dc_coastdown`) or an induction machine's ([`ImRunConfig`],
-//! `im_slip_sweep`). Errors are [`ConfigError`]s for both, naming the
+//! `im_slip_sweep` / `im_standard_tests`). Errors are [`ConfigError`]s for both, naming the
 //! file, the line and the key.
 //!
 //! A third machine would add a [`PlanKind`] variant per plan, a
@@ -35,14 +35,18 @@ pub enum PlanKind {
     DcCoastdown,
     /// Induction machine: slip sweep at several supply voltages.
     ImSlipSweep,
+    /// Induction machine: the standard test set (DC resistance, no load,
+    /// locked rotor), then the slip sweep as the load test.
+    ImStandardTests,
 }
 
 impl PlanKind {
     /// Every plan this version runs.
-    pub const ALL: [PlanKind; 3] = [
+    pub const ALL: [PlanKind; 4] = [
         PlanKind::DcStep,
         PlanKind::DcCoastdown,
         PlanKind::ImSlipSweep,
+        PlanKind::ImStandardTests,
     ];
 
     /// The name in `test.plan`.
@@ -51,6 +55,7 @@ impl PlanKind {
             PlanKind::DcStep => "dc_step",
             PlanKind::DcCoastdown => "dc_coastdown",
             PlanKind::ImSlipSweep => "im_slip_sweep",
+            PlanKind::ImStandardTests => "im_standard_tests",
         }
     }
 
@@ -58,7 +63,7 @@ impl PlanKind {
     pub fn machine(self) -> &'static str {
         match self {
             PlanKind::DcStep | PlanKind::DcCoastdown => "dc",
-            PlanKind::ImSlipSweep => "induction",
+            PlanKind::ImSlipSweep | PlanKind::ImStandardTests => "induction",
         }
     }
 
@@ -122,7 +127,7 @@ impl TestConfig {
     /// directory resolves relative device-profile paths).
     pub fn parse(source: &str, text: &str) -> Result<TestConfig, ConfigError> {
         match PlanKind::of(source, text)? {
-            Some(PlanKind::ImSlipSweep) => {
+            Some(PlanKind::ImSlipSweep | PlanKind::ImStandardTests) => {
                 Ok(TestConfig::Im(Box::new(ImRunConfig::parse(source, text)?)))
             }
             Some(PlanKind::DcStep | PlanKind::DcCoastdown) | None => {
@@ -147,6 +152,7 @@ impl TestConfig {
                 super::Plan::DcStep { .. } => PlanKind::DcStep,
                 super::Plan::DcCoastdown { .. } => PlanKind::DcCoastdown,
             },
+            TestConfig::Im(c) if c.standard.is_some() => PlanKind::ImStandardTests,
             TestConfig::Im(_) => PlanKind::ImSlipSweep,
         }
     }
@@ -185,6 +191,9 @@ impl TestConfig {
     pub fn stages(&self) -> Vec<&'static str> {
         match self {
             TestConfig::Dc(_) => vec!["power_stage"],
+            TestConfig::Im(c) if c.standard.is_some() => {
+                vec!["supply", "dynamometer", "dc_source"]
+            }
             TestConfig::Im(_) => vec!["supply", "dynamometer"],
         }
     }
@@ -228,6 +237,7 @@ mod tests {
     use super::*;
 
     const SIM_IM: &str = include_str!("../../config/sim-im.toml");
+    const SIM_IM_STANDARD: &str = include_str!("../../config/sim-im-standard.toml");
 
     #[test]
     fn the_plan_picks_the_machine() {
@@ -239,6 +249,12 @@ mod tests {
             (PlanKind::ImSlipSweep, "induction")
         );
         assert_eq!(im.stages(), ["supply", "dynamometer"]);
+        let standard = TestConfig::parse("std.toml", SIM_IM_STANDARD).unwrap();
+        assert_eq!(
+            (standard.plan(), standard.machine()),
+            (PlanKind::ImStandardTests, "induction")
+        );
+        assert_eq!(standard.stages(), ["supply", "dynamometer", "dc_source"]);
         assert_eq!(recorded_im_model(SIM_IM), Some(ImModel::Double));
         assert_eq!(recorded_im_model(super::super::DEFAULT_CONFIG), None);
     }

@@ -192,11 +192,11 @@ impl Analysed {
 }
 
 /// Analyse a record of any machine (`replay`): an induction-machine
-/// record (one that holds operating points) by the circuit its
-/// configuration named (else single cage with iron loss), any other as a
-/// DC record.
+/// record (one that holds operating points or standard-test readings) by
+/// the circuit its configuration named (else single cage with iron loss),
+/// any other as a DC record.
 pub fn analyse_record(record: &Record, diagnose: bool) -> Analysed {
-    if record.operating_points.is_empty() {
+    if record.operating_points.is_empty() && record.standard_tests.is_empty() {
         analyse_dc(record, None, diagnose)
     } else {
         analyse_im(record, None, im::recorded_model(record), diagnose)

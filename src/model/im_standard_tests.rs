@@ -3,9 +3,10 @@
 //! no-load test with a friction-and-windage load on the shaft (the rotor
 //! runs at the slip where the air-gap power covers it), and the
 //! locked-rotor test at any frequency. Test fixtures for the classical
-//! reduction, and the plant the rig plans of these tests will drive.
+//! reduction; and [`free_rotor_slip`], where the simulated rig's uncoupled
+//! rotor runs with friction and windage on its shaft.
 
-use super::im::{Connection, ImCircuit, RotorCage, C64};
+use super::im::{Connection, ImCircuit, ImSupply, RotorCage, C64};
 
 /// One simulated reading on an AC supply, terminal values (line voltage
 /// and current RMS, three-phase power).
@@ -99,6 +100,42 @@ pub fn no_load_reading(
     Some(at_slip(c, connection, line_voltage, hi).0)
 }
 
+/// Slip steps of the scan for the free rotor's operating point.
+const SCAN_STEPS: usize = 1000;
+
+/// The slip at which `c`, uncoupled on `supply`, runs with friction and
+/// windage that take `friction_windage` W at synchronous speed (the loss
+/// `∝ ω²`: a torque `∝ ω`): the smallest slip where the electromagnetic
+/// torque `P_ag/ω_s` meets the friction torque (the stable branch below
+/// breakdown), found by a scan and bisection. 0 without friction or
+/// without voltage; close to 1 where the machine cannot turn its shaft
+/// against them (the friction torque vanishes at standstill).
+pub fn free_rotor_slip(c: &ImCircuit, supply: &ImSupply, friction_windage: f64) -> f64 {
+    if !(friction_windage > 0.0 && supply.line_voltage > 0.0) {
+        return 0.0;
+    }
+    let ws = std::f64::consts::TAU * supply.frequency / f64::from(supply.pole_pairs.max(1));
+    // Electromagnetic less friction torque at slip `s`.
+    let net = |s: f64| {
+        let friction = friction_windage / ws * (1.0 - s);
+        c.operating_point(supply, s).torque - friction
+    };
+    let step = 1.0 / SCAN_STEPS as f64;
+    let Some(k) = (1..=SCAN_STEPS).find(|&k| net(k as f64 * step) >= 0.0) else {
+        return 1.0;
+    };
+    let (mut lo, mut hi) = ((k - 1) as f64 * step, k as f64 * step);
+    for _ in 0..SLIP_STEPS {
+        let mid = 0.5 * (lo + hi);
+        if net(mid) < 0.0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    hi
+}
+
 /// The locked-rotor reading of `c` (reactances at `rated_frequency`) on
 /// `line_voltage` at `frequency`.
 pub fn locked_rotor_reading(
@@ -121,15 +158,11 @@ pub fn locked_rotor_reading(
 mod tests {
     use super::*;
 
+    use crate::model::im_fixtures::{single_cage, supply};
+
     #[test]
     fn the_no_load_rotor_delivers_its_friction_and_the_locked_one_nothing() {
-        let c = ImCircuit {
-            rs: 1.5,
-            xs: 3.0,
-            xm: 90.0,
-            rfe: Some(1500.0),
-            rotor: RotorCage::Single { rr: 1.6, xr: 3.0 },
-        };
+        let c = single_cage(1.5, 3.0, 90.0, Some(1500.0), 1.6, 3.0);
         let r = no_load_reading(&c, Connection::Delta, 400.0, 60.0).unwrap();
         assert!(r.slip > 0.0 && r.slip < 0.01, "{r:?}");
         let (_, pm) = at_slip(&c, Connection::Delta, 400.0, r.slip);
@@ -140,5 +173,20 @@ mod tests {
         assert!((lr.line_current - 3f64.sqrt() * i).abs() < 1e-9);
         assert!((lr.input_power - 3.0 * i * i * z.re).abs() < 1e-6);
         assert_eq!(terminal_resistance(1.5, Connection::Delta), 1.0);
+    }
+
+    #[test]
+    fn the_free_rotor_turns_where_its_torque_meets_the_friction() {
+        let c = single_cage(1.5, 3.0, 90.0, Some(1500.0), 1.6, 3.0);
+        let supply = supply(400.0, 50.0, Connection::Delta, 2);
+        let ws = std::f64::consts::PI * 50.0;
+        let s = free_rotor_slip(&c, &supply, 60.0);
+        assert!(s > 0.0 && s < 0.01, "{s}");
+        // The shaft's friction torque at that speed, ∝ ω.
+        let friction = 60.0 / ws * (1.0 - s);
+        assert!((c.operating_point(&supply, s).torque - friction).abs() < 1e-9);
+        assert_eq!(free_rotor_slip(&c, &supply, 0.0), 0.0);
+        // Far more friction than the machine can turn: it (nearly) stalls.
+        assert!(free_rotor_slip(&c, &supply, 1e7) > 0.99);
     }
 }

@@ -31,5 +31,6 @@ pub use im_equivalent::{
 };
 pub use im_lab::{LabMachine, LabMeters, LabPoint, LabSegment, LabTerminal};
 pub use im_standard_tests::{
-    at_frequency, locked_rotor_reading, no_load_reading, terminal_resistance, StandardReading,
+    at_frequency, free_rotor_slip, locked_rotor_reading, no_load_reading, terminal_resistance,
+    StandardReading,
 };

@@ -32,8 +32,8 @@ use std::collections::BTreeMap;
 
 use super::schema::SENSOR_PREFIX;
 use super::types::{
-    ChannelSpec, DcSegment, Entry, Event, OperatingPoint, Record, SegmentKind, SegmentPhase,
-    SupplyLimit, TestMeta,
+    ChannelSpec, DcSegment, Entry, Event, ImStandardTests, OperatingPoint, Record, SegmentKind,
+    SegmentPhase, SupplyLimit, TestMeta,
 };
 
 /// Appended to the label of a segment that has no end marker.
@@ -68,6 +68,7 @@ pub struct RecordBuilder {
     events: Vec<(u64, Event)>,
     result: Option<serde_json::Value>,
     points: Vec<OperatingPoint>,
+    standard_tests: ImStandardTests,
     supply_limits: Vec<SupplyLimit>,
 }
 
@@ -117,6 +118,7 @@ impl RecordBuilder {
             events: Vec::new(),
             result: None,
             points: Vec::new(),
+            standard_tests: ImStandardTests::default(),
             supply_limits: Vec::new(),
         }
     }
@@ -154,6 +156,7 @@ impl RecordBuilder {
             Entry::Result { report, .. } => self.result = Some(report.clone()),
             Entry::OperatingPoint { point, .. } => self.points.push(*point),
             Entry::SupplyLimit { limit, .. } => self.supply_limits.push(*limit),
+            Entry::StandardTest { reading, .. } => self.standard_tests.push(*reading),
         }
     }
 
@@ -166,6 +169,7 @@ impl RecordBuilder {
             mut events,
             result,
             points,
+            standard_tests,
             supply_limits,
             ..
         } = self;
@@ -208,7 +212,7 @@ impl RecordBuilder {
             segments,
             events,
             operating_points: points,
-            standard_tests: Default::default(),
+            standard_tests,
             supply_limits,
             recorded_result: result,
             recovery: None,

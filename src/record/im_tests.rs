@@ -3,10 +3,14 @@
 //! reading, the no-load test at several voltages and the locked-rotor test,
 //! as the record holds them for the classical reduction
 //! (`machine/im/identify/standard_tests/`). Additive segment kinds of the
-//! data contract: `im_dc_resistance`, `im_no_load`, `im_locked_rotor`.
+//! data contract: `im_dc_resistance`, `im_no_load`, `im_locked_rotor`;
+//! on a record the rig made, each reading is one `/bench/standard_test`
+//! message ([`StandardTestReading`]).
+
+use serde::{Deserialize, Serialize};
 
 /// One DC winding-resistance reading between two line terminals.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct DcResistanceReading {
     /// Segment index.
     pub segment: u32,
@@ -19,7 +23,7 @@ pub struct DcResistanceReading {
 }
 
 /// One steady reading of a no-load or locked-rotor test on an AC supply.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SupplyReading {
     /// Segment index.
     pub segment: u32,
@@ -46,7 +50,52 @@ pub struct ImStandardTests {
     pub locked_rotor: Vec<SupplyReading>,
 }
 
+/// One reading of a standard test as the rig records it on
+/// `/bench/standard_test`: the reading's keys and `"test"`, its segment
+/// kind.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "test", rename_all = "snake_case")]
+pub enum StandardTestReading {
+    /// An `im_dc_resistance` reading.
+    ImDcResistance(DcResistanceReading),
+    /// An `im_no_load` reading.
+    ImNoLoad(SupplyReading),
+    /// An `im_locked_rotor` reading.
+    ImLockedRotor(SupplyReading),
+}
+
+impl StandardTestReading {
+    /// The first value that is not a finite number (JSON cannot carry
+    /// it), if any.
+    pub fn non_finite_field(&self) -> Option<(&'static str, f64)> {
+        let fields = match self {
+            StandardTestReading::ImDcResistance(r) => vec![
+                ("dc_voltage", r.dc_voltage),
+                ("dc_current", r.dc_current),
+                ("winding_temperature", r.winding_temperature.unwrap_or(0.0)),
+            ],
+            StandardTestReading::ImNoLoad(r) | StandardTestReading::ImLockedRotor(r) => vec![
+                ("line_voltage", r.line_voltage),
+                ("line_current", r.line_current),
+                ("input_power", r.input_power),
+                ("frequency", r.frequency),
+                ("winding_temperature", r.winding_temperature.unwrap_or(0.0)),
+            ],
+        };
+        fields.into_iter().find(|(_, v)| !v.is_finite())
+    }
+}
+
 impl ImStandardTests {
+    /// Add one reading to its test's list.
+    pub fn push(&mut self, reading: StandardTestReading) {
+        match reading {
+            StandardTestReading::ImDcResistance(r) => self.dc_resistance.push(r),
+            StandardTestReading::ImNoLoad(r) => self.no_load.push(r),
+            StandardTestReading::ImLockedRotor(r) => self.locked_rotor.push(r),
+        }
+    }
+
     /// Whether the record holds none of these tests.
     pub fn is_empty(&self) -> bool {
         self.dc_resistance.is_empty() && self.no_load.is_empty() && self.locked_rotor.is_empty()

@@ -45,7 +45,7 @@ use super::mcap_walk::{walk_records, Damage};
 use super::schema::{
     is_sample_topic_for, COMMAND_PREFIX, MESSAGE_ENCODING, METADATA_NAME, METADATA_START_TIME_NS,
     SENSOR_PREFIX, TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT,
-    TOPIC_SUPPLY_LIMIT,
+    TOPIC_STANDARD_TEST, TOPIC_SUPPLY_LIMIT,
 };
 use super::types::{ChannelSpec, Entry, Record, Recovery, SegmentKind, TestMeta};
 use crate::contract::READ_SCHEMA_VERSIONS;
@@ -65,6 +65,7 @@ enum Route {
     Event,
     Result,
     SupplyLimit,
+    StandardTest,
     Ignore,
 }
 
@@ -276,6 +277,10 @@ impl<'p> Reading<'p> {
                         t_ns,
                         limit: decode(&data).map_err(|e| bad(e.to_string()))?,
                     }),
+                    Route::StandardTest => Some(Entry::StandardTest {
+                        t_ns,
+                        reading: decode(&data).map_err(|e| bad(e.to_string()))?,
+                    }),
                     Route::Sample(_) | Route::Ignore => None,
                 };
                 if let Some(entry) = entry {
@@ -328,6 +333,7 @@ fn route_of(
         TOPIC_EVENT => Route::Event,
         TOPIC_RESULT => Route::Result,
         TOPIC_SUPPLY_LIMIT => Route::SupplyLimit,
+        TOPIC_STANDARD_TEST => Route::StandardTest,
         _ => return Ok(Route::Ignore),
     };
     if c.message_encoding != MESSAGE_ENCODING {

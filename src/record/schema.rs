@@ -44,6 +44,9 @@ pub const TOPIC_RESULT: &str = "/bench/result";
 /// Topic of the stretches where the supply could not follow its set
 /// point (an additive extension of the contract).
 pub const TOPIC_SUPPLY_LIMIT: &str = "/bench/supply_limit";
+/// Topic of the induction machine's standard-test readings (an additive
+/// extension of the contract).
+pub const TOPIC_STANDARD_TEST: &str = "/bench/standard_test";
 
 /// Schema of `/sensor/*` and `/command/*` messages.
 pub const SCHEMA_SAMPLE: &str = "motorbench.Sample";
@@ -60,6 +63,8 @@ pub const SCHEMA_LOG: &str = "foxglove.Log";
 pub const SCHEMA_RESULT: &str = "motorbench.Result";
 /// Schema of `/bench/supply_limit` messages.
 pub const SCHEMA_SUPPLY_LIMIT: &str = "motorbench.SupplyLimit";
+/// Schema of `/bench/standard_test` messages.
+pub const SCHEMA_STANDARD_TEST: &str = "motorbench.StandardTest";
 
 /// JSON Schema of `motorbench.Sample`: `{"value": number}`. (A non-finite
 /// reading, which JSON cannot carry, is reported on `/bench/event`.)
@@ -83,7 +88,7 @@ pub const SEGMENT_JSON_SCHEMA: &str = r#"{
   "type": "object",
   "properties": {
     "index": {"type": "integer", "minimum": 0},
-    "kind": {"enum": ["dc_step", "dc_coastdown", "im_slip_sweep"]},
+    "kind": {"enum": ["dc_step", "dc_coastdown", "im_slip_sweep", "im_dc_resistance", "im_no_load", "im_locked_rotor"]},
     "phase": {"enum": ["start", "end"]},
     "label": {"type": "string"}
   },
@@ -183,9 +188,31 @@ pub const SUPPLY_LIMIT_JSON_SCHEMA: &str = r#"{
   "required": ["segment", "kind", "from", "to", "commanded_voltage", "measured_voltage", "current_limit", "peak_current"]
 }"#;
 
+/// JSON Schema of `motorbench.StandardTest`: one averaged reading of an
+/// induction machine's standard test, its test named by `test` (the
+/// segment kind). Readers ignore keys they do not know.
+pub const STANDARD_TEST_JSON_SCHEMA: &str = r#"{
+  "$schema": "https://json-schema.org/draft/2020-12/schema",
+  "title": "motorbench.StandardTest",
+  "description": "One averaged reading of an induction machine's standard test (SI units; winding temperature in degrees Celsius): a DC winding-resistance reading between two line terminals (test im_dc_resistance), or a no-load (im_no_load) or locked-rotor (im_locked_rotor) reading on the AC supply.",
+  "type": "object",
+  "properties": {
+    "test": {"enum": ["im_dc_resistance", "im_no_load", "im_locked_rotor"]},
+    "segment": {"type": "integer", "minimum": 0},
+    "dc_voltage": {"type": "number"},
+    "dc_current": {"type": "number"},
+    "line_voltage": {"type": "number"},
+    "line_current": {"type": "number"},
+    "input_power": {"type": "number"},
+    "frequency": {"type": "number"},
+    "winding_temperature": {"type": ["number", "null"]}
+  },
+  "required": ["test", "segment", "winding_temperature"]
+}"#;
+
 /// The `/bench/*` topics with their schema names and schema texts, in the
 /// order the recorder declares them (version 2).
-pub const BENCH_TOPICS: [(&str, &str, &str); 5] = [
+pub const BENCH_TOPICS: [(&str, &str, &str); 6] = [
     (TOPIC_SEGMENT, SCHEMA_SEGMENT, SEGMENT_JSON_SCHEMA),
     (
         TOPIC_OPERATING_POINT,
@@ -198,6 +225,11 @@ pub const BENCH_TOPICS: [(&str, &str, &str); 5] = [
         TOPIC_SUPPLY_LIMIT,
         SCHEMA_SUPPLY_LIMIT,
         SUPPLY_LIMIT_JSON_SCHEMA,
+    ),
+    (
+        TOPIC_STANDARD_TEST,
+        SCHEMA_STANDARD_TEST,
+        STANDARD_TEST_JSON_SCHEMA,
     ),
 ];
 
@@ -224,6 +256,7 @@ mod tests {
             (SCHEMA_LOG, LOG_JSON_SCHEMA),
             (SCHEMA_RESULT, RESULT_JSON_SCHEMA),
             (SCHEMA_SUPPLY_LIMIT, SUPPLY_LIMIT_JSON_SCHEMA),
+            (SCHEMA_STANDARD_TEST, STANDARD_TEST_JSON_SCHEMA),
         ];
         for (name, text) in all {
             let v: serde_json::Value = serde_json::from_str(text).unwrap();
@@ -241,7 +274,14 @@ mod tests {
         let v: serde_json::Value = serde_json::from_str(SEGMENT_JSON_SCHEMA).unwrap();
         assert_eq!(
             v["properties"]["kind"]["enum"],
-            serde_json::json!(["dc_step", "dc_coastdown", "im_slip_sweep"])
+            serde_json::json!([
+                "dc_step",
+                "dc_coastdown",
+                "im_slip_sweep",
+                "im_dc_resistance",
+                "im_no_load",
+                "im_locked_rotor"
+            ])
         );
         assert_eq!(
             v["properties"]["phase"]["enum"],

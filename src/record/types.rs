@@ -3,7 +3,9 @@
 
 use serde::{Deserialize, Serialize};
 
-pub use super::im_tests::{DcResistanceReading, ImStandardTests, SupplyReading};
+pub use super::im_tests::{
+    DcResistanceReading, ImStandardTests, StandardTestReading, SupplyReading,
+};
 
 /// Contract version written to every record and report.
 pub use crate::contract::SCHEMA_VERSION;
@@ -210,6 +212,14 @@ pub enum Entry {
         /// The stretch.
         limit: SupplyLimit,
     },
+    /// One averaged reading of an induction machine's standard test (DC
+    /// resistance, no load, locked rotor).
+    StandardTest {
+        /// When it was taken (the end of its averaging window).
+        t_ns: u64,
+        /// The reading.
+        reading: StandardTestReading,
+    },
     /// The final identification (and diagnosis) report.
     Result {
         /// When it was produced.
@@ -353,6 +363,7 @@ macro_rules! t_ns_field {
             | Entry::Segment { t_ns, .. }
             | Entry::Event { t_ns, .. }
             | Entry::SupplyLimit { t_ns, .. }
+            | Entry::StandardTest { t_ns, .. }
             | Entry::Result { t_ns, .. } => t_ns,
         }
     };
@@ -446,7 +457,8 @@ pub struct Record {
     /// Induction-machine operating points in recording order.
     pub operating_points: Vec<OperatingPoint>,
     /// Induction-machine standard tests other than the slip sweep (DC
-    /// resistance, no load, locked rotor); CSV import only for now.
+    /// resistance, no load, locked rotor): from CSV, or as the rig
+    /// recorded them on `/bench/standard_test`.
     pub standard_tests: ImStandardTests,
     /// Bench events in time order.
     pub events: Vec<(u64, Event)>,

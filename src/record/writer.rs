@@ -45,7 +45,7 @@ use super::log_event::LogMessage;
 use super::schema::{
     is_sample_topic_for, BENCH_TOPICS, MESSAGE_ENCODING, METADATA_NAME, METADATA_START_TIME_NS,
     SAMPLE_JSON_SCHEMA, SCHEMA_ENCODING, SCHEMA_SAMPLE, TOPIC_EVENT, TOPIC_OPERATING_POINT,
-    TOPIC_RESULT, TOPIC_SEGMENT, TOPIC_SUPPLY_LIMIT,
+    TOPIC_RESULT, TOPIC_SEGMENT, TOPIC_STANDARD_TEST, TOPIC_SUPPLY_LIMIT,
 };
 use super::start::TestStart;
 use super::types::{ChannelSpec, Entry, Event, EventLevel, TestMeta, SCHEMA_VERSION};
@@ -347,6 +347,11 @@ impl Recorder {
                     "operating point field {field} = {v} is not a finite number (JSON has none)"
                 )
             }),
+            Entry::StandardTest { reading, .. } => reading.non_finite_field().map(|(field, v)| {
+                format!(
+                    "standard-test reading field {field} = {v} is not a finite number (JSON has none)"
+                )
+            }),
             _ => None,
         };
         match reason {
@@ -490,6 +495,18 @@ fn run(
                     *t_ns,
                     limit,
                     "a supply limit serializes",
+                )
+                .map_err(mcap_err)?;
+                (*t_ns, true)
+            }
+            Entry::StandardTest { t_ns, reading } => {
+                write_bench_json(
+                    &mut writer,
+                    &mut table,
+                    TOPIC_STANDARD_TEST,
+                    *t_ns,
+                    reading,
+                    "a standard-test reading serializes",
                 )
                 .map_err(mcap_err)?;
                 (*t_ns, true)
@@ -659,7 +676,7 @@ mod tests {
         });
         assert_eq!(stats.messages, 201);
         assert_eq!(stats.path, path);
-        assert_eq!(stats.per_topic.len(), 7);
+        assert_eq!(stats.per_topic.len(), 8);
         assert_eq!(stats.per_topic["/bench/supply_limit"], 0);
         assert_eq!(stats.per_topic["/sensor/armature_current"], 100);
         assert_eq!(stats.per_topic["/bench/event"], 1);

@@ -7,6 +7,7 @@ pub mod dry_run;
 pub mod peer;
 pub mod python;
 pub mod rated_motor;
+pub mod replay;
 
 use std::path::Path;
 use std::process::{Command, Output};

@@ -5,23 +5,13 @@
 
 use crate::common;
 
+use common::replay::{only_mcap, replay_identical, run_json};
 use common::{motorbench, probed, text};
 
 #[test]
 fn run_sim_im_then_replay_gives_the_same_report() {
     let dir = tempfile::tempdir().unwrap();
-    let config = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-im.toml");
-    let out = motorbench(&[
-        "run",
-        "--config",
-        config,
-        "--out",
-        dir.path().to_str().unwrap(),
-        "--json",
-    ]);
-    let (stdout, stderr) = text(&out);
-    assert!(out.status.success(), "{stderr}");
-    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let v = run_json("sim-im.toml", dir.path(), &[]);
     assert_eq!(v["kind"], "im_slip_sweep");
     assert_eq!(v["best"], "lm");
     assert!(v["methods"]["lm"]["validation_nrmse"].as_f64().unwrap() < 0.01);
@@ -32,44 +22,19 @@ fn run_sim_im_then_replay_gives_the_same_report() {
         "{rs}"
     );
 
-    let mcap: Vec<_> = std::fs::read_dir(dir.path())
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "mcap"))
-        .collect();
-    assert_eq!(mcap.len(), 1);
+    let mcap = only_mcap(dir.path());
     let svg_written = std::fs::read_dir(dir.path())
         .unwrap()
         .any(|e| e.unwrap().path().extension().is_some_and(|e| e == "svg"));
     assert!(svg_written);
-    let replay = motorbench(&["replay", mcap[0].to_str().unwrap(), "--check", "--json"]);
-    let (rstdout, rstderr) = text(&replay);
-    assert!(replay.status.success(), "{rstderr}");
-    assert!(
-        rstderr.contains("identical to the recorded /bench/result"),
-        "{rstderr}"
-    );
-    let r: serde_json::Value = serde_json::from_str(&rstdout).unwrap();
+    let r = replay_identical(&mcap, &[]);
     assert_eq!(r, v);
     assert!(v.get("diagnosis").is_some(), "a default run diagnoses");
 
     // Without the diagnosis the replay still matches the rest of the
     // recorded result.
-    let replay = motorbench(&[
-        "replay",
-        mcap[0].to_str().unwrap(),
-        "--check",
-        "--json",
-        "--no-diagnose",
-    ]);
-    let (rstdout, rstderr) = text(&replay);
-    assert!(replay.status.success(), "{rstderr}");
-    assert!(
-        rstderr.contains("identical to the recorded /bench/result"),
-        "{rstderr}"
-    );
-    let mut r: serde_json::Value = serde_json::from_str(&rstdout).unwrap();
-    assert!(r.get("diagnosis").is_none(), "{rstdout}");
+    let mut r = replay_identical(&mcap, &["--no-diagnose"]);
+    assert!(r.get("diagnosis").is_none(), "{r}");
     let mut v = v;
     v.as_object_mut().unwrap().remove("diagnosis");
     r.as_object_mut().unwrap().remove("diagnosis");

@@ -18,6 +18,7 @@ mod identify_property;
 mod im_coverage;
 mod im_lab_record;
 mod im_paper_study;
+mod im_standard_rig;
 mod im_sweep_rig;
 mod run_supervised;
 mod safety;

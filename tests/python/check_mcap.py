@@ -43,6 +43,10 @@ VERSIONS = ("1", "2")
 # Foxglove's log levels motorbench writes in version 2: INFO, WARNING, ERROR.
 LOG_LEVELS = (2, 3, 4)
 KINDS = ("dc_step", "dc_coastdown", "im_slip_sweep")
+# motorbench's additive extension: the induction machine's standard tests,
+# segment kinds and the tests of /bench/standard_test (docs/data-contract.md).
+STANDARD_TESTS = ("im_dc_resistance", "im_no_load", "im_locked_rotor")
+SEGMENT_KINDS = KINDS + STANDARD_TESTS
 PHASES = ("start", "end")
 LEVELS = ("info", "warn", "abort")
 BENCH_SCHEMAS = {
@@ -53,6 +57,8 @@ BENCH_SCHEMAS = {
     # motorbench's additive extension: where the supply did not follow its
     # set point (docs/connect-your-rig.md).
     "/bench/supply_limit": "motorbench.SupplyLimit",
+    # ... and the induction machine's standard-test readings.
+    "/bench/standard_test": "motorbench.StandardTest",
 }
 SUPPLY_LIMIT_KINDS = ("current_limit", "voltage_compliance")
 SAMPLE_SCHEMA = "motorbench.Sample"
@@ -125,8 +131,8 @@ def shape_problem(schema_name, msg):
             return f"keys {sorted(msg)}, want ['index', 'kind', 'label', 'phase']"
         if not is_int(msg["index"]) or msg["index"] < 0:
             return f"index {msg['index']!r} is not a non-negative integer"
-        if msg["kind"] not in KINDS:
-            return f"kind {msg['kind']!r} is not one of {KINDS}"
+        if msg["kind"] not in SEGMENT_KINDS:
+            return f"kind {msg['kind']!r} is not one of {SEGMENT_KINDS}"
         if msg["phase"] not in PHASES:
             return f"phase {msg['phase']!r} is not one of {PHASES}"
         if not isinstance(msg["label"], str):
@@ -183,6 +189,24 @@ def shape_problem(schema_name, msg):
                 return f"{k} {msg[k]!r} is not a number"
         if msg["current_limit"] is not None and not is_number(msg["current_limit"]):
             return f"current_limit {msg['current_limit']!r} is not a number or null"
+        return None
+    if schema_name == "motorbench.StandardTest":
+        if msg.get("test") not in STANDARD_TESTS:
+            return f"test {msg.get('test')!r} is not one of {STANDARD_TESTS}"
+        if msg["test"] == "im_dc_resistance":
+            keys = ("dc_voltage", "dc_current")
+        else:
+            keys = ("line_voltage", "line_current", "input_power", "frequency")
+        if not set(keys) | {"segment", "winding_temperature"} <= set(msg):
+            return f"keys {sorted(msg)}, want at least {sorted(keys)}, segment, winding_temperature"
+        if not is_int(msg["segment"]) or msg["segment"] < 0:
+            return "segment is not a non-negative integer"
+        for k in keys:
+            if not is_number(msg[k]):
+                return f"{k} {msg[k]!r} is not a number"
+        t = msg["winding_temperature"]
+        if t is not None and not is_number(t):
+            return f"winding_temperature {t!r} is not a number or null"
         return None
     if schema_name == "motorbench.Result":
         return None  # any JSON object

@@ -1,6 +1,9 @@
 //! Configuration of an `im_slip_sweep` run (TOML, `config/sim-im.toml`
 //! on the simulated induction-machine rig, `config/sim-modbus-im.toml`
-//! behind Modbus), validated.
+//! behind Modbus), or of an `im_standard_tests` run (the same keys for
+//! its load test, and the optional `[test.dc_resistance]`,
+//! `[test.no_load]` and `[test.locked_rotor]` tables, see
+//! `standard_config`; `config/sim-im-standard.toml`), validated.
 //!
 //! The file has the DC configuration's layout (`[motor]`, `[rig]`,
 //! `[limits]`, `[test]`, the optional `[supervisor]` (its checks run
@@ -13,7 +16,8 @@
 
 use serde::Deserialize;
 
-use super::{ImModbusRig, ImSweepPlan, SimImRigConfig};
+use super::standard_config::{RawDcResistance, RawLockedRotor, RawNoLoad, RawStandardTests};
+use super::{ImModbusRig, ImSweepPlan, SimImRigConfig, StandardTestsPlan};
 use crate::bench::SafetyRules;
 use crate::bounds;
 use crate::config::{
@@ -49,8 +53,10 @@ pub struct ImRunConfig {
     pub supervision: Supervision,
     /// How long the daemon keeps this rig's records (`[records]`).
     pub retention: Retention,
-    /// The test plan.
+    /// The test plan: the slip sweep (the load test of the standard set).
     pub plan: ImSweepPlan,
+    /// The standard tests before the sweep (plan `im_standard_tests`).
+    pub standard: Option<StandardTestsPlan>,
     /// The circuit identification fits.
     pub model: ImModel,
 }
@@ -93,6 +99,18 @@ struct RawSim {
     dynamometer: RawDyno,
     sensors: RawSensors,
     thermal: RawThermal,
+    #[serde(default)]
+    mechanical: RawMechanical,
+}
+
+/// `[rig.simulated.mechanical]`: what the shaft carries besides the
+/// dynamometer.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawMechanical {
+    /// Friction and windage at synchronous speed, W (`∝ ω²`).
+    #[serde(rename = "friction_windage_W", default)]
+    friction_windage: f64,
 }
 
 #[derive(Debug, Deserialize)]
@@ -155,6 +173,9 @@ struct RawTest {
     hot_point_max_s: f64,
     cooldown_s: f64,
     settle: RawSettle,
+    dc_resistance: Option<RawDcResistance>,
+    no_load: Option<RawNoLoad>,
+    locked_rotor: Option<RawLockedRotor>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -245,10 +266,35 @@ impl ImRunConfig {
                 "is only used with rig.modbus.simulate: leave it out on a real rig".into(),
             ));
         }
-        if raw.test.plan != "im_slip_sweep" {
+        let standard_tables = RawStandardTests {
+            dc_resistance: raw.test.dc_resistance.as_ref(),
+            no_load: raw.test.no_load.as_ref(),
+            locked_rotor: raw.test.locked_rotor.as_ref(),
+        };
+        let standard_plan = match raw.test.plan.as_str() {
+            "im_standard_tests" => true,
+            "im_slip_sweep" => {
+                if let Some(key) = standard_tables.first_given() {
+                    return Err(bad(key, "is for test.plan = \"im_standard_tests\"".into()));
+                }
+                false
+            }
+            other => {
+                return Err(bad(
+                    "test.plan",
+                    format!(
+                        "{} is not im_slip_sweep nor im_standard_tests",
+                        quoted(other)
+                    ),
+                ))
+            }
+        };
+        if standard_plan && modbus.is_some() {
             return Err(bad(
                 "test.plan",
-                format!("{} is not im_slip_sweep", quoted(&raw.test.plan)),
+                "im_standard_tests needs a DC source for the winding-resistance test, which \
+                 only the simulated rig (rig.backend = \"simulated\") has so far"
+                    .into(),
             ));
         }
         let model = ImModel::parse(&raw.test.model).ok_or_else(|| {
@@ -433,6 +479,18 @@ impl ImRunConfig {
                     )?,
                     ambient_c: s.thermal.ambient,
                     seed: s.sensors.seed,
+                    friction_windage_w: {
+                        let w = s.mechanical.friction_windage;
+                        if !(w.is_finite() && w >= 0.0) {
+                            return Err(bad(
+                                "rig.simulated.mechanical.friction_windage_W",
+                                format!("{w} must be a finite number ≥ 0"),
+                            ));
+                        }
+                        w
+                    },
+                    // The DC source of the standard tests' resistance reading.
+                    dc_source_max_current: standard_plan.then_some(current),
                 })
             }
         };
@@ -462,6 +520,21 @@ impl ImRunConfig {
                 raw.limits.max_speed.unwrap_or(1.2 * synchronous),
             )?,
         };
+        let standard = standard_plan
+            .then(|| {
+                standard_tables.validate(voltage, current, limits.max_voltage, limits.max_current)
+            })
+            .transpose()
+            .map_err(|(key, why)| bad(&key, why))?;
+        if let Some(s) = &standard {
+            // The standard tests' readings, each to its timeout.
+            let points: usize = s.points().iter().sum();
+            bounded(
+                source,
+                "test.settle.timeout_s",
+                bounds::test_length(longest + points as f64 * (point_s + average_s), rate),
+            )?;
+        }
         let plan = ImSweepPlan {
             voltages: raw.test.voltages.clone(),
             slips: slip_grid(raw.test.points, raw.test.min_slip),
@@ -499,6 +572,7 @@ impl ImRunConfig {
             supervision,
             retention,
             plan,
+            standard,
             model,
         })
     }

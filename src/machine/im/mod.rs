@@ -1,9 +1,12 @@
 //! The induction machine: the slip sweep (`im_slip_sweep`) on a supply
-//! VFD and a dynamometer; identification of the equivalent circuit, the
-//! plot of current and power against slip.
+//! VFD and a dynamometer, or the standard test set (`im_standard_tests`:
+//! DC resistance, no load, locked rotor, then the sweep as the load test);
+//! identification of the equivalent circuit, the plot of current and
+//! power against slip.
 //!
 //! - `config` (+ `modbus_config`): the test's validated configuration;
-//! - `sweep`: the sweep driven through the bench's sequencer; `stages`:
+//! - `sweep`: the sweep driven through the bench's sequencer;
+//!   `standard_plan`: the standard tests before it; `stages`:
 //!   the VFD and dynamometer behind their Modbus profiles;
 //! - `rig`: the rig a configuration names; `sim_rig`: the simulated
 //!   machine, VFD and dynamometer; `served`: the simulated rig behind
@@ -22,6 +25,8 @@ mod rig;
 mod served;
 mod sim_rig;
 mod stages;
+mod standard_config;
+mod standard_plan;
 mod sweep;
 mod text;
 
@@ -31,16 +36,22 @@ pub use plot::{render_im_svg, write_im_svg, DrawError, SweepPlotError};
 pub use rig::{build_im_rig, ImRig, SERVED_IM_PLANT_RATE_HZ};
 pub use served::{ServedImRig, ServedVfd};
 pub use sim_rig::{
-    sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimRigError, SimVfd, COPPER_ALPHA,
+    sim_im_rig, SimDcSource, SimDyno, SimImRigConfig, SimImSensors, SimRigError, SimVfd,
+    COPPER_ALPHA,
 };
 pub use stages::{VfdDyno, VfdSupply};
+pub use standard_plan::{
+    StandardTestsPlan, DC_RESISTANCE_SEGMENT, LOCKED_ROTOR_SEGMENT, NO_LOAD_SEGMENT,
+    STANDARD_SEGMENTS,
+};
+use sweep::{run_im_plan, ImStages};
 pub use sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
 pub use text::render_im_text;
 
 use std::path::Path;
 
 use async_trait::async_trait;
-use motorbench_drivers::ChannelInfo;
+use motorbench_drivers::{ChannelInfo, PowerStage};
 
 use super::{
     Analysed, Analyser, Analysis, Machine, OpenedRig, PlanDurations, PlanRig, PlotFailure,
@@ -126,8 +137,12 @@ impl Machine for ImRunConfig {
 
     fn describe(&self) -> String {
         format!(
-            "{} slip sweep on {} ({})",
+            "{} {} on {} ({})",
             self.motor_id,
+            match self.standard {
+                Some(_) => "standard tests",
+                None => "slip sweep",
+            },
             self.describe_rig(),
             self.source
         )
@@ -136,14 +151,18 @@ impl Machine for ImRunConfig {
     fn plan_summary(&self) -> String {
         let p = &self.plan;
         let volts: Vec<String> = p.voltages.iter().map(|v| format!("{v}")).collect();
-        format!(
+        let sweep = format!(
             "im_slip_sweep {} V at {} Hz, {} slips {}…{}",
             volts.join(", "),
             p.frequency,
             p.slips.len(),
             p.slips.first().copied().unwrap_or(0.0),
             p.slips.last().copied().unwrap_or(0.0)
-        )
+        );
+        match &self.standard {
+            Some(s) => format!("{}; then the load test: {sweep}", s.summary()),
+            None => sweep,
+        }
     }
 
     fn safety_rules(&self) -> SafetyRules {
@@ -165,16 +184,32 @@ impl Machine for ImRunConfig {
         let period = 1.0 / self.sample_rate_hz;
         let point_guess = (2 * p.settle_window + p.average_samples) as f64 * period + 0.1;
         let point_max = p.max_point_s + p.average_samples as f64 * period + p.cooldown_s;
-        PlanDurations {
+        let mut d = PlanDurations {
             guess_s: point_guess * p.slips.len() as f64,
             timeouts_s: vec![point_max * p.slips.len() as f64; p.voltages.len()],
             kinds: vec![SegmentKind::ImSlipSweep; p.voltages.len()],
+        };
+        if let Some(s) = &self.standard {
+            let kinds = [
+                SegmentKind::ImDcResistance,
+                SegmentKind::ImNoLoad,
+                SegmentKind::ImLockedRotor,
+            ];
+            let points = s.points();
+            d.kinds.splice(0..0, kinds);
+            d.timeouts_s
+                .splice(0..0, points.map(|n| point_max * n as f64));
         }
+        d
     }
 
     fn record_channels(&self, sensors: &[ChannelInfo], stage_ids: &[&str]) -> Vec<ChannelSpec> {
         let id = |k: usize| stage_ids.get(k).copied().unwrap_or("stage");
-        sweep_channels(sensors, id(0), id(1))
+        let mut channels = sweep_channels(sensors, id(0), id(1));
+        if self.standard.is_some() {
+            channels.push(ChannelSpec::command("dc_current", "A", id(2)));
+        }
+        channels
     }
 
     async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, RigError> {
@@ -193,7 +228,14 @@ impl Machine for ImRunConfig {
                     stage: rig.dynamometer,
                     max_setpoint: self.limits.max_speed,
                 },
-            ],
+            ]
+            .into_iter()
+            .chain(rig.dc_source.map(|stage| RigStage {
+                name: "DC source",
+                max_setpoint: stage.capabilities().max_setpoint,
+                stage,
+            }))
+            .collect(),
             sensors: rig.sensors,
             counts_per_rev: rig.counts_per_rev,
             truth: rig.truth.map(|t| Box::new(t) as Truth),
@@ -211,14 +253,21 @@ impl Machine for ImRunConfig {
         progress: &dyn Progress,
         stops: StopPath<'_>,
     ) -> Result<Outcome, BenchError> {
-        let [supply, dyno] = rig.stages else {
-            unreachable!("an induction-machine rig opens two stages");
+        let (supply, dyno, dc) = match rig.stages {
+            [supply, dyno] => (supply, dyno, None),
+            [supply, dyno, dc] => (supply, dyno, Some(dc.as_mut() as &mut dyn PowerStage)),
+            _ => unreachable!("an induction-machine rig opens two or three stages"),
         };
-        run_im_sweep(
+        let stages = ImStages {
+            vfd: supply.as_mut(),
+            dyno: dyno.as_mut(),
+            dc,
+        };
+        run_im_plan(
             &self.plan,
+            self.standard.as_ref(),
             &ImRunConfig::safety_rules(self),
-            supply.as_mut(),
-            dyno.as_mut(),
+            stages,
             rig.sensors,
             sink,
             progress,

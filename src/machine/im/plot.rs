@@ -238,7 +238,7 @@ mod tests {
     use crate::identify::{identify_im, slip_grid, SlipSweep, SweepNoise};
     use crate::model::im_fixtures::{single_cage, STAR_400V_50HZ};
     use crate::model::{Connection, ImModel};
-    use crate::record::{OperatingPoint, Record};
+    use crate::record::Record;
 
     #[test]
     fn svg_shows_points_and_curves() {
@@ -250,20 +250,7 @@ mod tests {
             &SweepNoise::relative(0.003),
             2,
         );
-        let points = sw
-            .points
-            .iter()
-            .map(|p| OperatingPoint {
-                segment: 0,
-                slip: p.slip,
-                line_voltage: p.line_voltage,
-                line_current: p.line_current,
-                input_power: p.input_power,
-                speed: f64::NAN,
-                frequency: 50.0,
-                torque: None,
-            })
-            .collect();
+        let points = sw.operating_points(50.0);
         let id = identify_im(
             &Record {
                 operating_points: points,

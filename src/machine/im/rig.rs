@@ -22,6 +22,9 @@ pub struct ImRig {
     pub supply: Box<dyn PowerStage>,
     /// The dynamometer (set point: shaft speed, rad/s).
     pub dynamometer: Box<dyn PowerStage>,
+    /// The DC source of the winding-resistance test (set point: DC
+    /// current between two line terminals, A), where the rig has one.
+    pub dc_source: Option<Box<dyn PowerStage>>,
     /// Line voltage, line current, input power, encoder count (and torque
     /// where fitted).
     pub sensors: Box<dyn SensorStream>,
@@ -170,6 +173,7 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
     Ok(ImRig {
         supply: Box::new(supply),
         dynamometer: Box::new(dynamometer),
+        dc_source: None,
         sensors,
         counts_per_rev: cfg.plan.encoder_counts_per_rev,
         truth: cfg
@@ -191,6 +195,9 @@ pub async fn build_im_rig(cfg: &ImRunConfig, realtime: bool) -> Result<ImRig, Ri
                 sim_im_rig(sim.clone()).map_err(|e| RigError::Simulated(e.to_string()))?;
             let sensors = if realtime { sensors.paced() } else { sensors };
             Ok(ImRig {
+                dc_source: vfd
+                    .dc_source()
+                    .map(|dc| Box::new(dc) as Box<dyn PowerStage>),
                 supply: Box::new(vfd),
                 dynamometer: Box::new(dyno),
                 sensors: Box::new(sensors),

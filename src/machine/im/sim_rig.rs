@@ -2,13 +2,21 @@
 //! fixed-frequency supply (a VFD, [`SimVfd`]) whose shaft a dynamometer
 //! holds at a speed set point ([`SimDyno`]), read by [`SimImSensors`]: line
 //! voltage, line current, three-phase input power, an encoder and,
-//! optionally, a shaft-torque sensor, each with Gaussian noise.
+//! optionally, a shaft-torque sensor, each with Gaussian noise. For the
+//! standard tests the rig may also have a DC source ([`SimDcSource`],
+//! from [`SimVfd::dc_source`]) that drives a current between two line
+//! terminals with the supply off, read on `dc_voltage` and `dc_current`.
 //!
 //! The electrical side is quasi-static (the steady-state circuit at the
 //! instantaneous slip: electrical transients last milliseconds, the
 //! mechanical ones tenths of seconds); the dynamometer's speed follows its
 //! set point with a first-order lag and a rate limit; the supply slews to
-//! its voltage. A first-order thermal model heats the winding with the
+//! its voltage. Uncoupled from the dynamometer (its output off) the rotor
+//! runs where its torque meets the friction and windage on its shaft
+//! (a loss `∝ ω²` given at synchronous speed, [`free_rotor_slip`]), which
+//! the torque sensor, between the machine and the dynamometer, does not
+//! see; the core loss is the circuit's `Rfe`. A first-order thermal model
+//! heats the winding with the
 //! machine's losses and raises `Rs` with the copper's temperature
 //! coefficient (the `thermal_drift` effect; zero heating turns it off).
 //! Each [`SensorStream::next_batch`] advances the plant by one sample
@@ -25,11 +33,12 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
-use crate::model::{ImCircuit, ImCircuitError, ImSupply};
+use crate::model::{free_rotor_slip, terminal_resistance, ImCircuit, ImCircuitError, ImSupply};
 
 const VFD_ID: &str = "sim-vfd";
 const DYNO_ID: &str = "sim-dyno";
 const SENSORS_ID: &str = "sim-im-daq";
+const DC_SOURCE_ID: &str = "sim-dc-source";
 
 /// Copper's temperature coefficient of resistance at 20 °C, 1/K.
 pub const COPPER_ALPHA: f64 = 0.00393;
@@ -65,12 +74,18 @@ pub struct SimImRigConfig {
     pub ambient_c: f64,
     /// Seed of the noise.
     pub seed: u64,
+    /// Friction and windage at synchronous speed, W (`∝ ω²`; 0: none).
+    pub friction_windage_w: f64,
+    /// The DC source for the winding-resistance test, when fitted: its
+    /// largest current, A.
+    pub dc_source_max_current: Option<f64>,
 }
 
 impl SimImRigConfig {
     /// Defaults for `circuit` on `supply`: 500 Hz, a dynamometer with
     /// 50 ms lag and 200 rad/s², 0.5 % sensor noise, a 1024-line encoder,
-    /// a torque sensor, a winding heating by 0.02 K/W with 60 s.
+    /// a torque sensor, a winding heating by 0.02 K/W with 60 s, no
+    /// friction and windage, no DC source.
     pub fn new(circuit: ImCircuit, supply: ImSupply) -> SimImRigConfig {
         SimImRigConfig {
             circuit,
@@ -86,6 +101,8 @@ impl SimImRigConfig {
             thermal_time_constant_s: 60.0,
             ambient_c: 20.0,
             seed: 1,
+            friction_windage_w: 0.0,
+            dc_source_max_current: None,
         }
     }
 }
@@ -113,6 +130,8 @@ struct Plant {
     vfd_enabled: bool,
     dyno_setpoint: f64,
     dyno_enabled: bool,
+    dc_setpoint: f64,
+    dc_enabled: bool,
     speed: f64,
     angle: f64,
     winding_c: f64,
@@ -127,6 +146,8 @@ struct Snapshot {
     input_power: f64,
     torque: f64,
     angle: f64,
+    dc_voltage: f64,
+    dc_current: f64,
 }
 
 impl Plant {
@@ -148,10 +169,17 @@ impl Plant {
         // machine runs up to (near) synchronous speed on the supply, or
         // coasts down with the supply off.
         let ws = self.synchronous_speed();
+        // The winding's resistance now.
+        let mut c = self.cfg.circuit;
+        c.rs *= 1.0 + COPPER_ALPHA * (self.winding_c - 20.0);
+        let supply = ImSupply {
+            line_voltage: self.vfd_output.max(0.0),
+            ..self.cfg.supply
+        };
         let target_w = if self.dyno_enabled {
             self.dyno_setpoint
         } else if self.vfd_output > 0.0 {
-            ws
+            (1.0 - free_rotor_slip(&c, &supply, self.cfg.friction_windage_w)) * ws
         } else {
             0.0
         };
@@ -160,17 +188,20 @@ impl Plant {
             .clamp(-self.cfg.dyno_max_accel * dt, self.cfg.dyno_max_accel * dt);
         self.speed += dw;
         self.angle += self.speed * dt;
-        // Electrical, quasi-static, with the winding's resistance now.
-        let mut c = self.cfg.circuit;
-        c.rs *= 1.0 + COPPER_ALPHA * (self.winding_c - 20.0);
+        // Electrical, quasi-static.
         let slip = (1.0 - self.speed / ws).clamp(0.0, 1.0);
-        let supply = ImSupply {
-            line_voltage: self.vfd_output.max(0.0),
-            ..self.cfg.supply
-        };
         let op = c.operating_point(&supply, slip);
-        // Heating by the losses (input less shaft power).
-        let losses = (op.input_power - op.torque * self.speed).max(0.0);
+        // The DC source, between two line terminals.
+        let (dc_voltage, dc_current) = if self.dc_enabled {
+            let r = terminal_resistance(c.rs, self.cfg.supply.connection);
+            (self.dc_setpoint * r, self.dc_setpoint)
+        } else {
+            (0.0, 0.0)
+        };
+        // Heating by the losses (input less air-gap mechanical power).
+        let losses = (op.input_power - op.torque * self.speed).max(0.0) + dc_voltage * dc_current;
+        // Friction and windage on the shaft, a torque ∝ ω.
+        let friction = self.cfg.friction_windage_w / ws * (self.speed / ws);
         let rise = self.cfg.thermal_resistance_k_per_w * losses;
         let ttau = self.cfg.thermal_time_constant_s.max(dt);
         self.winding_c += (self.cfg.ambient_c + rise - self.winding_c) * dt / ttau;
@@ -179,8 +210,10 @@ impl Plant {
             line_voltage: op.line_voltage,
             line_current: op.line_current,
             input_power: op.input_power,
-            torque: op.torque,
+            torque: op.torque - friction,
             angle: self.angle,
+            dc_voltage,
+            dc_current,
         }
     }
 }
@@ -201,11 +234,21 @@ pub struct SimDyno {
     plant: Arc<Mutex<Plant>>,
 }
 
+/// The simulated DC source of the winding-resistance test: set point =
+/// DC current between two line terminals, A. It refuses to connect while
+/// the supply is on, and the supply refuses to run while it is connected.
+#[derive(Debug, Clone)]
+pub struct SimDcSource {
+    plant: Arc<Mutex<Plant>>,
+}
+
 /// The simulated sensors.
 #[derive(Debug)]
 pub struct SimImSensors {
     plant: Arc<Mutex<Plant>>,
     channels: Vec<ChannelInfo>,
+    /// The channels of the DC source's voltage and current, when fitted.
+    dc_channels: Option<(usize, usize)>,
     rng: StdRng,
     noise: Option<Normal<f64>>,
     counts_per_rad: f64,
@@ -259,6 +302,11 @@ pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors)
     if cfg.torque_sensor {
         channels.push(info("torque", "N*m"));
     }
+    let dc_channels = cfg.dc_source_max_current.map(|_| {
+        channels.push(info("dc_voltage", "V"));
+        channels.push(info("dc_current", "A"));
+        (channels.len() - 2, channels.len() - 1)
+    });
     let counts_per_rad = 4.0 * f64::from(cfg.encoder_lines) / std::f64::consts::TAU;
     let rng = StdRng::seed_from_u64(cfg.seed);
     let plant = Arc::new(Mutex::new(Plant {
@@ -270,6 +318,8 @@ pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors)
         vfd_enabled: false,
         dyno_setpoint: 0.0,
         dyno_enabled: false,
+        dc_setpoint: 0.0,
+        dc_enabled: false,
         speed: 0.0,
         angle: 0.0,
         step: 0,
@@ -284,6 +334,7 @@ pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors)
         SimImSensors {
             plant,
             channels,
+            dc_channels,
             rng,
             noise,
             counts_per_rad,
@@ -338,10 +389,20 @@ impl SimImSensors {
                 value: (snap.angle * self.counts_per_rad).floor(),
             },
         ];
-        if self.channels.len() > channel::TORQUE {
+        if lock(&self.plant).cfg.torque_sensor {
             samples.push(Sample {
                 channel: channel::TORQUE,
                 value: read(snap.torque),
+            });
+        }
+        if let Some((v, i)) = self.dc_channels {
+            samples.push(Sample {
+                channel: v,
+                value: read(snap.dc_voltage),
+            });
+            samples.push(Sample {
+                channel: i,
+                value: read(snap.dc_current),
             });
         }
         SampleBatch { t_ns, samples }
@@ -352,6 +413,16 @@ impl SimVfd {
     /// Whether the supply's output is on (the simulator's truth, for tests).
     pub fn output_enabled(&self) -> bool {
         lock(&self.plant).vfd_enabled
+    }
+
+    /// The rig's DC source, when the configuration fits one.
+    pub fn dc_source(&self) -> Option<SimDcSource> {
+        lock(&self.plant)
+            .cfg
+            .dc_source_max_current
+            .map(|_| SimDcSource {
+                plant: self.plant.clone(),
+            })
     }
 }
 
@@ -391,7 +462,14 @@ impl PowerStage for SimVfd {
     }
 
     async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
-        lock(&self.plant).vfd_enabled = enabled;
+        let mut p = lock(&self.plant);
+        if enabled && p.dc_enabled {
+            return Err(DriverError::Device {
+                device: VFD_ID.into(),
+                reason: "the DC source is connected to the winding: disconnect it first".into(),
+            });
+        }
+        p.vfd_enabled = enabled;
         Ok(())
     }
 
@@ -445,6 +523,52 @@ impl PowerStage for SimDyno {
 }
 
 #[async_trait]
+impl PowerStage for SimDcSource {
+    fn id(&self) -> &str {
+        DC_SOURCE_ID
+    }
+
+    fn capabilities(&self) -> StageCapabilities {
+        StageCapabilities {
+            current_limit: false,
+            max_setpoint: lock(&self.plant).cfg.dc_source_max_current.unwrap_or(0.0),
+        }
+    }
+
+    async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
+        let mut p = lock(&self.plant);
+        let max = p.cfg.dc_source_max_current.unwrap_or(0.0);
+        if !(value.is_finite() && (0.0..=max).contains(&value)) {
+            return Err(DriverError::Device {
+                device: DC_SOURCE_ID.into(),
+                reason: format!("DC current set point {value} A outside [0, {max}] A"),
+            });
+        }
+        p.dc_setpoint = value;
+        Ok(())
+    }
+
+    async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
+        let mut p = lock(&self.plant);
+        if enabled && (p.vfd_enabled || p.vfd_output > 0.0) {
+            return Err(DriverError::Device {
+                device: DC_SOURCE_ID.into(),
+                reason: "the supply is on: the DC source connects only to a dead winding".into(),
+            });
+        }
+        p.dc_enabled = enabled;
+        Ok(())
+    }
+
+    async fn safe_state(&mut self) -> Result<(), DriverError> {
+        let mut p = lock(&self.plant);
+        p.dc_setpoint = 0.0;
+        p.dc_enabled = false;
+        Ok(())
+    }
+}
+
+#[async_trait]
 impl SensorStream for SimImSensors {
     fn id(&self) -> &str {
         SENSORS_ID
@@ -491,6 +615,71 @@ mod tests {
             pole_pairs: 2,
         };
         SimImRigConfig::new(circuit, supply)
+    }
+
+    #[tokio::test]
+    async fn the_dc_source_reads_the_terminal_resistance_and_is_interlocked_with_the_supply() {
+        let mut cfg = rig();
+        cfg.noise_relative = 0.0;
+        cfg.thermal_resistance_k_per_w = 0.0;
+        assert!(sim_im_rig(cfg.clone()).unwrap().0.dc_source().is_none());
+        cfg.dc_source_max_current = Some(5.0);
+        let (mut vfd, _, mut sensors) = sim_im_rig(cfg).unwrap();
+        let mut dc = vfd.dc_source().unwrap();
+        let names: Vec<&str> = sensors
+            .channels()
+            .iter()
+            .map(|c| c.quantity.as_str())
+            .collect();
+        assert_eq!(names[5..], ["dc_voltage", "dc_current"]);
+        assert!(
+            dc.set_setpoint(6.0).await.is_err(),
+            "above its largest current"
+        );
+        dc.set_setpoint(4.0).await.unwrap();
+        dc.set_output_enabled(true).await.unwrap();
+        let e = vfd.set_output_enabled(true).await.unwrap_err();
+        assert!(e.to_string().contains("DC source"), "{e}");
+        let b = sensors.next_batch().await.unwrap();
+        // Star: two phases in series.
+        assert!((b.value(5).unwrap() - 4.0 * 2.0 * 0.8659).abs() < 1e-12);
+        assert_eq!(b.value(6), Some(4.0));
+        dc.safe_state().await.unwrap();
+        vfd.set_setpoint(400.0).await.unwrap();
+        vfd.set_output_enabled(true).await.unwrap();
+        sensors.next_batch().await.unwrap();
+        let e = dc.set_output_enabled(true).await.unwrap_err();
+        assert!(e.to_string().contains("supply is on"), "{e}");
+    }
+
+    #[tokio::test]
+    async fn the_free_rotor_turns_below_synchronous_speed_with_friction() {
+        let ws = std::f64::consts::PI * 50.0;
+        let mut speeds = Vec::new();
+        for friction in [0.0, 200.0] {
+            let mut cfg = rig();
+            cfg.noise_relative = 0.0;
+            cfg.supply.line_voltage = 400.0;
+            cfg.friction_windage_w = friction;
+            let (mut vfd, _, mut sensors) = sim_im_rig(cfg).unwrap();
+            vfd.set_setpoint(400.0).await.unwrap();
+            vfd.set_output_enabled(true).await.unwrap();
+            let mut last = None;
+            for _ in 0..2500 {
+                last = Some(sensors.next_batch().await.unwrap());
+            }
+            let b = last.unwrap();
+            let counts = b.value(channel::ENCODER).unwrap();
+            // The speed from the plant itself: the angle's growth per step.
+            let speed = lock(&sensors.plant).speed;
+            assert!(counts > 0.0);
+            // The torque sensor sees the shaft's torque: nothing is coupled.
+            assert!(b.value(channel::TORQUE).unwrap().abs() < 0.05, "{b:?}");
+            speeds.push(speed);
+        }
+        assert!((speeds[0] - ws).abs() < 1e-9, "{speeds:?}");
+        let slip = 1.0 - speeds[1] / ws;
+        assert!(slip > 1e-4 && slip < 0.02, "{slip}");
     }
 
     #[test]

@@ -19,6 +19,7 @@
 //! and followed by a cool-down with the supply off: a real rig burns the
 //! winding otherwise.
 
+use super::standard_plan::StandardTestsPlan;
 use crate::bench::sequencer::{safe_state_all, Halt, Read, Sequencer, SpeedChannel};
 use crate::bench::{
     sensor_channels_with_speed, BenchError, HeatingBudget, Outcome, Progress, RecordSink,
@@ -192,23 +193,31 @@ pub fn sweep_channels(sensors: &[ChannelInfo], vfd_id: &str, dyno_id: &str) -> V
 
 /// One reading of the quantities the sweep watches.
 #[derive(Debug, Clone, Copy)]
-struct Reading {
+pub(super) struct Reading {
     /// Data time of the batch that completed it, ns.
-    t_ns: u64,
-    voltage: f64,
-    current: f64,
-    power: f64,
-    speed: Option<f64>,
-    torque: Option<f64>,
+    pub t_ns: u64,
+    pub voltage: f64,
+    pub current: f64,
+    pub power: f64,
+    pub speed: Option<f64>,
+    pub torque: Option<f64>,
+    /// The DC source's voltage and current, where the rig has one.
+    pub dc_voltage: f64,
+    pub dc_current: f64,
 }
 
-struct Indices {
-    voltage: usize,
-    current: usize,
-    power: usize,
-    torque: Option<usize>,
-    vfd_rec: usize,
-    dyno_rec: usize,
+/// Where the plan's quantities are: sensor channels, then record channels.
+pub(super) struct Indices {
+    pub voltage: usize,
+    pub current: usize,
+    pub power: usize,
+    pub torque: Option<usize>,
+    /// The DC source's voltage and current sensor channels, where fitted.
+    pub dc: Option<(usize, usize)>,
+    pub vfd_rec: usize,
+    pub dyno_rec: usize,
+    /// The DC source's command record channel.
+    pub dc_rec: usize,
 }
 
 impl From<DriverError> for Halt {
@@ -217,21 +226,27 @@ impl From<DriverError> for Halt {
     }
 }
 
-struct Sweep<'a> {
-    plan: &'a ImSweepPlan,
-    vfd: &'a mut dyn PowerStage,
-    dyno: &'a mut dyn PowerStage,
-    seq: Sequencer<'a>,
-    ix: Indices,
+/// A plan running on an induction-machine rig: the slip sweep's points,
+/// and (`standard_plan`) the standard tests' readings.
+pub(super) struct Sweep<'a> {
+    pub plan: &'a ImSweepPlan,
+    pub vfd: &'a mut dyn PowerStage,
+    pub dyno: &'a mut dyn PowerStage,
+    /// The DC source of the winding-resistance test, where fitted.
+    pub dc: Option<&'a mut dyn PowerStage>,
+    pub seq: Sequencer<'a>,
+    pub ix: Indices,
     /// The latest value of each watched quantity: streams that poll
     /// devices separately deliver batches with some channels only.
     held: Reading,
     /// `(data time, speed)` of every encoder reading of the current point.
     speeds: Vec<(u64, f64)>,
+    /// The index of the first slip-sweep segment.
+    pub first_segment: usize,
 }
 
 impl Sweep<'_> {
-    fn t_ns(&self) -> u64 {
+    pub fn t_ns(&self) -> u64 {
         self.seq.t_ns()
     }
 
@@ -240,7 +255,13 @@ impl Sweep<'_> {
     /// each quantity when a batch brings a new line current (with a rig
     /// whose meter and encoder are polled separately, batches carrying
     /// only the encoder update the speed).
-    async fn read(&mut self) -> Result<Reading, Halt> {
+    pub async fn read(&mut self) -> Result<Reading, Halt> {
+        self.read_on(self.ix.current).await
+    }
+
+    /// As [`Sweep::read`], a reading made when a batch brings a new value
+    /// of sensor channel `trigger`.
+    pub async fn read_on(&mut self, trigger: usize) -> Result<Reading, Halt> {
         loop {
             let Read { batch, speed } = self.seq.next().await?;
             if let Some(w) = speed {
@@ -258,16 +279,22 @@ impl Sweep<'_> {
             if let Some(t) = self.ix.torque.and_then(get) {
                 h.torque = Some(t);
             }
-            let Some(current) = get(self.ix.current) else {
+            if let Some((v, i)) = self.ix.dc {
+                h.dc_voltage = get(v).unwrap_or(h.dc_voltage);
+                h.dc_current = get(i).unwrap_or(h.dc_current);
+            }
+            if let Some(current) = get(self.ix.current) {
+                h.current = current;
+            }
+            if get(trigger).is_none() {
                 continue;
-            };
-            h.current = current;
+            }
             h.t_ns = batch.t_ns;
             return Ok(*h);
         }
     }
 
-    /// Hold the current point until it settles, then average it; `None`
+    /// Hold the point of `slip` until it settles, then average it; `None`
     /// when it did not settle in time (and was not hot).
     async fn point(
         &mut self,
@@ -278,6 +305,19 @@ impl Sweep<'_> {
         let target = (1.0 - slip) * ws;
         self.dyno.set_setpoint(target).await?;
         self.seq.command(self.ix.dyno_rec, target).await?;
+        self.steady(segment, &format!("slip {slip:.4}")).await
+    }
+
+    /// Wait until line current, input power and speed settle, then
+    /// average them into a point of `segment`; `None` when they did not
+    /// settle in time (and the point was not hot); `what` names the point
+    /// in events. The bool: the point was hot.
+    pub async fn steady(
+        &mut self,
+        segment: u32,
+        what: &str,
+    ) -> Result<Option<(OperatingPoint, bool)>, Halt> {
+        let ws = self.plan.synchronous_speed();
         // Line current, input power and speed.
         let mut detector =
             SettleDetector::new(self.plan.settle_window, self.plan.settle_tolerance, 3);
@@ -322,7 +362,7 @@ impl Sweep<'_> {
                 .event(
                     EventLevel::Warn,
                     format!(
-                        "slip {slip:.4}: not settled within the hot-point limit {} s; the last {} samples averaged",
+                        "{what}: not settled within the hot-point limit {} s; the last {} samples averaged",
                         self.plan.hot_point_max_s,
                         recent.len()
                     ),
@@ -334,7 +374,7 @@ impl Sweep<'_> {
                 .event(
                     EventLevel::Warn,
                     format!(
-                        "slip {slip:.4}: not settled within {} s; point skipped",
+                        "{what}: not settled within {} s; point skipped",
                         self.plan.max_point_s
                     ),
                 )
@@ -377,7 +417,8 @@ impl Sweep<'_> {
         Ok(Some((point, hot)))
     }
 
-    async fn cool_down(&mut self, voltage: f64) -> Result<(), Halt> {
+    /// Supply off for the plan's cool-down, then on again at `voltage`.
+    pub async fn cool_down(&mut self, voltage: f64) -> Result<(), Halt> {
         self.vfd.set_output_enabled(false).await?;
         self.seq.command(self.ix.vfd_rec, 0.0).await?;
         self.seq
@@ -395,15 +436,18 @@ impl Sweep<'_> {
         Ok(())
     }
 
-    async fn run(&mut self) -> Result<(), Halt> {
+    /// The slip sweep: one segment per supply voltage.
+    pub async fn run(&mut self) -> Result<(), Halt> {
         let plan = self.plan;
-        for (k, &v) in plan.voltages.iter().enumerate() {
+        for (j, &v) in plan.voltages.iter().enumerate() {
+            let k = self.first_segment + j;
             let label = format!("{v:.0} V, {} Hz", plan.frequency);
             let kind = SegmentKind::ImSlipSweep;
             self.seq
                 .marker(k, kind, SegmentPhase::Start, &label)
                 .await?;
-            self.seq.segment(k, plan.voltages.len(), &label);
+            self.seq
+                .segment(k, self.first_segment + plan.voltages.len(), &label);
             self.vfd.set_setpoint(v).await?;
             self.vfd.set_output_enabled(true).await?;
             self.dyno.set_output_enabled(true).await?;
@@ -440,6 +484,48 @@ pub async fn run_im_sweep<'s>(
     progress: &dyn Progress,
     stops: impl Into<StopPath<'s>>,
 ) -> Result<Outcome, BenchError> {
+    let stages = ImStages {
+        vfd,
+        dyno,
+        dc: None,
+    };
+    run_im_plan(
+        plan,
+        None,
+        rules,
+        stages,
+        sensors,
+        sink,
+        progress,
+        stops.into(),
+    )
+    .await
+}
+
+/// The stages of an induction-machine rig as a plan drives them.
+pub(super) struct ImStages<'a> {
+    /// The supply.
+    pub vfd: &'a mut dyn PowerStage,
+    /// The dynamometer.
+    pub dyno: &'a mut dyn PowerStage,
+    /// The DC source of the winding-resistance test, where fitted.
+    pub dc: Option<&'a mut dyn PowerStage>,
+}
+
+/// Run the slip sweep `plan`, after the standard tests `standard` when
+/// given (see [`run_im_sweep`] for the rest).
+#[allow(clippy::too_many_arguments)]
+pub(super) async fn run_im_plan(
+    plan: &ImSweepPlan,
+    standard: Option<&StandardTestsPlan>,
+    rules: &SafetyRules,
+    stages: ImStages<'_>,
+    sensors: &mut dyn SensorStream,
+    sink: &mut RecordSink,
+    progress: &dyn Progress,
+    stops: StopPath<'_>,
+) -> Result<Outcome, BenchError> {
+    let ImStages { vfd, dyno, mut dc } = stages;
     let channels = sensors.channels().to_vec();
     let find = |q: &'static str| {
         channels
@@ -454,8 +540,14 @@ pub async fn run_im_sweep<'s>(
             current: find("line_current")?,
             power: find("input_power")?,
             torque: channels.iter().position(|c| c.quantity == "torque"),
+            dc: match (standard, &dc) {
+                (Some(_), Some(_)) => Some((find("dc_voltage")?, find("dc_current")?)),
+                (Some(_), None) => return Err(BenchError::MissingChannel("dc_source")),
+                (None, _) => None,
+            },
             vfd_rec: n + 1,
             dyno_rec: n + 2,
+            dc_rec: n + 3,
         };
         let speed = SpeedChannel {
             encoder: find("encoder_count")?,
@@ -470,7 +562,7 @@ pub async fn run_im_sweep<'s>(
     let (ix, speed, monitor) = match found {
         Ok(found) => found,
         Err(e) => {
-            safe_state_all(&mut [vfd, dyno]).await;
+            safe_state_all(&mut all_stages(vfd, dyno, dc.as_deref_mut())).await;
             return Err(e);
         }
     };
@@ -478,7 +570,7 @@ pub async fn run_im_sweep<'s>(
         sensors,
         sink,
         progress,
-        stops.into(),
+        stops,
         monitor,
         speed,
         f64::INFINITY,
@@ -487,6 +579,12 @@ pub async fn run_im_sweep<'s>(
         plan,
         vfd,
         dyno,
+        // Each reference as the sweep's (a trait object's lifetime does
+        // not shorten inside an Option by itself).
+        dc: match dc {
+            Some(dc) => Some(dc as &mut dyn PowerStage),
+            None => None,
+        },
         seq,
         ix,
         speeds: Vec::new(),
@@ -497,12 +595,23 @@ pub async fn run_im_sweep<'s>(
             power: f64::NAN,
             speed: None,
             torque: None,
+            dc_voltage: f64::NAN,
+            dc_current: f64::NAN,
         },
+        first_segment: 0,
     };
-    let result = sweep.run().await;
-    // Safe state first, whatever happened: both stages at once, the
+    let result = match standard {
+        Some(tests) => sweep.run_standard(tests).await,
+        None => sweep.run().await,
+    };
+    // Safe state first, whatever happened: every stage at once, the
     // supply first.
-    let safe = safe_state_all(&mut [&mut *sweep.vfd, &mut *sweep.dyno]).await;
+    let safe = safe_state_all(&mut all_stages(
+        &mut *sweep.vfd,
+        &mut *sweep.dyno,
+        sweep.dc.as_deref_mut(),
+    ))
+    .await;
     let outcome = match result {
         Ok(()) => Outcome::Completed,
         Err(Halt::Record(e)) => return Err(BenchError::Record(e)),
@@ -518,7 +627,7 @@ pub async fn run_im_sweep<'s>(
         }
     };
     sweep.seq.sampling_summary().await?;
-    for (name, r) in ["supply", "dynamometer"].into_iter().zip(safe) {
+    for (name, r) in ["supply", "dynamometer", "DC source"].into_iter().zip(safe) {
         if let Err(e) = r {
             sweep
                 .seq
@@ -527,6 +636,19 @@ pub async fn run_im_sweep<'s>(
         }
     }
     Ok(outcome)
+}
+
+/// The stages in the order their safe states go out: the supply first.
+fn all_stages<'a, 'b: 'a>(
+    vfd: &'a mut (dyn PowerStage + 'b),
+    dyno: &'a mut (dyn PowerStage + 'b),
+    dc: Option<&'a mut (dyn PowerStage + 'b)>,
+) -> Vec<&'a mut dyn PowerStage> {
+    let mut all: Vec<&'a mut dyn PowerStage> = vec![vfd, dyno];
+    if let Some(dc) = dc {
+        all.push(dc);
+    }
+    all
 }
 
 #[cfg(test)]

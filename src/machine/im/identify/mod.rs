@@ -18,6 +18,7 @@
 mod classical;
 mod error;
 mod identifiability;
+mod joint;
 mod lm;
 mod recursive;
 mod standard_tests;
@@ -26,6 +27,10 @@ mod sweep;
 pub use classical::{classical_single, classical_starts};
 pub use error::{ImFitError, SweepError};
 pub use identifiability::{weak_directions, Identifiability, WeakDirection, STRUCTURAL_LIMIT};
+pub use joint::{
+    fit_joint, joint_method, JointFit, JointFitError, JOINT, MAX_EVALUATIONS, MAX_WINDING_RISE_K,
+    MIN_FRICTION_W,
+};
 pub use lm::{
     evaluation_bound, fit_lm, FittedParam, LmFit, LmOptions, ParamSource, ResidualScale,
     SplitPolicy, PRACTICAL_LIMIT, SOLVE_POINT_EVALUATIONS, SVD_MAX_ITERATIONS,
@@ -36,8 +41,8 @@ pub use recursive::{
     THETA_SINGLE_L4,
 };
 pub use standard_tests::{
-    reduce_standard_tests, standard_tests_method, StandardTestsOptions, StandardTestsReduction,
-    FRICTION_VOLTAGE_SHARE, STANDARD_TESTS,
+    reduce_standard_tests, standard_tests_method, StandardTestsError, StandardTestsOptions,
+    StandardTestsReduction, FRICTION_VOLTAGE_SHARE, STANDARD_TESTS,
 };
 pub use sweep::{
     predict, predict_gradient, predict_gradient_into, slip_grid, Channels, PhaseData, SlipSweep,
@@ -523,13 +528,35 @@ pub fn identify_im(
             r.messages, r.reason
         ));
     }
-    let standard = standard_tests_method(
-        &record.standard_tests,
-        conn,
-        &standard_tests_options(record, &mut warnings),
-    );
+    let opts = standard_tests_options(record, &mut warnings);
+    let standard = standard_tests_method(&record.standard_tests, conn, &opts);
     if let Some((method, reduction)) = standard {
         report.methods.insert(STANDARD_TESTS.into(), method);
+        // The joint fit starts from the reduction; the reactances at the
+        // nameplate's frequency, else the readings'.
+        let rated_frequency = opts
+            .rated_frequency
+            .or_else(|| {
+                let tests = &record.standard_tests;
+                tests
+                    .no_load
+                    .iter()
+                    .chain(&tests.locked_rotor)
+                    .map(|r| r.frequency)
+                    .find(|f| f.is_finite() && *f > 0.0)
+            })
+            .unwrap_or(50.0);
+        if let Some((method, notes)) = joint_method(
+            &record.operating_points,
+            &record.standard_tests,
+            reduction.as_ref(),
+            conn,
+            opts.split,
+            rated_frequency,
+        ) {
+            report.methods.insert(JOINT.into(), method);
+            warnings.extend(notes);
+        }
         if let Some(r) = reduction {
             warnings.extend(r.warnings);
             report.standard_tests = Some(r.tables);
@@ -542,11 +569,10 @@ pub fn identify_im(
                 .insert(key.into(), MethodReport::not_applicable(reason.to_string()));
         }
         report.refuse_unphysical();
-        report.best = report
-            .methods
-            .get(STANDARD_TESTS)
-            .filter(|m| m.applies)
-            .map(|_| STANDARD_TESTS.to_string());
+        report.best = [JOINT, STANDARD_TESTS]
+            .into_iter()
+            .find(|m| report.methods.get(*m).is_some_and(|r| r.applies))
+            .map(String::from);
         report.warnings = warnings;
         return ImIdentification {
             report,
@@ -581,7 +607,7 @@ pub fn identify_im(
     report.methods.insert("lm".into(), lm_report);
     report.methods.insert("recursive".into(), rec_report);
     report.refuse_unphysical();
-    report.best = ["lm", "recursive", STANDARD_TESTS]
+    report.best = [JOINT, "lm", "recursive", STANDARD_TESTS]
         .into_iter()
         .find(|m| report.methods.get(*m).is_some_and(|r| r.applies))
         .map(String::from);

@@ -119,6 +119,24 @@ impl SlipSweep {
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
         SlipSweep::simulate(circuit, supply, slips, noise, 0, &mut rng)
     }
+
+    /// The points as a record holds them, at `frequency` Hz, speed not
+    /// given.
+    pub(crate) fn operating_points(&self, frequency: f64) -> Vec<crate::record::OperatingPoint> {
+        self.points
+            .iter()
+            .map(|p| crate::record::OperatingPoint {
+                segment: p.segment,
+                slip: p.slip,
+                line_voltage: p.line_voltage,
+                line_current: p.line_current,
+                input_power: p.input_power,
+                speed: f64::NAN,
+                frequency,
+                torque: None,
+            })
+            .collect()
+    }
 }
 
 impl SlipSweep {

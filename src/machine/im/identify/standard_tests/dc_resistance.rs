@@ -5,6 +5,7 @@
 //! connection (star: half of it; delta: 3/2 of it), and corrected to
 //! another test's winding temperature with copper's α.
 
+use super::error::StandardTestsError;
 use super::regression::through_origin;
 use crate::machine::im::COPPER_ALPHA;
 use crate::model::Connection;
@@ -40,7 +41,7 @@ pub(super) fn mean_temperature(t: impl Iterator<Item = Option<f64>>) -> Option<f
 pub(super) fn dc_resistance(
     readings: &[DcResistanceReading],
     connection: Connection,
-) -> Result<DcResistance, String> {
+) -> Result<DcResistance, StandardTestsError> {
     let temperature = mean_temperature(readings.iter().map(|r| r.winding_temperature));
     // Each reading's voltage as it would be at the mean temperature.
     let v: Vec<f64> = readings
@@ -50,7 +51,7 @@ pub(super) fn dc_resistance(
     let i: Vec<f64> = readings.iter().map(|r| r.dc_current).collect();
     let (r_line, hw) = through_origin(&i, &v)
         .filter(|(r, _)| *r > 0.0)
-        .ok_or_else(|| "the DC readings give no positive resistance".to_string())?;
+        .ok_or(StandardTestsError::NoDcResistance)?;
     let per_phase = match connection {
         Connection::Star => 0.5,
         Connection::Delta => 1.5,

@@ -5,6 +5,7 @@
 //! and the rotor branch behind it once `Rs`, `Xs` and the magnetising
 //! branch are known (IEEE 112's correction for the current `Xm` takes).
 
+use super::error::StandardTestsError;
 use super::regression::through_origin;
 use crate::contract::LockedRotorRow;
 use crate::model::{Connection, C64};
@@ -26,7 +27,10 @@ const SAME_FREQUENCY: f64 = 0.01;
 
 /// The common frequency of `readings` (NaN when none gives one), or why
 /// there is none.
-pub(super) fn common_frequency(readings: &[SupplyReading], test: &str) -> Result<f64, String> {
+pub(super) fn common_frequency(
+    readings: &[SupplyReading],
+    test: &'static str,
+) -> Result<f64, StandardTestsError> {
     let known: Vec<f64> = readings
         .iter()
         .map(|r| r.frequency)
@@ -39,10 +43,11 @@ pub(super) fn common_frequency(readings: &[SupplyReading], test: &str) -> Result
         .iter()
         .find(|f| ((*f - first) / first).abs() > SAME_FREQUENCY)
     {
-        return Err(format!(
-            "the {test} readings are at more than one frequency ({first} Hz and {other} Hz): \
-             give one segment per frequency"
-        ));
+        return Err(StandardTestsError::Frequencies {
+            test,
+            first,
+            other: *other,
+        });
     }
     Ok(known.iter().sum::<f64>() / known.len() as f64)
 }
@@ -51,7 +56,7 @@ pub(super) fn common_frequency(readings: &[SupplyReading], test: &str) -> Result
 pub(super) fn locked_rotor(
     readings: &[SupplyReading],
     connection: Connection,
-) -> Result<LockedRotor, String> {
+) -> Result<LockedRotor, StandardTestsError> {
     let mut rows = Vec::new();
     let (mut i2, mut p, mut q) = (Vec::new(), Vec::new(), Vec::new());
     for (k, r) in readings.iter().enumerate() {
@@ -60,14 +65,13 @@ pub(super) fn locked_rotor(
         let pph = r.input_power / 3.0;
         let s = v * i;
         if pph >= s {
-            return Err(format!(
-                "locked-rotor reading {} of segment {}: input power {} W is not below √3·V·I = \
-                 {:.1} W (a power factor of 1 or more: a wiring or scaling error)",
-                k + 1,
-                r.segment,
-                r.input_power,
-                3.0 * s
-            ));
+            return Err(StandardTestsError::PowerFactor {
+                test: "locked-rotor",
+                index: k + 1,
+                segment: r.segment,
+                power: r.input_power,
+                apparent: 3.0 * s,
+            });
         }
         let qph = (s * s - pph * pph).sqrt();
         rows.push(LockedRotorRow {
@@ -85,8 +89,8 @@ pub(super) fn locked_rotor(
         q.push(qph);
     }
     rows.sort_by(|a, b| a.line_current.total_cmp(&b.line_current));
-    let rlr = through_origin(&i2, &p).ok_or("the locked-rotor readings give no R_lr")?;
-    let xlr = through_origin(&i2, &q).ok_or("the locked-rotor readings give no X_lr")?;
+    let rlr = through_origin(&i2, &p).ok_or(StandardTestsError::LockedRotorImpedance("R_lr"))?;
+    let xlr = through_origin(&i2, &q).ok_or(StandardTestsError::LockedRotorImpedance("X_lr"))?;
     Ok(LockedRotor { rows, rlr, xlr })
 }
 
@@ -131,12 +135,13 @@ mod tests {
         assert!((lr.rows[1].zlr - 5.0).abs() < 1e-9);
         assert!((lr.rlr.0 - 3.0).abs() < 1e-9 && (lr.xlr.0 - 4.0).abs() < 1e-9);
         let e = locked_rotor(&[reading(v, 10.0, 2000.0, 50.0)], Connection::Star).unwrap_err();
-        assert!(e.contains("not below"), "{e}");
+        assert!(e.to_string().contains("not below"), "{e}");
         assert!(common_frequency(
             &[reading(v, 1.0, 1.0, 50.0), reading(v, 1.0, 1.0, 25.0)],
             "x"
         )
         .unwrap_err()
+        .to_string()
         .contains("more than one frequency"));
     }
 

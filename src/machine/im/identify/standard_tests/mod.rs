@@ -21,6 +21,7 @@
 //! not apply, with the reason.
 
 mod dc_resistance;
+mod error;
 mod locked_rotor;
 mod no_load;
 mod reduce;
@@ -38,6 +39,7 @@ use crate::contract::{MethodReport, ParamEstimate, StandardTestTables};
 use crate::model::{Connection, ImCircuit, LeakageSplit, RotorCage};
 use crate::record::ImStandardTests;
 
+pub use error::StandardTestsError;
 pub use no_load::FRICTION_VOLTAGE_SHARE;
 
 /// The method's key in the report.
@@ -69,7 +71,7 @@ pub struct StandardTestsReduction {
 }
 
 /// The tests missing for the reduction, named by their segment kinds.
-fn missing(tests: &ImStandardTests) -> Option<String> {
+fn missing(tests: &ImStandardTests) -> Option<StandardTestsError> {
     let names: Vec<&str> = [
         (
             tests.dc_resistance.is_empty(),
@@ -81,12 +83,7 @@ fn missing(tests: &ImStandardTests) -> Option<String> {
     .into_iter()
     .filter_map(|(m, n)| m.then_some(n))
     .collect();
-    (!names.is_empty()).then(|| {
-        format!(
-            "{}: the classical reduction needs the DC-resistance, no-load and locked-rotor tests",
-            names.join(", ")
-        )
-    })
+    (!names.is_empty()).then(|| StandardTestsError::Missing(names.join(", ")))
 }
 
 fn estimate(value: f64, hw: Option<f64>, unit: &str) -> ParamEstimate {
@@ -103,7 +100,7 @@ pub fn reduce_standard_tests(
     tests: &ImStandardTests,
     connection: Connection,
     opts: &StandardTestsOptions,
-) -> Result<StandardTestsReduction, String> {
+) -> Result<StandardTestsReduction, StandardTestsError> {
     if let Some(why) = missing(tests) {
         return Err(why);
     }
@@ -322,6 +319,6 @@ pub fn standard_tests_method(
     }
     Some(match reduce_standard_tests(tests, connection, opts) {
         Ok(r) => (MethodReport::fitted(r.params.clone(), None), Some(r)),
-        Err(why) => (MethodReport::not_applicable(why), None),
+        Err(why) => (MethodReport::not_applicable(why.to_string()), None),
     })
 }

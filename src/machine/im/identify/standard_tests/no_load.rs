@@ -5,6 +5,7 @@
 //! `Rfe = E²/P_fe` (per phase); the fitted `Xm(V)` curve; and `Xm`, `Rfe`
 //! and the core loss at rated voltage.
 
+use super::error::StandardTestsError;
 use super::regression::{line, polynomial, powers, through_origin};
 use crate::contract::{NoLoadRow, XmCurve};
 use crate::model::{Connection, C64};
@@ -51,7 +52,7 @@ pub(super) fn friction(
     connection: Connection,
     rs: f64,
     rated: f64,
-) -> Result<Friction, String> {
+) -> Result<Friction, StandardTestsError> {
     let pk = constant_losses(readings, connection, rs);
     let low: Vec<bool> = readings
         .iter()
@@ -80,11 +81,7 @@ pub(super) fn friction(
         .filter(|(_, u)| **u)
         .map(|((r, p), _)| (r.line_voltage.powi(2), *p))
         .unzip();
-    let fit = line(&x, &y).ok_or_else(|| {
-        "the no-load readings used for friction and windage are at fewer than two distinct \
-         voltages: the test needs several voltages to separate friction from core loss"
-            .to_string()
-    })?;
+    let fit = line(&x, &y).ok_or(StandardTestsError::FrictionVoltages)?;
     Ok(Friction {
         pfw: fit.beta[0],
         half_width: fit.half_width(0),
@@ -102,7 +99,7 @@ pub(super) fn rows(
     xs: f64,
     pfw: f64,
     used: &[bool],
-) -> Result<Vec<NoLoadRow>, String> {
+) -> Result<Vec<NoLoadRow>, StandardTestsError> {
     let pk = constant_losses(readings, connection, rs);
     let mut rows = Vec::new();
     for (k, r) in readings.iter().enumerate() {
@@ -110,14 +107,13 @@ pub(super) fn rows(
         let i = connection.phase_current(r.line_current);
         let (pph, s) = (r.input_power / 3.0, v * i);
         if pph >= s {
-            return Err(format!(
-                "no-load reading {} of segment {}: input power {} W is not below √3·V·I = {:.1} W \
-                 (a power factor of 1 or more: a wiring or scaling error)",
-                k + 1,
-                r.segment,
-                r.input_power,
-                3.0 * s
-            ));
+            return Err(StandardTestsError::PowerFactor {
+                test: "no-load",
+                index: k + 1,
+                segment: r.segment,
+                power: r.input_power,
+                apparent: 3.0 * s,
+            });
         }
         let qph = (s * s - pph * pph).sqrt();
         // The phase current lags the voltage by φ.

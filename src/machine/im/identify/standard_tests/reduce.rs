@@ -6,6 +6,7 @@
 //! magnetising branch at rated voltage (from the no-load test, which
 //! itself needs `Xs`) are taken off; solved for `Xs` by bisection.
 
+use super::error::StandardTestsError;
 use super::locked_rotor::rotor_branch;
 use super::no_load::{friction, interpolate, rfe_at_rated, rows, xm_curve};
 use crate::contract::{NoLoadRow, XmCurve};
@@ -122,18 +123,12 @@ fn magnetising(
     xs_nl: f64,
     pfw: f64,
     used: &[bool],
-) -> Result<Magnetising, String> {
+) -> Result<Magnetising, StandardTestsError> {
     let table = rows(ctx.no_load, ctx.connection, rs_nl, xs_nl, pfw, used)?;
-    let (curve, xm, hw) = xm_curve(&table, ctx.rated_voltage).ok_or_else(|| {
-        format!(
-            "no no-load reading has reactive power above the stator leakage's (Xs = {xs_nl:.4} Ω): \
-             no magnetising reactance"
-        )
-    })?;
+    let (curve, xm, hw) = xm_curve(&table, ctx.rated_voltage)
+        .ok_or(StandardTestsError::NoMagnetising { xs: xs_nl })?;
     if xm.is_nan() || xm <= 0.0 {
-        return Err(format!(
-            "the fitted Xm(V) gives {xm:.4e} Ω at rated voltage, not above 0"
-        ));
+        return Err(StandardTestsError::XmNotPositive { xm });
     }
     let rfe = rfe_at_rated(&table, ctx.rated_voltage);
     let e = interpolate(&table, ctx.rated_voltage, |r| Some(r.air_gap_voltage));
@@ -148,25 +143,26 @@ fn magnetising(
 }
 
 /// The reduction at `inputs`.
-pub(super) fn solve(ctx: &Context, inputs: Inputs) -> Result<Solved, String> {
+pub(super) fn solve(ctx: &Context, inputs: Inputs) -> Result<Solved, StandardTestsError> {
     let rs_nl = inputs.rs_dc * ctx.k_no_load;
     let rs_lr = inputs.rs_dc * ctx.k_locked;
     let fr = friction(ctx.no_load, ctx.connection, rs_nl, ctx.rated_voltage)?;
     let pfw_raw = fr.pfw + inputs.pfw_offset;
     let pfw = pfw_raw.max(0.0);
     // The rotor branch with `xs` (Ω at the locked-rotor frequency).
-    let branch = |xs: f64| -> Result<(C64, Magnetising), String> {
+    let branch = |xs: f64| -> Result<(C64, Magnetising), StandardTestsError> {
         let m = magnetising(ctx, rs_nl, xs * ctx.f_ratio, pfw, &fr.used)?;
         let xm = m.xm.0 / ctx.f_ratio;
         let ym = C64::new(m.rfe.map_or(0.0, |r| 1.0 / r.0), -1.0 / xm);
-        let zr = rotor_branch(inputs.rlr, inputs.xlr, rs_lr, xs, ym).ok_or_else(|| {
-            format!(
-                "the locked-rotor impedance {:.4} + j{:.4} Ω leaves no physical rotor branch \
-                 once Rs = {rs_lr:.4} Ω, Xs = {xs:.4} Ω and Xm = {xm:.4} Ω are taken off (R_lr \
-                 not above Rs: the DC reading at another temperature, or a wrong connection?)",
-                inputs.rlr, inputs.xlr
-            )
-        })?;
+        let zr = rotor_branch(inputs.rlr, inputs.xlr, rs_lr, xs, ym).ok_or(
+            StandardTestsError::NoRotorBranch {
+                rlr: inputs.rlr,
+                xlr: inputs.xlr,
+                rs: rs_lr,
+                xs,
+                xm,
+            },
+        )?;
         Ok((zr, m))
     };
     let ratio = ctx.split.ratio();

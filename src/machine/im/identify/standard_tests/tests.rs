@@ -282,7 +282,8 @@ fn missing_tests_and_bad_data_give_reasons_not_nans() {
         ..full.clone()
     };
     let e = reduce_standard_tests(&no_nl, Connection::Delta, &opts()).unwrap_err();
-    assert!(e.contains("no im_no_load segment"), "{e}");
+    assert!(e.to_string().contains("no im_no_load segment"), "{e}");
+    assert!(matches!(e, StandardTestsError::Missing(_)), "{e:?}");
     let (m, _) = standard_tests_method(&no_nl, Connection::Delta, &opts()).unwrap();
     assert!(!m.applies);
     assert!(
@@ -295,7 +296,10 @@ fn missing_tests_and_bad_data_give_reasons_not_nans() {
         ..full.clone()
     };
     let e = reduce_standard_tests(&one, Connection::Delta, &opts()).unwrap_err();
-    assert!(e.contains("fewer than two distinct voltages"), "{e}");
+    assert!(
+        e.to_string().contains("fewer than two distinct voltages"),
+        "{e}"
+    );
 
     // A DC reading far above the locked-rotor resistance.
     let mut high = full.clone();
@@ -303,13 +307,17 @@ fn missing_tests_and_bad_data_give_reasons_not_nans() {
         d.dc_voltage *= 5.0;
     }
     let e = reduce_standard_tests(&high, Connection::Delta, &opts()).unwrap_err();
-    assert!(e.contains("no physical rotor branch"), "{e}");
+    assert!(e.to_string().contains("no physical rotor branch"), "{e}");
+    assert!(
+        matches!(e, StandardTestsError::NoRotorBranch { .. }),
+        "{e:?}"
+    );
 
     // A power factor above 1.
     let mut bad = full;
     bad.locked_rotor[1].input_power *= 10.0;
     let e = reduce_standard_tests(&bad, Connection::Delta, &opts()).unwrap_err();
-    assert!(e.contains("not below"), "{e}");
+    assert!(e.to_string().contains("not below"), "{e}");
 }
 
 #[test]

@@ -1,0 +1,195 @@
+//! The standard test set (`im_standard_tests`) on the simulated rig in
+//! process, through the [`Machine`] trait: the readings the plan records
+//! round-trip through MCAP; an operator stop in the middle of the no-load
+//! test ends it as aborted with every stage (supply, dynamometer, DC
+//! source) safe, and the record keeps the finished DC test.
+
+use motorbench::bench::{NoProgress, Outcome, Progress, RecordSink};
+use motorbench::machine::im::{sim_im_rig, ImRunConfig, NO_LOAD_SEGMENT};
+use motorbench::machine::{Machine, PlanRig};
+use motorbench::record::{
+    read_mcap, DcResistanceReading, Entry, EventLevel, Recorder, SegmentKind, StandardTestReading,
+    SupplyReading, TestMeta, SCHEMA_VERSION,
+};
+use motorbench_drivers::{PowerStage, SensorStream};
+use tokio::sync::watch;
+
+const SIM_IM_STANDARD: &str = include_str!("../../config/sim-im-standard.toml");
+
+fn meta() -> TestMeta {
+    TestMeta {
+        schema_version: SCHEMA_VERSION.into(),
+        kind: SegmentKind::ImSlipSweep,
+        motor_id: "sim".into(),
+        started_at: "2026-12-03T12:00:00Z".into(),
+        nameplate: serde_json::json!({"voltage_V": 400.0, "connection": "star"}),
+        config: String::new(),
+    }
+}
+
+#[tokio::test]
+async fn standard_test_readings_round_trip_and_a_non_finite_one_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("std.mcap");
+    let dc = DcResistanceReading {
+        segment: 0,
+        dc_voltage: 3.4,
+        dc_current: 2.0,
+        winding_temperature: Some(21.5),
+    };
+    let supply = |segment, line_voltage| SupplyReading {
+        segment,
+        line_voltage,
+        line_current: 2.0,
+        input_power: 150.0,
+        frequency: 50.0,
+        winding_temperature: None,
+    };
+    let readings = [
+        StandardTestReading::ImDcResistance(dc),
+        StandardTestReading::ImNoLoad(supply(1, 400.0)),
+        StandardTestReading::ImLockedRotor(supply(2, 60.0)),
+    ];
+    let rec = Recorder::start(&path, &meta(), &[], 8).unwrap();
+    for (k, reading) in readings.into_iter().enumerate() {
+        rec.send(Entry::StandardTest {
+            t_ns: k as u64,
+            reading,
+        })
+        .await
+        .unwrap();
+    }
+    let mut bad = supply(1, 380.0);
+    bad.frequency = f64::NAN;
+    let e = rec
+        .send(Entry::StandardTest {
+            t_ns: 9,
+            reading: StandardTestReading::ImNoLoad(bad),
+        })
+        .await
+        .unwrap_err();
+    assert!(e.to_string().contains("frequency"), "{e}");
+    let stats = rec.finish().await.unwrap();
+    assert_eq!(stats.per_topic["/bench/standard_test"], 3);
+    let tests = read_mcap(&path).unwrap().standard_tests;
+    assert_eq!(tests.dc_resistance, [dc]);
+    assert_eq!(tests.no_load, [supply(1, 400.0)]);
+    assert_eq!(tests.locked_rotor, [supply(2, 60.0)]);
+}
+
+/// Raises the operator's stop when segment `at` begins.
+struct StopAt {
+    at: usize,
+    stop: watch::Sender<bool>,
+}
+
+impl Progress for StopAt {
+    fn segment(&self, index: usize, _: usize, _: &str) {
+        if index == self.at {
+            self.stop.send_replace(true);
+        }
+    }
+    fn tick(&self, _: f64) {}
+    fn done(&self, _: &str) {}
+}
+
+#[tokio::test]
+async fn a_stop_during_the_no_load_test_leaves_every_stage_safe() {
+    let cfg = ImRunConfig::parse("sim-im-standard.toml", SIM_IM_STANDARD).unwrap();
+    let (vfd, dyno, mut sensors) = sim_im_rig(cfg.simulated.clone().unwrap()).unwrap();
+    let dc = vfd
+        .dc_source()
+        .expect("the standard plan's rig has a DC source");
+    let mut stages: Vec<Box<dyn PowerStage>> = vec![
+        Box::new(vfd.clone()),
+        Box::new(dyno.clone()),
+        Box::new(dc.clone()),
+    ];
+    let ids: Vec<String> = stages.iter().map(|s| s.id().to_string()).collect();
+    let ids: Vec<&str> = ids.iter().map(String::as_str).collect();
+    let channels = cfg.record_channels(sensors.channels(), &ids);
+    let mut sink = RecordSink::new(None, Some(meta()), channels);
+    let (tx, rx) = watch::channel(false);
+    let progress = StopAt {
+        at: NO_LOAD_SEGMENT,
+        stop: tx,
+    };
+    let rig = PlanRig {
+        stages: &mut stages,
+        sensors: &mut sensors,
+        counts_per_rev: cfg.plan.encoder_counts_per_rev,
+    };
+    let outcome = cfg.run_plan(rig, &mut sink, &progress, (&rx).into()).await;
+    match outcome.unwrap() {
+        Outcome::Aborted { reason } => assert!(reason.contains("operator stop"), "{reason}"),
+        other => panic!("not aborted: {other:?}"),
+    }
+    assert!(!vfd.output_enabled(), "supply off");
+    assert_eq!(dyno.command(), (0.0, true), "dynamometer braking to rest");
+    // The DC source is disconnected: it may connect again only because
+    // the supply is off and it is in its safe state (no current).
+    let mut probe = dc.clone();
+    probe.set_output_enabled(true).await.unwrap();
+    probe.safe_state().await.unwrap();
+
+    let (_, record) = sink.into_parts();
+    assert_eq!(record.standard_tests.dc_resistance.len(), 3);
+    assert!(record.standard_tests.no_load.is_empty());
+    let labels: Vec<&str> = record.segments.iter().map(|s| s.label.as_str()).collect();
+    assert!(labels[1].ends_with("(incomplete)"), "{labels:?}");
+    assert!(record
+        .events
+        .iter()
+        .any(|(_, e)| e.level == EventLevel::Abort));
+}
+
+#[tokio::test]
+async fn the_plan_with_the_nameplate_defaults_runs_to_its_end() {
+    // The standard tests with the nameplate's defaults (the shipped
+    // file's tables left out), then a short load test (two voltages of
+    // five slips): every segment completes, in order.
+    let tables = SIM_IM_STANDARD.find("[test.dc_resistance]").unwrap();
+    let text = SIM_IM_STANDARD[..tables].replace("points = 30", "points = 5");
+    assert!(!text.contains("[test.no_load]"));
+    let cfg = ImRunConfig::parse("sim-im-standard.toml", &text).unwrap();
+    let mut rig = cfg.open_rig(false).await.unwrap();
+    let ids: Vec<String> = rig
+        .stages
+        .iter()
+        .map(|s| s.stage.id().to_string())
+        .collect();
+    let ids: Vec<&str> = ids.iter().map(String::as_str).collect();
+    let channels = cfg.record_channels(rig.sensors.channels(), &ids);
+    let mut sink = RecordSink::new(None, Some(meta()), channels);
+    let (_tx, rx) = watch::channel(false);
+    let mut stages: Vec<Box<dyn PowerStage>> = rig.stages.drain(..).map(|s| s.stage).collect();
+    assert_eq!(stages.len(), 3);
+    let plan_rig = PlanRig {
+        stages: &mut stages,
+        sensors: rig.sensors.as_mut(),
+        counts_per_rev: rig.counts_per_rev,
+    };
+    let outcome = cfg
+        .run_plan(plan_rig, &mut sink, &NoProgress, (&rx).into())
+        .await
+        .unwrap();
+    assert_eq!(outcome, Outcome::Completed);
+    let (_, record) = sink.into_parts();
+    let kinds: Vec<SegmentKind> = record.segments.iter().map(|s| s.kind.unwrap()).collect();
+    assert_eq!(
+        kinds,
+        [
+            SegmentKind::ImDcResistance,
+            SegmentKind::ImNoLoad,
+            SegmentKind::ImLockedRotor,
+            SegmentKind::ImSlipSweep,
+            SegmentKind::ImSlipSweep
+        ]
+    );
+    assert!(record
+        .segments
+        .iter()
+        .all(|s| !s.label.contains("incomplete")));
+    assert_eq!(record.standard_tests.no_load.len(), 10);
+    assert_eq!(record.operating_points.len(), 10);
+}
