@@ -7,10 +7,12 @@ use crate::record::{DcSegment, SegmentKind};
 
 /// The model's current and speed on `seg`'s time base.
 ///
-/// The segment starts from the model's own steady state at the first
-/// measured voltage (a step segment begins where the previous level
-/// settled; the first one from rest), or for a coast-down from the first
-/// measured speed with the armature open. The voltage reading at `t[k]`
+/// A step segment starts from its first measured current and speed (the
+/// state it begins in, settled or not: a step from a settled level, or
+/// the first one from rest while the supply slews — where the model's
+/// steady state at the first voltage reading, mid-slew, put the rotor at
+/// speed before it had moved); a coast-down from the first measured
+/// speed with the armature open. The voltage reading at `t[k]`
 /// is taken as the voltage applied over `(t[k−1], t[k]]` (zero-order
 /// hold, as the simulated rig reports it); the sample interval is the
 /// segment's mean.
@@ -32,7 +34,11 @@ pub fn simulate_segment(
             angle: 0.0,
         }
     } else {
-        params.steady_state(seg.voltage[0])
+        DcState {
+            current: seg.current[0],
+            speed: seg.speed[0],
+            angle: 0.0,
+        }
     };
     let (mut current, mut speed) = (Vec::with_capacity(n), Vec::with_capacity(n));
     current.push(x.current);
@@ -74,6 +80,33 @@ mod tests {
         let (i, w) = simulate_segment(&p, &seg).unwrap();
         assert_eq!(i.len(), 2000);
         for k in 0..2000 {
+            assert!((i[k] - seg.current[k]).abs() < 1e-12 && (w[k] - seg.speed[k]).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn a_segment_from_rest_starts_at_rest_even_when_its_first_voltage_is_mid_slew() {
+        // The first step of a run: the rotor at rest while the supply
+        // slews to 60 V; the first voltage reading is 25 V. The model's
+        // steady state at 25 V would start the rotor at about 17 rad/s.
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let dt = 5e-4;
+        let motor = DcMotor::new(p, dt).unwrap();
+        let mut x = DcState::default();
+        let mut seg = DcSegment {
+            kind: Some(SegmentKind::DcStep),
+            ..Default::default()
+        };
+        for k in 0..1000 {
+            let u = (25.0 + 17.5 * k as f64).min(60.0);
+            if k > 0 {
+                x = motor.step(&x, Terminal::Driven(u));
+            }
+            seg.push_sample(k as f64 * dt, u, x.current, x.speed);
+        }
+        let (i, w) = simulate_segment(&p, &seg).unwrap();
+        assert_eq!((i[0], w[0]), (0.0, 0.0));
+        for k in 0..1000 {
             assert!((i[k] - seg.current[k]).abs() < 1e-12 && (w[k] - seg.speed[k]).abs() < 1e-9);
         }
     }
