@@ -129,12 +129,19 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// `motorbench identify ARGS`, which must succeed; its stdout.
+fn identify(args: &[&str]) -> String {
+    let out = motorbench(&[&["identify"], args].concat());
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    stdout
+}
+
 #[test]
 fn standard_tests_from_csv_recover_the_circuit_with_intervals() {
     let dir = tempfile::tempdir().unwrap();
     let f = write_tests(dir.path());
-    let out = motorbench(&[
-        "identify",
+    let stdout = identify(&[
         "--kind",
         "im_no_load",
         s(&f.dc),
@@ -144,8 +151,6 @@ fn standard_tests_from_csv_recover_the_circuit_with_intervals() {
         s(&f.nameplate),
         "--json",
     ]);
-    let (stdout, stderr) = text(&out);
-    assert!(out.status.success(), "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     // The joint fit of the three tests (no load test here) is the best.
     assert_eq!(v["best"], "joint", "{v}");
@@ -205,8 +210,7 @@ fn standard_tests_from_csv_recover_the_circuit_with_intervals() {
         .any(|w| w.as_str().unwrap().contains("Xs/(Xs + Xr) = 0.5")));
 
     // The text report prints the tables.
-    let out = motorbench(&[
-        "identify",
+    let stdout = identify(&[
         "--kind",
         "im_no_load",
         s(&f.dc),
@@ -215,8 +219,6 @@ fn standard_tests_from_csv_recover_the_circuit_with_intervals() {
         "--nameplate",
         s(&f.nameplate),
     ]);
-    let (stdout, stderr) = text(&out);
-    assert!(out.status.success(), "{stderr}");
     assert!(
         stdout.contains("joint  (best)")
             && stdout.contains("standard_tests\n")
@@ -232,8 +234,7 @@ fn standard_tests_from_csv_recover_the_circuit_with_intervals() {
 fn beside_a_sweep_every_method_runs_and_a_missing_test_is_named() {
     let dir = tempfile::tempdir().unwrap();
     let f = write_tests(dir.path());
-    let out = motorbench(&[
-        "identify",
+    let stdout = identify(&[
         "--kind",
         "im_slip_sweep",
         s(&f.sweep),
@@ -245,8 +246,6 @@ fn beside_a_sweep_every_method_runs_and_a_missing_test_is_named() {
         "single-fe",
         "--json",
     ]);
-    let (stdout, stderr) = text(&out);
-    assert!(out.status.success(), "{stderr}");
     let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(v["best"], "lm", "{v}");
     assert_eq!(v["methods"]["lm"]["applies"], true);
