@@ -10,6 +10,7 @@ use clap::{Args, ValueEnum};
 use super::output::warn_if_damaged;
 use super::Failure;
 use crate::identify::check_plausible_files;
+use crate::machine::dc::split_single_segment;
 use crate::model::Connection;
 use crate::record::{load_record_files, Record, SegmentKind};
 
@@ -48,17 +49,20 @@ impl RecordInput {
 
     /// Load the record; warn on stderr when it is damaged (recovered up to
     /// its last good chunk); refuse DC files whose values are not
-    /// plausible for their kind. Errors are bad input (exit code 2).
+    /// plausible for their kind, and split a DC record that holds its test
+    /// in one segment ([`split_single_segment`]). Errors are bad input
+    /// (exit code 2).
     pub fn load(&self) -> Result<Record, Failure> {
         let kind = self.kind();
         let record =
             load_record_files(kind, &self.files, self.nameplate.as_deref(), self.frequency)
                 .map_err(Failure::bad_input)?;
         warn_if_damaged(&self.files[0], &record);
-        if !kind.is_im() {
-            check_plausible_files(&record, kind, &self.files).map_err(Failure::bad_input)?;
+        if kind.is_im() {
+            return Ok(record);
         }
-        Ok(record)
+        check_plausible_files(&record, kind, &self.files).map_err(Failure::bad_input)?;
+        Ok(split_single_segment(record))
     }
 }
 

@@ -216,6 +216,7 @@ impl RecordBuilder {
             supply_limits,
             recorded_result: result,
             recovery: None,
+            notes: Vec::new(),
         }
     }
 }

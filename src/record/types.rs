@@ -468,4 +468,7 @@ pub struct Record {
     pub recorded_result: Option<serde_json::Value>,
     /// Set when the file was damaged and only partly read.
     pub recovery: Option<Recovery>,
+    /// What was done to the record after reading it (a single segment
+    /// split, say), for the report's warnings; not part of the contract.
+    pub notes: Vec<String>,
 }

@@ -117,14 +117,33 @@ fn im_record_with_iron_loss_is_diagnosed_from_csv() {
 #[test]
 fn data_that_cannot_be_diagnosed_gets_a_clear_error() {
     let dir = tempfile::tempdir().unwrap();
-    // One segment: nothing to hold out.
+    // One segment is cut into parts and diagnosed; one too short to cut
+    // leaves nothing to hold out.
     let case = simulate_dc_case(None, &mut StdRng::seed_from_u64(13));
     let (files, _) = write_case_files(&case.record, dir.path()).unwrap();
     let one = files[0].display().to_string();
-    let out = motorbench(&["diagnose", "--kind", "dc_step", &one]);
+    let out = motorbench(&["diagnose", "--kind", "dc_step", "--json", &one]);
+    let (stdout, stderr) = text(&out);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(
+        stdout.contains("the record holds its test in one driven segment"),
+        "{stdout}"
+    );
+    let head: String = std::fs::read_to_string(&files[0])
+        .unwrap()
+        .lines()
+        .take(80)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let short = dir.path().join("short.csv");
+    std::fs::write(&short, head).unwrap();
+    let out = motorbench(&["diagnose", "--kind", "dc_step", short.to_str().unwrap()]);
     let (_, stderr) = text(&out);
     assert_eq!(out.status.code(), Some(4), "{stderr}");
-    assert!(stderr.contains("not enough data"), "{stderr}");
+    assert!(
+        stderr.contains("not enough data") && stderr.contains("record two or more segments"),
+        "{stderr}"
+    );
 
     // A malformed file: named with its line and column, exit 2.
     let bad = dir.path().join("bad.csv");

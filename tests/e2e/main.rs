@@ -15,6 +15,7 @@ mod daemon;
 mod daemon_modbus;
 mod daemon_page;
 mod daemon_web;
+mod dc_one_file;
 mod dc_step;
 mod diagnose_cli;
 mod diagnose_dc_shaft;

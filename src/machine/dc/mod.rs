@@ -25,6 +25,7 @@ mod rig;
 mod runner;
 mod served;
 mod sim_rig;
+pub(crate) mod split;
 mod supply_limits;
 mod text;
 
@@ -34,6 +35,7 @@ pub use rig::{build_rig, Rig, SERVED_PLANT_RATE_HZ};
 pub use runner::{record_channels, run_test, SUPPLY_LIMIT_FRACTION};
 pub use served::ServedRig;
 pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};
+pub use split::split_single_segment;
 pub use supply_limits::SupplyLimitDetector;
 pub use text::render_text;
 

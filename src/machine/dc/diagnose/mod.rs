@@ -103,7 +103,8 @@ pub fn diagnose_dc(
     record: &Record,
     _options: &DiagnoseOptions,
 ) -> Result<DiagnosisRun, DiagnoseError> {
-    let mut warnings = Vec::new();
+    let mut warnings = record.notes.clone();
+    warnings.extend(crate::identify::clipped_channels(record));
     let held = held_levels(&record.segments);
     let runs = prepare_runs(&held, &mut warnings)?;
     let weights = channel_weights(&runs, &mut warnings);
@@ -819,8 +820,11 @@ fn prepare_runs<'a>(
     }
     if runs.len() < 2 {
         return Err(DiagnoseError::NotEnoughData(format!(
-            "{} usable segment(s): leave-one-segment-out needs at least 2",
-            runs.len()
+            "{} usable segment(s): leave-one-segment-out needs at least 2; record two or more \
+             segments (one CSV file each), or one segment of at least {} samples that holds \
+             voltage levels or a varied voltage to cut into parts",
+            runs.len(),
+            2 * crate::machine::dc::split::MIN_PART
         )));
     }
     if runs.iter().all(|r| r.coast) {

@@ -38,6 +38,7 @@ pub use coastdown::{fit_decay, DecayFit};
 pub use equation_error::{equation_error, EquationErrorFit};
 pub use error::NotApplicable;
 pub use level_error::LevelError;
+pub(crate) use levels::white_noise;
 pub use levels::{is_coastdown, settled_level, unsettled_channel, SettledLevel};
 pub use moments::{MomentsEstimate, TransferCoefficients};
 pub use output_error::{
@@ -46,8 +47,8 @@ pub use output_error::{
 };
 pub use pasek::{PasekEstimate, PasekReading};
 pub use plausibility::{
-    check_plausible, check_plausible_files, ImplausibleFile, ImplausibleInput, MAX_CURRENT,
-    MAX_SPEED, MAX_VOLTAGE,
+    check_plausible, check_plausible_files, clipped_channels, ImplausibleFile, ImplausibleInput,
+    MAX_CURRENT, MAX_SPEED, MAX_VOLTAGE,
 };
 pub use simulate::simulate_segment;
 pub use steady_state::{PairEstimate, SteadyStateEstimate, SteadyStateFit};
@@ -259,6 +260,8 @@ pub fn identify_dc(record: &Record) -> Identification {
     if let Err(e) = check_plausible(record) {
         return implausible(report, &e);
     }
+    report.warnings.extend(record.notes.iter().cloned());
+    report.warnings.extend(clipped_channels(record));
     let mut levels = Vec::new();
     let mut level_notes = Vec::new();
     for seg in &record.segments {

@@ -64,7 +64,8 @@ pub fn check_plausible(record: &Record) -> Result<(), ImplausibleInput> {
     for seg in &record.segments {
         check_segment(seg)?;
     }
-    check_current_reverses(record)
+    check_current_reverses(record)?;
+    check_power_flows_in(record)
 }
 
 /// [`check_plausible`] on a record loaded from `files`, the error naming
@@ -190,6 +191,134 @@ fn check_current_reverses(record: &Record) -> Result<(), ImplausibleInput> {
     })
 }
 
+/// One channel of a segment.
+type ChannelOf = fn(&DcSegment) -> &[f64];
+
+fn current_of(s: &DcSegment) -> &[f64] {
+    &s.current
+}
+
+fn speed_of(s: &DcSegment) -> &[f64] {
+    &s.speed
+}
+
+/// Share of `Σ|x·y|` by which `Σ x·y` must be negative for a channel to
+/// count as reversed: three quarters of the product's magnitude against
+/// the voltage. Braking within a record (a controller reversing, a step
+/// down) takes a small share.
+const AGAINST: f64 = 0.5;
+
+/// A motor driven by its armature takes electrical power in on balance
+/// (`Σ U·i > 0`: the losses, plus the kinetic energy it gains) and turns
+/// the way its voltage drives it (`Σ U·ω > 0`: the back-EMF opposes the
+/// supply). A record that is mostly the other way round has a channel of
+/// reversed polarity: a current sensor mounted the other way round, an
+/// encoder counting backwards.
+fn check_power_flows_in(record: &Record) -> Result<(), ImplausibleInput> {
+    let driven: Vec<&DcSegment> = record
+        .segments
+        .iter()
+        .filter(|s| s.kind != Some(SegmentKind::DcCoastdown) && !super::is_coastdown(s))
+        .collect();
+    let balance = |y: ChannelOf| {
+        driven
+            .iter()
+            .flat_map(|s| s.voltage.iter().zip(y(s)))
+            .fold((0.0, 0.0), |(net, gross), (u, v)| {
+                (net + u * v, gross + (u * v).abs())
+            })
+    };
+    let checks: [(&'static str, ChannelOf, &str); 2] = [
+        (
+            "armature_current_A",
+            current_of,
+            "the electrical input power U·i is negative on balance: a motor driven by its \
+             armature takes power in; is the current sensor's polarity reversed (negate the column)?",
+        ),
+        (
+            "speed_rad_s",
+            speed_of,
+            "the speed turns against the armature voltage on balance: a motor turns the way \
+             its voltage drives it; does the encoder or tachometer count the other way (negate \
+             the column)?",
+        ),
+    ];
+    for (column, y, why) in checks {
+        let (net, gross) = balance(y);
+        if gross > 0.0 && net < -AGAINST * gross {
+            let seg = driven[0];
+            return Err(ImplausibleInput {
+                segment: seg.index,
+                label: seg.label.clone(),
+                column,
+                reason: format!(
+                    "{why} (Σ U·{} is {:.0} % of Σ |U·{}| over the driven segments)",
+                    if column == "speed_rad_s" { "ω" } else { "i" },
+                    100.0 * net / gross,
+                    if column == "speed_rad_s" { "ω" } else { "i" },
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Fewest consecutive readings at a channel's extreme that make a flat
+/// top.
+const FLAT_TOP: usize = 3;
+/// How many times longer than any other run of equal readings in the
+/// channel a flat top must be: a sensor below its resolution repeats its
+/// readings at every settled level alike, while a clipping one repeats
+/// only its full scale.
+const LONGER: usize = 2;
+
+/// Warnings for channels that clip: current or speed repeating exactly its
+/// largest magnitude for longer than it repeats any other reading (an ADC
+/// at full scale, a sensor at the end of its range). The fits take those
+/// readings as true, so the estimates are biased; the user needs to hear
+/// it.
+pub fn clipped_channels(record: &Record) -> Vec<String> {
+    let mut out = Vec::new();
+    let channels: [(&str, &str, ChannelOf); 2] = [
+        ("armature_current_A", "A", current_of),
+        ("speed_rad_s", "rad/s", speed_of),
+    ];
+    for (column, unit, y) in channels {
+        let peak = record
+            .segments
+            .iter()
+            .flat_map(|s| y(s).iter())
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        if peak == 0.0 {
+            continue;
+        }
+        // Longest run of equal readings at the extreme, and elsewhere.
+        let (mut top, mut other, mut at) = (0usize, 0usize, Vec::new());
+        for s in &record.segments {
+            for run in y(s).chunk_by(|a, b| a == b) {
+                if run[0].abs() == peak {
+                    top = top.max(run.len());
+                    at.push(s.index);
+                } else {
+                    other = other.max(run.len());
+                }
+            }
+        }
+        if top >= FLAT_TOP && other > 0 && top > LONGER * other {
+            at.dedup();
+            let at: Vec<String> = at.iter().map(u32::to_string).collect();
+            out.push(format!(
+                "column {column} repeats its largest magnitude, {peak} {unit}, for up to {top} \
+                 readings in a row (no other reading repeats more than {other} times; segment {}): \
+                 the sensor or its ADC clips there, and every fit takes those readings as true, so \
+                 the estimates are biased; record with a wider sensor range",
+                at.join(", ")
+            ));
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -243,5 +372,49 @@ mod tests {
         assert!(e.reason.contains("never changes sign"), "{}", e.reason);
         // One polarity only: a current of one sign is normal.
         assert!(check_plausible(&record(|_| 60.0, |_| 0.1)).is_ok());
+    }
+
+    #[test]
+    fn a_reversed_current_or_speed_is_refused_by_column() {
+        let u = |k: usize| if k < 100 { 0.0 } else { 60.0 };
+        assert!(check_plausible(&record(u, |k| 0.1 * u(k) / 60.0)).is_ok());
+        let e = check_plausible(&record(u, |k| -0.1 * u(k) / 60.0)).unwrap_err();
+        assert_eq!(e.column, "armature_current_A");
+        assert!(e.reason.contains("polarity reversed"), "{}", e.reason);
+        let mut r = record(u, |k| 0.1 * u(k) / 60.0);
+        for w in &mut r.segments[0].speed {
+            *w = -*w;
+        }
+        let e = check_plausible(&r).unwrap_err();
+        assert_eq!(e.column, "speed_rad_s");
+        // A controller braking for a while is not a reversal.
+        let brake = |k: usize| if k < 300 { 60.0 } else { -60.0 };
+        let r = record(brake, |k| 0.1 * brake(k) / 60.0);
+        let mut r2 = r.clone();
+        r2.segments[0].speed = vec![46.0; 400];
+        assert!(check_plausible(&r2).is_ok());
+    }
+
+    #[test]
+    fn a_clipped_current_is_warned_of_and_a_settled_maximum_is_not() {
+        // A step response whose peak an ADC clips at 1.5 A.
+        let i = |k: usize| 2.0 * (-(k as f64) / 50.0).exp() + 0.2;
+        let r = record(|_| 60.0, |k| i(k).min(1.5));
+        let w = clipped_channels(&r);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(
+            w[0].contains("armature_current_A") && w[0].contains("1.5 A"),
+            "{}",
+            w[0]
+        );
+        // The unclipped response, and a speed below its resolution that
+        // repeats every level of a staircase alike, are not clipping.
+        assert!(clipped_channels(&record(|_| 60.0, i)).is_empty());
+        let mut settled = record(|_| 60.0, i);
+        settled.segments[0].speed = (0..400).map(|k| (k / 100) as f64).collect();
+        assert!(clipped_channels(&settled).is_empty());
+        // The same speed clipped at its second level is.
+        settled.segments[0].speed = (0..400).map(|k| (k / 100).min(1) as f64).collect();
+        assert_eq!(clipped_channels(&settled).len(), 1);
     }
 }

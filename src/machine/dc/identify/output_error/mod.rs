@@ -367,22 +367,18 @@ fn channel_noise<'a>(
     segments: impl Iterator<Item = &'a DcSegment>,
     warnings: &mut Vec<String>,
 ) -> ChannelNoise {
-    let (mut sum, mut count, mut peak) = ([0.0f64; 3], 0usize, [0.0f64; 3]);
+    let mut diffs: [Vec<f64>; 3] = Default::default();
+    let mut peak = [0.0f64; 3];
     for s in segments {
         let n = s.time.len();
         let channels = [&s.voltage, &s.current, &s.speed];
         let tail = (n / 4).max(MIN_SAMPLES / 2).min(n - 1);
-        for k in n - tail..n {
-            for (c, y) in channels.iter().enumerate() {
-                sum[c] += (y[k] - y[k - 1]).powi(2);
-            }
-            count += 1;
-        }
         for (c, y) in channels.iter().enumerate() {
+            diffs[c].extend((n - tail..n).map(|k| y[k] - y[k - 1]));
             peak[c] = y.iter().fold(peak[c], |m, v| m.max(v.abs()));
         }
     }
-    let sigma: [f64; 3] = std::array::from_fn(|c| (sum[c] / (2.0 * count.max(1) as f64)).sqrt());
+    let sigma: [f64; 3] = std::array::from_fn(|c| difference_noise(&diffs[c]));
     let mut weight = [sigma[1], sigma[2]];
     for (c, name) in ["current", "speed"].iter().enumerate() {
         if weight[c].is_nan() || weight[c] <= 0.0 {
@@ -399,6 +395,31 @@ fn channel_noise<'a>(
         speed: weight[1],
     }
 }
+
+/// `σ = √(mean(Δy²)/2)` over the first differences `d`, leaving out a
+/// difference beyond [`JUMP`] times their median magnitude: a step inside
+/// a tail that is too short to settle (a level held a few samples) is not
+/// noise. Noise never reaches that far (for Gaussian noise the median is
+/// 0.67 of the differences' deviation), so a settled tail keeps every
+/// difference; readings below their resolution (median zero) keep them
+/// all too.
+fn difference_noise(d: &[f64]) -> f64 {
+    let mut magnitudes: Vec<f64> = d.iter().map(|v| v.abs()).collect();
+    magnitudes.sort_by(f64::total_cmp);
+    let limit = match magnitudes.get(magnitudes.len() / 2) {
+        Some(&m) if m > 0.0 => JUMP * m,
+        _ => f64::INFINITY,
+    };
+    let (sum, count) = d
+        .iter()
+        .filter(|v| v.abs() <= limit)
+        .fold((0.0, 0usize), |(s, n), v| (s + v * v, n + 1));
+    (sum / (2.0 * count.max(1) as f64)).sqrt()
+}
+
+/// Differences beyond this many times their median magnitude are steps,
+/// not noise (see [`difference_noise`]).
+const JUMP: f64 = 12.0;
 
 /// K, Ra, f, Tst from the steady-state fit (La and J placeholders).
 fn steady_state_start(record: &Record) -> Result<DcParams, NotApplicable> {
