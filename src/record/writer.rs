@@ -868,16 +868,25 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("bp.mcap");
         let n = 20_000u64;
-        let stats = runtime().block_on(async {
+        let (stats, backlog, most) = runtime().block_on(async {
             let rec = Recorder::start(&path, &meta(), &channels(), 1).unwrap();
+            let backlog = rec.backlog();
+            let mut most = 0;
             for k in 0..n {
                 rec.send(samples(k * 1_000)).await.unwrap();
+                most = most.max(backlog.entries());
             }
-            rec.finish().await.unwrap()
+            (rec.finish().await.unwrap(), backlog, most)
         });
         assert_eq!(stats.messages, 2 * n);
         assert!(stats.backpressure_waits > 0);
         assert!(stats.backpressure_waits <= n);
+        // The backlog never showed more than the queue holds (plus the one
+        // entry counted on its way in), and it is empty at the end.
+        assert_eq!(backlog.capacity(), 1);
+        assert!(most <= 2, "backlog peaked at {most}");
+        assert_eq!(backlog.entries(), 0);
+        assert_eq!(backlog.waits(), stats.backpressure_waits);
     }
 
     #[test]
