@@ -176,8 +176,10 @@ async fn the_status_page_plots_a_sweeps_operating_points_in_chromium() {
     assert_eq!(sweep["canvas"], true, "the sweep plot is drawn: {sweep}");
     assert_eq!(sweep["visible"], true, "{sweep}");
     assert_eq!(sweep["title"], "sweep operating points", "{sweep}");
+    // The series (the axes' labels are drawn on the canvas: see the
+    // screenshot).
     assert_eq!(
-        sweep["axes"],
+        sweep["legend"],
         serde_json::json!(["slip", "line current, A", "input power, W"]),
         "{sweep}"
     );

@@ -190,7 +190,6 @@ SWEEP_TEXT = ("({points: Number(c.dataset.sweepPoints || 0), "
               "canvas: !!c.querySelector('.sweep canvas'), visible: !c.querySelector('.sweep').hidden, "
               "legend: Array.from(c.querySelectorAll('.sweep .u-legend .u-label')).map(e => e.textContent), "
               "title: (c.querySelector('.sweep .u-title') || {}).textContent || '', "
-              "axes: Array.from(c.querySelectorAll('.sweep .u-axis .u-label')).map(e => e.textContent), "
               "time_points: Number(c.dataset.points || 0), segment: c.querySelector('.segment').textContent})")
 
 

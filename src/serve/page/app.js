@@ -228,7 +228,7 @@ function newSweepPlot(card) {
     axes: [
       { label: "slip" },
       { scale: "A", label: "line current, A" },
-      { scale: "W", side: 1, label: "input power, W", grid: { show: false } },
+      { scale: "W", side: 1, size: 70, label: "input power, W", grid: { show: false } },
     ],
     series: [
       { label: "slip" },
