@@ -385,6 +385,9 @@ mod tests {
         fn epoch(&self) -> Option<Instant> {
             Some(self.epoch)
         }
+        fn link_health(&self) -> Vec<LinkHealth> {
+            vec![LinkHealth::new(&self.id)]
+        }
     }
 
     const MS: u64 = 1_000_000;
@@ -425,6 +428,8 @@ mod tests {
         assert!(w.contains(&"a: second batch".to_string()), "{w:?}");
         assert!(w.contains(&"b: second batch".to_string()), "{w:?}");
         assert_eq!(m.epoch(), Some(t0));
+        let links: Vec<String> = m.link_health().iter().map(|l| l.name().into()).collect();
+        assert_eq!(links, ["a", "b"], "every source's links, in order");
     }
 
     #[tokio::test(start_paused = true)]

@@ -425,6 +425,14 @@ async fn bus_timeouts_and_exceptions_from_a_pymodbus_peer_are_counted_per_bus_in
         "faults counted while the test was {}",
         status["state"].as_str().unwrap_or("?")
     );
+    for (kind, n) in ["timeout", "exception", "retry", "reconnect", "link_error"]
+        .iter()
+        .map(|k| (k, errors(&during, &daq_bus, k)))
+    {
+        println!(
+            "motorbench_bus_errors_total{{rig=\"rig\",bus=\"{daq_bus}\",kind=\"{kind}\"}} {n}"
+        );
+    }
     let grown = |kind| errors(&during, &daq_bus, kind) - errors(&before, &daq_bus, kind);
     assert_eq!(grown("timeout"), 2.0, "{:?}", during.0);
     assert_eq!(grown("exception"), 3.0);

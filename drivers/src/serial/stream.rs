@@ -308,6 +308,12 @@ mod tests {
         );
         assert!(w.contains("garbage"), "{w}");
         assert_eq!(s.decode_counts().rejected, 1);
+        // The link's health says the same, by kind, under the stream's name.
+        let health = s.link_health();
+        assert_eq!(health.len(), 1);
+        assert_eq!(health[0].name(), "daq");
+        let c = health[0].counts();
+        assert_eq!((c.decode_errors, c.lost, c.timeouts), (1, 2, 0));
     }
 
     #[tokio::test]
