@@ -52,6 +52,24 @@ use common::peer::Peer;
 /// other so that they do not disturb each other's sampling.
 static REALTIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
+/// Start a test on `rig` through the API (with `test` over its
+/// configured plan); its id.
+async fn start_test(served: &Served, rig: &str, test: Option<&serde_json::Value>) -> String {
+    let r = served
+        .client(None)
+        .post(&format!("/v1/rigs/{rig}/tests"), test)
+        .await
+        .unwrap();
+    assert_eq!(
+        r.status,
+        201,
+        "{}\n{}",
+        String::from_utf8_lossy(&r.body),
+        served.log()
+    );
+    r.json()["id"].as_str().unwrap().to_string()
+}
+
 /// Start the daemon on `config`, records and log in `dir`.
 fn start_daemon(config: &Path, dir: &Path) -> Served {
     Served::start(
@@ -192,15 +210,7 @@ async fn abort_halfway_behind_modbus_makes_the_supply_safe_and_is_timed() {
     let c = served.client(None);
 
     // The full staircase; abort it halfway.
-    let r = c.post("/v1/rigs/rig/tests", None).await.unwrap();
-    assert_eq!(
-        r.status,
-        201,
-        "{}\n{}",
-        String::from_utf8_lossy(&r.body),
-        served.log()
-    );
-    let id = r.json()["id"].as_str().unwrap().to_string();
+    let id = start_test(&served, "rig", None).await;
     let s = wait_test(&c, &id, |s| {
         s["segment"]["index"].as_u64().unwrap_or(0) * 2
             >= s["segment"]["total"].as_u64().unwrap_or(99)
@@ -368,15 +378,7 @@ async fn bus_timeouts_and_exceptions_from_a_pymodbus_peer_are_counted_per_bus_in
 
     let levels =
         serde_json::json!({"test": {"levels_V": [10, 55, 10, 32, 55, 21], "coastdown": false}});
-    let r = c.post("/v1/rigs/rig/tests", Some(&levels)).await.unwrap();
-    assert_eq!(
-        r.status,
-        201,
-        "{}\n{}",
-        String::from_utf8_lossy(&r.body),
-        served.log()
-    );
-    let id = r.json()["id"].as_str().unwrap().to_string();
+    let id = start_test(&served, "rig", Some(&levels)).await;
     wait_test(&c, &id, |s| s["t_s"].as_f64().unwrap_or(0.0) > 0.5).await;
 
     // Live, before any fault: both buses carry requests, the recorder's
@@ -556,15 +558,7 @@ async fn one_daemon_runs_a_dc_test_and_an_im_sweep_and_aborts_the_sweep_with_bot
     assert_eq!(rig_of("sim-modbus-dc")["machine"], "dc");
 
     // The full sweep on the IM rig, through the API.
-    let r = c.post("/v1/rigs/im-rig/tests", None).await.unwrap();
-    assert_eq!(
-        r.status,
-        201,
-        "{}\n{}",
-        String::from_utf8_lossy(&r.body),
-        served.log()
-    );
-    let sweep = r.json()["id"].as_str().unwrap().to_string();
+    let sweep = start_test(&served, "im-rig", None).await;
 
     // Meanwhile a short DC test on the other rig, through `ctl`.
     let out = served.ctl(&[

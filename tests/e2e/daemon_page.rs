@@ -21,12 +21,51 @@ use crate::common;
 
 use std::path::Path;
 
+use motorbench::serve::client::Client;
 use serde_json::Value;
 
 use common::daemon::{
     finished, get, python_script, shipped, start_config_with_token, start_with_token, wait_test,
-    WEB_TOKEN,
+    Served, WEB_TOKEN,
 };
+
+/// Where the page checks keep their screenshots.
+fn shots_dir() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("target/daemon-page")
+}
+
+/// Start a test on the daemon's rig `rig` with `body`; its id.
+async fn start(c: &Client, body: &Value) -> String {
+    let r = c.post("/v1/rigs/rig/tests", Some(body)).await.unwrap();
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    r.json()["id"].as_str().unwrap().to_string()
+}
+
+/// Run `tests/python/page_check.py` (`mode` first when given) against
+/// the daemon's page following test `id` on rig `rig`; what it saw.
+fn page_check(served: &Served, mode: Option<&str>, id: &str) -> Value {
+    let shots = shots_dir();
+    let url = format!("{}/", served.url);
+    let mut args: Vec<&std::ffi::OsStr> = mode.into_iter().map(|m| m.as_ref()).collect();
+    args.extend([
+        url.as_ref(),
+        WEB_TOKEN.as_ref(),
+        "rig".as_ref(),
+        id.as_ref(),
+        shots.as_os_str(),
+    ]);
+    let out = python_script("page_check.py", &args);
+    let (stdout, stderr) = common::text(&out);
+    assert!(
+        out.status.success(),
+        "the page check failed (screenshots in {}):\n{stderr}\n{}",
+        shots.display(),
+        served.log()
+    );
+    let seen: Value = serde_json::from_str(&stdout).unwrap();
+    println!("{}", serde_json::to_string_pretty(&seen).unwrap());
+    seen
+}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_status_page_shows_the_test_and_aborts_it_in_chromium() {
@@ -37,31 +76,9 @@ async fn the_status_page_shows_the_test_and_aborts_it_in_chromium() {
     // page, watch and abort however slow the browser starts.
     let slow =
         serde_json::json!({"test": {"settle": {"min_hold_s": 6, "hold_s": 2, "timeout_s": 20}}});
-    let r = c.post("/v1/rigs/rig/tests", Some(&slow)).await.unwrap();
-    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
-    let id = r.json()["id"].as_str().unwrap().to_string();
-
-    let shots = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/daemon-page");
-    let url = format!("{}/", served.url);
-    let out = python_script(
-        "page_check.py",
-        &[
-            url.as_ref(),
-            WEB_TOKEN.as_ref(),
-            "rig".as_ref(),
-            id.as_ref(),
-            shots.as_os_str(),
-        ],
-    );
-    let (stdout, stderr) = common::text(&out);
-    assert!(
-        out.status.success(),
-        "the page check failed (screenshots in {}):\n{stderr}\n{}",
-        shots.display(),
-        served.log()
-    );
-    let seen: Value = serde_json::from_str(&stdout).unwrap();
-    println!("{}", serde_json::to_string_pretty(&seen).unwrap());
+    let id = start(&c, &slow).await;
+    let seen = page_check(&served, None, &id);
+    let shots = shots_dir();
 
     assert!(seen["token_form"].as_str().unwrap().contains("token"));
     let running = &seen["running"];
@@ -145,32 +162,9 @@ async fn the_status_page_plots_a_sweeps_operating_points_in_chromium() {
     let c = served.client(Some(WEB_TOKEN));
     // One voltage, short cool-downs: points come every second or so.
     let short = serde_json::json!({"test": {"voltages_V": [400], "points": 16, "cooldown_s": 1}});
-    let r = c.post("/v1/rigs/rig/tests", Some(&short)).await.unwrap();
-    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
-    let id = r.json()["id"].as_str().unwrap().to_string();
-
-    let shots = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/daemon-page");
-    let url = format!("{}/", served.url);
-    let out = python_script(
-        "page_check.py",
-        &[
-            "--sweep".as_ref(),
-            url.as_ref(),
-            WEB_TOKEN.as_ref(),
-            "rig".as_ref(),
-            id.as_ref(),
-            shots.as_os_str(),
-        ],
-    );
-    let (stdout, stderr) = common::text(&out);
-    assert!(
-        out.status.success(),
-        "the page check failed (screenshots in {}):\n{stderr}\n{}",
-        shots.display(),
-        served.log()
-    );
-    let seen: Value = serde_json::from_str(&stdout).unwrap();
-    println!("{}", serde_json::to_string_pretty(&seen).unwrap());
+    let id = start(&c, &short).await;
+    let seen = page_check(&served, Some("--sweep"), &id);
+    let shots = shots_dir();
 
     let sweep = &seen["sweep"];
     assert_eq!(sweep["canvas"], true, "the sweep plot is drawn: {sweep}");

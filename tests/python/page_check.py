@@ -205,6 +205,15 @@ async def open_with_token(b, url, token, seen, shot=None):
     await b.js("document.querySelector('#token-form button[type=submit]').click()")
 
 
+async def abort_from_page(b, rig, what):
+    """Click the card's Abort button; `what` (an expression over the card)
+    once the rig is idle and the test shown aborted."""
+    await b.js(card(rig, "c.querySelector('button.abort').click()"))
+    return await b.wait("the test aborted", card(
+        rig, f"c.dataset.state === 'idle' && c.querySelector('.eta').textContent.startsWith('aborted') "
+             f"&& {what}"))
+
+
 async def run_sweep(url, token, rig, test_id, out_dir):
     b = Browser(out_dir)
     await b.start()
@@ -221,10 +230,7 @@ async def run_sweep(url, token, rig, test_id, out_dir):
                  f"&& {SWEEP_TEXT}"))
         await b.js(card(rig, "c.scrollIntoView()"))
         seen["shots"].append(await b.screenshot("11-sweep"))
-        await b.js(card(rig, "c.querySelector('button.abort').click()"))
-        seen["aborted"] = await b.wait("the sweep aborted", card(
-            rig, f"c.dataset.state === 'idle' && c.querySelector('.eta').textContent.startsWith('aborted') "
-                 f"&& Object.assign({CARD_TEXT}, {{sweep: {SWEEP_TEXT}}})"))
+        seen["aborted"] = await abort_from_page(b, rig, f"Object.assign({CARD_TEXT}, {{sweep: {SWEEP_TEXT}}})")
         seen["shots"].append(await b.screenshot("12-sweep-aborted"))
         seen["requests"] = b.requests
         seen["console_errors"] = b.console_errors
@@ -252,10 +258,7 @@ async def run(url, token, rig, test_id, out_dir):
         seen["shots"].append(await b.screenshot("02-running"))
 
         # Abort from the page.
-        await b.js(card(rig, "c.querySelector('button.abort').click()"))
-        seen["aborted"] = await b.wait("the test aborted", card(
-            rig, f"c.dataset.state === 'idle' && c.querySelector('.eta').textContent.startsWith('aborted') "
-                 f"&& {CARD_TEXT}"))
+        seen["aborted"] = await abort_from_page(b, rig, CARD_TEXT)
         seen["shots"].append(await b.screenshot("03-aborted"))
 
         # The record: report and plot from the records list.
