@@ -210,3 +210,20 @@ pub enum ServedLink {
     /// A streaming DAQ: open this pseudo-terminal path.
     Stream(SerialSettings),
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bus_is_named_by_its_configured_address_not_a_port_of_the_day() {
+        let tcp = LinkSpec::Tcp("10.0.0.5:502".parse().unwrap());
+        assert_eq!(link_name("modbus-supply", &tcp), "tcp:10.0.0.5:502");
+        let rtu = LinkSpec::Rtu(SerialSettings::new_8n1("/dev/ttyUSB0", 19200));
+        assert_eq!(link_name("modbus-meter", &rtu), "rtu:/dev/ttyUSB0");
+        assert_eq!(
+            link_name("modbus-stage", &LinkSpec::Simulated),
+            "simulated:modbus-stage"
+        );
+    }
+}
