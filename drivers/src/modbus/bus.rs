@@ -5,6 +5,11 @@
 //! routine (polls, heartbeats). An urgent request waiting goes before any
 //! routine one, so a safe-state command never waits behind a queue of
 //! polls, only behind the one transaction on the wire.
+//!
+//! After every request the task publishes its client's counts (requests,
+//! timeouts, exceptions, retries, reconnections) to the bus's
+//! [`LinkHealth`], which any holder of a handle reads
+//! ([`BusHandle::health`]).
 
 use std::time::Duration;
 
