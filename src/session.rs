@@ -13,7 +13,7 @@
 
 use std::path::{Path, PathBuf};
 
-use motorbench_drivers::{PowerStage, SensorStream};
+use motorbench_drivers::{LinkHealth, PowerStage, SensorStream};
 use thiserror::Error;
 use tokio::sync::watch;
 
@@ -24,8 +24,8 @@ use crate::bench::{
 use crate::diagnose::{write_residual_svg, ResidualPlot};
 use crate::machine::{Analysed, Analysis, Machine, PlanRig, PlotFailure, Truth};
 use crate::record::{
-    Entry, Event, EventLevel, Record, RecordError, Recorder, RecorderStats, TestMeta,
-    QUEUE_CAPACITY, SCHEMA_VERSION,
+    Entry, Event, EventLevel, Record, RecordError, Recorder, RecorderBacklog, RecorderStats,
+    TestMeta, QUEUE_CAPACITY, SCHEMA_VERSION,
 };
 use crate::report::Provenance;
 use crate::rig::RigError;
@@ -76,6 +76,7 @@ pub struct Session {
     counts_per_rev: f64,
     truth: Option<Truth>,
     keep_alive: Option<Box<dyn std::any::Any + Send>>,
+    links: Vec<LinkHealth>,
 }
 
 impl Session {
@@ -83,6 +84,9 @@ impl Session {
     /// clock.
     pub async fn open(machine: Box<dyn Machine>, realtime: bool) -> Result<Session, SessionError> {
         let rig = machine.open_rig(realtime).await?;
+        // The rig's buses, then the links its sensors read themselves.
+        let mut links = rig.links;
+        links.extend(rig.sensors.link_health());
         let (stages, bounds) = rig
             .stages
             .into_iter()
@@ -96,12 +100,19 @@ impl Session {
             counts_per_rev: rig.counts_per_rev,
             truth: rig.truth,
             keep_alive: rig.keep_alive,
+            links,
         })
     }
 
     /// The test.
     pub fn machine(&self) -> &dyn Machine {
         self.machine.as_ref()
+    }
+
+    /// The health of the rig's links (requests and errors by kind), live
+    /// while the test runs.
+    pub fn links(&self) -> &[LinkHealth] {
+        &self.links
     }
 
     /// The record's metadata for a test started at `started_at` (RFC 3339).
@@ -140,6 +151,7 @@ impl Session {
             .record_channels(self.sensors.channels(), &stage_ids);
         let meta = self.meta(started_at);
         let recorder = Recorder::start(path, &meta, &channels, QUEUE_CAPACITY)?;
+        let backlog = recorder.backlog();
         let sink = RecordSink::new(Some(recorder), Some(meta.clone()), channels);
         let (session, handle, task) = self.supervise(monitor);
         Ok(Supervised {
@@ -151,6 +163,7 @@ impl Session {
             },
             handle,
             task,
+            backlog,
         })
     }
 
@@ -167,6 +180,7 @@ impl Session {
             counts_per_rev,
             truth,
             keep_alive,
+            links,
         } = self;
         let (bus_loss_s, rate_hz) = machine.bus_loss_and_rate();
         let supervised = supervise_stages(
@@ -187,6 +201,7 @@ impl Session {
             counts_per_rev,
             truth,
             keep_alive,
+            links,
         };
         (session, supervised.handle, supervised.task)
     }
@@ -288,6 +303,7 @@ pub struct Supervised {
     recording: Recording,
     handle: SupervisorHandle,
     task: SupervisorTask,
+    backlog: RecorderBacklog,
 }
 
 /// How a supervised plan ended.
@@ -312,6 +328,16 @@ impl Supervised {
         &self.handle
     }
 
+    /// The health of the rig's links, live while the plan runs.
+    pub fn links(&self) -> &[LinkHealth] {
+        self.recording.session.links()
+    }
+
+    /// The recorder's queue, live while the plan runs.
+    pub fn backlog(&self) -> &RecorderBacklog {
+        &self.backlog
+    }
+
     /// Run the plan to its end; every stop comes through the supervisor.
     /// Then the supervisor's stop, if any, is recorded as an event (with
     /// the first sample read after the safe state) and the supervisor
@@ -321,6 +347,7 @@ impl Supervised {
             mut recording,
             handle,
             task,
+            ..
         } = self;
         let s = &mut recording.session;
         let rig = PlanRig {

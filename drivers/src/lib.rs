@@ -26,11 +26,14 @@
 //! - [`serial`]: ASCII and binary line protocols for streaming sensors,
 //!   serial ports and pseudo-terminals.
 //! - [`ChannelStats`]: jitter and loss per channel, kept by the streams.
+//! - [`LinkHealth`]: requests and errors by kind per link (timeouts,
+//!   exceptions, decode errors, reconnects), kept by the link's owner.
 //! - [`MergedSensors`]: several streams (each in its own task) as one, on
 //!   one time base and in time order.
 
 pub mod can;
 mod error;
+mod link_health;
 mod merged;
 pub mod modbus;
 mod power_stage;
@@ -39,6 +42,7 @@ pub mod serial;
 mod stats;
 
 pub use error::DriverError;
+pub use link_health::{LinkCounts, LinkHealth};
 pub use merged::{MergedSensors, DEFAULT_REORDER};
 pub use power_stage::{PowerStage, StageCapabilities};
 pub use sensor::{ChannelInfo, Sample, SampleBatch, SensorStream};

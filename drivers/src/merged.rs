@@ -34,7 +34,7 @@ use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tokio::time::{Duration, Instant};
 
-use crate::{ChannelInfo, ChannelStats, DriverError, SampleBatch, SensorStream};
+use crate::{ChannelInfo, ChannelStats, DriverError, LinkHealth, SampleBatch, SensorStream};
 
 /// What a source's task shares with the merged stream besides batches.
 #[derive(Debug, Default)]
@@ -76,6 +76,7 @@ pub struct MergedSensors {
     dropped: Vec<u64>,
     warnings: Vec<String>,
     tasks: Vec<JoinHandle<()>>,
+    links: Vec<LinkHealth>,
 }
 
 impl std::fmt::Debug for MergedSensors {
@@ -111,7 +112,9 @@ impl MergedSensors {
         // Room for a second's worth of batches from fast sources before a
         // source task waits for the consumer.
         let (tx, rx) = mpsc::channel(4096);
+        let mut links = Vec::new();
         for mut source in sources {
+            links.extend(source.link_health());
             let offset = channels.len();
             offsets.push(offset);
             channels.extend(source.channels().iter().cloned());
@@ -162,6 +165,7 @@ impl MergedSensors {
             states,
             warnings: Vec::new(),
             tasks,
+            links,
         }
     }
 
@@ -284,6 +288,10 @@ impl SensorStream for MergedSensors {
         out
     }
 
+    fn link_health(&self) -> Vec<LinkHealth> {
+        self.links.clone()
+    }
+
     fn take_warnings(&mut self) -> Vec<String> {
         let mut out = Vec::new();
         for state in &self.states {
@@ -377,6 +385,9 @@ mod tests {
         fn epoch(&self) -> Option<Instant> {
             Some(self.epoch)
         }
+        fn link_health(&self) -> Vec<LinkHealth> {
+            vec![LinkHealth::new(&self.id)]
+        }
     }
 
     const MS: u64 = 1_000_000;
@@ -417,6 +428,8 @@ mod tests {
         assert!(w.contains(&"a: second batch".to_string()), "{w:?}");
         assert!(w.contains(&"b: second batch".to_string()), "{w:?}");
         assert_eq!(m.epoch(), Some(t0));
+        let links: Vec<String> = m.link_health().iter().map(|l| l.name().into()).collect();
+        assert_eq!(links, ["a", "b"], "every source's links, in order");
     }
 
     #[tokio::test(start_paused = true)]

@@ -2,7 +2,7 @@
 
 use async_trait::async_trait;
 
-use crate::{ChannelStats, DriverError};
+use crate::{ChannelStats, DriverError, LinkHealth};
 
 /// Static description of one channel a stream delivers.
 #[derive(Debug, Clone, PartialEq)]
@@ -64,6 +64,14 @@ pub trait SensorStream: Send {
     /// Sampling statistics per channel so far (received, lost, jitter).
     /// Streams that keep none return an empty list (the default).
     fn sampling_stats(&self) -> Vec<ChannelStats> {
+        Vec::new()
+    }
+
+    /// The health of the links this stream reads itself (a serial line, a
+    /// CAN interface): errors by kind, for the daemon's metrics. Streams
+    /// that poll through a bus task owned elsewhere (Modbus: the rig
+    /// reports the bus) and simulated streams return none (the default).
+    fn link_health(&self) -> Vec<LinkHealth> {
         Vec::new()
     }
 

@@ -9,6 +9,9 @@ pub trait Progress: Send + Sync {
     fn tick(&self, t_s: f64);
     /// The test ended.
     fn done(&self, message: &str);
+    /// An operating point of a sweep was recorded (a live display plots
+    /// it). Default: ignored.
+    fn operating_point(&self, _point: &crate::record::OperatingPoint) {}
 }
 
 /// Progress that goes nowhere.

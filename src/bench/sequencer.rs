@@ -136,9 +136,18 @@ impl<'a> Sequencer<'a> {
         self.t_ns
     }
 
-    /// Record one entry.
+    /// Record one entry (an operating point also goes to the progress
+    /// display).
     pub async fn push(&mut self, entry: Entry) -> Result<(), RecordError> {
-        self.sink.push(entry).await
+        let point = match &entry {
+            Entry::OperatingPoint { point, .. } => Some(*point),
+            _ => None,
+        };
+        self.sink.push(entry).await?;
+        if let Some(p) = point {
+            self.progress.operating_point(&p);
+        }
+        Ok(())
     }
 
     /// Record an event at the latest data time.

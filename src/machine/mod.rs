@@ -32,7 +32,7 @@ use std::any::Any;
 use std::path::Path;
 
 use async_trait::async_trait;
-use motorbench_drivers::{ChannelInfo, PowerStage, SensorStream};
+use motorbench_drivers::{ChannelInfo, LinkHealth, PowerStage, SensorStream};
 
 use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
 use crate::config::Retention;
@@ -73,6 +73,11 @@ pub struct OpenedRig {
     /// The sensors again, for a one-shot read of each channel (`probe`),
     /// where the rig polls them over Modbus.
     pub modbus_probe: Option<ModbusProbe>,
+    /// The health of the buses the rig owns (its Modbus links, one per
+    /// link); a rig with none (the in-process simulation) leaves it
+    /// empty. The sensors' own links ([`SensorStream::link_health`]) are
+    /// not in it.
+    pub links: Vec<LinkHealth>,
 }
 
 /// The rig as a plan drives it: its stages in the order

@@ -43,4 +43,4 @@ pub use files::load_record_files;
 pub use reader::{build_record, read_entries, read_mcap, Entries};
 pub use start::TestStart;
 pub use types::*;
-pub use writer::{library_name, Recorder, RecorderStats, QUEUE_CAPACITY};
+pub use writer::{library_name, Recorder, RecorderBacklog, RecorderStats, QUEUE_CAPACITY};

@@ -27,6 +27,9 @@
 //!
 //! If the recorder is dropped without [`Recorder::finish`], the writer
 //! thread still writes what was queued and the summary, in the background.
+//!
+//! [`Recorder::backlog`] watches the queue while the test runs: entries
+//! waiting for the writer thread now, and the waits for room so far.
 
 use std::collections::BTreeMap;
 use std::fs::{File, OpenOptions};
@@ -76,6 +79,10 @@ pub struct RecorderStats {
 #[derive(Debug, Default)]
 struct Shared {
     backpressure_waits: AtomicU64,
+    /// Entries queued and not yet taken by the writer thread.
+    queued: AtomicU64,
+    /// The queue's capacity, entries.
+    capacity: u64,
     /// The writer thread's error, once it has failed.
     failure: Mutex<Option<String>>,
 }
@@ -89,6 +96,31 @@ pub struct Recorder {
     shared: Arc<Shared>,
     channel_count: usize,
     path: PathBuf,
+}
+
+/// The recorder's queue seen from outside: how far the writer thread is
+/// behind. Cheap to clone; it does not keep the queue open.
+#[derive(Debug, Clone)]
+pub struct RecorderBacklog {
+    shared: Arc<Shared>,
+}
+
+impl RecorderBacklog {
+    /// Entries (one instant's readings, a marker, an event) queued and
+    /// not yet taken by the writer thread.
+    pub fn entries(&self) -> u64 {
+        self.shared.queued.load(Ordering::Relaxed)
+    }
+
+    /// The queue's capacity, entries.
+    pub fn capacity(&self) -> u64 {
+        self.shared.capacity
+    }
+
+    /// Times an entry has waited for room in the full queue so far.
+    pub fn waits(&self) -> u64 {
+        self.shared.backpressure_waits.load(Ordering::Relaxed)
+    }
 }
 
 /// Channel ids and counters, owned by the writer thread. Positions
@@ -215,14 +247,17 @@ impl Recorder {
 
         let (tx, rx) = mpsc::channel(queue_capacity.max(1));
         let (done_tx, done) = oneshot::channel();
-        let shared = Arc::new(Shared::default());
+        let shared = Arc::new(Shared {
+            capacity: queue_capacity.max(1) as u64,
+            ..Shared::default()
+        });
         let thread_shared = Arc::clone(&shared);
         let thread_path = path.to_path_buf();
         let thread = std::thread::Builder::new()
             .name("mcap-writer".to_string())
             .spawn(move || {
                 let mut rx = rx;
-                let result = run(writer, &mut rx, table, &thread_path);
+                let result = run(writer, &mut rx, table, &thread_path, &thread_shared);
                 if let Err(e) = &result {
                     *thread_shared
                         .failure
@@ -257,7 +292,10 @@ impl Recorder {
             return Err(self.writer_failed(reason));
         }
         self.check(&entry)?;
-        match self.tx.try_send(entry) {
+        // Counted before it is queued, so that the writer thread never
+        // takes an entry it has not been counted for.
+        self.shared.queued.fetch_add(1, Ordering::Relaxed);
+        let sent = match self.tx.try_send(entry) {
             Ok(()) => Ok(()),
             Err(mpsc::error::TrySendError::Full(entry)) => {
                 self.shared
@@ -266,6 +304,17 @@ impl Recorder {
                 self.tx.send(entry).await.map_err(|_| self.writer_stopped())
             }
             Err(mpsc::error::TrySendError::Closed(_)) => Err(self.writer_stopped()),
+        };
+        if sent.is_err() {
+            self.shared.queued.fetch_sub(1, Ordering::Relaxed);
+        }
+        sent
+    }
+
+    /// A watch on the queue, for a live display while the test runs.
+    pub fn backlog(&self) -> RecorderBacklog {
+        RecorderBacklog {
+            shared: Arc::clone(&self.shared),
         }
     }
 
@@ -430,11 +479,13 @@ fn run(
     rx: &mut mpsc::Receiver<Entry>,
     mut table: Channels,
     path: &Path,
+    shared: &Shared,
 ) -> Result<RecorderStats, RecordError> {
     let mcap_err = |e| RecordError::mcap(path, e);
     let mut payload = Vec::with_capacity(64);
     let mut last_flush = 0u64;
     while let Some(entry) = rx.blocking_recv() {
+        shared.queued.fetch_sub(1, Ordering::Relaxed);
         let (t_ns, urgent) = match &entry {
             Entry::Samples { t_ns, values } => {
                 for &(index, value) in values {
@@ -817,16 +868,25 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("bp.mcap");
         let n = 20_000u64;
-        let stats = runtime().block_on(async {
+        let (stats, backlog, most) = runtime().block_on(async {
             let rec = Recorder::start(&path, &meta(), &channels(), 1).unwrap();
+            let backlog = rec.backlog();
+            let mut most = 0;
             for k in 0..n {
                 rec.send(samples(k * 1_000)).await.unwrap();
+                most = most.max(backlog.entries());
             }
-            rec.finish().await.unwrap()
+            (rec.finish().await.unwrap(), backlog, most)
         });
         assert_eq!(stats.messages, 2 * n);
         assert!(stats.backpressure_waits > 0);
         assert!(stats.backpressure_waits <= n);
+        // The backlog never showed more than the queue holds (plus the one
+        // entry counted on its way in), and it is empty at the end.
+        assert_eq!(backlog.capacity(), 1);
+        assert!(most <= 2, "backlog peaked at {most}");
+        assert_eq!(backlog.entries(), 0);
+        assert_eq!(backlog.waits(), stats.backpressure_waits);
     }
 
     #[test]

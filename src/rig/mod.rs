@@ -11,10 +11,10 @@ use std::task::{Context, Poll, Waker};
 
 use motorbench_drivers::modbus::server::WriteSpan;
 use motorbench_drivers::modbus::{
-    spawn_bus, BusHandle, CallPolicy, DeviceProfile, ModbusClient, PolledChannel, Register,
+    spawn_bus_as, BusHandle, CallPolicy, DeviceProfile, ModbusClient, PolledChannel, Register,
 };
 use motorbench_drivers::serial::port::SerialSettings;
-use motorbench_drivers::{ChannelInfo, DriverError};
+use motorbench_drivers::{ChannelInfo, DriverError, LinkHealth};
 
 use crate::config::{LinkSpec, ModbusDeviceLink};
 
@@ -127,15 +127,29 @@ impl<'a> Buses<'a> {
                 return b.clone();
             }
         }
-        let bus = spawn_bus(client(
-            name,
-            &device.link,
-            served,
-            device.unit_id,
-            self.policy,
-        ));
+        let bus = spawn_bus_as(
+            client(name, &device.link, served, device.unit_id, self.policy),
+            &link_name(name, &device.link),
+        );
         self.open.push((device, bus.clone()));
         bus
+    }
+
+    /// The health of every bus opened, one per link.
+    pub(crate) fn health(&self) -> Vec<LinkHealth> {
+        self.open.iter().map(|(_, b)| b.health().clone()).collect()
+    }
+}
+
+/// The name a bus is known by in the metrics, the same from test to
+/// test: its configured address (`tcp:HOST:PORT`, `rtu:PATH`), or, for a
+/// simulated device served on a port of the day, `simulated:` and the
+/// device's role.
+pub(crate) fn link_name(role: &str, link: &LinkSpec) -> String {
+    match link {
+        LinkSpec::Tcp(addr) => format!("tcp:{addr}"),
+        LinkSpec::Rtu(s) => format!("rtu:{}", s.path),
+        LinkSpec::Simulated => format!("simulated:{role}"),
     }
 }
 
@@ -195,4 +209,21 @@ pub enum ServedLink {
     Rtu(SerialSettings),
     /// A streaming DAQ: open this pseudo-terminal path.
     Stream(SerialSettings),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_bus_is_named_by_its_configured_address_not_a_port_of_the_day() {
+        let tcp = LinkSpec::Tcp("10.0.0.5:502".parse().unwrap());
+        assert_eq!(link_name("modbus-supply", &tcp), "tcp:10.0.0.5:502");
+        let rtu = LinkSpec::Rtu(SerialSettings::new_8n1("/dev/ttyUSB0", 19200));
+        assert_eq!(link_name("modbus-meter", &rtu), "rtu:/dev/ttyUSB0");
+        assert_eq!(
+            link_name("modbus-stage", &LinkSpec::Simulated),
+            "simulated:modbus-stage"
+        );
+    }
 }

@@ -13,6 +13,7 @@ use std::time::SystemTime;
 use serde::Serialize;
 use tokio::sync::{watch, Mutex};
 
+use super::link_tally::LinkTally;
 use super::metrics::{Metrics, TestEnd};
 use super::records_index::{
     unix_s, IndexEntry, IndexError, KeyResults, RecordOutcome, RecordsIndex,
@@ -20,7 +21,7 @@ use super::records_index::{
 use crate::bench::{Outcome, Progress, Readings, StopCause, StopReport, SupervisorHandle};
 use crate::diagnose::write_residual_svg;
 use crate::machine::{Machine, PlanDurations};
-use crate::record::SegmentKind;
+use crate::record::{OperatingPoint, RecorderBacklog, SegmentKind};
 use crate::session::{Recording, RunEnd, Session, SessionError, Supervised};
 
 /// Where a test is.
@@ -80,6 +81,37 @@ impl From<&StopReport> for StopStatus {
     }
 }
 
+/// An operating point of a running sweep, as the live feed shows it (the
+/// record's `/bench/operating_point`, SI units).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, utoipa::ToSchema)]
+pub struct PointStatus {
+    /// Segment (the sweep's supply voltage) index.
+    pub segment: u32,
+    /// Slip, 0 (synchronous) to 1 (locked rotor).
+    pub slip: f64,
+    /// RMS line-to-line voltage, V.
+    pub line_voltage: f64,
+    /// RMS line current, A.
+    pub line_current: f64,
+    /// Three-phase input power, W.
+    pub input_power: f64,
+    /// Shaft speed, rad/s.
+    pub speed: f64,
+}
+
+impl From<&OperatingPoint> for PointStatus {
+    fn from(p: &OperatingPoint) -> PointStatus {
+        PointStatus {
+            segment: p.segment,
+            slip: p.slip,
+            line_voltage: p.line_voltage,
+            line_current: p.line_current,
+            input_power: p.input_power,
+            speed: p.speed,
+        }
+    }
+}
+
 /// A test's status, as the API shows it.
 #[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
 pub struct TestStatus {
@@ -110,6 +142,9 @@ pub struct TestStatus {
     pub reason: Option<String>,
     /// The supervisor's stop, if there was one.
     pub stop: Option<StopStatus>,
+    /// The operating points a sweep has recorded so far, in order (empty
+    /// for a test that has none).
+    pub operating_points: Vec<PointStatus>,
 }
 
 impl TestStatus {
@@ -129,6 +164,7 @@ impl TestStatus {
             outcome: None,
             reason: None,
             stop: None,
+            operating_points: Vec::new(),
         }
     }
 }
@@ -138,9 +174,21 @@ impl TestStatus {
 pub struct TestRun {
     pub(super) status: watch::Sender<TestStatus>,
     pub(super) supervisor: SupervisorHandle,
+    links: LinkTally,
+    backlog: RecorderBacklog,
 }
 
 impl TestRun {
+    /// The rig's links for this test, and what the metrics took of them.
+    pub fn links(&self) -> &LinkTally {
+        &self.links
+    }
+
+    /// The recorder's queue of this test.
+    pub fn backlog(&self) -> &RecorderBacklog {
+        &self.backlog
+    }
+
     /// Test id.
     pub fn id(&self) -> String {
         self.status.borrow().id.clone()
@@ -254,6 +302,8 @@ pub async fn prepare(
     let run = Arc::new(TestRun {
         status,
         supervisor: supervised.handle().clone(),
+        links: LinkTally::new(supervised.links().to_vec()),
+        backlog: supervised.backlog().clone(),
     });
     let job = Job {
         supervised,
@@ -305,8 +355,12 @@ impl Ending {
             .await
             .get(&self.name)
             .map_or(0, |e| e.bytes);
+        let rig = self.run.status.borrow().rig.clone();
+        // What the links did since the last scrape (the bus tasks have
+        // ended: these are their last counts).
+        self.metrics.links_used(&rig, &self.run.links.take_growth());
         self.metrics.test_ended(&TestEnd {
-            rig: self.run.status.borrow().rig.clone(),
+            rig,
             outcome: outcome.as_str().to_string(),
             stop_cause: stop.map(|s| s.cause.kind().to_string()),
             duration_s: self.started.elapsed().as_secs_f64(),
@@ -594,4 +648,10 @@ impl Progress for FeedProgress {
     }
 
     fn done(&self, _: &str) {}
+
+    fn operating_point(&self, point: &OperatingPoint) {
+        self.run
+            .status
+            .send_modify(|s| s.operating_points.push(PointStatus::from(point)));
+    }
 }

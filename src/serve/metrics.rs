@@ -4,7 +4,10 @@
 //! started and finished by outcome, tests stopped by cause, emergency
 //! stops by source, each rig's state and winding temperature, records
 //! written (count, bytes, messages, recorder waits for queue room), the
-//! last test's duration, and API requests by route and status.
+//! recorder's backlog now, requests and errors per bus and kind (timeouts,
+//! exceptions, …; see [`super::link_tally`] for how a test's counts
+//! become counters), the last test's duration, and API requests by route
+//! and status.
 
 use std::sync::atomic::AtomicU64;
 use std::sync::Mutex;
@@ -19,6 +22,7 @@ use prometheus_client::metrics::family::Family;
 use prometheus_client::metrics::gauge::Gauge;
 use prometheus_client::registry::{Metric, Registry, Unit};
 
+use super::link_tally::LinkGrowth;
 use super::state::Daemon;
 
 /// The content type of the exposition: OpenMetrics text, which
@@ -58,6 +62,19 @@ struct StateLabels {
 }
 
 #[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct BusLabels {
+    rig: String,
+    bus: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
+struct BusErrorLabels {
+    rig: String,
+    bus: String,
+    kind: String,
+}
+
+#[derive(Clone, Debug, Hash, PartialEq, Eq, EncodeLabelSet)]
 struct RequestLabels {
     method: String,
     route: String,
@@ -85,6 +102,19 @@ pub struct TestEnd {
     pub recorder_waits: u64,
 }
 
+/// A rig as a scrape sees it.
+#[derive(Debug, Clone)]
+pub struct RigSample {
+    /// The rig.
+    pub rig: String,
+    /// `idle`, `running` or `tripped`.
+    pub state: String,
+    /// Estimated winding temperature, °C.
+    pub winding_c: f64,
+    /// Entries in the running test's recorder queue now (0 when idle).
+    pub backlog: u64,
+}
+
 /// The daemon's metrics. See the module docs.
 #[derive(Debug)]
 pub struct Metrics {
@@ -99,6 +129,9 @@ pub struct Metrics {
     record_bytes: Family<RigLabel, Counter>,
     recorded_messages: Family<RigLabel, Counter>,
     recorder_waits: Family<RigLabel, Counter>,
+    recorder_backlog: Family<RigLabel, Gauge>,
+    bus_requests: Family<BusLabels, Counter>,
+    bus_errors: Family<BusErrorLabels, Counter>,
     last_duration: Family<RigLabel, FloatGauge>,
     api_requests: Family<RequestLabels, Counter>,
     /// Serialises scrapes (the rig gauges are set, then encoded).
@@ -127,6 +160,9 @@ impl Metrics {
             record_bytes: registered(&mut r, "record_written", HELP_BYTES, Some(Unit::Bytes)),
             recorded_messages: registered(&mut r, "recorded_messages", HELP_MESSAGES, None),
             recorder_waits: registered(&mut r, "recorder_queue_full", HELP_WAITS, None),
+            recorder_backlog: registered(&mut r, "recorder_backlog", HELP_BACKLOG, None),
+            bus_requests: registered(&mut r, "bus_requests", HELP_BUS_REQUESTS, None),
+            bus_errors: registered(&mut r, "bus_errors", HELP_BUS_ERRORS, None),
             last_duration: registered(&mut r, "last_test_duration", HELP_LAST, Some(Unit::Seconds)),
             api_requests: registered(&mut r, "api_requests", HELP_REQUESTS, None),
             scrape: Mutex::new(()),
@@ -167,6 +203,27 @@ impl Metrics {
         self.last_duration.get_or_create(&rig).set(end.duration_s);
     }
 
+    /// A test on `rig` used its links this much more since last counted.
+    pub fn links_used(&self, rig: &str, growth: &[LinkGrowth]) {
+        for g in growth {
+            self.bus_requests
+                .get_or_create(&BusLabels {
+                    rig: rig.to_string(),
+                    bus: g.link.clone(),
+                })
+                .inc_by(g.grown.requests);
+            for (kind, n) in g.grown.by_kind() {
+                self.bus_errors
+                    .get_or_create(&BusErrorLabels {
+                        rig: rig.to_string(),
+                        bus: g.link.clone(),
+                        kind: kind.to_string(),
+                    })
+                    .inc_by(n);
+            }
+        }
+    }
+
     /// An emergency stop was requested on `rig` by `source`.
     pub fn emergency_stop(&self, rig: &str, source: &str) {
         self.emergency_stops
@@ -188,20 +245,24 @@ impl Metrics {
             .inc();
     }
 
-    /// The text exposition, with each rig's state and winding
-    /// temperature as given (`(rig, state, winding °C)`).
-    pub fn render(&self, rigs: &[(String, String, f64)]) -> String {
+    /// The text exposition, with each rig's state, winding temperature
+    /// and recorder backlog as given.
+    pub fn render(&self, rigs: &[RigSample]) -> String {
         let _scrape = self.scrape.lock().unwrap_or_else(|p| p.into_inner());
-        for (rig, state, winding_c) in rigs {
+        for r in rigs {
             for s in RIG_STATES {
                 self.rig_state
                     .get_or_create(&StateLabels {
-                        rig: rig.clone(),
+                        rig: r.rig.clone(),
                         state: s.to_string(),
                     })
-                    .set(i64::from(s == state));
+                    .set(i64::from(s == r.state));
             }
-            self.winding.get_or_create(&rig_label(rig)).set(*winding_c);
+            let rig = rig_label(&r.rig);
+            self.winding.get_or_create(&rig).set(r.winding_c);
+            self.recorder_backlog
+                .get_or_create(&rig)
+                .set(i64::try_from(r.backlog).unwrap_or(i64::MAX));
         }
         let mut text = String::new();
         encode(&mut text, &self.registry).expect("writing to a String cannot fail");
@@ -223,6 +284,13 @@ const HELP_BYTES: &str = "Size of the records' files written, per rig";
 const HELP_MESSAGES: &str = "MCAP messages the recorder wrote, per rig";
 const HELP_WAITS: &str =
     "Times a sample batch waited for room in the recorder's queue (its backlog was full), per rig";
+const HELP_BACKLOG: &str = "Entries waiting in the running test's recorder queue now (readings of \
+     one instant, markers, events; 0 when no test runs), per rig";
+const HELP_BUS_REQUESTS: &str =
+    "Requests made on each bus (a Modbus call with its retries is one), per rig and bus";
+const HELP_BUS_ERRORS: &str = "Bus errors, per rig, bus (its configured address, or \
+     simulated:ROLE) and kind (timeout, exception, link_error, decode_error, lost, retry, \
+     reconnect)";
 const HELP_LAST: &str = "Wall-clock duration of the rig's last finished test";
 const HELP_REQUESTS: &str =
     "API requests answered, per method, route (the path template) and status";
@@ -253,12 +321,19 @@ fn rig_label(rig: &str) -> RigLabel {
     responses((status = 200, description = "OpenMetrics text (Prometheus' exposition format)",
                content_type = "application/openmetrics-text", body = String)))]
 pub async fn metrics(State(d): State<std::sync::Arc<Daemon>>) -> Response {
-    let rigs: Vec<(String, String, f64)> = d
-        .rigs()
-        .await
-        .into_iter()
-        .map(|r| (r.name, r.state, r.winding_c))
-        .collect();
+    let mut rigs = Vec::new();
+    for r in d.rigs().await {
+        let run = r.running_test.as_deref().and_then(|id| d.test(id));
+        if let Some(run) = &run {
+            d.metrics().links_used(&r.name, &run.links().take_growth());
+        }
+        rigs.push(RigSample {
+            backlog: run.map_or(0, |t| t.backlog().entries()),
+            rig: r.name,
+            state: r.state,
+            winding_c: r.winding_c,
+        });
+    }
     (
         [(header::CONTENT_TYPE, CONTENT_TYPE)],
         d.metrics().render(&rigs),
@@ -285,7 +360,23 @@ mod tests {
         });
         m.emergency_stop("rig", "API");
         m.api_request("GET".into(), "/v1/rigs".into(), 200);
-        let text = m.render(&[("rig".into(), "tripped".into(), 41.5)]);
+        m.links_used(
+            "rig",
+            &[LinkGrowth {
+                link: "tcp:10.0.0.5:502".into(),
+                grown: motorbench_drivers::LinkCounts {
+                    requests: 40,
+                    timeouts: 3,
+                    ..Default::default()
+                },
+            }],
+        );
+        let text = m.render(&[RigSample {
+            rig: "rig".into(),
+            state: "tripped".into(),
+            winding_c: 41.5,
+            backlog: 7,
+        }]);
         for line in [
             "motorbench_tests_started_total{rig=\"rig\"} 1",
             "motorbench_tests_finished_total{rig=\"rig\",outcome=\"aborted\"} 1",
@@ -297,6 +388,10 @@ mod tests {
             "motorbench_record_written_bytes_total{rig=\"rig\"} 1000",
             "motorbench_last_test_duration_seconds{rig=\"rig\"} 2.5",
             "motorbench_api_requests_total{method=\"GET\",route=\"/v1/rigs\",status=\"200\"} 1",
+            "motorbench_recorder_backlog{rig=\"rig\"} 7",
+            "motorbench_bus_requests_total{rig=\"rig\",bus=\"tcp:10.0.0.5:502\"} 40",
+            "motorbench_bus_errors_total{rig=\"rig\",bus=\"tcp:10.0.0.5:502\",kind=\"timeout\"} 3",
+            "motorbench_bus_errors_total{rig=\"rig\",bus=\"tcp:10.0.0.5:502\",kind=\"exception\"} 0",
         ] {
             assert!(text.lines().any(|l| l == line), "{line} missing in\n{text}");
         }

@@ -7,8 +7,8 @@
 //! - [`serve`]: bind, announce, serve until the shutdown future resolves,
 //!   then stop running tests safely and finish their records.
 //! - [`api`]: the HTTP endpoints and their OpenAPI document. [`auth`]:
-//!   the bearer token. [`metrics`]: `/metrics`. [`page`]: the status page
-//!   at `/`.
+//!   the bearer token. [`metrics`]: `/metrics` (a running test's bus
+//!   counts through [`link_tally`]). [`page`]: the status page at `/`.
 //! - [`state`]: rigs, tests, the index. [`rig_config`]: a DC or an
 //!   induction-machine rig. [`jobs`]: one test of any machine, over the
 //!   one session ([`crate::session`]).
@@ -22,6 +22,7 @@ pub mod client;
 pub mod connections;
 pub mod ctl;
 pub mod jobs;
+pub mod link_tally;
 pub mod metrics;
 pub mod page;
 pub mod records_index;

@@ -231,8 +231,16 @@ pub const WEB_TOKEN: &str = "status-page-token-0123456789abcdef";
 /// Start the daemon on the embedded default configuration, on loopback,
 /// behind [`WEB_TOKEN`] (written to `dir/token`).
 pub fn start_with_token(dir: &Path, records: &Path) -> Served {
+    start_config_with_token(motorbench::config::DEFAULT_CONFIG, dir, records)
+}
+
+/// Start the daemon on the configuration `config` (its text, written to
+/// `dir/rig.toml`: the rig is named `rig`), on loopback, behind
+/// [`WEB_TOKEN`] (written to `dir/token`).
+pub fn start_config_with_token(config: &str, dir: &Path, records: &Path) -> Served {
+    let text = config;
     let config = dir.join("rig.toml");
-    std::fs::write(&config, motorbench::config::DEFAULT_CONFIG).unwrap();
+    std::fs::write(&config, text).unwrap();
     let token_file = dir.join("token");
     std::fs::write(&token_file, format!("{WEB_TOKEN}\n")).unwrap();
     Served::start(
@@ -258,4 +266,56 @@ pub fn python_script(script: &str, args: &[&std::ffi::OsStr]) -> Output {
         .args(args)
         .output()
         .expect("the test python runs")
+}
+
+/// The daemon's `/metrics` (`body`), parsed by the Prometheus client
+/// library's OpenMetrics parser (`tests/python/parse_metrics.py`, strict:
+/// a malformed exposition fails the test); the file goes in `dir`.
+pub struct Metrics(pub Vec<Value>);
+
+impl Metrics {
+    /// Parse `body`.
+    pub fn parse(body: &[u8], dir: &Path) -> Metrics {
+        let file = dir.join("metrics.txt");
+        std::fs::write(&file, body).unwrap();
+        let out = python_script("parse_metrics.py", &[file.as_os_str()]);
+        assert!(
+            out.status.success(),
+            "{}\n{}",
+            String::from_utf8_lossy(&out.stderr),
+            String::from_utf8_lossy(body)
+        );
+        Metrics(serde_json::from_slice(&out.stdout).unwrap())
+    }
+
+    /// GET `/metrics` from the daemon and parse it.
+    pub async fn scrape(c: &Client, dir: &Path) -> Metrics {
+        let r = c.get("/metrics").await.unwrap();
+        assert_eq!(r.status, 200, "{}", String::from_utf8_lossy(&r.body));
+        Metrics::parse(&r.body, dir)
+    }
+
+    /// The sum of the samples named `motorbench_<name>` whose labels
+    /// include `labels` (0 when none).
+    pub fn value(&self, name: &str, labels: &[(&str, &str)]) -> f64 {
+        self.matching(name, labels)
+            .map(|s| s["value"].as_f64().unwrap())
+            .sum()
+    }
+
+    /// How many samples are named `motorbench_<name>` with `labels`.
+    pub fn count(&self, name: &str, labels: &[(&str, &str)]) -> usize {
+        self.matching(name, labels).count()
+    }
+
+    fn matching<'a>(
+        &'a self,
+        name: &'a str,
+        labels: &'a [(&'a str, &'a str)],
+    ) -> impl Iterator<Item = &'a Value> + 'a {
+        self.0.iter().filter(move |s| {
+            s["name"] == format!("motorbench_{name}")
+                && labels.iter().all(|(k, v)| s["labels"][*k] == *v)
+        })
+    }
 }

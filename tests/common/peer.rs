@@ -61,6 +61,14 @@ impl Peer {
             .to_string()
     }
 
+    /// Send the peer one line on its standard input (a command).
+    pub fn send(&mut self, line: &str) {
+        use std::io::Write;
+        let stdin = self.stdin.as_mut().expect("the peer's input is open");
+        writeln!(stdin, "{line}").expect("write to the peer");
+        stdin.flush().expect("flush to the peer");
+    }
+
     /// Close the peer's standard input (it ends by itself).
     pub fn close_stdin(&mut self) {
         self.stdin.take();

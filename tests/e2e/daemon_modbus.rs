@@ -14,6 +14,13 @@
 //!   process's clock. The figure is printed, not asserted (run with
 //!   `--nocapture`).
 //!
+//! The same rig again with the DAQ reached through a pymodbus proxy
+//! (`tests/python/modbus_fault_proxy.py`) that, on command, leaves
+//! requests unanswered or answers "device busy": `/metrics` (parsed by
+//! the Prometheus client library) counts exactly those timeouts and
+//! exceptions, with their retries and reconnections, on the DAQ's bus
+//! and none on the supply's, live while the test runs.
+//!
 //! And one daemon with two rigs behind Modbus: the DC rig of
 //! `config/sim-modbus-dc.toml` (served by the daemon) and the induction-
 //! machine rig of `config/sim-modbus-im.toml` served by this test process
@@ -38,11 +45,30 @@ use motorbench::record::{read_mcap, EventLevel};
 use motorbench::rig::ServedLink;
 use motorbench_drivers::modbus::server::lock_bank;
 
-use common::daemon::{get, shipped, wait_test, Served, PATIENCE};
+use common::daemon::{get, shipped, wait_test, Metrics, Served, PATIENCE};
+use common::peer::Peer;
 
 /// Held by every wall-clock test of this file: they run one after the
 /// other so that they do not disturb each other's sampling.
 static REALTIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+/// Start a test on `rig` through the API (with `test` over its
+/// configured plan); its id.
+async fn start_test(served: &Served, rig: &str, test: Option<&serde_json::Value>) -> String {
+    let r = served
+        .client(None)
+        .post(&format!("/v1/rigs/{rig}/tests"), test)
+        .await
+        .unwrap();
+    assert_eq!(
+        r.status,
+        201,
+        "{}\n{}",
+        String::from_utf8_lossy(&r.body),
+        served.log()
+    );
+    r.json()["id"].as_str().unwrap().to_string()
+}
 
 /// Start the daemon on `config`, records and log in `dir`.
 fn start_daemon(config: &Path, dir: &Path) -> Served {
@@ -184,15 +210,7 @@ async fn abort_halfway_behind_modbus_makes_the_supply_safe_and_is_timed() {
     let c = served.client(None);
 
     // The full staircase; abort it halfway.
-    let r = c.post("/v1/rigs/rig/tests", None).await.unwrap();
-    assert_eq!(
-        r.status,
-        201,
-        "{}\n{}",
-        String::from_utf8_lossy(&r.body),
-        served.log()
-    );
-    let id = r.json()["id"].as_str().unwrap().to_string();
+    let id = start_test(&served, "rig", None).await;
     let s = wait_test(&c, &id, |s| {
         s["segment"]["index"].as_u64().unwrap_or(0) * 2
             >= s["segment"]["total"].as_u64().unwrap_or(99)
@@ -310,6 +328,141 @@ async fn abort_halfway_behind_modbus_makes_the_supply_safe_and_is_timed() {
     );
 }
 
+/// Read the fault proxy's lines until it has said `INJECTED <kind> <n>`
+/// for each of `faults`.
+fn wait_injected(proxy: &mut Peer, faults: &[(&str, u64)]) {
+    let mut waiting: Vec<String> = faults
+        .iter()
+        .map(|(kind, n)| format!("INJECTED {kind} {n}"))
+        .collect();
+    while !waiting.is_empty() {
+        let line = tokio::task::block_in_place(|| proxy.line());
+        waiting.retain(|w| *w != line);
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bus_timeouts_and_exceptions_from_a_pymodbus_peer_are_counted_per_bus_in_the_metrics() {
+    let _one_at_a_time = REALTIME.lock().await;
+    let shipped_cfg = Config::load(&shipped("sim-modbus-dc.toml")).unwrap();
+    let mut rig = build_rig(&shipped_cfg, false).await.unwrap();
+    let rig_served = rig.served.take().expect("a served rig");
+    drop(rig);
+    let ServedLink::Tcp(daq) = rig_served.daq_link.clone() else {
+        panic!("the DAQ is served over TCP");
+    };
+    let ServedLink::Tcp(stage) = rig_served.stage_link.clone() else {
+        panic!("the supply is served over TCP");
+    };
+    let mut proxy = Peer::start(
+        "modbus_fault_proxy.py",
+        &[&daq.ip().to_string(), &daq.port().to_string()],
+    );
+    let proxied: std::net::SocketAddr = format!("127.0.0.1:{}", proxy.ready()).parse().unwrap();
+
+    // The daemon reaches the DAQ through the proxy. A timed-out poll and
+    // its retry leave the channels silent for about 0.2 s: more than the
+    // default stale-data timeout, so this rig allows 1 s.
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("rig.toml");
+    let text = hardware_config(&rig_served.stage_link, &ServedLink::Tcp(proxied));
+    let text = text.replace(
+        "bus_loss_timeout_s = 1.0",
+        "bus_loss_timeout_s = 1.0\nstale_timeout_s = 1.0",
+    );
+    assert!(text.contains("stale_timeout_s = 1.0"), "{text}");
+    std::fs::write(&config, text).unwrap();
+    let served = start_daemon(&config, dir.path());
+    let c = served.client(None);
+    let (daq_bus, stage_bus) = (format!("tcp:{proxied}"), format!("tcp:{stage}"));
+
+    let levels =
+        serde_json::json!({"test": {"levels_V": [10, 55, 10, 32, 55, 21], "coastdown": false}});
+    let id = start_test(&served, "rig", Some(&levels)).await;
+    wait_test(&c, &id, |s| s["t_s"].as_f64().unwrap_or(0.0) > 0.5).await;
+
+    // Live, before any fault: both buses carry requests, the recorder's
+    // queue is shown and within its capacity.
+    let before = Metrics::scrape(&c, dir.path()).await;
+    let rig = ("rig", "rig");
+    fn bus(b: &str) -> [(&str, &str); 2] {
+        [("rig", "rig"), ("bus", b)]
+    }
+    for b in [&daq_bus, &stage_bus] {
+        assert!(
+            before.value("bus_requests_total", &bus(b)) > 0.0,
+            "{b}: {:?}",
+            before.0
+        );
+    }
+    assert_eq!(before.count("recorder_backlog", &[rig]), 1);
+    let backlog = before.value("recorder_backlog", &[rig]);
+    assert!((0.0..=4096.0).contains(&backlog), "backlog {backlog}");
+
+    let errors = |m: &Metrics, b: &str, kind: &str| {
+        m.value("bus_errors_total", &[rig, ("bus", b), ("kind", kind)])
+    };
+    proxy.send("timeout 2");
+    proxy.send("busy 3");
+    wait_injected(&mut proxy, &[("timeout", 2), ("busy", 3)]);
+    // Each fault is counted once its call has ended (after the retry the
+    // proxy lets through): scrape until both show, then they must be
+    // exactly what was injected.
+    let t0 = Instant::now();
+    let during = loop {
+        let m = Metrics::scrape(&c, dir.path()).await;
+        let grown = |kind| errors(&m, &daq_bus, kind) - errors(&before, &daq_bus, kind);
+        if grown("timeout") >= 2.0 && grown("exception") >= 3.0 {
+            break m;
+        }
+        assert!(
+            t0.elapsed() < PATIENCE,
+            "the faults never showed: {:?}",
+            m.0
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    let status = get(&c, &format!("/v1/tests/{id}")).await;
+    println!(
+        "faults counted while the test was {}",
+        status["state"].as_str().unwrap_or("?")
+    );
+    for (kind, n) in ["timeout", "exception", "retry", "reconnect", "link_error"]
+        .iter()
+        .map(|k| (k, errors(&during, &daq_bus, k)))
+    {
+        println!(
+            "motorbench_bus_errors_total{{rig=\"rig\",bus=\"{daq_bus}\",kind=\"{kind}\"}} {n}"
+        );
+    }
+    let grown = |kind| errors(&during, &daq_bus, kind) - errors(&before, &daq_bus, kind);
+    assert_eq!(grown("timeout"), 2.0, "{:?}", during.0);
+    assert_eq!(grown("exception"), 3.0);
+    // Every fault was retried once; each timeout dropped the connection,
+    // which was opened again.
+    assert_eq!(grown("retry"), 5.0);
+    assert_eq!(grown("reconnect"), 2.0);
+    assert_eq!(grown("link_error"), 0.0);
+    for kind in ["timeout", "exception", "link_error", "retry", "reconnect"] {
+        assert_eq!(errors(&during, &stage_bus, kind), 0.0, "supply {kind}");
+    }
+
+    // The test rode over the faults; what the metrics hold after its end
+    // is at least what they showed live (counters never go back).
+    let s = wait_test(&c, &id, |s| s["state"] == "finished").await;
+    assert_eq!(s["outcome"], "completed", "{s}\n{}", served.log());
+    let after = Metrics::scrape(&c, dir.path()).await;
+    for kind in ["timeout", "exception", "retry", "reconnect"] {
+        assert!(errors(&after, &daq_bus, kind) >= errors(&during, &daq_bus, kind));
+    }
+    assert!(
+        after.value("bus_requests_total", &bus(&daq_bus))
+            > during.value("bus_requests_total", &bus(&daq_bus))
+    );
+    assert_eq!(after.value("recorder_backlog", &[rig]), 0.0, "idle");
+    proxy.close_stdin();
+}
+
 /// `config/sim-modbus-im.toml` rewritten for a rig reached at the served
 /// IM rig's addresses (no `simulate`, no `[rig.simulated]`: hardware to
 /// the daemon), with the profiles' paths made absolute.
@@ -405,15 +558,7 @@ async fn one_daemon_runs_a_dc_test_and_an_im_sweep_and_aborts_the_sweep_with_bot
     assert_eq!(rig_of("sim-modbus-dc")["machine"], "dc");
 
     // The full sweep on the IM rig, through the API.
-    let r = c.post("/v1/rigs/im-rig/tests", None).await.unwrap();
-    assert_eq!(
-        r.status,
-        201,
-        "{}\n{}",
-        String::from_utf8_lossy(&r.body),
-        served.log()
-    );
-    let sweep = r.json()["id"].as_str().unwrap().to_string();
+    let sweep = start_test(&served, "im-rig", None).await;
 
     // Meanwhile a short DC test on the other rig, through `ctl`.
     let out = served.ctl(&[
@@ -452,6 +597,40 @@ async fn one_daemon_runs_a_dc_test_and_an_im_sweep_and_aborts_the_sweep_with_bot
         s["values"]["speed"].is_number(),
         "the encoder's speed is shown: {s}"
     );
+    // The sweep's operating points on the live feed as they are
+    // recorded; the metrics count requests on each of its four buses
+    // (named by their configured addresses), each with its error counts.
+    let s = wait_test(&c, &sweep, |s| {
+        s["operating_points"]
+            .as_array()
+            .is_some_and(|p| !p.is_empty())
+    })
+    .await;
+    let p = &s["operating_points"][0];
+    assert_eq!(p["segment"], 0, "{p}");
+    assert!((0.0..=1.0).contains(&p["slip"].as_f64().unwrap()), "{p}");
+    assert!(p["line_current"].as_f64().unwrap() > 0.0, "{p}");
+    let m = Metrics::scrape(&c, dir.path()).await;
+    let links = [
+        &im.supply.link,
+        &im.dynamometer.link,
+        &im.meter_link,
+        &im.encoder_link,
+    ];
+    for link in links {
+        let ServedLink::Tcp(a) = link else {
+            panic!("served over TCP")
+        };
+        let bus = format!("tcp:{a}");
+        let labels = [("rig", "im-rig"), ("bus", bus.as_str())];
+        assert!(
+            m.value("bus_requests_total", &labels) > 0.0,
+            "{bus}: {:?}",
+            m.0
+        );
+        let timeouts = [labels[0], labels[1], ("kind", "timeout")];
+        assert_eq!(m.count("bus_errors_total", &timeouts), 1, "{bus}");
+    }
     // Wait for a point with the supply on (not a cool-down), then abort.
     let s = wait_test(&c, &sweep, |s| {
         s["values"]["voltage"].as_f64().unwrap_or(0.0) > 300.0

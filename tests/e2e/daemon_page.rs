@@ -11,14 +11,61 @@
 //! loads nothing but the daemon's own files. Screenshots are kept in
 //! `target/daemon-page/` for a person to look at. Without Chromium the
 //! test fails (tests/run.sh installs it).
+//!
+//! A second test runs an induction-machine slip sweep (the simulated rig
+//! of `config/sim-im.toml`): the page must plot the sweep's operating
+//! points, line current and input power against slip, as they arrive,
+//! the same points the API's status holds.
 
 use crate::common;
 
 use std::path::Path;
 
+use motorbench::serve::client::Client;
 use serde_json::Value;
 
-use common::daemon::{finished, get, python_script, start_with_token, wait_test, WEB_TOKEN};
+use common::daemon::{
+    finished, get, python_script, shipped, start_config_with_token, start_with_token, wait_test,
+    Served, WEB_TOKEN,
+};
+
+/// Where the page checks keep their screenshots.
+fn shots_dir() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("target/daemon-page")
+}
+
+/// Start a test on the daemon's rig `rig` with `body`; its id.
+async fn start(c: &Client, body: &Value) -> String {
+    let r = c.post("/v1/rigs/rig/tests", Some(body)).await.unwrap();
+    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+    r.json()["id"].as_str().unwrap().to_string()
+}
+
+/// Run `tests/python/page_check.py` (`mode` first when given) against
+/// the daemon's page following test `id` on rig `rig`; what it saw.
+fn page_check(served: &Served, mode: Option<&str>, id: &str) -> Value {
+    let shots = shots_dir();
+    let url = format!("{}/", served.url);
+    let mut args: Vec<&std::ffi::OsStr> = mode.into_iter().map(|m| m.as_ref()).collect();
+    args.extend([
+        url.as_ref(),
+        WEB_TOKEN.as_ref(),
+        "rig".as_ref(),
+        id.as_ref(),
+        shots.as_os_str(),
+    ]);
+    let out = python_script("page_check.py", &args);
+    let (stdout, stderr) = common::text(&out);
+    assert!(
+        out.status.success(),
+        "the page check failed (screenshots in {}):\n{stderr}\n{}",
+        shots.display(),
+        served.log()
+    );
+    let seen: Value = serde_json::from_str(&stdout).unwrap();
+    println!("{}", serde_json::to_string_pretty(&seen).unwrap());
+    seen
+}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_status_page_shows_the_test_and_aborts_it_in_chromium() {
@@ -29,31 +76,9 @@ async fn the_status_page_shows_the_test_and_aborts_it_in_chromium() {
     // page, watch and abort however slow the browser starts.
     let slow =
         serde_json::json!({"test": {"settle": {"min_hold_s": 6, "hold_s": 2, "timeout_s": 20}}});
-    let r = c.post("/v1/rigs/rig/tests", Some(&slow)).await.unwrap();
-    assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
-    let id = r.json()["id"].as_str().unwrap().to_string();
-
-    let shots = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/daemon-page");
-    let url = format!("{}/", served.url);
-    let out = python_script(
-        "page_check.py",
-        &[
-            url.as_ref(),
-            WEB_TOKEN.as_ref(),
-            "rig".as_ref(),
-            id.as_ref(),
-            shots.as_os_str(),
-        ],
-    );
-    let (stdout, stderr) = common::text(&out);
-    assert!(
-        out.status.success(),
-        "the page check failed (screenshots in {}):\n{stderr}\n{}",
-        shots.display(),
-        served.log()
-    );
-    let seen: Value = serde_json::from_str(&stdout).unwrap();
-    println!("{}", serde_json::to_string_pretty(&seen).unwrap());
+    let id = start(&c, &slow).await;
+    let seen = page_check(&served, None, &id);
+    let shots = shots_dir();
 
     assert!(seen["token_form"].as_str().unwrap().contains("token"));
     let running = &seen["running"];
@@ -125,6 +150,71 @@ async fn the_status_page_shows_the_test_and_aborts_it_in_chromium() {
         "04-record",
         "05-latched",
     ] {
+        assert!(shots.join(format!("{shot}.png")).exists(), "{shot}.png");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_status_page_plots_a_sweeps_operating_points_in_chromium() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = std::fs::read_to_string(shipped("sim-im.toml")).unwrap();
+    let served = start_config_with_token(&config, dir.path(), &dir.path().join("records"));
+    let c = served.client(Some(WEB_TOKEN));
+    // One voltage, short cool-downs: points come every second or so.
+    let short = serde_json::json!({"test": {"voltages_V": [400], "points": 16, "cooldown_s": 1}});
+    let id = start(&c, &short).await;
+    let seen = page_check(&served, Some("--sweep"), &id);
+    let shots = shots_dir();
+
+    let sweep = &seen["sweep"];
+    assert_eq!(sweep["canvas"], true, "the sweep plot is drawn: {sweep}");
+    assert_eq!(sweep["visible"], true, "{sweep}");
+    assert_eq!(sweep["title"], "sweep operating points", "{sweep}");
+    // The series (the axes' labels are drawn on the canvas: see the
+    // screenshot).
+    assert_eq!(
+        sweep["legend"],
+        serde_json::json!(["slip", "line current, A", "input power, W"]),
+        "{sweep}"
+    );
+    let first = seen["sweep_first"]["points"].as_u64().unwrap();
+    let later = sweep["points"].as_u64().unwrap();
+    assert!(
+        first >= 3 && later >= first + 2,
+        "points arrive: {first} then {later}"
+    );
+    assert!(sweep["time_points"].as_u64().unwrap() > 0, "{sweep}");
+
+    // The page plotted what the API says the sweep recorded.
+    let s = wait_test(&c, &id, finished).await;
+    assert_eq!(s["outcome"], "aborted", "aborted from the page: {s}");
+    let points = s["operating_points"].as_array().unwrap();
+    let shown = seen["aborted"]["sweep"]["points"].as_u64().unwrap();
+    assert_eq!(points.len() as u64, shown, "{s}");
+    for p in points {
+        let slip = p["slip"].as_f64().unwrap();
+        assert!((0.0..=1.0).contains(&slip), "{p}");
+        assert!(p["line_current"].as_f64().unwrap() > 0.0, "{p}");
+        assert!(p["input_power"].as_f64().unwrap() > 0.0, "{p}");
+    }
+    // The record holds the same points.
+    let mcap = dir.path().join("records").join(format!("{id}.mcap"));
+    let rec = motorbench::record::read_mcap(&mcap).unwrap();
+    assert_eq!(rec.operating_points.len(), points.len());
+    for (r, p) in rec.operating_points.iter().zip(points) {
+        assert_eq!(r.slip, p["slip"].as_f64().unwrap());
+        assert_eq!(r.line_current, p["line_current"].as_f64().unwrap());
+    }
+
+    for u in seen["requests"].as_array().unwrap() {
+        let u = u.as_str().unwrap();
+        assert!(
+            u.starts_with(&served.url) || u.starts_with("blob:") || u.starts_with("data:"),
+            "the page requested {u}"
+        );
+    }
+    assert_eq!(seen["console_errors"], Value::Array(vec![]), "{seen}");
+    for shot in ["11-sweep", "12-sweep-aborted"] {
         assert!(shots.join(format!("{shot}.png")).exists(), "{shot}.png");
     }
 }

@@ -17,7 +17,7 @@ use std::collections::BTreeSet;
 use motorbench::serve::client::{Client, Reply};
 use serde_json::{json, Value};
 
-use common::daemon::{finished, python_script, start_with_token, wait_test, WEB_TOKEN};
+use common::daemon::{finished, python_script, start_with_token, wait_test, Metrics, WEB_TOKEN};
 
 /// A metric's label: name and value.
 type Label<'a> = (&'a str, &'a str);
@@ -234,26 +234,8 @@ async fn every_documented_route_answers_as_documented_and_metrics_count_it() {
     assert!(out.status.success(), "{stdout}\n{stderr}");
 
     // The metrics, through a Prometheus parser.
-    let metrics_file = dir.path().join("metrics.txt");
-    std::fs::write(&metrics_file, &metrics.body).unwrap();
-    let out = python_script("parse_metrics.py", &[metrics_file.as_os_str()]);
-    let (stdout, stderr) = common::text(&out);
-    assert!(
-        out.status.success(),
-        "{stderr}\n{}",
-        String::from_utf8_lossy(&metrics.body)
-    );
-    let samples: Vec<Value> = serde_json::from_str(&stdout).unwrap();
-    let value = |name: &str, labels: &[(&str, &str)]| -> f64 {
-        samples
-            .iter()
-            .filter(|s| {
-                s["name"] == format!("motorbench_{name}")
-                    && labels.iter().all(|(k, v)| s["labels"][*k] == *v)
-            })
-            .map(|s| s["value"].as_f64().unwrap())
-            .sum()
-    };
+    let samples = Metrics::parse(&metrics.body, dir.path());
+    let value = |name: &str, labels: &[(&str, &str)]| samples.value(name, labels);
     let rig = ("rig", "rig");
     let post_201 = [
         ("method", "POST"),
@@ -289,4 +271,7 @@ async fn every_documented_route_answers_as_documented_and_metrics_count_it() {
     }
     let winding = value("winding_temperature_celsius", &[rig]);
     assert!((20.0..200.0).contains(&winding), "winding {winding}");
+    // No test runs: the recorder's queue is empty, and it is shown.
+    assert_eq!(samples.count("recorder_backlog", &[rig]), 1);
+    assert_eq!(value("recorder_backlog", &[rig]), 0.0);
 }

@@ -3,13 +3,19 @@ the daemon's status page, as a person at the rig would use it, and prints
 what it saw as JSON (tests/e2e/daemon_page.rs asserts on it).
 
 Usage: page_check.py URL TOKEN RIG TEST_ID OUT_DIR
+       page_check.py --sweep URL TOKEN RIG TEST_ID OUT_DIR
 
 The daemon runs TEST_ID on RIG and needs TOKEN. The page is loaded, the
 token typed into its form; the rig card must show the test running with
 its progress and a plot fed from the event stream; the page's Abort button
 aborts it; the record's report and plot are opened from the records list;
 the page's emergency stop latches the rig and its reset clears it.
-Screenshots go to OUT_DIR (01-token.png … 05-latched.png). Chromium is
+Screenshots go to OUT_DIR (01-token.png … 05-latched.png).
+
+With --sweep, TEST_ID is an induction-machine slip sweep: the card must
+plot its operating points (line current and input power against slip) as
+they arrive, beside the live plot; the page's Abort button then aborts
+it. Screenshots: 11-sweep.png, 12-sweep-aborted.png. Chromium is
 /usr/bin/chromium unless MOTORBENCH_CHROMIUM names another; without it the
 script fails (exit 2) and says how to install it.
 """
@@ -180,20 +186,65 @@ CARD_TEXT = ("({state: c.dataset.state, badge: c.querySelector('.state').textCon
              "message: c.querySelector('.message').textContent})")
 
 
+SWEEP_TEXT = ("({points: Number(c.dataset.sweepPoints || 0), "
+              "canvas: !!c.querySelector('.sweep canvas'), visible: !c.querySelector('.sweep').hidden, "
+              "legend: Array.from(c.querySelectorAll('.sweep .u-legend .u-label')).map(e => e.textContent), "
+              "title: (c.querySelector('.sweep .u-title') || {}).textContent || '', "
+              "time_points: Number(c.dataset.points || 0), segment: c.querySelector('.segment').textContent})")
+
+
+async def open_with_token(b, url, token, seen, shot=None):
+    """Load the page and type the token into its form, once (a screenshot
+    `shot` of the form first, when named)."""
+    await b.send("Page.navigate", {"url": url})
+    await b.wait("the token form", "!document.getElementById('token-form').hidden")
+    seen["token_form"] = await b.js("document.getElementById('token-form').innerText")
+    seen["shots"] = [await b.screenshot(shot)] if shot else []
+    await b.js("document.getElementById('token-input').focus()")
+    await b.send("Input.insertText", {"text": token})
+    await b.js("document.querySelector('#token-form button[type=submit]').click()")
+
+
+async def abort_from_page(b, rig, what):
+    """Click the card's Abort button; `what` (an expression over the card)
+    once the rig is idle and the test shown aborted."""
+    await b.js(card(rig, "c.querySelector('button.abort').click()"))
+    return await b.wait("the test aborted", card(
+        rig, f"c.dataset.state === 'idle' && c.querySelector('.eta').textContent.startsWith('aborted') "
+             f"&& {what}"))
+
+
+async def run_sweep(url, token, rig, test_id, out_dir):
+    b = Browser(out_dir)
+    await b.start()
+    seen = {}
+    try:
+        await open_with_token(b, url, token, seen)
+        # The sweep's operating points, plotted as they arrive.
+        first = await b.wait("a sweep plot with 3 operating points", card(
+            rig, f"c.dataset.state === 'running' && c.querySelector('.test').textContent.includes('{test_id}') "
+                 f"&& Number(c.dataset.sweepPoints || 0) >= 3 && {SWEEP_TEXT}"))
+        seen["sweep_first"] = first
+        seen["sweep"] = await b.wait("2 more operating points", card(
+            rig, f"c.dataset.state === 'running' && Number(c.dataset.sweepPoints || 0) >= {first['points'] + 2} "
+                 f"&& {SWEEP_TEXT}"))
+        await b.js(card(rig, "c.scrollIntoView()"))
+        seen["shots"].append(await b.screenshot("11-sweep"))
+        seen["aborted"] = await abort_from_page(b, rig, f"Object.assign({CARD_TEXT}, {{sweep: {SWEEP_TEXT}}})")
+        seen["shots"].append(await b.screenshot("12-sweep-aborted"))
+        seen["requests"] = b.requests
+        seen["console_errors"] = b.console_errors
+    finally:
+        await b.close()
+    return seen
+
+
 async def run(url, token, rig, test_id, out_dir):
     b = Browser(out_dir)
     await b.start()
     seen = {}
     try:
-        await b.send("Page.navigate", {"url": url})
-        await b.wait("the token form", "!document.getElementById('token-form').hidden")
-        seen["token_form"] = await b.js("document.getElementById('token-form').innerText")
-        seen["shots"] = [await b.screenshot("01-token")]
-
-        # The token, typed once.
-        await b.js("document.getElementById('token-input').focus()")
-        await b.send("Input.insertText", {"text": token})
-        await b.js("document.querySelector('#token-form button[type=submit]').click()")
+        await open_with_token(b, url, token, seen, "01-token")
 
         # The running test: state, progress and a plot fed by the event
         # stream, from its second step on (the plot then shows a step response).
@@ -207,10 +258,7 @@ async def run(url, token, rig, test_id, out_dir):
         seen["shots"].append(await b.screenshot("02-running"))
 
         # Abort from the page.
-        await b.js(card(rig, "c.querySelector('button.abort').click()"))
-        seen["aborted"] = await b.wait("the test aborted", card(
-            rig, f"c.dataset.state === 'idle' && c.querySelector('.eta').textContent.startsWith('aborted') "
-                 f"&& {CARD_TEXT}"))
+        seen["aborted"] = await abort_from_page(b, rig, CARD_TEXT)
         seen["shots"].append(await b.screenshot("03-aborted"))
 
         # The record: report and plot from the records list.
@@ -242,10 +290,15 @@ async def run(url, token, rig, test_id, out_dir):
 
 
 def main():
-    url, token, rig, test_id, out_dir = sys.argv[1:6]
+    args = sys.argv[1:]
+    check = run
+    if args and args[0] == "--sweep":
+        check = run_sweep
+        args = args[1:]
+    url, token, rig, test_id, out_dir = args[:5]
     os.makedirs(out_dir, exist_ok=True)
     try:
-        seen = asyncio.run(run(url, token, rig, test_id, out_dir))
+        seen = asyncio.run(check(url, token, rig, test_id, out_dir))
     except Failure as e:
         print(e, file=sys.stderr)
         sys.exit(1)

@@ -20,7 +20,10 @@ use tokio::time::Instant;
 use super::stamp::PeriodicStamp;
 use super::{CanId, FrameStream, SignalMap};
 use crate::stats::IntervalStats;
-use crate::{ChannelInfo, ChannelStats, DriverError, Sample, SampleBatch, SensorStream};
+use crate::{
+    ChannelInfo, ChannelStats, DriverError, LinkCounts, LinkHealth, Sample, SampleBatch,
+    SensorStream,
+};
 
 /// One channel: a DBC signal.
 #[derive(Debug, Clone, PartialEq)]
@@ -43,6 +46,8 @@ pub struct CanSignalSensors<F> {
     stats: Vec<IntervalStats>,
     stamps: Vec<PeriodicStamp>,
     warnings: Vec<String>,
+    health: LinkHealth,
+    lost_frames: u64,
 }
 
 /// A silence of a message longer than this (and than ten of its periods)
@@ -99,6 +104,8 @@ impl<F: FrameStream> CanSignalSensors<F> {
             wiring,
             started: Instant::now(),
             warnings: Vec::new(),
+            health: LinkHealth::new(name),
+            lost_frames: 0,
         })
     }
 }
@@ -130,6 +137,14 @@ impl<F: FrameStream> SensorStream for CanSignalSensors<F> {
                     let stamped = self.stamps[k].arrived(arrival_ns);
                     if stamped.lost > 0 {
                         self.stats[k].lost(stamped.lost);
+                        // A frame's signals share its loss: count it once.
+                        if t_ns.is_none() {
+                            self.lost_frames += stamped.lost;
+                        }
+                        self.health.publish(&LinkCounts {
+                            lost: self.lost_frames,
+                            ..LinkCounts::default()
+                        });
                         self.warnings.push(format!(
                             "{}: {} frame(s) of {signal} missing (silent for more than {RESYNC_SILENCE_S} s)",
                             self.name, stamped.lost
@@ -152,6 +167,10 @@ impl<F: FrameStream> SensorStream for CanSignalSensors<F> {
 
     fn sampling_stats(&self) -> Vec<ChannelStats> {
         self.stats.iter().map(IntervalStats::summary).collect()
+    }
+
+    fn link_health(&self) -> Vec<LinkHealth> {
+        vec![self.health.clone()]
     }
 
     fn take_warnings(&mut self) -> Vec<String> {

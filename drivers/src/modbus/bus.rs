@@ -5,6 +5,11 @@
 //! routine (polls, heartbeats). An urgent request waiting goes before any
 //! routine one, so a safe-state command never waits behind a queue of
 //! polls, only behind the one transaction on the wire.
+//!
+//! After every request the task publishes its client's counts (requests,
+//! timeouts, exceptions, retries, reconnections) to the bus's
+//! [`LinkHealth`], which any holder of a handle reads
+//! ([`BusHandle::health`]).
 
 use std::time::Duration;
 
@@ -13,7 +18,7 @@ use tokio::time::Instant;
 
 use super::client::ModbusClient;
 use super::register_map::{Register, RegisterKind};
-use crate::DriverError;
+use crate::{DriverError, LinkHealth};
 
 /// Most registers in one read request (the Modbus limit is 125).
 const MAX_READ_WORDS: u32 = 120;
@@ -68,13 +73,25 @@ pub struct BusHandle {
     name: String,
     urgent: mpsc::Sender<Job>,
     routine: mpsc::Sender<Job>,
+    health: LinkHealth,
 }
 
-/// Start the task that owns `client`'s link.
+/// Start the task that owns `client`'s link; its health is named for the
+/// client's device.
 pub fn spawn_bus(client: ModbusClient) -> BusHandle {
+    let link = client.device().to_string();
+    spawn_bus_as(client, &link)
+}
+
+/// Start the task that owns `client`'s link, its health named `link` (a
+/// name that stays the same from test to test: the link's address). The
+/// task publishes the client's counts after every request.
+pub fn spawn_bus_as(client: ModbusClient, link: &str) -> BusHandle {
     let (urgent, mut urgent_rx) = mpsc::channel::<Job>(16);
     let (routine, mut routine_rx) = mpsc::channel::<Job>(64);
     let name = client.device().to_string();
+    let health = LinkHealth::new(link);
+    let published = health.clone();
     let mut client = client;
     tokio::spawn(async move {
         loop {
@@ -85,12 +102,14 @@ pub fn spawn_bus(client: ModbusClient) -> BusHandle {
                 else => break,
             };
             run(&mut client, job).await;
+            published.publish(&client.stats().into());
         }
     });
     BusHandle {
         name,
         urgent,
         routine,
+        health,
     }
 }
 
@@ -190,6 +209,11 @@ impl BusHandle {
     /// Driver id of the link.
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// The link's request and error counts, as its task publishes them.
+    pub fn health(&self) -> &LinkHealth {
+        &self.health
     }
 
     fn gone(&self) -> DriverError {

@@ -70,6 +70,20 @@ pub struct LinkStats {
     pub connects: u64,
 }
 
+impl From<LinkStats> for crate::LinkCounts {
+    fn from(s: LinkStats) -> crate::LinkCounts {
+        crate::LinkCounts {
+            requests: s.calls,
+            timeouts: s.timeouts,
+            exceptions: s.exceptions,
+            link_errors: s.link_errors,
+            retries: s.retries,
+            reconnects: s.connects.saturating_sub(1),
+            ..crate::LinkCounts::default()
+        }
+    }
+}
+
 /// Whether a request may be sent again after an unknown outcome.
 pub fn is_idempotent(req: &Request<'_>) -> bool {
     matches!(

@@ -13,7 +13,9 @@ mod sensors;
 pub mod server;
 mod stage;
 
-pub use bus::{read_registers, spawn_bus, worst_case_latency, BusHandle, Priority, Reading};
+pub use bus::{
+    read_registers, spawn_bus, spawn_bus_as, worst_case_latency, BusHandle, Priority, Reading,
+};
 pub use client::{is_idempotent, CallPolicy, LinkStats, ModbusClient};
 pub use profile::{DeviceProfile, ProfileError, SerialDefaults, StageMap};
 pub use register_map::{

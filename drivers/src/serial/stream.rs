@@ -11,7 +11,10 @@ use super::ascii::AsciiDecoder;
 use super::binary::BinaryDecoder;
 use super::{DecodeCounts, StreamRecord};
 use crate::stats::IntervalStats;
-use crate::{ChannelInfo, ChannelStats, DriverError, Sample, SampleBatch, SensorStream};
+use crate::{
+    ChannelInfo, ChannelStats, DriverError, LinkCounts, LinkHealth, Sample, SampleBatch,
+    SensorStream,
+};
 
 /// Which of the two line protocols a device speaks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize)]
@@ -73,6 +76,8 @@ pub struct SerialSensors<T> {
     stats: Vec<IntervalStats>,
     reported: DecodeCounts,
     warnings: Vec<String>,
+    health: LinkHealth,
+    lost_records: u64,
 }
 
 impl<T> std::fmt::Debug for SerialSensors<T> {
@@ -113,12 +118,23 @@ impl<T: AsyncRead + Unpin + Send> SerialSensors<T> {
             last_seq: None,
             reported: DecodeCounts::default(),
             warnings: Vec::new(),
+            health: LinkHealth::new(name),
+            lost_records: 0,
         }
     }
 
     /// What the decoder decoded and refused so far.
     pub fn decode_counts(&self) -> DecodeCounts {
         self.decoder.counts()
+    }
+
+    /// Refused frames and lost records, for [`SensorStream::link_health`].
+    fn publish_health(&self) {
+        self.health.publish(&LinkCounts {
+            decode_errors: self.decoder.counts().rejected,
+            lost: self.lost_records,
+            ..LinkCounts::default()
+        });
     }
 
     fn batch_of(&mut self, r: StreamRecord) -> SampleBatch {
@@ -147,6 +163,8 @@ impl<T: AsyncRead + Unpin + Send> SerialSensors<T> {
             }
         }
         if gap > 0 {
+            self.lost_records += u64::from(gap);
+            self.publish_health();
             self.warnings.push(format!(
                 "{}: {gap} record(s) lost before sequence number {}",
                 self.name, r.seq
@@ -196,12 +214,17 @@ impl<T: AsyncRead + Unpin + Send> SensorStream for SerialSensors<T> {
                     self.name, c.rejected, c.skipped_bytes
                 ));
                 self.reported = c;
+                self.publish_health();
             }
         }
     }
 
     fn sampling_stats(&self) -> Vec<ChannelStats> {
         self.stats.iter().map(IntervalStats::summary).collect()
+    }
+
+    fn link_health(&self) -> Vec<LinkHealth> {
+        vec![self.health.clone()]
     }
 
     fn take_warnings(&mut self) -> Vec<String> {
@@ -285,6 +308,12 @@ mod tests {
         );
         assert!(w.contains("garbage"), "{w}");
         assert_eq!(s.decode_counts().rejected, 1);
+        // The link's health says the same, by kind, under the stream's name.
+        let health = s.link_health();
+        assert_eq!(health.len(), 1);
+        assert_eq!(health[0].name(), "daq");
+        let c = health[0].counts();
+        assert_eq!((c.decode_errors, c.lost, c.timeouts), (1, 2, 0));
     }
 
     #[tokio::test]

@@ -183,6 +183,7 @@ impl Machine for Config {
                 .served
                 .map(|s| Box::new(s) as Box<dyn std::any::Any + Send>),
             modbus_probe: rig.modbus_sensors,
+            links: rig.links,
         })
     }
 

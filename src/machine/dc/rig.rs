@@ -11,7 +11,7 @@ use motorbench_drivers::can::{
 use motorbench_drivers::modbus::{ModbusPowerStage, ModbusSensors, PolledChannel};
 use motorbench_drivers::serial::port::open_serial;
 use motorbench_drivers::serial::{SerialChannel, SerialSensors};
-use motorbench_drivers::{ChannelInfo, MergedSensors, PowerStage, SensorStream};
+use motorbench_drivers::{ChannelInfo, LinkHealth, MergedSensors, PowerStage, SensorStream};
 
 use super::served::{ServedDaq, ServedRig};
 use super::sim_rig;
@@ -37,6 +37,8 @@ pub struct Rig {
     pub served: Option<ServedRig>,
     /// The Modbus sensors again, for a one-shot read (`probe`).
     pub modbus_sensors: Option<ModbusProbe>,
+    /// The health of the rig's Modbus buses, one per link.
+    pub links: Vec<LinkHealth>,
 }
 
 async fn modbus_rig(
@@ -176,6 +178,7 @@ async fn modbus_rig(
         truth: simulated.filter(|_| m.simulate.is_some()).map(|s| s.motor),
         served,
         modbus_sensors,
+        links: buses.health(),
     })
 }
 
@@ -258,6 +261,7 @@ pub async fn build_rig(cfg: &Config, realtime: bool) -> Result<Rig, RigError> {
                 truth: Some(sim.motor),
                 served: None,
                 modbus_sensors: None,
+                links: Vec::new(),
             })
         }
         Backend::Modbus { rig, simulated } => {

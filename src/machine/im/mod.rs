@@ -243,6 +243,7 @@ impl Machine for ImRunConfig {
                 .served
                 .map(|s| Box::new(s) as Box<dyn std::any::Any + Send>),
             modbus_probe: None,
+            links: rig.links,
         })
     }
 

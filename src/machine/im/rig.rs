@@ -4,7 +4,7 @@
 //! served behind those links when the configuration asks for it).
 
 use motorbench_drivers::modbus::{ModbusPowerStage, ModbusSensors, PolledChannel};
-use motorbench_drivers::{ChannelInfo, MergedSensors, PowerStage, SensorStream};
+use motorbench_drivers::{ChannelInfo, LinkHealth, MergedSensors, PowerStage, SensorStream};
 
 use super::served::{ServedDevice, ServedImRig};
 use super::{sim_im_rig, ImModbusRig, ImRunConfig, VfdDyno, VfdSupply};
@@ -34,6 +34,8 @@ pub struct ImRig {
     pub truth: Option<ImCircuit>,
     /// The simulated rig's servers, when it is served behind Modbus.
     pub served: Option<ServedImRig>,
+    /// The health of the rig's Modbus buses, one per link.
+    pub links: Vec<LinkHealth>,
 }
 
 impl std::fmt::Debug for ImRig {
@@ -182,6 +184,7 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
             .filter(|_| m.simulate.is_some())
             .map(|s| s.circuit),
         served,
+        links: buses.health(),
     })
 }
 
@@ -204,6 +207,7 @@ pub async fn build_im_rig(cfg: &ImRunConfig, realtime: bool) -> Result<ImRig, Ri
                 counts_per_rev: cfg.plan.encoder_counts_per_rev,
                 truth: Some(sim.circuit),
                 served: None,
+                links: Vec::new(),
             })
         }
         (None, None) => Err(RigError::Simulated(

@@ -129,6 +129,19 @@ mod tests {
     }
 
     #[test]
+    fn a_tests_status_describes_its_operating_points() {
+        let doc = serde_json::to_value(crate::serve::api::openapi_document()).unwrap();
+        let schemas = &doc["components"]["schemas"];
+        let points = &schemas["TestStatus"]["properties"]["operating_points"];
+        assert_eq!(points["type"], "array", "{points}");
+        assert_eq!(points["items"]["$ref"], "#/components/schemas/PointStatus");
+        let fields = schemas["PointStatus"]["properties"].as_object().unwrap();
+        for f in ["segment", "slip", "line_current", "input_power"] {
+            assert!(fields.contains_key(f), "{f}: {fields:?}");
+        }
+    }
+
+    #[test]
     fn every_route_is_described_once_with_its_answers() {
         let doc = serde_json::to_value(crate::serve::api::openapi_document()).unwrap();
         let paths = doc["paths"].as_object().unwrap();

@@ -1,6 +1,7 @@
 // The status page of `motorbench serve`: rigs and their state, the running
 // test's progress with a live plot (current and speed from the test's
-// event stream), abort / emergency stop / reset, and the records with
+// event stream; for an induction-machine sweep also its operating points,
+// line current and input power against slip), abort / emergency stop / reset, and the records with
 // their reports, plots and downloads. Every call goes to the daemon's own
 // API with the token, when one is set (asked for once, kept in this tab's
 // session storage). No library but uPlot (vendored, served by the daemon).
@@ -119,6 +120,7 @@ function rigCard(rig) {
     values: el("div", { class: "values muted" }),
     bar: el("div"),
     plotBox: el("div", { class: "plot" }),
+    sweepBox: el("div", { class: "plot sweep", hidden: "" }),
     message: el("div", { class: "message muted" }),
     abort: el("button", { type: "button", class: "abort" }, "Abort test"),
     estop: el("button", { type: "button", class: "estop" }, "EMERGENCY STOP"),
@@ -128,6 +130,8 @@ function rigCard(rig) {
     runningId: null,
     plot: null,
     data: [[], [], []],
+    sweep: null,
+    sweepShown: 0,
   };
   card.abort.addEventListener("click", () => act(card, "abort"));
   card.estop.addEventListener("click", () => act(card, "estop"));
@@ -142,6 +146,7 @@ function rigCard(rig) {
       el("div", { class: "bar" }, card.bar),
       card.values),
     card.plotBox,
+    card.sweepBox,
     el("div", { class: "actions" }, card.abort, card.estop, card.reset),
     card.message,
   );
@@ -208,6 +213,48 @@ function newPlot(card, kind) {
   }, card.data, card.plotBox);
 }
 
+/** A new plot of a sweep's operating points against slip. */
+function newSweepPlot(card) {
+  if (card.sweep) card.sweep.destroy();
+  card.sweepBox.hidden = false;
+  const width = Math.max(320, card.sweepBox.clientWidth || card.plotBox.clientWidth || 560);
+  const dots = (stroke) => ({ stroke, width: 0, paths: () => null,
+    points: { show: true, size: 8, stroke, fill: stroke } });
+  card.sweep = new uPlot({
+    width,
+    height: 240,
+    title: "sweep operating points",
+    scales: { x: { time: false }, A: {}, W: {} },
+    axes: [
+      { label: "slip" },
+      { scale: "A", label: "line current, A" },
+      { scale: "W", side: 1, size: 70, label: "input power, W", grid: { show: false } },
+    ],
+    series: [
+      { label: "slip" },
+      Object.assign({ label: "line current, A", scale: "A" }, dots("#2f7de1")),
+      Object.assign({ label: "input power, W", scale: "W" }, dots("#12a150")),
+    ],
+  }, [[], [], []], card.sweepBox);
+  card.sweepShown = 0;
+}
+
+/** Plot the operating points a sweep has recorded so far. */
+function showSweep(card, points) {
+  if (!points || !points.length) return;
+  if (!card.sweep) newSweepPlot(card);
+  if (points.length === card.sweepShown) return;
+  // uPlot wants x in ascending order; the points come in sweep order.
+  const sorted = points.slice().sort((a, b) => a.slip - b.slip);
+  card.sweep.setData([
+    sorted.map((p) => p.slip),
+    sorted.map((p) => p.line_current),
+    sorted.map((p) => p.input_power),
+  ]);
+  card.sweepShown = points.length;
+  card.root.dataset.sweepPoints = String(points.length);
+}
+
 function showProgress(card, s) {
   const seg = s.segment;
   card.test.textContent = `${s.id} · ${s.plan} · ${s.state}`;
@@ -234,6 +281,7 @@ function showProgress(card, s) {
     }
   }
   card.root.dataset.points = String(card.data[0].length);
+  showSweep(card, s.operating_points);
 }
 
 /** Split a server-sent event stream into events; bytes are decoded as a
@@ -266,6 +314,10 @@ async function follow(card, id) {
   if (card.plotId !== id) {
     // A new test: a new plot (a feed picked up again keeps its points).
     if (card.plot) { card.plot.destroy(); card.plot = null; }
+    if (card.sweep) { card.sweep.destroy(); card.sweep = null; }
+    card.sweepBox.hidden = true;
+    card.sweepShown = 0;
+    delete card.root.dataset.sweepPoints;
     card.plotId = id;
     card.message.textContent = "";
   }
