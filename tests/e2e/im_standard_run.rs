@@ -15,7 +15,7 @@ use common::{motorbench, text};
 
 /// The simulated machine of the shipped configuration, Ω per phase at
 /// 50 Hz, and its friction and windage at synchronous speed, W.
-const TRUTH: [(&str, f64); 7] = [
+pub(crate) const TRUTH: [(&str, f64); 7] = [
     ("Rs", 0.8659),
     ("Xs", 1.84),
     ("Xm", 119.64),
@@ -25,7 +25,8 @@ const TRUTH: [(&str, f64); 7] = [
     ("Pfw", 60.0),
 ];
 
-fn value(report: &serde_json::Value, method: &str, key: &str) -> f64 {
+/// The value of parameter `key` of `method` in a report.
+pub(crate) fn value(report: &serde_json::Value, method: &str, key: &str) -> f64 {
     report["methods"][method]["params"][key]["value"]
         .as_f64()
         .unwrap_or_else(|| panic!("{method} has no {key}: {report}"))

@@ -134,6 +134,9 @@ struct RawSensors {
     noise_relative: f64,
     encoder_lines: u32,
     torque_sensor: bool,
+    /// A winding thermometer (channel `winding_temperature`, °C).
+    #[serde(default)]
+    winding_sensor: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -289,11 +292,25 @@ impl ImRunConfig {
                 ))
             }
         };
-        if standard_plan && modbus.is_some() {
+        let modbus_dc_source = modbus.as_ref().is_some_and(|m| m.dc_source.is_some());
+        if standard_plan
+            && modbus
+                .as_ref()
+                .is_some_and(|m| m.dyno_coast_value.is_none())
+        {
+            return Err(bad(
+                "rig.modbus.dynamometer.coast_value",
+                "missing: the no-load test of im_standard_tests lets the shaft turn freely, which \
+                 needs the value of the dynamometer's control word that coasts it (Optidrive E3: \
+                 8, bit 3)"
+                    .into(),
+            ));
+        }
+        if standard_plan && modbus.is_some() && !modbus_dc_source {
             return Err(bad(
                 "test.plan",
-                "im_standard_tests needs a DC source for the winding-resistance test, which \
-                 only the simulated rig (rig.backend = \"simulated\") has so far"
+                "im_standard_tests needs a DC source for the winding-resistance test: give \
+                 [rig.modbus.dc_source] (a DC supply with a current limit)"
                     .into(),
             ));
         }
@@ -490,7 +507,8 @@ impl ImRunConfig {
                         w
                     },
                     // The DC source of the standard tests' resistance reading.
-                    dc_source_max_current: standard_plan.then_some(current),
+                    dc_source_max_current: (standard_plan || modbus_dc_source).then_some(current),
+                    winding_sensor: s.sensors.winding_sensor,
                 })
             }
         };
@@ -522,7 +540,13 @@ impl ImRunConfig {
         };
         let standard = standard_plan
             .then(|| {
-                standard_tables.validate(voltage, current, limits.max_voltage, limits.max_current)
+                standard_tables.validate(
+                    voltage,
+                    current,
+                    frequency,
+                    limits.max_voltage,
+                    limits.max_current,
+                )
             })
             .transpose()
             .map_err(|(key, why)| bad(&key, why))?;
