@@ -13,10 +13,8 @@
 //! segments, the temperatures and the frequency command; the Python reader
 //! accepts it and `replay --check` reproduces the report exactly.
 
-use crate::common;
-
-use super::im_standard_run::{value, TRUTH};
-use common::replay::{only_mcap, replay_identical, run_json};
+use super::im_standard_run::{read_back_and_replayed, standard_record, value, TRUTH};
+use crate::common::replay::run_json;
 use motorbench::machine::im::COPPER_ALPHA;
 
 fn truth(key: &str) -> f64 {
@@ -27,31 +25,9 @@ fn truth(key: &str) -> f64 {
 fn the_standard_tests_run_over_modbus_with_a_reduced_frequency_locked_rotor_test() {
     let dir = tempfile::tempdir().unwrap();
     let v = run_json("sim-modbus-im-standard.toml", dir.path(), &["--quiet"]);
-    let mcap = only_mcap(dir.path());
-    let record = motorbench::record::read_mcap(&mcap).unwrap();
-
     // The record: the four kinds, the locked-rotor test twice.
-    let kinds: Vec<&str> = record
-        .segments
-        .iter()
-        .map(|s| s.kind.unwrap().as_str())
-        .collect();
-    assert_eq!(
-        kinds,
-        [
-            "im_dc_resistance",
-            "im_no_load",
-            "im_locked_rotor",
-            "im_locked_rotor",
-            "im_slip_sweep"
-        ]
-    );
+    let (mcap, record) = standard_record(dir.path(), &["im_locked_rotor"]);
     let tests = &record.standard_tests;
-    assert_eq!(
-        (tests.dc_resistance.len(), tests.no_load.len()),
-        (3, 10),
-        "{tests:?}"
-    );
     let at = |segment: u32| -> Vec<_> {
         let lr = tests.locked_rotor.iter();
         lr.filter(|r| r.segment == segment).collect()
@@ -162,17 +138,8 @@ fn the_standard_tests_run_over_modbus_with_a_reduced_frequency_locked_rotor_test
     assert!((leakage / 4.6 - 1.0).abs() < 0.05, "lm Xs + Xr = {leakage}");
 
     // The Python reader accepts the record: the readings, the thermometer,
-    // the DC source's read-back and the frequency command.
-    let readings = 3 + 10 + tests.locked_rotor.len();
-    let counts = common::python_check_mcap(&mcap, &[format!("/bench/standard_test={readings}")]);
-    for topic in [
-        "/sensor/dc_current",
-        "/sensor/winding_temperature",
-        "/command/supply_frequency",
-    ] {
-        assert!(counts[topic].as_u64().unwrap() > 0, "{topic}: {counts}");
-    }
-
-    // The replay reduces the recorded readings to the same report.
-    assert_eq!(replay_identical(&mcap, &[]), v);
+    // the DC source's read-back and the frequency command; the replay
+    // reduces the recorded readings to the same report.
+    let topics = ["/sensor/winding_temperature", "/command/supply_frequency"];
+    read_back_and_replayed(&mcap, &record, &v, &topics);
 }

@@ -43,7 +43,9 @@ use super::sim_rig::{
 };
 use crate::config::{ModbusDeviceLink, SimulatedTransport};
 use crate::model::Connection;
-use crate::rig::{ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock};
+use crate::rig::{
+    enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock,
+};
 
 /// The simulated machine, supply and dynamometer on the wall clock.
 struct Plant {
@@ -366,14 +368,7 @@ impl SimulatedDevice for DcSourceDevice {
             ready_now(source.set_setpoint(bank.get(&self.current)))
                 .map_err(|_| ExceptionCode::IllegalDataValue)?;
         }
-        let (r, on, off) = &self.enable;
-        if touches(&span, r) {
-            let raw = bank.get(r) as u16;
-            let enabled = match raw {
-                x if x == *on => true,
-                x if x == *off => false,
-                _ => return Err(ExceptionCode::IllegalDataValue),
-            };
+        if let Some(enabled) = enable_written(bank, &span, &self.enable)? {
             ready_now(source.set_output_enabled(enabled))
                 .map_err(|_| ExceptionCode::ServerDeviceFailure)?;
         }
