@@ -143,7 +143,7 @@ fn the_standard_tests_run_on_the_simulated_rig_and_replay() {
 
     // The record: five segments of the four kinds, the readings on
     // /bench/standard_test, accepted by the Python reader.
-    let (mcap, record) = standard_record(dir.path(), &["im_locked_rotor", "im_slip_sweep"]);
+    let (mcap, record) = standard_record(dir.path(), &["im_slip_sweep"]);
     let tests = &record.standard_tests;
     assert!(tests
         .no_load
