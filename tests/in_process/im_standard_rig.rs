@@ -267,6 +267,15 @@ async fn a_warming_winding_is_corrected_to_its_measured_temperature_and_a_reduce
         );
     }
 
+    for key in ["Rs", "Xs", "Xm", "Rfe", "Rr", "Pfw"] {
+        println!(
+            "joint {key} {:.5}",
+            report["methods"]["joint"]["params"][key]["value"]
+                .as_f64()
+                .unwrap()
+        );
+    }
+
     // The same readings without their temperatures: the warm winding's
     // extra copper resistance lands in Rr.
     let mut cold = done.record.clone();

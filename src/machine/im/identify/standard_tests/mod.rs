@@ -36,7 +36,8 @@ mod tests;
 
 use std::collections::BTreeMap;
 
-use dc_resistance::{dc_resistance, mean_temperature, temperature_factor};
+pub(crate) use dc_resistance::temperature_factor;
+use dc_resistance::{dc_resistance, mean_temperature};
 use locked_rotor::{common_frequency, frequency_groups, locked_rotor};
 use reduce::{elements, propagate, solve, Context, Inputs};
 
@@ -71,6 +72,10 @@ pub struct StandardTestsReduction {
     pub params: BTreeMap<String, ParamEstimate>,
     /// The per-voltage and per-point tables and the `Xm(V)` curve.
     pub tables: StandardTestTables,
+    /// The winding temperature `Rs` is at, °C: the locked-rotor test's
+    /// where the DC reading and that test give one, the DC reading's
+    /// where only it does; `None` when the DC reading gives none.
+    pub rs_temperature: Option<f64>,
     /// What a user should know (conventions, corrections, assumptions).
     pub warnings: Vec<String>,
 }
@@ -310,6 +315,7 @@ pub fn reduce_standard_tests(
             locked_rotor: lr.rows,
             xm_curve: s.curve,
         },
+        rs_temperature: dc.temperature.map(|t| t_lr.unwrap_or(t)),
         warnings,
     })
 }
