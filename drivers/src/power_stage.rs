@@ -46,6 +46,16 @@ pub trait PowerStage: Send {
         })
     }
 
+    /// Command the output frequency (hertz), for a stage whose output is
+    /// alternating (a VFD feeding a machine). Optional: a stage without
+    /// one refuses with [`DriverError::Unsupported`].
+    async fn set_frequency(&mut self, _hz: f64) -> Result<(), DriverError> {
+        Err(DriverError::Unsupported {
+            device: self.id().to_string(),
+            what: "a frequency command",
+        })
+    }
+
     /// The keep-alive timeout of the stage's heartbeat, when it has one:
     /// once armed by a first [`PowerStage::heartbeat`], a stage that is not
     /// petted again within this time goes to its safe state by itself, so a
@@ -99,5 +109,7 @@ mod tests {
         assert_eq!(e.to_string(), "plain does not support a heartbeat");
         let e = stage.set_current_limit(1.0).await.unwrap_err();
         assert!(matches!(e, DriverError::Unsupported { .. }));
+        let e = stage.set_frequency(12.5).await.unwrap_err();
+        assert_eq!(e.to_string(), "plain does not support a frequency command");
     }
 }

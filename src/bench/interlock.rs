@@ -275,6 +275,14 @@ impl PowerStage for InterlockedStage {
         }
         stage.set_current_limit(amperes).await
     }
+
+    async fn set_frequency(&mut self, hz: f64) -> Result<(), DriverError> {
+        let mut stage = self.stage.lock().await;
+        if self.shared.stopped.load(Ordering::SeqCst) {
+            return Err(self.refuse("frequency"));
+        }
+        stage.set_frequency(hz).await
+    }
 }
 
 /// The sensor stream as the sequencer sees it. See the module docs.

@@ -9,7 +9,7 @@ use std::future::Future;
 use std::pin::pin;
 use std::task::{Context, Poll, Waker};
 
-use motorbench_drivers::modbus::server::WriteSpan;
+use motorbench_drivers::modbus::server::{ExceptionCode, RegisterBank, WriteSpan};
 use motorbench_drivers::modbus::{
     spawn_bus_as, BusHandle, CallPolicy, DeviceProfile, ModbusClient, PolledChannel, Register,
 };
@@ -198,6 +198,24 @@ pub(crate) fn touches(span: &WriteSpan, r: &Register) -> bool {
     span.kind == r.kind
         && span.address < r.address + r.data_type.width()
         && r.address < span.address + span.count
+}
+
+/// The output state a write asks of a served stage whose enable register
+/// is `(register, enable value, disable value)`: `None` when the write
+/// does not touch it, an illegal-data-value exception for another value.
+pub(crate) fn enable_written(
+    bank: &RegisterBank,
+    span: &WriteSpan,
+    (r, on, off): &(Register, u16, u16),
+) -> Result<Option<bool>, ExceptionCode> {
+    if !touches(span, r) {
+        return Ok(None);
+    }
+    match bank.get(r) as u16 {
+        raw if raw == *on => Ok(Some(true)),
+        raw if raw == *off => Ok(Some(false)),
+        _ => Err(ExceptionCode::IllegalDataValue),
+    }
 }
 
 /// Where a served device can be reached.

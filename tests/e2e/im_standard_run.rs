@@ -12,10 +12,12 @@ use crate::common;
 
 use common::replay::{only_mcap, replay_identical, run_json};
 use common::{motorbench, text};
+use motorbench::record::Record;
+use std::path::{Path, PathBuf};
 
 /// The simulated machine of the shipped configuration, Ω per phase at
 /// 50 Hz, and its friction and windage at synchronous speed, W.
-const TRUTH: [(&str, f64); 7] = [
+pub(crate) const TRUTH: [(&str, f64); 7] = [
     ("Rs", 0.8659),
     ("Xs", 1.84),
     ("Xm", 119.64),
@@ -25,10 +27,55 @@ const TRUTH: [(&str, f64); 7] = [
     ("Pfw", 60.0),
 ];
 
-fn value(report: &serde_json::Value, method: &str, key: &str) -> f64 {
+/// The value of parameter `key` of `method` in a report.
+pub(crate) fn value(report: &serde_json::Value, method: &str, key: &str) -> f64 {
     report["methods"][method]["params"][key]["value"]
         .as_f64()
         .unwrap_or_else(|| panic!("{method} has no {key}: {report}"))
+}
+
+/// The one record in `dir`, read: its segments are the DC, no-load and
+/// first locked-rotor tests, `then` the kinds given, then a sweep; it
+/// holds three DC and ten no-load readings.
+pub(crate) fn standard_record(dir: &Path, then: &[&str]) -> (PathBuf, Record) {
+    let mcap = only_mcap(dir);
+    let record = motorbench::record::read_mcap(&mcap).unwrap();
+    let kinds: Vec<&str> = record
+        .segments
+        .iter()
+        .map(|s| s.kind.unwrap().as_str())
+        .collect();
+    let mut want = vec!["im_dc_resistance", "im_no_load", "im_locked_rotor"];
+    want.extend(then);
+    want.push("im_slip_sweep");
+    assert_eq!(kinds, want);
+    let tests = &record.standard_tests;
+    assert_eq!(
+        (tests.dc_resistance.len(), tests.no_load.len()),
+        (3, 10),
+        "{tests:?}"
+    );
+    (mcap, record)
+}
+
+/// The Python reader accepts `mcap` with every standard-test reading of
+/// `record` on `/bench/standard_test` and messages on the DC source's
+/// channel and on each of `topics`; `replay --check` reproduces the
+/// report `v`.
+pub(crate) fn read_back_and_replayed(
+    mcap: &Path,
+    record: &Record,
+    v: &serde_json::Value,
+    topics: &[&str],
+) {
+    let tests = &record.standard_tests;
+    let readings = tests.dc_resistance.len() + tests.no_load.len() + tests.locked_rotor.len();
+    let counts = common::python_check_mcap(mcap, &[format!("/bench/standard_test={readings}")]);
+    for topic in topics.iter().chain(&["/sensor/dc_current"]) {
+        assert!(counts[*topic].as_u64().unwrap() > 0, "{topic}: {counts}");
+    }
+    // The replay reduces the recorded readings to the same report.
+    assert_eq!(&replay_identical(mcap, &[]), v);
 }
 
 #[test]
@@ -96,40 +143,14 @@ fn the_standard_tests_run_on_the_simulated_rig_and_replay() {
 
     // The record: five segments of the four kinds, the readings on
     // /bench/standard_test, accepted by the Python reader.
-    let mcap = only_mcap(dir.path());
-    let record = motorbench::record::read_mcap(&mcap).unwrap();
-    let kinds: Vec<&str> = record
-        .segments
-        .iter()
-        .map(|s| s.kind.unwrap().as_str())
-        .collect();
-    assert_eq!(
-        kinds,
-        [
-            "im_dc_resistance",
-            "im_no_load",
-            "im_locked_rotor",
-            "im_slip_sweep",
-            "im_slip_sweep"
-        ]
-    );
+    let (mcap, record) = standard_record(dir.path(), &["im_slip_sweep"]);
     let tests = &record.standard_tests;
-    assert_eq!(
-        (tests.dc_resistance.len(), tests.no_load.len()),
-        (3, 10),
-        "{tests:?}"
-    );
     assert!(tests
         .no_load
         .iter()
         .all(|r| r.segment == 1 && r.frequency == 50.0));
     assert!(record.operating_points.iter().all(|p| p.segment >= 3));
-    let readings = 3 + 10 + locked.len();
-    let counts = common::python_check_mcap(&mcap, &[format!("/bench/standard_test={readings}")]);
-    assert!(counts["/sensor/dc_current"].as_u64().unwrap() > 0);
-
-    // The replay reduces the recorded readings to the same report.
-    assert_eq!(replay_identical(&mcap, &[]), v);
+    read_back_and_replayed(&mcap, &record, &v, &[]);
 
     // As text: the reduction and its tables.
     let replay = motorbench(&["replay", mcap.to_str().unwrap(), "--no-diagnose"]);

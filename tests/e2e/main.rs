@@ -24,6 +24,7 @@ mod foxglove_layout;
 mod identify_csv;
 mod im_identify_cli;
 mod im_run_cli;
+mod im_standard_modbus;
 mod im_standard_run;
 mod im_standard_tests_cli;
 mod modbus_stage;

@@ -2,10 +2,15 @@
 //! process, through the [`Machine`] trait: the readings the plan records
 //! round-trip through MCAP; an operator stop in the middle of the no-load
 //! test ends it as aborted with every stage (supply, dynamometer, DC
-//! source) safe, and the record keeps the finished DC test.
+//! source) safe, and the record keeps the finished DC test; a winding
+//! read by a thermometer as it warms has the DC resistance corrected to
+//! the locked-rotor test's temperature, and the locked-rotor test run
+//! again at reduced frequency reduces to the machine.
 
+use crate::common::dry_run;
 use motorbench::bench::{NoProgress, Outcome, Progress, RecordSink};
-use motorbench::machine::im::{sim_im_rig, ImRunConfig, NO_LOAD_SEGMENT};
+use motorbench::identify::identify_im;
+use motorbench::machine::im::{sim_im_rig, ImRunConfig, COPPER_ALPHA, NO_LOAD_SEGMENT};
 use motorbench::machine::{Machine, PlanRig};
 use motorbench::record::{
     read_mcap, DcResistanceReading, Entry, EventLevel, Recorder, SegmentKind, StandardTestReading,
@@ -192,4 +197,108 @@ async fn the_plan_with_the_nameplate_defaults_runs_to_its_end() {
         .all(|s| !s.label.contains("incomplete")));
     assert_eq!(record.standard_tests.no_load.len(), 10);
     assert_eq!(record.operating_points.len(), 10);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_warming_winding_is_corrected_to_its_measured_temperature_and_a_reduced_frequency_test_reduces(
+) {
+    // The shipped machine with a winding thermometer, a winding that heats
+    // forty times faster (0.2 K/W, 20 s) and the locked-rotor test again
+    // at 12.5 Hz with the nameplate's default voltages.
+    let text = SIM_IM_STANDARD
+        .replace(
+            "torque_sensor = true",
+            "torque_sensor = true\nwinding_sensor = true",
+        )
+        .replace("resistance_K_per_W = 0.005", "resistance_K_per_W = 0.2")
+        .replace("time_constant_s = 300", "time_constant_s = 20")
+        .replace(
+            "max_current_A = 9.5 ",
+            "reduced_frequency_Hz = 12.5\nmax_current_A = 9.5 ",
+        );
+    let cfg = ImRunConfig::parse("sim-im-standard.toml", &text).unwrap();
+    assert!(cfg.standard.as_ref().unwrap().reduced_frequency.is_some());
+    let (_dir, done) = dry_run::commission(&cfg).await;
+    assert_eq!(done.outcome, Outcome::Completed);
+    let tests = &done.record.standard_tests;
+    let mean = |rs: &[&SupplyReading]| {
+        rs.iter()
+            .map(|r| r.winding_temperature.unwrap())
+            .sum::<f64>()
+            / rs.len() as f64
+    };
+    let reduced: Vec<&SupplyReading> = tests
+        .locked_rotor
+        .iter()
+        .filter(|r| r.segment == 3)
+        .collect();
+    assert!(reduced.len() >= 3 && reduced.iter().all(|r| r.frequency == 12.5));
+    let t_dc = tests.dc_resistance[0].winding_temperature.unwrap();
+    let t_lr = mean(&reduced);
+    // The no-load and locked-rotor tests warmed the winding well above
+    // the DC reading's temperature.
+    assert!(
+        t_lr > t_dc + 3.0,
+        "DC at {t_dc} °C, locked rotor at {t_lr} °C"
+    );
+
+    let report = serde_json::to_value(done.analysis.report()).unwrap();
+    let param = |r: &serde_json::Value, key: &str| {
+        r["methods"]["standard_tests"]["params"][key]["value"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("no {key}: {r}"))
+    };
+    // Rs at the locked-rotor test's temperature, Rr the machine's.
+    let rs_hot = 0.8659 * (1.0 + COPPER_ALPHA * (t_lr - 20.0));
+    let rs = param(&report, "Rs");
+    assert!((rs / rs_hot - 1.0).abs() < 0.005, "Rs {rs}, truth {rs_hot}");
+    let rr = param(&report, "Rr");
+    assert!((rr / 1.2 - 1.0).abs() < 0.02, "Rr {rr}");
+    for key in ["Xs", "Xr", "Xm"] {
+        let truth = match key {
+            "Xs" => 1.84,
+            "Xr" => 2.76,
+            _ => 119.64,
+        };
+        let got = param(&report, key);
+        assert!(
+            (got / truth - 1.0).abs() < 0.02,
+            "{key} {got}, truth {truth}"
+        );
+    }
+
+    for key in ["Rs", "Xs", "Xm", "Rfe", "Rr", "Pfw"] {
+        println!(
+            "joint {key} {:.5}",
+            report["methods"]["joint"]["params"][key]["value"]
+                .as_f64()
+                .unwrap()
+        );
+    }
+
+    // The same readings without their temperatures: the warm winding's
+    // extra copper resistance lands in Rr.
+    let mut cold = done.record.clone();
+    let st = &mut cold.standard_tests;
+    st.dc_resistance
+        .iter_mut()
+        .for_each(|r| r.winding_temperature = None);
+    st.no_load
+        .iter_mut()
+        .for_each(|r| r.winding_temperature = None);
+    st.locked_rotor
+        .iter_mut()
+        .for_each(|r| r.winding_temperature = None);
+    let uncorrected = identify_im(&cold, None, cfg.model);
+    let uncorrected = serde_json::to_value(&uncorrected.report).unwrap();
+    let rr_cold = param(&uncorrected, "Rr");
+    println!(
+        "DC at {t_dc:.2} °C, locked rotor (12.5 Hz) at {t_lr:.2} °C: Rs {rs:.5} (truth {rs_hot:.5}), \
+         Rr {rr:.5} (truth 1.2), uncorrected Rs {:.5}, Rr {rr_cold:.5}",
+        param(&uncorrected, "Rs")
+    );
+    assert!(
+        rr_cold - 1.2 > 0.5 * (rs_hot - 0.8659),
+        "uncorrected Rr {rr_cold}, corrected {rr}"
+    );
 }

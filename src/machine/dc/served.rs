@@ -28,7 +28,9 @@ use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
 use crate::config::{SimulatedRig, SimulatedTransport};
-use crate::rig::{ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock};
+use crate::rig::{
+    enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock,
+};
 
 /// The simulated plant on the wall clock.
 struct RealtimePlant {
@@ -133,16 +135,8 @@ impl SimulatedDevice for SupplyDevice {
                     .map_err(|_| ExceptionCode::IllegalDataValue)?;
             }
         }
-        if let Some((r, on, off)) = &self.enable {
-            if touches(&span, r) {
-                let raw = bank.get(r) as u16;
-                let enabled = if raw == *on {
-                    true
-                } else if raw == *off {
-                    false
-                } else {
-                    return Err(ExceptionCode::IllegalDataValue);
-                };
+        if let Some(enable) = &self.enable {
+            if let Some(enabled) = enable_written(bank, &span, enable)? {
                 ready_now(p.stage.set_output_enabled(enabled))
                     .map_err(|_| ExceptionCode::ServerDeviceFailure)?;
             }

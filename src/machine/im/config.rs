@@ -134,6 +134,9 @@ struct RawSensors {
     noise_relative: f64,
     encoder_lines: u32,
     torque_sensor: bool,
+    /// A winding thermometer (channel `winding_temperature`, °C).
+    #[serde(default)]
+    winding_sensor: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -289,11 +292,25 @@ impl ImRunConfig {
                 ))
             }
         };
-        if standard_plan && modbus.is_some() {
+        let modbus_dc_source = modbus.as_ref().is_some_and(|m| m.dc_source.is_some());
+        if standard_plan
+            && modbus
+                .as_ref()
+                .is_some_and(|m| m.dyno_coast_value.is_none())
+        {
+            return Err(bad(
+                "rig.modbus.dynamometer.coast_value",
+                "missing: the no-load test of im_standard_tests lets the shaft turn freely, which \
+                 needs the value of the dynamometer's control word that coasts it (Optidrive E3: \
+                 8, bit 3)"
+                    .into(),
+            ));
+        }
+        if standard_plan && modbus.is_some() && !modbus_dc_source {
             return Err(bad(
                 "test.plan",
-                "im_standard_tests needs a DC source for the winding-resistance test, which \
-                 only the simulated rig (rig.backend = \"simulated\") has so far"
+                "im_standard_tests needs a DC source for the winding-resistance test: give \
+                 [rig.modbus.dc_source] (a DC supply with a current limit)"
                     .into(),
             ));
         }
@@ -490,7 +507,8 @@ impl ImRunConfig {
                         w
                     },
                     // The DC source of the standard tests' resistance reading.
-                    dc_source_max_current: standard_plan.then_some(current),
+                    dc_source_max_current: (standard_plan || modbus_dc_source).then_some(current),
+                    winding_sensor: s.sensors.winding_sensor,
                 })
             }
         };
@@ -522,7 +540,13 @@ impl ImRunConfig {
         };
         let standard = standard_plan
             .then(|| {
-                standard_tables.validate(voltage, current, limits.max_voltage, limits.max_current)
+                standard_tables.validate(
+                    voltage,
+                    current,
+                    frequency,
+                    limits.max_voltage,
+                    limits.max_current,
+                )
             })
             .transpose()
             .map_err(|(key, why)| bad(&key, why))?;
@@ -794,6 +818,82 @@ mod tests {
             e.contains("rig.modbus.supply.transport") || e.contains("rig.simulated"),
             "{e}"
         );
+    }
+
+    const SIM_MODBUS_IM_STANDARD: &str =
+        include_str!("../../../config/sim-modbus-im-standard.toml");
+
+    #[test]
+    fn shipped_modbus_standard_config_parses_and_its_standard_keys_are_checked() {
+        let source = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/config/sim-modbus-im-standard.toml"
+        );
+        let c = ImRunConfig::parse(source, SIM_MODBUS_IM_STANDARD).unwrap();
+        let m = c.modbus.as_ref().unwrap();
+        let dc = m.dc_source.as_ref().unwrap();
+        assert_eq!(dc.device.profile.name, "Riden RD6006");
+        assert_eq!(dc.compliance_voltage, 30.0);
+        assert_eq!(m.dyno_coast_value, Some(8));
+        let sim = c.simulated.as_ref().unwrap();
+        assert!(sim.winding_sensor);
+        assert_eq!(sim.dc_source_max_current, Some(7.6));
+        let reduced = c.standard.as_ref().unwrap().reduced_frequency.as_ref();
+        assert_eq!(reduced.unwrap().frequency, 12.5);
+        assert!(
+            c.describe_rig().contains("DC source Riden RD6006"),
+            "{}",
+            c.describe_rig()
+        );
+
+        let bad = |from: &str, to: &str| {
+            assert!(SIM_MODBUS_IM_STANDARD.contains(from), "{from}");
+            ImRunConfig::parse(source, &SIM_MODBUS_IM_STANDARD.replace(from, to))
+                .unwrap_err()
+                .to_string()
+        };
+        let section = "[rig.modbus.dc_source]";
+        let start = SIM_MODBUS_IM_STANDARD.find(section).unwrap();
+        let end = start + SIM_MODBUS_IM_STANDARD[start..].find("\n\n").unwrap();
+        let cases: [(&str, &str, &[&str]); 6] = [
+            (
+                &SIM_MODBUS_IM_STANDARD[start..end],
+                "",
+                &["test.plan", "[rig.modbus.dc_source]"],
+            ),
+            (
+                "coast_value = 8 ",
+                "",
+                &["rig.modbus.dynamometer.coast_value"],
+            ),
+            (
+                "compliance_V = 30 ",
+                "compliance_V = 100 ",
+                &["rig.modbus.dc_source.compliance_V", "60"],
+            ),
+            (
+                ", dc_current = \"current_out\"",
+                "",
+                &["rig.modbus.dc_source.channels", "dc_current"],
+            ),
+            (
+                "profile = \"devices/riden-rd6006.toml\"",
+                "profile = \"devices/eastron-sdm630.toml\"",
+                &["rig.modbus.dc_source.profile", "[power_stage]"],
+            ),
+            (
+                "reduced_frequency_Hz = 12.5",
+                "reduced_frequency_Hz = 50",
+                &["test.locked_rotor.reduced_frequency_Hz"],
+            ),
+        ];
+        for (from, to, names) in cases {
+            let e = bad(from, to);
+            assert!(
+                names.iter().all(|n| e.contains(n)),
+                "{from:?} → {to:?}: {e}"
+            );
+        }
     }
 
     #[test]

@@ -31,7 +31,7 @@ mod sweep;
 mod text;
 
 pub use config::ImRunConfig;
-pub use modbus_config::ImModbusRig;
+pub use modbus_config::{ImDcSourceLink, ImModbusRig};
 pub use plot::{render_im_svg, write_im_svg, DrawError, SweepPlotError};
 pub use rig::{build_im_rig, ImRig, SERVED_IM_PLANT_RATE_HZ};
 pub use served::{ServedImRig, ServedVfd};
@@ -39,10 +39,10 @@ pub use sim_rig::{
     sim_im_rig, SimDcSource, SimDyno, SimImRigConfig, SimImSensors, SimRigError, SimVfd,
     COPPER_ALPHA,
 };
-pub use stages::{VfdDyno, VfdSupply};
+pub use stages::{DcCurrentSource, VfdDyno, VfdSupply};
 pub use standard_plan::{
-    StandardTestsPlan, DC_RESISTANCE_SEGMENT, LOCKED_ROTOR_SEGMENT, NO_LOAD_SEGMENT,
-    STANDARD_SEGMENTS,
+    ReducedFrequencyTest, StandardTestsPlan, DC_RESISTANCE_SEGMENT, LOCKED_ROTOR_SEGMENT,
+    NO_LOAD_SEGMENT, REDUCED_FREQUENCY_SEGMENT, STANDARD_SEGMENTS,
 };
 use sweep::{run_im_plan, ImStages};
 pub use sweep::{run_im_sweep, sweep_channels, ImSweepPlan};
@@ -194,11 +194,12 @@ impl Machine for ImRunConfig {
                 SegmentKind::ImDcResistance,
                 SegmentKind::ImNoLoad,
                 SegmentKind::ImLockedRotor,
+                SegmentKind::ImLockedRotor,
             ];
             let points = s.points();
-            d.kinds.splice(0..0, kinds);
+            d.kinds.splice(0..0, kinds.into_iter().take(points.len()));
             d.timeouts_s
-                .splice(0..0, points.map(|n| point_max * n as f64));
+                .splice(0..0, points.into_iter().map(|n| point_max * n as f64));
         }
         d
     }
@@ -206,8 +207,11 @@ impl Machine for ImRunConfig {
     fn record_channels(&self, sensors: &[ChannelInfo], stage_ids: &[&str]) -> Vec<ChannelSpec> {
         let id = |k: usize| stage_ids.get(k).copied().unwrap_or("stage");
         let mut channels = sweep_channels(sensors, id(0), id(1));
-        if self.standard.is_some() {
+        if let Some(s) = &self.standard {
             channels.push(ChannelSpec::command("dc_current", "A", id(2)));
+            if s.reduced_frequency.is_some() {
+                channels.push(ChannelSpec::command("supply_frequency", "Hz", id(0)));
+            }
         }
         channels
     }

@@ -20,6 +20,7 @@
 //! profile = "devices/invertek-optidrive-e3.toml"
 //! unit_id = 2
 //! pole_pairs = 2              # of the load machine: speed = 2π f / pole_pairs
+//! coast_value = 8             # optional: the control word's coast stop (lets the shaft go; the no-load test needs it)
 //!
 //! [rig.modbus.meter]          # line voltage, line current, input power
 //! profile = "devices/eastron-sdm630.toml"
@@ -30,7 +31,13 @@
 //! profile = "devices/sim-daq.toml"
 //! unit_id = 4
 //! encoder_lines = 4096
-//! channels = { encoder_count = "encoder_count" }
+//! channels = { encoder_count = "encoder_count" }   # optional: winding_temperature = "winding_temperature"
+//!
+//! [rig.modbus.dc_source]      # optional: the standard tests' DC source (winding resistance)
+//! profile = "devices/riden-rd6006.toml"   # a DC supply whose [power_stage] has a current limit
+//! unit_id = 5
+//! compliance_V = 30           # its voltage set point in constant current; default: the profile's max_setpoint
+//! channels = { dc_voltage = "voltage_out", dc_current = "current_out" }
 //! ```
 //!
 //! On a real rig each device section also says where the device is
@@ -72,6 +79,9 @@ pub struct ImModbusRig {
     pub dynamometer: ModbusDeviceLink,
     /// Pole pairs of the load machine (speed set point to frequency).
     pub dyno_pole_pairs: u32,
+    /// The value of the dynamometer's enable (control) register that
+    /// coasts it (lets the shaft turn freely), where given.
+    pub dyno_coast_value: Option<u16>,
     /// The power meter.
     pub meter: ModbusDeviceLink,
     /// `(quantity, register)` read from the meter.
@@ -82,6 +92,20 @@ pub struct ImModbusRig {
     pub encoder_channels: Vec<(String, String)>,
     /// Encoder lines per revolution (4 counts per line).
     pub encoder_lines: u32,
+    /// The DC source of the standard tests' winding-resistance reading,
+    /// when the rig has one.
+    pub dc_source: Option<ImDcSourceLink>,
+}
+
+/// `[rig.modbus.dc_source]`: a DC supply driven in constant current.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImDcSourceLink {
+    /// The supply (its profile's `[power_stage]` has a current limit).
+    pub device: ModbusDeviceLink,
+    /// Its voltage set point while it drives a current, V.
+    pub compliance_voltage: f64,
+    /// `(quantity, register)` read back: `dc_voltage`, `dc_current`.
+    pub channels: Vec<(String, String)>,
 }
 
 /// Quantities the sweep needs, and the device that must provide each.
@@ -168,6 +192,60 @@ fn channels(
     Ok(out)
 }
 
+/// `[rig.modbus.dc_source]`, validated.
+fn dc_source(mut t: toml::Table, dir: &Path, simulated: bool) -> Result<ImDcSourceLink, Bad> {
+    let key = "rig.modbus.dc_source";
+    let compliance: Option<f64> = take(&mut t, key, "compliance_V")?;
+    let map = channel_map(&mut t, key)?;
+    let device = link(t, key, dir, simulated)?;
+    let Some(stage) = device.profile.power_stage.as_ref() else {
+        return Err((
+            format!("{key}.profile"),
+            format!(
+                "{} has no [power_stage] section: it cannot drive a current",
+                device.profile_path
+            ),
+        ));
+    };
+    if stage.current_limit.is_none() || stage.enable.is_none() {
+        return Err((
+            format!("{key}.profile"),
+            format!(
+                "{}'s [power_stage] needs a current_limit and an enable register: the DC \
+                 source drives a current and disconnects",
+                device.profile_path
+            ),
+        ));
+    }
+    let compliance_voltage = compliance.unwrap_or(stage.max_setpoint);
+    if !(compliance_voltage.is_finite()
+        && compliance_voltage > 0.0
+        && compliance_voltage <= stage.max_setpoint)
+    {
+        return Err((
+            format!("{key}.compliance_V"),
+            format!(
+                "{compliance_voltage} must be in (0, {}] V (the profile's max_setpoint)",
+                stage.max_setpoint
+            ),
+        ));
+    }
+    let channels = channels(map, key, &device)?;
+    for q in ["dc_voltage", "dc_current"] {
+        if !channels.iter().any(|(c, _)| c == q) {
+            return Err((
+                format!("{key}.channels"),
+                format!("missing `{q}`: the winding-resistance test reads DC voltage and current"),
+            ));
+        }
+    }
+    Ok(ImDcSourceLink {
+        device,
+        compliance_voltage,
+        channels,
+    })
+}
+
 impl ImModbusRig {
     /// Validate the `[rig.modbus]` table; `dir` resolves relative profile
     /// paths; `simulated_present`: the file has `[rig.simulated]`. Errors
@@ -222,6 +300,7 @@ impl ImModbusRig {
         let key = "rig.modbus.dynamometer";
         let mut t = section(&mut rig, "dynamometer")?;
         let dyno_pole_pairs = take_count(&mut t, key, "pole_pairs", "must be ≥ 1")?;
+        let dyno_coast_value: Option<u16> = take(&mut t, key, "coast_value")?;
         let dynamometer = link(t, key, dir, sim)?;
         for (k, d) in [
             ("rig.modbus.supply.profile", &supply),
@@ -251,11 +330,16 @@ impl ImModbusRig {
         let encoder = link(t, key, dir, sim)?;
         let encoder_channels = channels(map, key, &encoder)?;
 
+        let dc_source = match rig.contains_key("dc_source") {
+            true => Some(dc_source(section(&mut rig, "dc_source")?, dir, sim)?),
+            false => None,
+        };
+
         if let Some(extra) = rig.keys().next() {
             return Err((
                 format!("rig.modbus.{extra}"),
                 "unknown key: want simulate, timeout_ms, retries, max_lost_polls, \
-                 merge_window_ms, supply, dynamometer, meter, encoder"
+                 merge_window_ms, supply, dynamometer, meter, encoder, dc_source"
                     .into(),
             ));
         }
@@ -281,11 +365,13 @@ impl ImModbusRig {
             supply_voltage_register: voltage_register,
             dynamometer,
             dyno_pole_pairs,
+            dyno_coast_value,
             meter,
             meter_channels,
             encoder,
             encoder_channels,
             encoder_lines,
+            dc_source,
         })
     }
 
@@ -296,8 +382,12 @@ impl ImModbusRig {
             Some(SimulatedTransport::Rtu) => "the simulated rig served over Modbus RTU: ",
             None => "Modbus: ",
         };
+        let dc = match &self.dc_source {
+            Some(d) => format!(", DC source {}", d.device.profile.name),
+            None => String::new(),
+        };
         format!(
-            "{how}supply {}, dynamometer {}, meter {}, encoder {}",
+            "{how}supply {}, dynamometer {}, meter {}, encoder {}{dc}",
             self.supply.profile.name,
             self.dynamometer.profile.name,
             self.meter.profile.name,

@@ -1,13 +1,14 @@
 //! Build the rig an induction-machine sweep configuration names: the
 //! simulated rig in process, or the supply VFD, the dynamometer VFD, the
-//! power meter and the encoder counter over Modbus (with the simulated rig
-//! served behind those links when the configuration asks for it).
+//! power meter, the encoder counter and (for the standard tests) the DC
+//! source over Modbus (with the simulated rig served behind those links
+//! when the configuration asks for it).
 
 use motorbench_drivers::modbus::{ModbusPowerStage, ModbusSensors, PolledChannel};
 use motorbench_drivers::{ChannelInfo, LinkHealth, MergedSensors, PowerStage, SensorStream};
 
 use super::served::{ServedDevice, ServedImRig};
-use super::{sim_im_rig, ImModbusRig, ImRunConfig, VfdDyno, VfdSupply};
+use super::{sim_im_rig, DcCurrentSource, ImModbusRig, ImRunConfig, VfdDyno, VfdSupply};
 use crate::config::ModbusDeviceLink;
 use crate::model::ImCircuit;
 use crate::rig::{same_link, Buses, RigError};
@@ -79,26 +80,19 @@ fn polled(
 
 async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigError> {
     let served = match (m.simulate, &cfg.simulated) {
-        (Some(transport), Some(sim)) => {
-            let count = &m
-                .encoder_channels
-                .iter()
-                .find(|(q, _)| q == "encoder_count")
-                .expect("checked when the configuration was loaded")
-                .1;
-            Some(
-                ServedImRig::start(
-                    sim,
-                    SERVED_IM_PLANT_RATE_HZ,
-                    transport,
-                    (ServedDevice::of(&m.supply), &m.supply_voltage_register),
-                    (ServedDevice::of(&m.dynamometer), m.dyno_pole_pairs),
-                    (ServedDevice::of(&m.meter), &m.meter_channels),
-                    (ServedDevice::of(&m.encoder), count),
-                )
-                .await?,
+        (Some(transport), Some(sim)) => Some(
+            ServedImRig::start(
+                sim,
+                SERVED_IM_PLANT_RATE_HZ,
+                transport,
+                (ServedDevice::of(&m.supply), &m.supply_voltage_register),
+                (ServedDevice::of(&m.dynamometer), m.dyno_pole_pairs),
+                (ServedDevice::of(&m.meter), &m.meter_channels),
+                (ServedDevice::of(&m.encoder), &m.encoder_channels),
+                m.dc_source.as_ref().map(|d| ServedDevice::of(&d.device)),
             )
-        }
+            .await?,
+        ),
         _ => None,
     };
     let s = served.as_ref();
@@ -134,48 +128,86 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
     );
     let dyno_drive = ModbusPowerStage::new(
         &format!("modbus:{} (dynamometer)", m.dynamometer.profile.name),
-        dyno_bus,
+        dyno_bus.clone(),
         m.dynamometer.unit_id,
         &m.dynamometer.profile,
     )?;
-    let dynamometer = VfdDyno::new(dyno_drive, m.dyno_pole_pairs);
+    let mut dynamometer = VfdDyno::new(dyno_drive, m.dyno_pole_pairs);
+    let control = m.dynamometer.profile.power_stage.as_ref().and_then(|s| {
+        let (name, ..) = s.enable.as_ref()?;
+        m.dynamometer.profile.register(name).cloned()
+    });
+    if let (Some(value), Some(control)) = (m.dyno_coast_value, control) {
+        dynamometer = dynamometer.with_coast(dyno_bus, m.dynamometer.unit_id, control, value);
+    }
+
+    // The DC source: its stage, and its read-back channels polled.
+    let dc = match &m.dc_source {
+        Some(d) => {
+            let bus = buses.bus(
+                "modbus-dc-source",
+                &d.device,
+                s.and_then(|s| s.dc_source_link.as_ref()),
+            );
+            let drive = ModbusPowerStage::new(
+                &format!("modbus:{} (DC source)", d.device.profile.name),
+                bus.clone(),
+                d.device.unit_id,
+                &d.device.profile,
+            )?;
+            let stage = DcCurrentSource::new(drive, d.compliance_voltage, cfg.plan.rated_current);
+            Some((stage, &d.device, bus, &d.channels))
+        }
+        None => None,
+    };
 
     let rate = cfg.sample_rate_hz;
-    let meter_channels = polled(&m.meter, &m.meter_channels, rate);
-    let encoder_channels = polled(&m.encoder, &m.encoder_channels, rate);
-    let sensors: Box<dyn SensorStream> = if s.is_none() && same_link(&m.meter, &m.encoder) {
-        // One line: one poller, the units read in turn.
-        let mut all = meter_channels;
-        all.extend(encoder_channels);
-        Box::new(
-            ModbusSensors::new("modbus-sensors", meter_bus, all, m.max_lost_polls)
-                .with_max_read_gap(m.meter.profile.max_read_gap),
-        )
+    // The devices polled, with their buses: those on one line (a real rig)
+    // share one poller, the units read in turn.
+    let mut groups: Vec<(&ModbusDeviceLink, _, Vec<PolledChannel>)> = Vec::new();
+    let devices = [
+        Some((&m.meter, meter_bus, &m.meter_channels)),
+        Some((&m.encoder, encoder_bus, &m.encoder_channels)),
+        dc.as_ref().map(|(_, d, bus, ch)| (*d, bus.clone(), *ch)),
+    ];
+    for (device, bus, channels) in devices.into_iter().flatten() {
+        let channels = polled(device, channels, rate);
+        match groups
+            .iter_mut()
+            .find(|(d, _, _)| s.is_none() && same_link(d, device))
+        {
+            Some((_, _, all)) => all.extend(channels),
+            None => groups.push((device, bus, channels)),
+        }
+    }
+    let mut pollers: Vec<Box<dyn SensorStream>> = groups
+        .into_iter()
+        .map(|(link, bus, channels)| {
+            Box::new(
+                ModbusSensors::new(
+                    &format!("modbus:{}", link.profile.name),
+                    bus,
+                    channels,
+                    m.max_lost_polls,
+                )
+                .with_max_read_gap(link.profile.max_read_gap),
+            ) as Box<dyn SensorStream>
+        })
+        .collect();
+    let sensors: Box<dyn SensorStream> = if pollers.len() == 1 {
+        pollers.remove(0)
     } else {
-        let poller = |link: &ModbusDeviceLink, bus, channels| {
-            ModbusSensors::new(
-                &format!("modbus:{}", link.profile.name),
-                bus,
-                channels,
-                m.max_lost_polls,
-            )
-            .with_max_read_gap(link.profile.max_read_gap)
-        };
-        let meter = poller(&m.meter, meter_bus, meter_channels);
-        let encoder = poller(&m.encoder, encoder_bus, encoder_channels);
         // Separate links: a poller each, their batches (each with one
         // device's channels) put on one time base and in time order; the
-        // sweep holds the latest value of every channel.
-        Box::new(MergedSensors::new(
-            "modbus-meter+encoder",
-            vec![Box::new(meter), Box::new(encoder)],
-            m.merge_window,
-        ))
+        // plan holds the latest value of every channel.
+        let ids: Vec<&str> = pollers.iter().map(|p| p.id()).collect();
+        let name = format!("modbus-merged({})", ids.join("+"));
+        Box::new(MergedSensors::new(&name, pollers, m.merge_window))
     };
     Ok(ImRig {
         supply: Box::new(supply),
         dynamometer: Box::new(dynamometer),
-        dc_source: None,
+        dc_source: dc.map(|(stage, ..)| Box::new(stage) as Box<dyn PowerStage>),
         sensors,
         counts_per_rev: cfg.plan.encoder_counts_per_rev,
         truth: cfg

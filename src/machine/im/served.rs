@@ -4,9 +4,9 @@
 //! of shipped profiles:
 //!
 //! - the supply VFD (e.g. `config/devices/invertek-optidrive-e3.toml`):
-//!   control word (bit 0 run, bit 3 coast stop), frequency set point (only
-//!   0 or the machine's rated frequency: the simulated supply has one
-//!   frequency), and a voltage register setting the output line voltage;
+//!   control word (bit 0 run, bit 3 coast stop), frequency set point (0,
+//!   or up to the machine's rated frequency: the reactances scale with
+//!   it), and a voltage register setting the output line voltage;
 //!   output frequency, output current and status read back;
 //! - the dynamometer VFD (same profile, another unit): run means hold the
 //!   speed `2π f / p` of its frequency set point, stop means ramp the shaft
@@ -14,7 +14,15 @@
 //! - the power meter (e.g. `config/devices/eastron-sdm630.toml`): phase and
 //!   line-to-line voltages, phase and average currents, phase and total
 //!   power, frequency, from the simulated sensors;
-//! - the encoder counter (e.g. `config/devices/sim-daq.toml`): the count.
+//! - the encoder counter (e.g. `config/devices/sim-daq.toml`): the count,
+//!   and the winding thermometer's reading where the simulated rig has one
+//!   (`winding_temperature`);
+//! - for the standard tests, the DC source of the winding-resistance test
+//!   (e.g. `config/devices/riden-rd6006.toml`, a DC supply in constant
+//!   current): its current-limit register sets the current it drives
+//!   between two line terminals, its voltage set point the compliance
+//!   voltage, its enable register connects it; `voltage_out` and
+//!   `current_out` read back.
 //!
 //! The plant runs on the wall clock, as in [`crate::machine::dc::ServedRig`]: every
 //! request first advances it to "now" in steps of its own period.
@@ -30,10 +38,14 @@ use motorbench_drivers::serial::port::SerialStream;
 use motorbench_drivers::{PowerStage, SampleBatch};
 use tokio::task::JoinHandle;
 
-use super::sim_rig::{channel, sim_im_rig, SimDyno, SimImRigConfig, SimImSensors, SimVfd};
+use super::sim_rig::{
+    channel, sim_im_rig, SimDcSource, SimDyno, SimImRigConfig, SimImSensors, SimVfd,
+};
 use crate::config::{ModbusDeviceLink, SimulatedTransport};
 use crate::model::Connection;
-use crate::rig::{ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock};
+use crate::rig::{
+    enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock,
+};
 
 /// The simulated machine, supply and dynamometer on the wall clock.
 struct Plant {
@@ -131,7 +143,6 @@ struct SupplyDevice {
     plant: SharedPlant,
     regs: VfdRegisters,
     voltage: Register,
-    frequency_hz: f64,
 }
 
 impl SupplyDevice {
@@ -146,7 +157,7 @@ impl SimulatedDevice for SupplyDevice {
         p.catch_up();
         let running = self.running(bank);
         if let Some(r) = &self.regs.output_frequency {
-            bank.set(r, if running { self.frequency_hz } else { 0.0 });
+            bank.set(r, if running { p.vfd.frequency() } else { 0.0 });
         }
         if let Some(r) = &self.regs.output_current {
             bank.set(r, p.reading(channel::LINE_CURRENT).max(0.0));
@@ -166,9 +177,10 @@ impl SimulatedDevice for SupplyDevice {
         p.catch_up();
         if touches(&span, &self.regs.frequency) {
             let f = bank.get(&self.regs.frequency);
-            // The simulated machine has one supply frequency.
-            if f != 0.0 && (f - self.frequency_hz).abs() > 0.051 {
-                return Err(ExceptionCode::IllegalDataValue);
+            // Zero stops the drive; any other frequency up to the rated
+            // one is the output's.
+            if f != 0.0 {
+                ready_now(p.vfd.set_frequency(f)).map_err(|_| ExceptionCode::IllegalDataValue)?;
             }
         }
         if touches(&span, &self.voltage) {
@@ -228,7 +240,6 @@ struct MeterDevice {
     plant: SharedPlant,
     /// `(register, what it shows)`.
     registers: Vec<(Register, MeterValue)>,
-    frequency_hz: f64,
     phase_voltage_per_line: f64,
 }
 
@@ -279,7 +290,7 @@ impl SimulatedDevice for MeterDevice {
                 MeterValue::PhasePower => w / 3.0,
                 MeterValue::Frequency => {
                     if v > 1.0 {
-                        self.frequency_hz
+                        p.vfd.frequency()
                     } else {
                         0.0
                     }
@@ -290,10 +301,13 @@ impl SimulatedDevice for MeterDevice {
     }
 }
 
-/// The encoder counter.
+/// The encoder counter (and the winding thermometer's input, where the
+/// simulated rig has one).
 struct EncoderDevice {
     plant: SharedPlant,
     count: Register,
+    /// The winding temperature's register and the sensors' channel.
+    temperature: Option<(Register, usize)>,
 }
 
 impl SimulatedDevice for EncoderDevice {
@@ -301,6 +315,64 @@ impl SimulatedDevice for EncoderDevice {
         let mut p = lock(&self.plant);
         p.catch_up();
         bank.set(&self.count, p.count_now());
+        if let Some((r, ch)) = &self.temperature {
+            bank.set(r, p.reading(*ch));
+        }
+    }
+}
+
+/// The DC source of the winding-resistance test: a DC supply in constant
+/// current, behind its profile's power-stage registers.
+struct DcSourceDevice {
+    plant: SharedPlant,
+    source: SimDcSource,
+    /// The voltage set point: the compliance voltage.
+    compliance: Register,
+    /// The current limit: the current driven.
+    current: Register,
+    enable: (Register, u16, u16),
+    voltage_out: Option<Register>,
+    current_out: Option<Register>,
+    /// The sensors' DC voltage and current channels.
+    channels: (usize, usize),
+}
+
+impl SimulatedDevice for DcSourceDevice {
+    fn before_read(&self, bank: &mut RegisterBank) {
+        let mut p = lock(&self.plant);
+        p.catch_up();
+        let (v, i) = self.channels;
+        if let Some(r) = &self.voltage_out {
+            bank.set(r, p.reading(v).max(0.0));
+        }
+        if let Some(r) = &self.current_out {
+            bank.set(r, p.reading(i).max(0.0));
+        }
+    }
+
+    fn after_write(
+        &self,
+        bank: &mut RegisterBank,
+        _before: &RegisterBank,
+        span: WriteSpan,
+    ) -> Result<(), ExceptionCode> {
+        let mut p = lock(&self.plant);
+        p.catch_up();
+        let mut source = self.source.clone();
+        if touches(&span, &self.compliance) {
+            source
+                .set_compliance_voltage(bank.get(&self.compliance))
+                .map_err(|_| ExceptionCode::IllegalDataValue)?;
+        }
+        if touches(&span, &self.current) {
+            ready_now(source.set_setpoint(bank.get(&self.current)))
+                .map_err(|_| ExceptionCode::IllegalDataValue)?;
+        }
+        if let Some(enabled) = enable_written(bank, &span, &self.enable)? {
+            ready_now(source.set_output_enabled(enabled))
+                .map_err(|_| ExceptionCode::ServerDeviceFailure)?;
+        }
+        Ok(())
     }
 }
 
@@ -324,6 +396,8 @@ pub struct ServedImRig {
     pub meter_link: ServedLink,
     /// Where the encoder counter answers.
     pub encoder_link: ServedLink,
+    /// Where the DC source answers, when served.
+    pub dc_source_link: Option<ServedLink>,
     tasks: Vec<JoinHandle<()>>,
     _pty_ends: Vec<SerialStream>,
     vfd: SimVfd,
@@ -366,8 +440,11 @@ impl ServedImRig {
     /// the supply VFD (its output voltage set through `supply_voltage`),
     /// the dynamometer VFD (a load machine of `dyno_pole_pairs`), the meter
     /// (answering on every register its profile names that it knows, and
-    /// on `meter_channels`' registers by quantity) and the encoder counter
-    /// (`encoder_count` its count register).
+    /// on `meter_channels`' registers by quantity), the encoder counter
+    /// (its channels' registers by quantity: `encoder_count`, and
+    /// `winding_temperature` where the simulated rig has a thermometer) and,
+    /// when given, the DC source (a profile whose `[power_stage]` has a
+    /// current limit and an enable register; `sim` must fit one).
     #[allow(clippy::too_many_arguments)]
     pub async fn start(
         sim: &SimImRigConfig,
@@ -376,18 +453,20 @@ impl ServedImRig {
         supply: (ServedDevice<'_>, &str),
         dynamometer: (ServedDevice<'_>, u32),
         meter: (ServedDevice<'_>, &[(String, String)]),
-        encoder: (ServedDevice<'_>, &str),
+        encoder: (ServedDevice<'_>, &[(String, String)]),
+        dc_source: Option<ServedDevice<'_>>,
     ) -> Result<ServedImRig, ServeError> {
         let cfg = SimImRigConfig {
             sample_rate_hz: plant_rate_hz,
             ..sim.clone()
         };
-        let frequency_hz = cfg.supply.frequency;
         let phase_voltage_per_line = match cfg.supply.connection {
             Connection::Star => 1.0 / 3f64.sqrt(),
             Connection::Delta => 1.0,
         };
         let (vfd, dyno, sensors) = sim_im_rig(cfg).map_err(|e| ServeError::Motor(e.to_string()))?;
+        let dc_channels = sensors.dc_channels();
+        let temperature_channel = sensors.temperature_channel();
         let plant = Arc::new(Mutex::new(Plant {
             vfd: vfd.clone(),
             dyno: dyno.clone(),
@@ -402,7 +481,6 @@ impl ServedImRig {
             plant: plant.clone(),
             regs: VfdRegisters::of(sd.profile)?,
             voltage: register(sd.profile, voltage_name)?,
-            frequency_hz,
         };
         let (dd, pole_pairs) = dynamometer;
         let dyno_dev = DynoDevice {
@@ -430,13 +508,81 @@ impl ServedImRig {
         let meter_dev = MeterDevice {
             plant: plant.clone(),
             registers,
-            frequency_hz,
             phase_voltage_per_line,
         };
-        let (ed, count_name) = encoder;
+        let (ed, encoder_channels) = encoder;
+        let named = |quantity: &str| {
+            encoder_channels
+                .iter()
+                .find(|(q, _)| q == quantity)
+                .map(|(_, name)| register(ed.profile, name))
+                .transpose()
+        };
+        if let Some((quantity, name)) = encoder_channels
+            .iter()
+            .find(|(q, _)| !matches!(q.as_str(), "encoder_count" | "winding_temperature"))
+        {
+            return Err(ServeError::MissingRegister {
+                profile: format!("{} (served counter)", ed.profile.name),
+                register: format!(
+                    "{name} for `{quantity}`, which the simulated counter does not read"
+                ),
+            });
+        }
+        let missing = |profile: &DeviceProfile, what: &str| ServeError::MissingRegister {
+            profile: profile.name.clone(),
+            register: what.into(),
+        };
+        let count = named("encoder_count")?
+            .ok_or_else(|| missing(ed.profile, "encoder_count (a channel of the counter)"))?;
+        let temperature = match (named("winding_temperature")?, temperature_channel) {
+            (Some(r), Some(ch)) => Some((r, ch)),
+            (None, _) => None,
+            (Some(_), None) => {
+                return Err(ServeError::Motor(
+                    "winding_temperature is read, but the simulated rig has no winding \
+                     thermometer (rig.simulated.sensors.winding_sensor)"
+                        .into(),
+                ))
+            }
+        };
         let encoder_dev = EncoderDevice {
             plant: plant.clone(),
-            count: register(ed.profile, count_name)?,
+            count,
+            temperature,
+        };
+        let dc_dev = match dc_source {
+            None => None,
+            Some(d) => {
+                let (Some(source), Some(channels)) = (vfd.dc_source(), dc_channels) else {
+                    return Err(ServeError::Motor(
+                        "a DC source is served, but the simulated rig fits none".into(),
+                    ));
+                };
+                let map =
+                    d.profile.power_stage.as_ref().ok_or_else(|| {
+                        missing(d.profile, "[power_stage] section (the DC source)")
+                    })?;
+                let current = map.current_limit.as_deref().ok_or_else(|| {
+                    missing(d.profile, "[power_stage] current_limit (the DC current)")
+                })?;
+                let (enable, on, off) = map.enable.as_ref().ok_or_else(|| {
+                    missing(d.profile, "[power_stage] enable (the output switch)")
+                })?;
+                Some((
+                    d,
+                    DcSourceDevice {
+                        plant: plant.clone(),
+                        source,
+                        compliance: register(d.profile, &map.setpoint)?,
+                        current: register(d.profile, current)?,
+                        enable: (register(d.profile, enable)?, *on, *off),
+                        voltage_out: d.profile.register("voltage_out").cloned(),
+                        current_out: d.profile.register("current_out").cloned(),
+                        channels,
+                    },
+                ))
+            }
         };
 
         let mut pty_ends = Vec::new();
@@ -456,6 +602,10 @@ impl ServedImRig {
         let (dyno_link, dyno_bank) = serve(dd.profile, dd.unit, Arc::new(dyno_dev))?;
         let (meter_link, _) = serve(md.profile, md.unit, Arc::new(meter_dev))?;
         let (encoder_link, _) = serve(ed.profile, ed.unit, Arc::new(encoder_dev))?;
+        let dc_source_link = match dc_dev {
+            Some((d, dev)) => Some(serve(d.profile, d.unit, Arc::new(dev))?.0),
+            None => None,
+        };
         Ok(ServedImRig {
             supply: ServedVfd {
                 link: supply_link,
@@ -467,6 +617,7 @@ impl ServedImRig {
             },
             meter_link,
             encoder_link,
+            dc_source_link,
             tasks,
             _pty_ends: pty_ends,
             vfd,

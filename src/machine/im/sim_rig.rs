@@ -5,7 +5,12 @@
 //! optionally, a shaft-torque sensor, each with Gaussian noise. For the
 //! standard tests the rig may also have a DC source ([`SimDcSource`],
 //! from [`SimVfd::dc_source`]) that drives a current between two line
-//! terminals with the supply off, read on `dc_voltage` and `dc_current`.
+//! terminals with the supply off, read on `dc_voltage` and `dc_current`
+//! (a current source up to its compliance voltage), and a winding
+//! thermometer ([`SimImRigConfig::winding_sensor`], read on
+//! `winding_temperature`, °C). The supply's frequency may be commanded
+//! below its rated one ([`PowerStage::set_frequency`]: a locked-rotor test
+//! at reduced frequency): every reactance of the circuit scales with it.
 //!
 //! The electrical side is quasi-static (the steady-state circuit at the
 //! instantaneous slip: electrical transients last milliseconds, the
@@ -31,9 +36,11 @@ use motorbench_drivers::{
 };
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-use rand_distr::{Distribution, Normal};
+use rand_distr::{Distribution, Normal, StandardNormal};
 
-use crate::model::{free_rotor_slip, terminal_resistance, ImCircuit, ImCircuitError, ImSupply};
+use crate::model::{
+    at_frequency, free_rotor_slip, terminal_resistance, ImCircuit, ImCircuitError, ImSupply,
+};
 
 const VFD_ID: &str = "sim-vfd";
 const DYNO_ID: &str = "sim-dyno";
@@ -79,6 +86,9 @@ pub struct SimImRigConfig {
     /// The DC source for the winding-resistance test, when fitted: its
     /// largest current, A.
     pub dc_source_max_current: Option<f64>,
+    /// Whether a winding thermometer is fitted (channel
+    /// `winding_temperature`, °C; σ 0.1 K when the sensors are noisy).
+    pub winding_sensor: bool,
 }
 
 impl SimImRigConfig {
@@ -103,6 +113,7 @@ impl SimImRigConfig {
             seed: 1,
             friction_windage_w: 0.0,
             dc_source_max_current: None,
+            winding_sensor: false,
         }
     }
 }
@@ -121,6 +132,9 @@ pub mod channel {
     pub const TORQUE: usize = 4;
 }
 
+/// σ of the winding thermometer's reading when the sensors are noisy, K.
+const WINDING_SENSOR_SIGMA_K: f64 = 0.1;
+
 #[derive(Debug)]
 struct Plant {
     cfg: SimImRigConfig,
@@ -132,6 +146,11 @@ struct Plant {
     dyno_enabled: bool,
     dc_setpoint: f64,
     dc_enabled: bool,
+    /// The DC source's compliance voltage, V (its current falls short
+    /// of the set point where the winding would need more).
+    dc_compliance: f64,
+    /// The supply's output frequency now, Hz.
+    frequency: f64,
     speed: f64,
     angle: f64,
     winding_c: f64,
@@ -148,9 +167,12 @@ struct Snapshot {
     angle: f64,
     dc_voltage: f64,
     dc_current: f64,
+    winding_c: f64,
 }
 
 impl Plant {
+    /// Synchronous speed at the rated frequency, rad/s (the dynamometer's
+    /// range, the friction's reference).
     fn synchronous_speed(&self) -> f64 {
         std::f64::consts::TAU * self.cfg.supply.frequency / f64::from(self.cfg.supply.pole_pairs)
     }
@@ -168,12 +190,15 @@ impl Plant {
         // Shaft: the dynamometer holds its set point; without it the
         // machine runs up to (near) synchronous speed on the supply, or
         // coasts down with the supply off.
-        let ws = self.synchronous_speed();
-        // The winding's resistance now.
-        let mut c = self.cfg.circuit;
+        let ws_rated = self.synchronous_speed();
+        let ratio = self.frequency / self.cfg.supply.frequency;
+        let ws = ws_rated * ratio;
+        // The winding's resistance now, the reactances at the frequency.
+        let mut c = at_frequency(&self.cfg.circuit, ratio);
         c.rs *= 1.0 + COPPER_ALPHA * (self.winding_c - 20.0);
         let supply = ImSupply {
             line_voltage: self.vfd_output.max(0.0),
+            frequency: self.frequency,
             ..self.cfg.supply
         };
         let target_w = if self.dyno_enabled {
@@ -191,17 +216,19 @@ impl Plant {
         // Electrical, quasi-static.
         let slip = (1.0 - self.speed / ws).clamp(0.0, 1.0);
         let op = c.operating_point(&supply, slip);
-        // The DC source, between two line terminals.
+        // The DC source, between two line terminals: its set current, or
+        // less where that would need more than its compliance voltage.
         let (dc_voltage, dc_current) = if self.dc_enabled {
             let r = terminal_resistance(c.rs, self.cfg.supply.connection);
-            (self.dc_setpoint * r, self.dc_setpoint)
+            let i = self.dc_setpoint.min(self.dc_compliance / r);
+            (i * r, i)
         } else {
             (0.0, 0.0)
         };
         // Heating by the losses (input less air-gap mechanical power).
         let losses = (op.input_power - op.torque * self.speed).max(0.0) + dc_voltage * dc_current;
         // Friction and windage on the shaft, a torque ∝ ω.
-        let friction = self.cfg.friction_windage_w / ws * (self.speed / ws);
+        let friction = self.cfg.friction_windage_w / ws_rated * (self.speed / ws_rated);
         let rise = self.cfg.thermal_resistance_k_per_w * losses;
         let ttau = self.cfg.thermal_time_constant_s.max(dt);
         self.winding_c += (self.cfg.ambient_c + rise - self.winding_c) * dt / ttau;
@@ -214,6 +241,7 @@ impl Plant {
             angle: self.angle,
             dc_voltage,
             dc_current,
+            winding_c: self.winding_c,
         }
     }
 }
@@ -249,6 +277,8 @@ pub struct SimImSensors {
     channels: Vec<ChannelInfo>,
     /// The channels of the DC source's voltage and current, when fitted.
     dc_channels: Option<(usize, usize)>,
+    /// The winding thermometer's channel, when fitted.
+    temperature_channel: Option<usize>,
     rng: StdRng,
     noise: Option<Normal<f64>>,
     counts_per_rad: f64,
@@ -307,11 +337,16 @@ pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors)
         channels.push(info("dc_current", "A"));
         (channels.len() - 2, channels.len() - 1)
     });
+    let temperature_channel = cfg.winding_sensor.then(|| {
+        channels.push(info("winding_temperature", "degC"));
+        channels.len() - 1
+    });
     let counts_per_rad = 4.0 * f64::from(cfg.encoder_lines) / std::f64::consts::TAU;
     let rng = StdRng::seed_from_u64(cfg.seed);
     let plant = Arc::new(Mutex::new(Plant {
         dt: 1.0 / cfg.sample_rate_hz,
         winding_c: cfg.ambient_c,
+        frequency: cfg.supply.frequency,
         cfg,
         vfd_setpoint: 0.0,
         vfd_output: 0.0,
@@ -320,6 +355,7 @@ pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors)
         dyno_enabled: false,
         dc_setpoint: 0.0,
         dc_enabled: false,
+        dc_compliance: f64::INFINITY,
         speed: 0.0,
         angle: 0.0,
         step: 0,
@@ -335,6 +371,7 @@ pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors)
             plant,
             channels,
             dc_channels,
+            temperature_channel,
             rng,
             noise,
             counts_per_rad,
@@ -348,6 +385,16 @@ impl SimImSensors {
     /// Winding temperature now, °C (the simulator's truth, for tests).
     pub fn winding_temperature(&self) -> f64 {
         lock(&self.plant).winding_c
+    }
+
+    /// The channels of the DC source's voltage and current, when fitted.
+    pub fn dc_channels(&self) -> Option<(usize, usize)> {
+        self.dc_channels
+    }
+
+    /// The winding thermometer's channel, when fitted.
+    pub fn temperature_channel(&self) -> Option<usize> {
+        self.temperature_channel
     }
 
     /// Pace the stream at the wall clock: each batch is delivered when the
@@ -405,6 +452,19 @@ impl SimImSensors {
                 value: read(snap.dc_current),
             });
         }
+        if let Some(ch) = self.temperature_channel {
+            let noise = match self.noise {
+                Some(_) => {
+                    let z: f64 = StandardNormal.sample(&mut self.rng);
+                    WINDING_SENSOR_SIGMA_K * z
+                }
+                None => 0.0,
+            };
+            samples.push(Sample {
+                channel: ch,
+                value: snap.winding_c + noise,
+            });
+        }
         SampleBatch { t_ns, samples }
     }
 }
@@ -415,6 +475,11 @@ impl SimVfd {
         lock(&self.plant).vfd_enabled
     }
 
+    /// The supply's output frequency, Hz.
+    pub fn frequency(&self) -> f64 {
+        lock(&self.plant).frequency
+    }
+
     /// The rig's DC source, when the configuration fits one.
     pub fn dc_source(&self) -> Option<SimDcSource> {
         lock(&self.plant)
@@ -423,6 +488,21 @@ impl SimVfd {
             .map(|_| SimDcSource {
                 plant: self.plant.clone(),
             })
+    }
+}
+
+impl SimDcSource {
+    /// Set the compliance voltage, V: the source drives its set current
+    /// unless the winding would need more than this.
+    pub fn set_compliance_voltage(&mut self, volts: f64) -> Result<(), DriverError> {
+        if !(volts.is_finite() && volts >= 0.0) {
+            return Err(DriverError::Device {
+                device: DC_SOURCE_ID.into(),
+                reason: format!("compliance voltage {volts} V must be ≥ 0"),
+            });
+        }
+        lock(&self.plant).dc_compliance = volts;
+        Ok(())
     }
 }
 
@@ -477,6 +557,21 @@ impl PowerStage for SimVfd {
         let mut p = lock(&self.plant);
         p.vfd_setpoint = 0.0;
         p.vfd_enabled = false;
+        Ok(())
+    }
+
+    /// The output frequency, in (0, rated] Hz (the simulated machine runs
+    /// at its rated frequency or below, its reactances in proportion).
+    async fn set_frequency(&mut self, hz: f64) -> Result<(), DriverError> {
+        let mut p = lock(&self.plant);
+        let rated = p.cfg.supply.frequency;
+        if !(hz.is_finite() && hz > 0.0 && hz <= rated * 1.0001) {
+            return Err(DriverError::Device {
+                device: VFD_ID.into(),
+                reason: format!("frequency {hz} Hz outside (0, {rated}] Hz"),
+            });
+        }
+        p.frequency = hz.min(rated);
         Ok(())
     }
 }
@@ -680,6 +775,75 @@ mod tests {
         assert!((speeds[0] - ws).abs() < 1e-9, "{speeds:?}");
         let slip = 1.0 - speeds[1] / ws;
         assert!(slip > 1e-4 && slip < 0.02, "{slip}");
+    }
+
+    #[tokio::test]
+    async fn a_reduced_frequency_scales_the_reactances_and_the_thermometer_reads_the_winding() {
+        let mut cfg = rig();
+        cfg.noise_relative = 0.0;
+        cfg.thermal_resistance_k_per_w = 0.0;
+        cfg.ambient_c = 31.5;
+        cfg.winding_sensor = true;
+        let (mut vfd, mut dyno, mut sensors) = sim_im_rig(cfg.clone()).unwrap();
+        let t = sensors.temperature_channel().unwrap();
+        assert_eq!(sensors.channels()[t].quantity, "winding_temperature");
+        for bad in [0.0, 50.1, f64::NAN] {
+            assert!(vfd.set_frequency(bad).await.is_err(), "{bad} Hz");
+        }
+        dyno.set_setpoint(0.0).await.unwrap();
+        dyno.set_output_enabled(true).await.unwrap();
+        vfd.set_frequency(12.5).await.unwrap();
+        assert_eq!(vfd.frequency(), 12.5);
+        vfd.set_setpoint(40.0).await.unwrap();
+        vfd.set_output_enabled(true).await.unwrap();
+        let mut last = None;
+        for _ in 0..200 {
+            last = Some(sensors.next_batch().await.unwrap());
+        }
+        let b = last.unwrap();
+        let mut c = at_frequency(&cfg.circuit, 0.25);
+        c.rs *= 1.0 + COPPER_ALPHA * (31.5 - 20.0);
+        let supply = ImSupply {
+            line_voltage: 40.0,
+            frequency: 12.5,
+            ..cfg.supply
+        };
+        let want = c.operating_point(&supply, 1.0).line_current;
+        let got = b.value(channel::LINE_CURRENT).unwrap();
+        assert!((got / want - 1.0).abs() < 1e-9, "{got} A against {want} A");
+        // Far from the rated-frequency current at that voltage.
+        let mut rated = cfg.circuit;
+        rated.rs = c.rs;
+        let at_50 = rated
+            .operating_point(
+                &ImSupply {
+                    line_voltage: 40.0,
+                    ..cfg.supply
+                },
+                1.0,
+            )
+            .line_current;
+        assert!(got > 1.5 * at_50, "{got} A, {at_50} A at 50 Hz");
+        assert_eq!(b.value(t), Some(31.5));
+    }
+
+    #[tokio::test]
+    async fn the_dc_source_stops_at_its_compliance_voltage() {
+        let mut cfg = rig();
+        cfg.noise_relative = 0.0;
+        cfg.thermal_resistance_k_per_w = 0.0;
+        cfg.dc_source_max_current = Some(5.0);
+        let (vfd, _, mut sensors) = sim_im_rig(cfg).unwrap();
+        let mut dc = vfd.dc_source().unwrap();
+        let (v, i) = sensors.dc_channels().unwrap();
+        assert!(dc.set_compliance_voltage(-1.0).is_err());
+        dc.set_compliance_voltage(2.0).unwrap();
+        dc.set_setpoint(4.0).await.unwrap();
+        dc.set_output_enabled(true).await.unwrap();
+        let b = sensors.next_batch().await.unwrap();
+        // 2 V across 2·Rs: less than the 4 A set.
+        assert_eq!(b.value(v), Some(2.0));
+        assert!((b.value(i).unwrap() - 2.0 / (2.0 * 0.8659)).abs() < 1e-12);
     }
 
     #[test]

@@ -5,14 +5,23 @@
 //!   point is the output line voltage (V), written to the drive's voltage
 //!   register (on an Optidrive E3, the motor rated voltage P-07, which sets
 //!   the V/f characteristic's voltage at base frequency); enabling writes
-//!   the supply frequency and then the run command; the safe state is the
+//!   the supply frequency and then the run command; the frequency may be
+//!   commanded below the rated one ([`PowerStage::set_frequency`], for a
+//!   locked-rotor test at reduced frequency); the safe state is the
 //!   drive's own (stop, frequency zero): supply output off.
 //! - [`VfdDyno`]: the VFD driving the load machine. The sweep's set point is
 //!   the shaft speed (rad/s), sent as the frequency `ω·p/2π` for a load
 //!   machine of `p` pole pairs; the safe state stops the drive (its ramp
-//!   brings the shaft to rest).
+//!   brings the shaft to rest). Output off is that stop too, or, where
+//!   the drive's coast-stop command is given ([`VfdDyno::with_coast`]), a
+//!   coast stop: the shaft turns freely (the no-load test).
 //!
-//! Both wrap a [`ModbusPowerStage`] over the profile's `[power_stage]`
+//! - [`DcCurrentSource`]: the DC supply of the winding-resistance test, in
+//!   constant current: the set point (A) is written to its current limit,
+//!   its voltage set point is the compliance voltage; the safe state is
+//!   the supply's own (output off, set point zero).
+//!
+//! Each wraps a [`ModbusPowerStage`] over the profile's `[power_stage]`
 //! section, so heartbeat, retries and refusals behave as for the DC rig.
 
 use async_trait::async_trait;
@@ -27,6 +36,7 @@ pub struct VfdSupply {
     unit: u8,
     voltage: Register,
     frequency_hz: f64,
+    rated_hz: f64,
     max_voltage: f64,
 }
 
@@ -48,6 +58,7 @@ impl VfdSupply {
             unit,
             voltage,
             frequency_hz,
+            rated_hz: frequency_hz,
             max_voltage,
         }
     }
@@ -91,6 +102,83 @@ impl PowerStage for VfdSupply {
     async fn safe_state(&mut self) -> Result<(), DriverError> {
         self.drive.safe_state().await
     }
+
+    async fn set_frequency(&mut self, hz: f64) -> Result<(), DriverError> {
+        if !(hz.is_finite() && hz > 0.0 && hz <= self.rated_hz) {
+            return Err(DriverError::Device {
+                device: self.id().to_string(),
+                reason: format!("frequency {hz} Hz outside (0, {}] Hz", self.rated_hz),
+            });
+        }
+        self.drive.set_setpoint(hz).await?;
+        self.frequency_hz = hz;
+        Ok(())
+    }
+}
+
+/// The DC source of the winding-resistance test; see the module docs.
+#[derive(Debug)]
+pub struct DcCurrentSource {
+    drive: ModbusPowerStage,
+    compliance_voltage: f64,
+    max_current: f64,
+}
+
+impl DcCurrentSource {
+    /// The DC supply `drive` (its profile with a current limit) driving
+    /// currents up to `max_current` A with `compliance_voltage` V as its
+    /// voltage set point.
+    pub fn new(
+        drive: ModbusPowerStage,
+        compliance_voltage: f64,
+        max_current: f64,
+    ) -> DcCurrentSource {
+        DcCurrentSource {
+            drive,
+            compliance_voltage,
+            max_current,
+        }
+    }
+}
+
+#[async_trait]
+impl PowerStage for DcCurrentSource {
+    fn id(&self) -> &str {
+        self.drive.id()
+    }
+
+    fn capabilities(&self) -> StageCapabilities {
+        StageCapabilities {
+            current_limit: true,
+            max_setpoint: self.max_current,
+        }
+    }
+
+    async fn set_setpoint(&mut self, amperes: f64) -> Result<(), DriverError> {
+        if !(amperes.is_finite() && (0.0..=self.max_current).contains(&amperes)) {
+            return Err(DriverError::Device {
+                device: self.id().to_string(),
+                reason: format!(
+                    "DC current set point {amperes} A outside [0, {}] A",
+                    self.max_current
+                ),
+            });
+        }
+        self.drive.set_current_limit(amperes).await?;
+        self.drive.set_setpoint(self.compliance_voltage).await
+    }
+
+    async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
+        self.drive.set_output_enabled(enabled).await
+    }
+
+    async fn safe_state(&mut self) -> Result<(), DriverError> {
+        self.drive.safe_state().await
+    }
+
+    async fn set_current_limit(&mut self, amperes: f64) -> Result<(), DriverError> {
+        self.set_setpoint(amperes).await
+    }
 }
 
 /// The dynamometer VFD; see the module docs.
@@ -98,6 +186,8 @@ impl PowerStage for VfdSupply {
 pub struct VfdDyno {
     drive: ModbusPowerStage,
     hz_per_rad_s: f64,
+    /// Where and what to write to coast the drive.
+    coast: Option<(BusHandle, u8, Register, u16)>,
 }
 
 impl VfdDyno {
@@ -106,7 +196,21 @@ impl VfdDyno {
         VfdDyno {
             drive,
             hz_per_rad_s: f64::from(pole_pairs.max(1)) / std::f64::consts::TAU,
+            coast: None,
         }
+    }
+
+    /// Output off coasts the drive: `value` written to `control` (unit
+    /// `unit` on `bus`) lets the shaft turn freely.
+    pub fn with_coast(
+        mut self,
+        bus: BusHandle,
+        unit: u8,
+        control: Register,
+        value: u16,
+    ) -> VfdDyno {
+        self.coast = Some((bus, unit, control, value));
+        self
     }
 }
 
@@ -129,7 +233,13 @@ impl PowerStage for VfdDyno {
     }
 
     async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
-        self.drive.set_output_enabled(enabled).await
+        match &self.coast {
+            Some((bus, unit, control, value)) if !enabled => {
+                bus.write_words(*unit, control, vec![*value], Priority::Urgent)
+                    .await
+            }
+            _ => self.drive.set_output_enabled(enabled).await,
+        }
     }
 
     async fn safe_state(&mut self) -> Result<(), DriverError> {

@@ -1,11 +1,13 @@
 //! The `[test.dc_resistance]`, `[test.no_load]` and `[test.locked_rotor]`
-//! tables of an `im_standard_tests` configuration, validated into a
+//! tables (the last with the optional locked-rotor test at reduced
+//! frequency: `reduced_frequency_Hz`, `reduced_voltages_V`) of an
+//! `im_standard_tests` configuration, validated into a
 //! [`StandardTestsPlan`]: every key optional, its default from the
 //! nameplate ([`StandardTestsPlan::from_nameplate`]); errors name the key.
 
 use serde::Deserialize;
 
-use super::StandardTestsPlan;
+use super::{ReducedFrequencyTest, StandardTestsPlan};
 use crate::bounds;
 
 /// `[test.dc_resistance]`.
@@ -36,6 +38,12 @@ pub(super) struct RawLockedRotor {
     /// Stop stepping up once the line current passes this, A.
     #[serde(rename = "max_current_A")]
     max_current: Option<f64>,
+    /// A second locked-rotor test at this supply frequency, Hz.
+    #[serde(rename = "reduced_frequency_Hz")]
+    reduced_frequency: Option<f64>,
+    /// Its line voltages, V, run from the lowest up.
+    #[serde(rename = "reduced_voltages_V")]
+    reduced_voltages: Option<Vec<f64>>,
 }
 
 /// The standard tests' tables as given (each may be left out).
@@ -58,13 +66,14 @@ impl RawStandardTests<'_> {
         .find_map(|(given, key)| given.then_some(key))
     }
 
-    /// The plan for a machine rated `line_voltage` and `line_current`,
-    /// the supply's voltages up to `max_voltage`, currents up to
-    /// `max_current` (the test's limit); `Err((key, why))`.
+    /// The plan for a machine rated `line_voltage`, `line_current` and
+    /// `frequency`, the supply's voltages up to `max_voltage`, currents up
+    /// to `max_current` (the test's limit); `Err((key, why))`.
     pub fn validate(
         &self,
         line_voltage: f64,
         line_current: f64,
+        frequency: f64,
         max_voltage: f64,
         max_current: f64,
     ) -> Result<StandardTestsPlan, (String, String)> {
@@ -109,6 +118,34 @@ impl RawStandardTests<'_> {
             }
             plan.locked_rotor_max_current = a;
         }
+        let reduced_voltages = self.locked_rotor.and_then(|t| t.reduced_voltages.as_ref());
+        match self.locked_rotor.and_then(|t| t.reduced_frequency) {
+            Some(f) => {
+                if !(f.is_finite() && f > 0.0 && f < frequency) {
+                    return Err((
+                        "test.locked_rotor.reduced_frequency_Hz".into(),
+                        format!(
+                            "{f} must be in (0, {frequency}) Hz, below the rated frequency \
+                             (IEEE 112: at most 25 %, {} Hz)",
+                            0.25 * frequency
+                        ),
+                    ));
+                }
+                let mut test = ReducedFrequencyTest::from_nameplate(line_voltage, f);
+                let key = "test.locked_rotor.reduced_voltages_V";
+                if let Some(v) = list(key, reduced_voltages, max_voltage, "V")? {
+                    test.voltages = v;
+                }
+                plan.reduced_frequency = Some(test);
+            }
+            None if reduced_voltages.is_some() => {
+                return Err((
+                    "test.locked_rotor.reduced_voltages_V".into(),
+                    "is for a test at reduced frequency: give reduced_frequency_Hz".into(),
+                ))
+            }
+            None => {}
+        }
         if plan
             .no_load_voltages
             .iter()
@@ -132,7 +169,7 @@ mod tests {
     fn left_out_keys_take_the_nameplate_defaults_and_bad_ones_are_named() {
         let none = RawStandardTests::default();
         assert_eq!(none.first_given(), None);
-        let plan = none.validate(400.0, 8.0, 440.0, 70.0).unwrap();
+        let plan = none.validate(400.0, 8.0, 50.0, 440.0, 70.0).unwrap();
         assert_eq!(plan, StandardTestsPlan::from_nameplate(400.0, 8.0));
 
         let dc = RawDcResistance {
@@ -143,22 +180,64 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(given.first_given(), Some("test.dc_resistance"));
-        let (key, why) = given.validate(400.0, 8.0, 440.0, 70.0).unwrap_err();
+        let (key, why) = given.validate(400.0, 8.0, 50.0, 440.0, 70.0).unwrap_err();
         assert_eq!(key, "test.dc_resistance.currents_A");
         assert!(why.contains("8.0"), "{why}");
 
         let lr = RawLockedRotor {
             voltages: Some(vec![20.0, 40.0]),
             max_current: Some(80.0),
+            ..Default::default()
         };
         let given = RawStandardTests {
             locked_rotor: Some(&lr),
             ..Default::default()
         };
-        let (key, _) = given.validate(400.0, 8.0, 440.0, 70.0).unwrap_err();
+        let (key, _) = given.validate(400.0, 8.0, 50.0, 440.0, 70.0).unwrap_err();
         assert_eq!(key, "test.locked_rotor.max_current_A");
+        // The reduced-frequency test: its default voltages from the
+        // nameplate, a frequency at or above rated refused, voltages
+        // without a frequency refused.
+        let lr = RawLockedRotor {
+            reduced_frequency: Some(12.5),
+            ..Default::default()
+        };
+        let given = RawStandardTests {
+            locked_rotor: Some(&lr),
+            ..Default::default()
+        };
+        let plan = given.validate(400.0, 8.0, 50.0, 440.0, 70.0).unwrap();
+        assert_eq!(
+            plan.reduced_frequency,
+            Some(ReducedFrequencyTest::from_nameplate(400.0, 12.5))
+        );
+        for (f, voltages, key) in [
+            (Some(50.0), None, "test.locked_rotor.reduced_frequency_Hz"),
+            (
+                None,
+                Some(vec![10.0]),
+                "test.locked_rotor.reduced_voltages_V",
+            ),
+            (
+                Some(12.5),
+                Some(vec![]),
+                "test.locked_rotor.reduced_voltages_V",
+            ),
+        ] {
+            let lr = RawLockedRotor {
+                reduced_frequency: f,
+                reduced_voltages: voltages,
+                ..Default::default()
+            };
+            let given = RawStandardTests {
+                locked_rotor: Some(&lr),
+                ..Default::default()
+            };
+            let (k, _) = given.validate(400.0, 8.0, 50.0, 440.0, 70.0).unwrap_err();
+            assert_eq!(k, key);
+        }
         // A supply below the default no-load voltages.
-        let (key, _) = none.validate(400.0, 8.0, 400.0, 70.0).unwrap_err();
+        let (key, _) = none.validate(400.0, 8.0, 50.0, 400.0, 70.0).unwrap_err();
         assert_eq!(key, "test.no_load.voltages_V");
     }
 }

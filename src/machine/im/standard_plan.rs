@@ -13,14 +13,25 @@
 //! 3. `im_locked_rotor`: the dynamometer holds the shaft at rest and the
 //!    supply steps up through reduced voltages until the current passes
 //!    the test's ceiling (about rated current);
-//! 4. the load test: the slip sweep ([`super::ImSweepPlan`]), its segments
-//!    after these three.
+//! 4. when the plan asks for it ([`ReducedFrequencyTest`]), a second
+//!    `im_locked_rotor` segment at a reduced supply frequency (IEEE 112:
+//!    at most 25 % of rated, nearer the rotor's running slip frequency),
+//!    the supply commanded there
+//!    ([`motorbench_drivers::PowerStage::set_frequency`]; a supply
+//!    without that command ends the test saying so) and back to rated
+//!    frequency after;
+//! 5. the load test: the slip sweep ([`super::ImSweepPlan`]), its segments
+//!    after these.
+//!
+//! Where the rig reads the winding temperature, each reading carries its
+//! mean over the reading's averaging window.
 //!
 //! Every reading goes to `/bench/standard_test` (a
 //! [`StandardTestReading`]), so a replay reduces the same readings the
 //! run did. The defaults come from the nameplate
 //! ([`StandardTestsPlan::from_nameplate`]).
 
+use super::sweep::mean_of;
 use super::sweep::Sweep;
 use crate::bench::sequencer::Halt;
 use crate::bench::SettleDetector;
@@ -41,6 +52,35 @@ pub struct StandardTestsPlan {
     /// The locked-rotor test stops stepping up once the line current
     /// passes this, A.
     pub locked_rotor_max_current: f64,
+    /// A second locked-rotor test at a reduced frequency, when asked for.
+    pub reduced_frequency: Option<ReducedFrequencyTest>,
+}
+
+/// A locked-rotor test at a reduced supply frequency.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReducedFrequencyTest {
+    /// The supply frequency, Hz.
+    pub frequency: f64,
+    /// Line voltages, V, in the order run (lowest first); it stops
+    /// stepping up as the rated-frequency test does.
+    pub voltages: Vec<f64>,
+}
+
+impl ReducedFrequencyTest {
+    /// The default for a machine rated `line_voltage`: from 2 % of rated
+    /// voltage up in steps of 1.5 % to 14 % (the leakage reactance falls
+    /// with the frequency: a machine of 5 to 8 × rated locked-rotor current
+    /// at rated frequency reaches rated current at 25 % frequency near 5
+    /// to 12 % voltage).
+    pub fn from_nameplate(line_voltage: f64, frequency: f64) -> ReducedFrequencyTest {
+        ReducedFrequencyTest {
+            frequency,
+            voltages: [0.02, 0.035, 0.05, 0.065, 0.08, 0.095, 0.11, 0.125, 0.14]
+                .iter()
+                .map(|s| s * line_voltage)
+                .collect(),
+        }
+    }
 }
 
 /// Segment index of the DC-resistance test; the no-load and the
@@ -50,7 +90,10 @@ pub const DC_RESISTANCE_SEGMENT: usize = 0;
 pub const NO_LOAD_SEGMENT: usize = 1;
 /// Segment index of the locked-rotor test.
 pub const LOCKED_ROTOR_SEGMENT: usize = 2;
-/// Segments before the load test's.
+/// Segment index of the locked-rotor test at reduced frequency, when run.
+pub const REDUCED_FREQUENCY_SEGMENT: usize = 3;
+/// Segments before the load test's without the reduced-frequency test
+/// ([`StandardTestsPlan::segments`] counts a plan's).
 pub const STANDARD_SEGMENTS: usize = 3;
 
 impl StandardTestsPlan {
@@ -75,17 +118,29 @@ impl StandardTestsPlan {
                 &[0.05, 0.08, 0.11, 0.14, 0.17, 0.2, 0.23, 0.26],
             ),
             locked_rotor_max_current: 1.25 * line_current,
+            reduced_frequency: None,
         }
     }
 
-    /// The number of readings the tests take at most (for the plan's
-    /// duration): DC, no load (and its run-up), locked rotor.
-    pub fn points(&self) -> [usize; 3] {
-        [
+    /// Segments before the load test's: 3, or 4 with the locked-rotor test
+    /// at reduced frequency.
+    pub fn segments(&self) -> usize {
+        STANDARD_SEGMENTS + usize::from(self.reduced_frequency.is_some())
+    }
+
+    /// The number of readings each test takes at most (for the plan's
+    /// duration), in segment order: DC, no load (and its run-up), locked
+    /// rotor, and the reduced-frequency locked rotor when run.
+    pub fn points(&self) -> Vec<usize> {
+        let mut points = vec![
             self.dc_currents.len(),
             self.no_load_voltages.len() + 1,
             self.locked_rotor_voltages.len(),
-        ]
+        ];
+        if let Some(r) = &self.reduced_frequency {
+            points.push(r.voltages.len());
+        }
+        points
     }
 
     /// The plan for a person, one line.
@@ -95,8 +150,17 @@ impl StandardTestsPlan {
             let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
             format!("{lo:.1}…{hi:.1}")
         };
+        let reduced = match &self.reduced_frequency {
+            Some(r) => format!(
+                "; im_locked_rotor at {} Hz up to {} voltages {} V",
+                r.frequency,
+                r.voltages.len(),
+                range(&r.voltages)
+            ),
+            None => String::new(),
+        };
         format!(
-            "im_dc_resistance {} currents {} A; im_no_load {} voltages {} V; im_locked_rotor up to {} voltages {} V (to {:.1} A)",
+            "im_dc_resistance {} currents {} A; im_no_load {} voltages {} V; im_locked_rotor up to {} voltages {} V (to {:.1} A){reduced}",
             self.dc_currents.len(),
             range(&self.dc_currents),
             self.no_load_voltages.len(),
@@ -111,12 +175,54 @@ impl StandardTestsPlan {
 impl Sweep<'_> {
     /// The standard tests, then the slip sweep.
     pub(super) async fn run_standard(&mut self, tests: &StandardTestsPlan) -> Result<(), Halt> {
-        let total = STANDARD_SEGMENTS + self.plan.voltages.len();
+        let total = tests.segments() + self.plan.voltages.len();
         self.dc_resistance(tests, total).await?;
         self.no_load(tests, total).await?;
-        self.locked_rotor(tests, total).await?;
-        self.first_segment = STANDARD_SEGMENTS;
+        let rated = self.plan.frequency;
+        let at_rated = LockedRotor {
+            index: LOCKED_ROTOR_SEGMENT,
+            frequency: rated,
+            voltages: &tests.locked_rotor_voltages,
+        };
+        self.locked_rotor(tests, total, at_rated).await?;
+        if let Some(r) = &tests.reduced_frequency {
+            self.supply_frequency(r.frequency).await?;
+            let reduced = LockedRotor {
+                index: REDUCED_FREQUENCY_SEGMENT,
+                frequency: r.frequency,
+                voltages: &r.voltages,
+            };
+            self.locked_rotor(tests, total, reduced).await?;
+            self.supply_frequency(rated).await?;
+        }
+        self.first_segment = tests.segments();
         self.run().await
+    }
+
+    /// Command the supply's frequency once its output is off (the line
+    /// voltage below 1 % of the plan's highest: a frequency step on a live
+    /// winding at its voltage drives a current the test did not ask for),
+    /// and record it; a supply without that command ends the test saying
+    /// so.
+    async fn supply_frequency(&mut self, hz: f64) -> Result<(), Halt> {
+        let off = 0.01 * self.plan.voltages.iter().copied().fold(0.0, f64::max);
+        let start = self.t_ns();
+        while self.read().await?.voltage.abs() > off {
+            if (self.t_ns() - start) as f64 * 1e-9 > self.plan.max_point_s {
+                return Err(Halt::Fault(format!(
+                    "the supply's output did not come off within {} s: its frequency is not \
+                     changed on a live winding",
+                    self.plan.max_point_s
+                )));
+            }
+        }
+        if let Err(e) = self.vfd.set_frequency(hz).await {
+            return Err(Halt::Fault(format!(
+                "the locked-rotor test at reduced frequency needs the supply at {hz} Hz: {e}"
+            )));
+        }
+        self.seq.command(self.ix.frequency_rec, hz).await?;
+        Ok(())
     }
 
     /// Start segment `index` of `kind`.
@@ -255,36 +361,40 @@ impl Sweep<'_> {
                 return Ok(None);
             }
         }
-        let (mut v, mut i) = (0.0, 0.0);
+        let (mut v, mut i, mut temperatures) = (0.0, 0.0, Vec::new());
         for _ in 0..plan.average_samples {
             let r = self.read_on(current).await?;
             v += r.dc_voltage;
             i += r.dc_current;
+            temperatures.push(r.winding_temperature);
         }
         let n = plan.average_samples as f64;
         Ok(Some(DcResistanceReading {
             segment,
             dc_voltage: v / n,
             dc_current: i / n,
-            winding_temperature: None,
+            winding_temperature: mean_of(temperatures.into_iter()),
         }))
     }
 
-    /// A steady reading on the supply, for a no-load or locked-rotor test.
+    /// A steady reading on the supply at `frequency`, for a no-load or
+    /// locked-rotor test.
     async fn supply_reading(
         &mut self,
         segment: u32,
+        frequency: f64,
         what: &str,
     ) -> Result<Option<(SupplyReading, bool)>, Halt> {
-        let frequency = self.plan.frequency;
-        Ok(self.steady(segment, what).await?.map(|(p, hot)| {
+        let steady = self.steady(segment, what).await?;
+        let winding_temperature = self.window_temperature;
+        Ok(steady.map(|(p, hot)| {
             let reading = SupplyReading {
                 segment,
                 line_voltage: p.line_voltage,
                 line_current: p.line_current,
                 input_power: p.input_power,
                 frequency,
-                winding_temperature: None,
+                winding_temperature,
             };
             (reading, hot)
         }))
@@ -336,7 +446,8 @@ impl Sweep<'_> {
         for &volts in &tests.no_load_voltages {
             self.supply(Some(volts)).await?;
             let what = format!("no load at {volts:.1} V");
-            if let Some((r, _)) = self.supply_reading(index as u32, &what).await? {
+            let frequency = self.plan.frequency;
+            if let Some((r, _)) = self.supply_reading(index as u32, frequency, &what).await? {
                 self.reading(StandardTestReading::ImNoLoad(r)).await?;
             }
         }
@@ -345,19 +456,29 @@ impl Sweep<'_> {
     }
 
     /// `im_locked_rotor`: the shaft held at rest, the supply stepped up
-    /// until the current passes the test's ceiling.
-    async fn locked_rotor(&mut self, tests: &StandardTestsPlan, total: usize) -> Result<(), Halt> {
-        let (index, kind) = (LOCKED_ROTOR_SEGMENT, SegmentKind::ImLockedRotor);
+    /// through `test`'s voltages at its frequency until the current passes
+    /// the test's ceiling.
+    async fn locked_rotor(
+        &mut self,
+        tests: &StandardTestsPlan,
+        total: usize,
+        test: LockedRotor<'_>,
+    ) -> Result<(), Halt> {
+        let (index, kind) = (test.index, SegmentKind::ImLockedRotor);
         let label = format!(
-            "locked rotor, up to {} voltages",
-            tests.locked_rotor_voltages.len()
+            "locked rotor at {} Hz, up to {} voltages",
+            test.frequency,
+            test.voltages.len()
         );
         self.begin(index, total, kind, &label).await?;
         self.hold_shaft(0.0).await?;
-        for &volts in &tests.locked_rotor_voltages {
+        for &volts in test.voltages {
             self.supply(Some(volts)).await?;
-            let what = format!("locked rotor at {volts:.1} V");
-            let Some((r, hot)) = self.supply_reading(index as u32, &what).await? else {
+            let what = format!("locked rotor at {volts:.1} V, {} Hz", test.frequency);
+            let reading = self
+                .supply_reading(index as u32, test.frequency, &what)
+                .await?;
+            let Some((r, hot)) = reading else {
                 continue;
             };
             self.reading(StandardTestReading::ImLockedRotor(r)).await?;
@@ -379,6 +500,13 @@ impl Sweep<'_> {
     }
 }
 
+/// One locked-rotor segment: its index, frequency and voltages.
+struct LockedRotor<'a> {
+    index: usize,
+    frequency: f64,
+    voltages: &'a [f64],
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -396,6 +524,20 @@ mod tests {
         assert!(p.locked_rotor_voltages.windows(2).all(|w| w[0] < w[1]));
         assert_eq!(p.locked_rotor_max_current, 10.0);
         assert_eq!(p.points(), [3, 11, 8]);
+        assert_eq!(p.segments(), 3);
+        let reduced = StandardTestsPlan {
+            reduced_frequency: Some(ReducedFrequencyTest::from_nameplate(400.0, 12.5)),
+            ..p.clone()
+        };
+        assert_eq!(reduced.points(), [3, 11, 8, 9]);
+        assert_eq!(reduced.segments(), 4);
+        assert!(
+            reduced
+                .summary()
+                .contains("im_locked_rotor at 12.5 Hz up to 9 voltages 8.0…56.0 V"),
+            "{}",
+            reduced.summary()
+        );
         assert!(
             p.summary().contains("im_no_load 10 voltages 120.0…420.0 V"),
             "{}",

@@ -181,6 +181,14 @@ fn angle_slope(time: &[f64], speed: &[f64], rad_per_count: f64) -> f64 {
     fit(&|k| residual(k).abs() <= bound).0
 }
 
+/// The mean of the values present, `None` when none is.
+pub(super) fn mean_of(values: impl Iterator<Item = Option<f64>>) -> Option<f64> {
+    let (sum, n) = values
+        .flatten()
+        .fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+    (n > 0).then(|| sum / n as f64)
+}
+
 /// Channels recorded for a sweep: every sensor channel, then the speed
 /// derived from the encoder, then the supply-voltage and dynamometer-speed
 /// commands.
@@ -204,6 +212,8 @@ pub(super) struct Reading {
     /// The DC source's voltage and current, where the rig has one.
     pub dc_voltage: f64,
     pub dc_current: f64,
+    /// The winding thermometer's reading, °C, where the rig has one.
+    pub winding_temperature: Option<f64>,
 }
 
 /// Where the plan's quantities are: sensor channels, then record channels.
@@ -214,10 +224,15 @@ pub(super) struct Indices {
     pub torque: Option<usize>,
     /// The DC source's voltage and current sensor channels, where fitted.
     pub dc: Option<(usize, usize)>,
+    /// The winding thermometer's sensor channel, where fitted.
+    pub temperature: Option<usize>,
     pub vfd_rec: usize,
     pub dyno_rec: usize,
     /// The DC source's command record channel.
     pub dc_rec: usize,
+    /// The supply-frequency command's record channel (a plan with a
+    /// reduced-frequency locked-rotor test).
+    pub frequency_rec: usize,
 }
 
 impl From<DriverError> for Halt {
@@ -243,6 +258,9 @@ pub(super) struct Sweep<'a> {
     speeds: Vec<(u64, f64)>,
     /// The index of the first slip-sweep segment.
     pub first_segment: usize,
+    /// The mean winding temperature over the last steady point's
+    /// averaging window, °C, where the rig reads one.
+    pub window_temperature: Option<f64>,
 }
 
 impl Sweep<'_> {
@@ -282,6 +300,9 @@ impl Sweep<'_> {
             if let Some((v, i)) = self.ix.dc {
                 h.dc_voltage = get(v).unwrap_or(h.dc_voltage);
                 h.dc_current = get(i).unwrap_or(h.dc_current);
+            }
+            if let Some(t) = self.ix.temperature.and_then(get) {
+                h.winding_temperature = Some(t);
             }
             if let Some(current) = get(self.ix.current) {
                 h.current = current;
@@ -383,6 +404,7 @@ impl Sweep<'_> {
         };
         let n = window.len() as f64;
         let mean = |f: &dyn Fn(&Reading) -> f64| window.iter().map(f).sum::<f64>() / n;
+        self.window_temperature = mean_of(window.iter().map(|r| r.winding_temperature));
         // The speed over the window: the slope of the angle the encoder
         // readings add up to against time (least squares, then again
         // without the readings whose timestamps a stall threw off).
@@ -545,9 +567,13 @@ pub(super) async fn run_im_plan(
                 (Some(_), None) => return Err(BenchError::MissingChannel("dc_source")),
                 (None, _) => None,
             },
+            temperature: channels
+                .iter()
+                .position(|c| c.quantity == "winding_temperature"),
             vfd_rec: n + 1,
             dyno_rec: n + 2,
             dc_rec: n + 3,
+            frequency_rec: n + 4,
         };
         let speed = SpeedChannel {
             encoder: find("encoder_count")?,
@@ -597,8 +623,10 @@ pub(super) async fn run_im_plan(
             torque: None,
             dc_voltage: f64::NAN,
             dc_current: f64::NAN,
+            winding_temperature: None,
         },
         first_segment: 0,
+        window_temperature: None,
     };
     let result = match standard {
         Some(tests) => sweep.run_standard(tests).await,

@@ -116,6 +116,8 @@ pub fn render_im_text(id: &ImIdentification) -> String {
         let _ = writeln!(out, "\n{key}{best}");
         match &method.params {
             Some(params) if method.applies => {
+                // The names' column as wide as the longest.
+                let width = params.keys().map(|k| k.chars().count()).fold(4, usize::max);
                 for (name, p) in params {
                     let ci = p.ci95.map_or("no interval".to_string(), |[lo, hi]| {
                         format!("95 % [{lo:.4}, {hi:.4}]")
@@ -139,7 +141,7 @@ pub fn render_im_text(id: &ImIdentification) -> String {
                     };
                     let _ = writeln!(
                         out,
-                        "  {name:<4} {:>12.5} {unit:<3} {per_unit} {ci}{source}",
+                        "  {name:<width$} {:>12.5} {unit:<3} {per_unit} {ci}{source}",
                         p.value
                     );
                 }

@@ -24,7 +24,7 @@ pub(super) struct DcResistance {
 
 /// Copper's resistance at `to` °C over its resistance at `from` °C
 /// (α = [`COPPER_ALPHA`] at 20 °C); 1 when either is unknown.
-pub(super) fn temperature_factor(from: Option<f64>, to: Option<f64>) -> f64 {
+pub(crate) fn temperature_factor(from: Option<f64>, to: Option<f64>) -> f64 {
     match (from, to) {
         (Some(a), Some(b)) => (1.0 + COPPER_ALPHA * (b - 20.0)) / (1.0 + COPPER_ALPHA * (a - 20.0)),
         _ => 1.0,

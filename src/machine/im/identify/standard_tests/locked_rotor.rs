@@ -52,6 +52,29 @@ pub(super) fn common_frequency(
     Ok(known.iter().sum::<f64>() / known.len() as f64)
 }
 
+/// The readings grouped by frequency, lowest first, when every reading
+/// gives one and they fall into two groups or more; `None` otherwise (one
+/// frequency, or a reading without one: [`common_frequency`] decides).
+pub(super) fn frequency_groups(readings: &[SupplyReading]) -> Option<Vec<Vec<SupplyReading>>> {
+    if readings.iter().any(|r| !r.frequency.is_finite()) {
+        return None;
+    }
+    let mut sorted = readings.to_vec();
+    sorted.sort_by(|a, b| a.frequency.total_cmp(&b.frequency));
+    let mut groups: Vec<Vec<SupplyReading>> = Vec::new();
+    for r in sorted {
+        match groups.last_mut() {
+            Some(g)
+                if ((r.frequency - g[0].frequency) / g[0].frequency).abs() <= SAME_FREQUENCY =>
+            {
+                g.push(r)
+            }
+            _ => groups.push(vec![r]),
+        }
+    }
+    (groups.len() > 1).then_some(groups)
+}
+
 /// Reduce the locked-rotor readings of a winding connected as `connection`.
 pub(super) fn locked_rotor(
     readings: &[SupplyReading],

@@ -13,7 +13,12 @@
 //! - `R_lr`, `X_lr` from the locked-rotor test; `Xs` and `Xr` in the
 //!   design class's ratio, `Rr` behind the magnetising branch (IEEE 112's
 //!   `Xm` correction), reactances scaled to rated frequency when the
-//!   locked-rotor test ran at a reduced one.
+//!   locked-rotor test ran at a reduced one. With locked-rotor readings at
+//!   two frequencies (rated and reduced), the circuit takes the lowest
+//!   frequency's (IEEE 112: the rotor resistance nearest its running slip
+//!   frequency) and the highest frequency's rotor resistance and
+//!   reactance are reported beside it (`Rr_rated_frequency`,
+//!   `Xr_rated_frequency`): a deep-bar or double-cage rotor shows there.
 //!
 //! Every element carries a 95 % interval where the regressions give one
 //! (two readings or more per regression), carried through the reduction
@@ -31,8 +36,9 @@ mod tests;
 
 use std::collections::BTreeMap;
 
-use dc_resistance::{dc_resistance, mean_temperature, temperature_factor};
-use locked_rotor::{common_frequency, locked_rotor};
+pub(crate) use dc_resistance::temperature_factor;
+use dc_resistance::{dc_resistance, mean_temperature};
+use locked_rotor::{common_frequency, frequency_groups, locked_rotor};
 use reduce::{elements, propagate, solve, Context, Inputs};
 
 use crate::contract::{MethodReport, ParamEstimate, StandardTestTables};
@@ -66,6 +72,10 @@ pub struct StandardTestsReduction {
     pub params: BTreeMap<String, ParamEstimate>,
     /// The per-voltage and per-point tables and the `Xm(V)` curve.
     pub tables: StandardTestTables,
+    /// The winding temperature `Rs` is at, °C: the locked-rotor test's
+    /// where the DC reading and that test give one, the DC reading's
+    /// where only it does; `None` when the DC reading gives none.
+    pub rs_temperature: Option<f64>,
     /// What a user should know (conventions, corrections, assumptions).
     pub warnings: Vec<String>,
 }
@@ -103,6 +113,9 @@ pub fn reduce_standard_tests(
 ) -> Result<StandardTestsReduction, StandardTestsError> {
     if let Some(why) = missing(tests) {
         return Err(why);
+    }
+    if let Some(groups) = frequency_groups(&tests.locked_rotor) {
+        return reduce_two_frequencies(tests, connection, opts, groups);
     }
     let mut warnings = Vec::new();
     let dc = dc_resistance(&tests.dc_resistance, connection)?;
@@ -302,8 +315,60 @@ pub fn reduce_standard_tests(
             locked_rotor: lr.rows,
             xm_curve: s.curve,
         },
+        rs_temperature: dc.temperature.map(|t| t_lr.unwrap_or(t)),
         warnings,
     })
+}
+
+/// The reduction of tests whose locked-rotor readings ran at several
+/// frequencies, `groups` (lowest first, each of one frequency): the
+/// circuit from the lowest, the rotor from the highest beside it.
+fn reduce_two_frequencies(
+    tests: &ImStandardTests,
+    connection: Connection,
+    opts: &StandardTestsOptions,
+    groups: Vec<Vec<crate::record::SupplyReading>>,
+) -> Result<StandardTestsReduction, StandardTestsError> {
+    let frequency = |g: &[crate::record::SupplyReading]| g[0].frequency;
+    let with = |locked_rotor: &[crate::record::SupplyReading]| ImStandardTests {
+        locked_rotor: locked_rotor.to_vec(),
+        ..tests.clone()
+    };
+    let (low, high) = (&groups[0], &groups[groups.len() - 1]);
+    let mut r = reduce_standard_tests(&with(low), connection, opts)?;
+    let (f_low, f_high) = (frequency(low), frequency(high));
+    match reduce_standard_tests(&with(high), connection, opts) {
+        Ok(at_high) => {
+            for key in ["Rr", "Xr"] {
+                if let Some(p) = at_high.params.get(key) {
+                    r.params.insert(format!("{key}_rated_frequency"), p.clone());
+                }
+            }
+            let rr =
+                |m: &BTreeMap<String, ParamEstimate>| m.get("Rr").map_or(f64::NAN, |p| p.value);
+            let (rr_low, rr_high) = (rr(&r.params), rr(&at_high.params));
+            r.warnings.push(format!(
+                "standard_tests: locked-rotor tests at {f_low} Hz and {f_high} Hz: the circuit \
+                 takes the {f_low} Hz test's (IEEE 112: nearest the rotor's running slip \
+                 frequency); the {f_high} Hz test gives Rr = {rr_high:.4} ohm ({:+.1} %), \
+                 reported as Rr_rated_frequency and Xr_rated_frequency (a deep-bar or \
+                 double-cage rotor's resistance rises with the slip frequency)",
+                100.0 * (rr_high / rr_low - 1.0)
+            ));
+            r.tables.locked_rotor.extend(at_high.tables.locked_rotor);
+        }
+        Err(why) => r.warnings.push(format!(
+            "standard_tests: the locked-rotor test at {f_high} Hz does not reduce: {why}"
+        )),
+    }
+    if groups.len() > 2 {
+        r.warnings.push(format!(
+            "standard_tests: locked-rotor readings at {} frequencies: those between {f_low} Hz \
+             and {f_high} Hz are left out",
+            groups.len()
+        ));
+    }
+    Ok(r)
 }
 
 /// The method's report, the tables, and the warnings to add to the

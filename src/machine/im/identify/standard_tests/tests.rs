@@ -339,3 +339,39 @@ fn a_negative_friction_intercept_is_held_at_zero_with_a_reason() {
         assert!(p.value.is_finite() && p.value >= 0.0, "{p:?}");
     }
 }
+
+#[test]
+fn locked_rotor_tests_at_two_frequencies_give_the_circuit_the_reduced_ones_rotor() {
+    // A rotor whose resistance at 50 Hz slip frequency is 20 % above its
+    // resistance at 12.5 Hz (a deep bar's): the circuit takes the 12.5 Hz
+    // test's, the 50 Hz test's is reported beside it.
+    let deep = ImCircuit {
+        rotor: RotorCage::Single { rr: 1.92, xr: 3.0 },
+        ..machine()
+    };
+    let mut tests = tests_of(&machine(), 0.0, 12.5, None);
+    let mut rated = tests_of(&deep, 0.0, 50.0, None).locked_rotor;
+    for r in &mut rated {
+        r.segment = 3;
+    }
+    tests.locked_rotor.extend(rated);
+    let r = reduce(&tests);
+    for (key, t) in truth(&machine()) {
+        let v = value(&r, key).value;
+        assert!((v - t).abs() < tolerance(key) * t, "{key}: {v} against {t}");
+    }
+    let rr50 = value(&r, "Rr_rated_frequency").value;
+    assert!((rr50 / 1.92 - 1.0).abs() < 1e-3, "{rr50}");
+    let xr50 = value(&r, "Xr_rated_frequency").value;
+    assert!((xr50 / 3.0 - 1.0).abs() < 1e-3, "{xr50}");
+    assert!(
+        r.warnings
+            .iter()
+            .any(|w| w.contains("12.5 Hz and 50 Hz") && w.contains("+20.0 %")),
+        "{:?}",
+        r.warnings
+    );
+    let frequencies: Vec<Option<f64>> = r.tables.locked_rotor.iter().map(|l| l.frequency).collect();
+    assert_eq!(frequencies.iter().filter(|f| **f == Some(12.5)).count(), 4);
+    assert_eq!(frequencies.iter().filter(|f| **f == Some(50.0)).count(), 4);
+}
