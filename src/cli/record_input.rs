@@ -9,7 +9,7 @@ use clap::{Args, ValueEnum};
 
 use super::output::warn_if_damaged;
 use super::Failure;
-use crate::identify::check_plausible_files;
+use crate::identify::{check_input_power, check_plausible_files};
 use crate::machine::dc::split_single_segment;
 use crate::model::Connection;
 use crate::record::{load_record_files, Record, SegmentKind};
@@ -59,6 +59,10 @@ impl RecordInput {
                 .map_err(Failure::bad_input)?;
         warn_if_damaged(&self.files[0], &record);
         if kind.is_im() {
+            check_input_power(&record).map_err(|e| match &self.files[..] {
+                [one] => Failure::bad_input(format!("{}: {e}", one.display())),
+                _ => Failure::bad_input(e),
+            })?;
             return Ok(record);
         }
         check_plausible_files(&record, kind, &self.files).map_err(Failure::bad_input)?;

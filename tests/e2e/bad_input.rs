@@ -446,3 +446,34 @@ fn huge_lengths_in_an_mcap_are_refused_or_recovered_by_every_command() {
         }
     }
 }
+
+#[test]
+fn a_reversed_wattmeter_is_refused_naming_the_file_and_column() {
+    let dir = tempfile::tempdir().unwrap();
+    let load = std::fs::read_to_string("tests/data/im_lab/load.csv").unwrap();
+    // The lab's load curve with the input power's sign flipped.
+    let mut flipped = String::new();
+    for line in load.lines() {
+        let cols: Vec<&str> = line.split(',').collect();
+        match cols[0].parse::<f64>() {
+            Ok(_) => {
+                let p: f64 = cols[3].parse().unwrap();
+                let neg = format!("{}", -p);
+                let mut row = cols.clone();
+                row[3] = &neg;
+                flipped += &(row.join(",") + "\n");
+            }
+            Err(_) => flipped += &(line.to_string() + "\n"),
+        }
+    }
+    let path = write(dir.path(), "load.csv", &flipped);
+    for command in ["identify", "diagnose"] {
+        let err = run_bad(&[command, "--kind", "im_slip_sweep", &path]);
+        assert!(
+            err.contains("load.csv")
+                && err.contains("column input_power_W")
+                && err.contains("polarity reversed"),
+            "{command}: {err}"
+        );
+    }
+}

@@ -20,6 +20,7 @@ mod error;
 mod identifiability;
 mod joint;
 mod lm;
+mod plausibility;
 mod recursive;
 mod standard_tests;
 mod sweep;
@@ -35,6 +36,7 @@ pub use lm::{
     evaluation_bound, fit_lm, FittedParam, LmFit, LmOptions, ParamSource, ResidualScale,
     SplitPolicy, PRACTICAL_LIMIT, SOLVE_POINT_EVALUATIONS, SVD_MAX_ITERATIONS,
 };
+pub use plausibility::{check_input_power, ImplausiblePower};
 pub use recursive::{
     paper_cost, recursive_estimate, recursive_pass, Innovation, RecursiveEstimate,
     RecursiveOptions, RecursiveStop, THETA_DOUBLE_L5, THETA_DOUBLE_L7, THETA_SINGLE_FE_L6,
