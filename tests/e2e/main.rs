@@ -17,6 +17,7 @@ mod daemon_page;
 mod daemon_web;
 mod dc_one_file;
 mod dc_step;
+mod degenerate_dc;
 mod diagnose_cli;
 mod diagnose_dc_shaft;
 mod export;
