@@ -35,26 +35,35 @@ const CARRIED_NOISE: f64 = 5.0;
 /// Share of the segment's peak current it must exceed as well (a current
 /// read below its resolution has no noise to compare with).
 const CARRIED_PEAK: f64 = 1e-3;
-/// Share of the samples held levels must cover for the segment to count
-/// as a staircase.
+/// Share of the samples up to the last level's end that held levels must
+/// cover for the segment to count as a staircase.
 const HELD_SHARE: f64 = 0.6;
 
 /// The record with its one driven segment split (see the module docs), or
 /// as it was. Segments are renumbered in order when one is split.
 pub fn split_single_segment(mut record: Record) -> Record {
-    let driven: Vec<usize> = record
+    let not_marked: Vec<usize> = record
         .segments
         .iter()
         .enumerate()
-        .filter(|(_, s)| s.kind != Some(SegmentKind::DcCoastdown) && !is_coastdown(s))
-        .filter(|(_, s)| !s.time.is_empty())
+        .filter(|(_, s)| s.kind != Some(SegmentKind::DcCoastdown) && !s.time.is_empty())
         .map(|(k, _)| k)
         .collect();
-    let [only] = driven[..] else {
-        return record;
+    let driven: Vec<usize> = not_marked
+        .iter()
+        .copied()
+        .filter(|&k| !is_coastdown(&record.segments[k]))
+        .collect();
+    // A whole test in one segment can look like a coast-down to the
+    // segment-wise test (little mean current, a speed that ends low after
+    // the coast-down at its end): it is cut when it holds levels.
+    let (only, levels_only) = match (&driven[..], &not_marked[..]) {
+        ([only], _) => (*only, false),
+        ([], [only]) if record.segments.len() == 1 => (*only, true),
+        _ => return record,
     };
     let seg = &record.segments[only];
-    let Some((cuts, how)) = cuts(seg) else {
+    let Some((cuts, how)) = cuts(seg, levels_only) else {
         return record;
     };
     let parts = split_at(seg, &cuts);
@@ -79,8 +88,9 @@ pub fn split_single_segment(mut record: Record) -> Record {
 }
 
 /// Where to cut `seg`, and how the cuts were chosen; `None` when it is too
-/// short to cut or its voltage never changes.
-fn cuts(seg: &DcSegment) -> Option<(Vec<usize>, String)> {
+/// short to cut, its voltage never changes, or it holds no levels and
+/// `levels_only`.
+fn cuts(seg: &DcSegment, levels_only: bool) -> Option<(Vec<usize>, String)> {
     let n = seg.voltage.len();
     if n < 2 * MIN_PART {
         return None;
@@ -103,6 +113,9 @@ fn cuts(seg: &DcSegment) -> Option<(Vec<usize>, String)> {
             n => format!("before each of its {n} voltage steps"),
         };
         return Some((steps, how));
+    }
+    if levels_only {
+        return None;
     }
     let blocks = BLOCKS.min(n / MIN_PART);
     let cuts: Vec<usize> = (1..blocks).map(|b| b * n / blocks).collect();
@@ -160,14 +173,17 @@ fn step_cuts(u: &[f64], i: &[f64], threshold: f64, noise: f64) -> Option<Vec<usi
             _ => levels.push(hold),
         }
     }
+    // The levels must cover most of the samples up to the last one's end
+    // (a long stretch after it, a coast-down say, is a part of its own).
     let held: usize = levels.iter().map(|(a, b)| b - a).sum();
-    if levels.len() < 2 || levels.len() > MAX_LEVELS || (held as f64) < HELD_SHARE * n as f64 {
+    let last_end = levels.last().map_or(0, |l| l.1);
+    if levels.len() < 2 || levels.len() > MAX_LEVELS || (held as f64) < HELD_SHARE * last_end as f64
+    {
         return None;
     }
     // Cut a few samples before each level ends, so that the next part
     // starts on the old level; the last level too when a long stretch
     // that holds no level follows it (a coast-down, a ramp down).
-    let last_end = levels[levels.len() - 1].1;
     let ends = if n - last_end >= MIN_PART {
         &levels[..]
     } else {
@@ -318,6 +334,16 @@ mod tests {
         assert_eq!(split.segments.len(), 3, "{:?}", split.notes);
         assert_eq!(split.segments[2].voltage[0], 120.0);
         assert!(split.segments[2].voltage.last().unwrap() < &1.0);
+    }
+
+    #[test]
+    fn a_lone_coast_down_is_not_cut_into_blocks() {
+        let mut r = one_segment(2000, |t| 120.0 * (-t / 0.3).exp());
+        for i in &mut r.segments[0].current {
+            *i = 0.0;
+        }
+        assert!(is_coastdown(&r.segments[0]));
+        assert_eq!(split_single_segment(r).segments.len(), 1);
     }
 
     #[test]
