@@ -15,15 +15,25 @@ pub fn rig_record() -> Record {
     record_of(vec![60.0, 248.0, 107.0, 201.0, 60.0], false)
 }
 
+/// First level of each repeat of the default plan in
+/// [`default_plan_record`] (as in `benches/diagnosis_cpu.sh`).
+pub const REPEAT_FIRST_V: f64 = 107.0;
+
 /// The embedded default's plan with its levels repeated `times` times and
 /// its coast-down at the end: `times` = 1 is the default run's record
-/// (9 segments), 2 and 4 are twice and four times as long.
+/// (9 segments), 2 and 4 are about twice and four times as long.
 #[allow(dead_code)]
 pub fn default_plan_record(times: usize) -> Record {
     let Plan::DcStep { levels, coastdown } = Config::embedded_default().plan else {
         panic!("the embedded default is a DC step plan");
     };
-    let repeated = levels.iter().copied().cycle().take(levels.len() * times).collect();
+    let mut repeated = levels.clone();
+    for _ in 1..times {
+        // A repeat's first level is 107 V: the plan ends on the level it
+        // starts with, and a level may not repeat the one before it.
+        repeated.push(REPEAT_FIRST_V);
+        repeated.extend_from_slice(&levels[1..]);
+    }
     record_of(repeated, coastdown)
 }
 

@@ -37,7 +37,7 @@ cargo build --release --locked --bin motorbench --example peers
 
 export OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 echo "peers: $("$venv/bin/python" -c 'import numpy, scipy, mcap, sys; print("Python", sys.version.split()[0], "numpy", numpy.__version__, "scipy", scipy.__version__, "mcap", mcap.__version__)'), OPENBLAS_NUM_THREADS=$OPENBLAS_NUM_THREADS"
-echo "machine: $(nproc) cores, $(uname -m)"
+echo "machine: $(getconf _NPROCESSORS_ONLN) cores, $(uname -m), load average $(cut -d" " -f1-3 /proc/loadavg)"
 only=()
 if [ ${#rows[@]} -gt 0 ]; then only=(--only "${rows[@]}"); fi
 exec "$venv/bin/python" benches/peers/compare.py \

@@ -4,49 +4,18 @@
 //! of rated voltage, from the classical starts; the leakage split is left
 //! as fitted (`SplitPolicy::Never`) so that both sides solve the same
 //! least-squares problem. The data are those of `benches/identify_im.rs`.
+//! The answer compared is the fitted current and power at every point:
+//! the double cage's circuit is determined only up to a one-parameter
+//! family (the reason for the leakage-split convention).
 
 use std::path::Path;
 
-use motorbench::identify::{
-    classical_starts, fit_lm, slip_grid, LmOptions, PhaseData, SlipSweep, SplitPolicy, SweepNoise,
-};
-use motorbench::model::{
-    Connection, ImCircuit, ImModel, ImSupply, LeakageSplit, PerUnitBase, SEED_DOUBLE_CAGE_PU,
-};
-use rand::rngs::StdRng;
-use rand::SeedableRng;
+use motorbench::identify::{classical_starts, fit_lm, predict, LmOptions, SplitPolicy};
+use motorbench::model::{ImCircuit, ImModel, LeakageSplit};
 use serde_json::json;
 
-/// Three sweeps of the seed paper's double cage on a 4 kW, 400 V star base.
-fn data() -> PhaseData {
-    let circuit = ImCircuit::from_per_unit(
-        &SEED_DOUBLE_CAGE_PU,
-        &PerUnitBase::from_rating(400.0, 8.3, Connection::Star),
-    );
-    let mut rng = StdRng::seed_from_u64(1);
-    let mut sweep: Option<SlipSweep> = None;
-    for (segment, v) in [400.0, 320.0, 240.0].into_iter().enumerate() {
-        let supply = ImSupply {
-            line_voltage: v,
-            frequency: 50.0,
-            connection: Connection::Star,
-            pole_pairs: 2,
-        };
-        let s = SlipSweep::simulate(
-            &circuit,
-            &supply,
-            &slip_grid(50, 0.002),
-            &SweepNoise::relative(0.005),
-            segment as u32,
-            &mut rng,
-        );
-        match &mut sweep {
-            Some(all) => all.extend(s),
-            None => sweep = Some(s),
-        }
-    }
-    sweep.expect("three segments").phase_data()
-}
+#[path = "../common/im_sweeps.rs"]
+mod im_sweeps;
 
 fn values(c: &ImCircuit) -> Vec<f64> {
     ImModel::Double
@@ -58,7 +27,7 @@ fn values(c: &ImCircuit) -> Vec<f64> {
 
 /// Time `fit_lm` alone; write the points and the starts for the peer.
 pub fn run(problem: &Path) -> serde_json::Value {
-    let d = data();
+    let (d, _) = im_sweeps::double_cage_sweeps();
     let mut opts = LmOptions::new(ImModel::Double);
     opts.split_policy = SplitPolicy::Never;
     let (fit, seconds) = super::best_of(|| fit_lm(&d, &opts).expect("the fit"));
@@ -77,6 +46,17 @@ pub fn run(problem: &Path) -> serde_json::Value {
         "bound": motorbench::identify::evaluation_bound(d.len(), 7),
     });
     std::fs::write(problem, doc.to_string()).expect("the problem file is written");
+    // The double cage's seven elements are one more than terminal readings
+    // determine (a one-parameter family of circuits gives the same
+    // impedance at every slip), so the answer compared is what the fit
+    // determines: the predicted current and power at every point.
+    let prediction: Vec<f64> = {
+        let (i, p): (Vec<f64>, Vec<f64>) = (0..d.len())
+            .map(|k| predict(&fit.circuit, d.slip[k], d.voltage[k]))
+            .unzip();
+        i.into_iter().chain(p).collect()
+    };
     json!({"seconds": seconds, "params": values(&fit.circuit), "names": names,
+           "prediction": prediction,
            "starts": fit.starts.0, "evaluations": fit.evaluations, "points": d.len()})
 }

@@ -15,6 +15,8 @@
 //! - `mcap-write <out.mcap> <samples>`: records `samples` JSON samples (4
 //!   channels at 2 kHz) in the contract layout through the recorder.
 //! - `mcap-read <record.mcap>`: reads a record and decodes every message.
+//! - `record-size <record.mcap>`: prints its segments and samples (for
+//!   `benches/diagnosis_cpu.sh`).
 //!
 //! Built by the script as `cargo build --release --example peers`.
 
@@ -41,6 +43,13 @@ fn main() {
         "im-fit" => im_fit::run(Path::new(arg(1))),
         "mcap-write" => mcap_write(Path::new(arg(1)), arg(2).parse().expect("a sample count")),
         "mcap-read" => mcap_read(Path::new(arg(1))),
+        "record-size" => {
+            // Plain text for shell scripts: segments and samples.
+            let record = read_mcap(Path::new(arg(1))).expect("a readable record");
+            let samples: usize = record.segments.iter().map(|s| s.time.len()).sum();
+            println!("{} {samples}", record.segments.len());
+            return;
+        }
         other => {
             eprintln!("unknown subcommand {other}");
             std::process::exit(2)
@@ -188,8 +197,11 @@ fn mcap_read(path: &Path) -> serde_json::Value {
     let (mut count, mut sum) = (0u64, 0.0f64);
     for e in &entries {
         if let Entry::Samples { values, .. } = e {
-            count += values.len() as u64;
-            sum += values.iter().map(|(_, v)| v).sum::<f64>();
+            // One by one in file order, as the peer adds them.
+            for (_, v) in values {
+                count += 1;
+                sum += v;
+            }
         }
     }
     // The identification's reader too (the same pass plus the record).
