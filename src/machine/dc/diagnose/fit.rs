@@ -12,6 +12,12 @@
 //! the crate sees the problem reduced to `P+1` rows (`R` of a QR of the
 //! Jacobian and the residual's norm), so it never factorises the tall
 //! Jacobian itself.
+//!
+//! A held-out refit starts from the all-segment fit's linearisation, kept
+//! with the fit ([`AtOptimum`]): one Gauss–Newton step on its normal
+//! equations less the held-out rows ([`one_step_refit`]) where that step is
+//! short and the residuals are linear over it, which costs one segment's
+//! linearisation instead of an iterated fit of all the others.
 
 use std::cell::RefCell;
 use std::sync::Arc;

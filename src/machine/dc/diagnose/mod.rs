@@ -12,8 +12,7 @@
 //!    out, each fold refitted in one Gauss–Newton step from the
 //!    candidate's all-segment optimum (`fit::one_step_refit`; iterated
 //!    from there when that step is long or the residuals are not linear
-//!    over it); the fits
-//!    run on every core (`std::thread::scope`).
+//!    over it); the fits run on every core (`std::thread::scope`).
 //! 4. Candidates are ranked by the held-out penalised score and tested
 //!    with the paired held-out block test of `decision`; the verdict is the
 //!    best significant, physically signed candidate, else `none`.
