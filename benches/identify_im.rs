@@ -14,50 +14,16 @@
 //! `cargo bench --bench identify_im`
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use motorbench::identify::{
-    fit_lm, identify_im, slip_grid, LmOptions, PhaseData, SlipSweep, SplitPolicy, SweepNoise,
-};
-use motorbench::model::{
-    Connection, ImCircuit, ImModel, ImSupply, LabMachine, LabMeters, PerUnitBase,
-    SEED_DOUBLE_CAGE_PU,
-};
+use motorbench::identify::{fit_lm, identify_im, LmOptions, SplitPolicy};
+use motorbench::model::{Connection, ImModel, LabMachine, LabMeters};
 use motorbench::record::{OperatingPoint, Record};
-use rand::rngs::StdRng;
-use rand::SeedableRng;
 use std::hint::black_box;
 
-fn data() -> (PhaseData, ImCircuit) {
-    // The seed paper's double cage on a 4 kW, 400 V star base.
-    let pu = SEED_DOUBLE_CAGE_PU;
-    let circuit =
-        ImCircuit::from_per_unit(&pu, &PerUnitBase::from_rating(400.0, 8.3, Connection::Star));
-    let mut rng = StdRng::seed_from_u64(1);
-    let mut sweep: Option<SlipSweep> = None;
-    for (segment, v) in [400.0, 320.0, 240.0].into_iter().enumerate() {
-        let supply = ImSupply {
-            line_voltage: v,
-            frequency: 50.0,
-            connection: Connection::Star,
-            pole_pairs: 2,
-        };
-        let s = SlipSweep::simulate(
-            &circuit,
-            &supply,
-            &slip_grid(50, 0.002),
-            &SweepNoise::relative(0.005),
-            segment as u32,
-            &mut rng,
-        );
-        match &mut sweep {
-            Some(all) => all.extend(s),
-            None => sweep = Some(s),
-        }
-    }
-    (sweep.expect("three segments").phase_data(), circuit)
-}
+#[path = "common/im_sweeps.rs"]
+mod im_sweeps;
 
 fn bench(c: &mut Criterion) {
-    let (d, truth) = data();
+    let (d, truth) = im_sweeps::double_cage_sweeps();
     let opts = LmOptions::new(ImModel::Double);
     let fit = fit_lm(&d, &opts).expect("fit");
     println!(

@@ -9,8 +9,10 @@
 //! 2. The residual is localised (`gap.rs`).
 //! 3. Every candidate of the vocabulary (`candidates.rs`) is refitted with
 //!    the nominal parameters on all segments and then leave-one-segment-
-//!    out, each fold warm-started from the candidate's all-segment optimum;
-//!    the fits run on every core (`std::thread::scope`).
+//!    out, each fold refitted in one Gauss–Newton step from the
+//!    candidate's all-segment optimum (`fit::one_step_refit`; iterated
+//!    from there when that step is long or the residuals are not linear
+//!    over it); the fits run on every core (`std::thread::scope`).
 //! 4. Candidates are ranked by the held-out penalised score and tested
 //!    with the paired held-out block test of `decision`; the verdict is the
 //!    best significant, physically signed candidate, else `none`.
@@ -30,7 +32,7 @@ use self::candidates::{
     candidates, effect_params, extra_params, physical, separating_plan, undetermined, CandidateDef,
     RecordScales,
 };
-use self::fit::{fit, refit_spec, FitSpec, Fitted, Transform, Weights};
+use self::fit::{fit, one_step_refit, refit_spec, without, FitSpec, Fitted, Transform, Weights};
 use self::gap::{locate, spectral_peak, HeldOutSeries, Measured};
 use self::model::{AugModel, Continuation, SegmentRun, Start};
 use crate::contract::{
@@ -595,7 +597,8 @@ fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> 
         .collect()
 }
 
-/// Refit `spec` (warm-started at `all`) without segment `h` and simulate it.
+/// Refit `spec` without segment `h` (one step from `all`, else iterated
+/// from there) and simulate it.
 fn fold(
     spec: &FitSpec,
     all: &Fitted,
@@ -603,15 +606,12 @@ fn fold(
     h: usize,
     w: &Weights,
 ) -> Option<HeldOutSeries> {
-    let train: Vec<SegmentRun> = runs
-        .iter()
-        .enumerate()
-        .filter(|(n, _)| *n != h)
-        .map(|(_, r)| *r)
-        .collect();
-    let start = refit_spec(spec, all);
-    let fitted = fit(&start, &train, w, PATIENCE_FOLD)?;
-    held_out(&fitted.model, &runs[..=h])
+    let train = without(runs, h);
+    let model = match one_step_refit(spec, all, runs, &train, h, w) {
+        Some(m) => m,
+        None => fit(&refit_spec(spec, all), &train, w, PATIENCE_FOLD)?.model,
+    };
+    held_out(&model, &runs[..=h])
 }
 
 /// Residuals (measured − simulated) and NRMSE of `model` on the last of

@@ -155,23 +155,74 @@ impl Rigid {
 }
 
 /// Exact one-sample step of the open-armature (coast-down) rotor under a
-/// constant torque `t`: `J·ω' = −f·ω − t`. Returns `(ω, Δθ)`.
+/// constant torque `t`: `J·ω' = −f·ω − t`. Its coefficients depend on
+/// the parameters and the step only, so they are computed once per
+/// simulated segment, not per sample (two `exp` per sample were a quarter
+/// of a diagnosis).
+struct CoastStep {
+    /// `e^−x`, `x = f·dt/J`.
+    a: f64,
+    /// `(1 − e^−x)·J/f`.
+    g: f64,
+    /// `(dt − g)/f`.
+    h: f64,
+    /// J.
+    j: f64,
+}
+
+impl CoastStep {
+    fn new(p: &DcParams, dt: f64) -> CoastStep {
+        let x = p.f * dt / p.j;
+        // (1 − e^−x)·J/f and (dt − that)/f, by series when x is small.
+        let (g, h) = if x < 1e-6 {
+            (
+                dt * (1.0 - x / 2.0),
+                dt * dt / (2.0 * p.j) * (1.0 - x / 3.0),
+            )
+        } else {
+            let g = -(-x).exp_m1() * p.j / p.f;
+            (g, (dt - g) / p.f)
+        };
+        CoastStep {
+            a: (-x).exp(),
+            g,
+            h,
+            j: p.j,
+        }
+    }
+
+    /// `(ω, Δθ)` after one step from `ω` under the torque `t`.
+    #[inline]
+    fn step(&self, w: f64, t: f64) -> (f64, f64) {
+        let nw = self.a * w - t * self.g / self.j;
+        (nw, w * self.g - t * self.h)
+    }
+}
+
+/// `e^x`, with the underflow to zero below −746 taken without calling
+/// `exp` (the same value: `exp` is 0 there); the breakaway term of dry
+/// friction is that far below zero at every turning sample.
 #[inline]
-fn coast_step(p: &DcParams, dt: f64, w: f64, t: f64) -> (f64, f64) {
-    let x = p.f * dt / p.j;
-    // (1 − e^−x)·J/f and (dt − that)/f, by series when x is small.
-    let (g, h) = if x < 1e-6 {
-        (
-            dt * (1.0 - x / 2.0),
-            dt * dt / (2.0 * p.j) * (1.0 - x / 3.0),
-        )
+fn exp_or_zero(x: f64) -> f64 {
+    if x < -746.0 {
+        0.0
     } else {
-        let g = -(-x).exp_m1() * p.j / p.f;
-        (g, (dt - g) / p.f)
-    };
-    let a = (-x).exp();
-    let nw = a * w - t * g / p.j;
-    (nw, w * g - t * h)
+        x.exp()
+    }
+}
+
+/// `tanh(x)`, with its saturation at ±1 above |x| = 22 taken without
+/// calling `tanh` (the same value: `tanh` rounds to ±1 there); the brush
+/// drop is saturated wherever the current is well above its knee.
+#[inline]
+fn tanh_or_one(x: f64) -> f64 {
+    if x > 22.0 {
+        1.0
+    } else if x < -22.0 {
+        -1.0
+    } else {
+        x.tanh()
+    }
 }
 
 impl AugModel {
@@ -189,8 +240,8 @@ impl AugModel {
     fn perturb(&self, i: f64, w: f64, u: f64, heat: f64, dir: f64) -> (f64, f64) {
         let p = &self.p;
         match self.aug {
-            Augment::CoulombFriction => (0.0, self.e[0] * (-w.abs() / self.e[1]).exp() * dir),
-            Augment::BrushDrop => (self.e[0] * (i / self.e[1]).tanh(), 0.0),
+            Augment::CoulombFriction => (0.0, self.e[0] * exp_or_zero(-w.abs() / self.e[1]) * dir),
+            Augment::BrushDrop => (self.e[0] * tanh_or_one(i / self.e[1]), 0.0),
             Augment::ArmatureReaction => {
                 let d = self.e[0] * i * i;
                 (-p.k * d * w, p.k * d * i)
@@ -407,20 +458,21 @@ impl AugModel {
             lag: None,
         };
         if run.coast {
+            let coast = CoastStep::new(p, dt);
             for _ in first..u.len() {
                 let (nw, dth) = if w == 0.0 {
                     (0.0, 0.0)
                 } else {
                     let dir = w.signum();
                     let t0 = p.tst * dir + self.perturb(0.0, w, 0.0, heat, dir).1;
-                    let (pw, _) = coast_step(p, dt, w, t0);
+                    let (pw, _) = coast.step(w, t0);
                     let t = if plain {
                         t0
                     } else {
                         let t1 = p.tst * dir + self.perturb(0.0, pw, 0.0, heat, dir).1;
                         0.5 * (t0 + t1)
                     };
-                    let (nw, dth) = coast_step(p, dt, w, t);
+                    let (nw, dth) = coast.step(w, t);
                     (if nw * dir < 0.0 { 0.0 } else { nw }, dth)
                 };
                 w = nw;
@@ -652,6 +704,67 @@ mod tests {
             b.push(w);
         }));
         (a, b)
+    }
+
+    /// The shortcuts give what `exp` and `tanh` give, bit for bit, so the
+    /// fits are those before them.
+    #[test]
+    fn the_saturation_shortcuts_are_exact() {
+        for x in [
+            -1e6,
+            -800.0,
+            -746.000_001,
+            -746.0,
+            -745.5,
+            -700.0,
+            -1.0,
+            0.0,
+            3.0,
+        ] {
+            assert_eq!(exp_or_zero(x).to_bits(), x.exp().to_bits(), "exp({x})");
+        }
+        for x in [
+            -1e9,
+            -40.0,
+            -22.000_001,
+            -22.0,
+            -19.5,
+            -0.3,
+            0.0,
+            0.7,
+            19.5,
+            22.0,
+            22.000_001,
+            1e9,
+        ] {
+            assert_eq!(tanh_or_one(x).to_bits(), x.tanh().to_bits(), "tanh({x})");
+        }
+    }
+
+    /// The coast-down step is the exact solution of `J·ω' = −f·ω − t`
+    /// over one step: `ω(dt) = (ω0 + t/f)·e^(−f·dt/J) − t/f` and the angle
+    /// its integral; the small-friction series included.
+    #[test]
+    fn the_coast_step_solves_the_rotor_equation() {
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        for (f, dt) in [(p.f, 5e-4), (1e-7, 5e-4), (0.3, 1e-3)] {
+            let p = DcParams { f, ..p };
+            let c = CoastStep::new(&p, dt);
+            for (w, t) in [(150.0, 0.128), (-3.0, -0.2), (1e-3, 0.0)] {
+                let x = f * dt / p.j;
+                let want_w = (w + t / f) * (-x).exp() - t / f;
+                let want_th = -(w + t / f) * p.j / f * (-x).exp_m1() - t / f * dt;
+                let (got_w, got_th) = c.step(w, t);
+                assert!(
+                    (got_w - want_w).abs() <= 1e-9 * (1.0 + want_w.abs()),
+                    "{got_w} {want_w}"
+                );
+                assert!(
+                    (got_th - want_th).abs() <= 1e-9 * (dt + want_th.abs()),
+                    "{got_th} {want_th}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -205,7 +205,9 @@ impl<'d, 'a> OutputErrorProblem<'d, 'a> {
                 }
             }
             let inv_h = 1.0 / h;
-            for (c, b) in column.iter_mut().zip(r.iter()) {
+            // Slices, not the vector's strided iterator: this loop runs
+            // over every row of every column and vectorises.
+            for (c, b) in column.iter_mut().zip(r.as_slice()) {
                 *c = (*c - b) * inv_h;
             }
         }
@@ -264,7 +266,7 @@ impl<'d, 'a> OutputErrorProblem<'d, 'a> {
 fn reduce(jac: &OMatrix<f64, Dyn, U6>, r: &DVector<f64>) -> (SVector<f64, 7>, SMatrix<f64, 7, 6>) {
     let jtj = jac.tr_mul(jac);
     let g = jac.tr_mul(r);
-    let r_norm_sq = if r.iter().all(|v| v.is_finite()) {
+    let r_norm_sq = if r.as_slice().iter().all(|v| v.is_finite()) {
         r.norm_squared()
     } else {
         f64::NAN
