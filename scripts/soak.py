@@ -58,6 +58,12 @@ def run_one(api, rig, override):
         if code == 409 and started.get("error") == "busy":
             time.sleep(0.1)
             continue
+        if code == 409 and started.get("error") == "tripped":
+            # A supervisor trip latched the rig (e.g. the winding estimate
+            # reached its limit): say so, clear the latch, go on.
+            print(f"soak: {rig} tripped: {started['trip']['message']}; reset", file=sys.stderr)
+            request(f"{api}/v1/rigs/{rig}/reset", "POST")
+            continue
         raise SystemExit(f"soak: start on {rig} answered {code}: {started}")
     tid = started["id"]
     while True:
