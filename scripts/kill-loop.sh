@@ -20,8 +20,8 @@ kills=50
 seed=1
 work=""
 config=()
-bin="$root/target/release/motorbench"
-python="python3"
+script_name=kill-loop
+. "$here/bench-tools.sh"
 while [ $# -gt 0 ]; do
     case "$1" in
     --kills) kills="$2"; shift 2 ;;
@@ -34,8 +34,7 @@ while [ $# -gt 0 ]; do
     *) echo "kill-loop: unknown option $1" >&2; exit 2 ;;
     esac
 done
-[ -x "$bin" ] || { echo "kill-loop: no binary at $bin (cargo build --release)" >&2; exit 2; }
-"$python" -c 'import mcap' 2>/dev/null || { echo "kill-loop: $python lacks the mcap package" >&2; exit 2; }
+require_tools mcap
 [ -n "$work" ] || work="$(mktemp -d -t motorbench-kill-loop.XXXXXX)"
 mkdir -p "$work"
 check="$here/kill_check.py"

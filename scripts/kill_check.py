@@ -21,6 +21,7 @@ object:
 
 import argparse
 import json
+import statistics
 import sys
 
 from mcap.reader import NonSeekingReader, SeekingReader
@@ -126,11 +127,6 @@ def check(a):
     print()
 
 
-def pct(xs, q):
-    xs = sorted(xs)
-    return xs[min(len(xs) - 1, int(round(q * (len(xs) - 1))))]
-
-
 def summary(a):
     rows = [json.loads(line) for line in open(a.results) if line.strip()]
     killed = [r for r in rows if r["status"] == "killed"]
@@ -163,7 +159,7 @@ def summary(a):
     if during:
         lost = [r["lost_s"] for r in during]
         print(f"kills during the test: {len(during)}; data lost per kill, s: "
-              f"min {min(lost):.3f}, median {pct(lost, 0.5):.3f}, max {max(lost):.3f}")
+              f"min {min(lost):.3f}, median {statistics.median(lost):.3f}, max {max(lost):.3f}")
     stopped = [r for r in with_rec if r.get("stop")]
     if stopped:
         print(f"runs the safety supervisor stopped before the kill (test end taken "

@@ -25,22 +25,20 @@ minutes=""
 im=0
 full=0
 work=""
-bin="$root/target/release/motorbench"
-python="python3"
+script_name=soak
+. "$here/bench-tools.sh"
 while [ $# -gt 0 ]; do
     case "$1" in
     --tests) tests="$2"; shift 2 ;;
     --minutes) minutes="$2"; shift 2 ;;
     --im) im=1; shift ;;
     --full) full=1; shift ;;
-    --work) work="$2"; shift 2 ;;
-    --bin) bin="$2"; shift 2 ;;
-    --python) python="$2"; shift 2 ;;
-    -h|--help) sed -n 2,16p "$0"; exit 0 ;;
+    --bin | --python | --work) declare "${1#--}=$2"; shift 2 ;;
+    -h | --help) sed -n 2,16p "$0"; exit 0 ;;
     *) echo "soak: unknown option $1" >&2; exit 2 ;;
     esac
 done
-[ -x "$bin" ] || { echo "soak: no binary at $bin (cargo build --release)" >&2; exit 2; }
+require_tools
 [ -n "$work" ] || work="$(mktemp -d -t motorbench-soak.XXXXXX)"
 mkdir -p "$work/records"
 
