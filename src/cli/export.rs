@@ -4,6 +4,7 @@
 //! file (pandas, polars, MATLAB's `parquetread`). See
 //! [`crate::record::export`].
 
+use crate::cli::stdout::outln;
 use std::path::PathBuf;
 
 use clap::{Args, ValueEnum};
@@ -80,13 +81,13 @@ pub fn export(args: ExportArgs) -> Result<(), Failure> {
             "files": exported.files(),
             "identify": identify,
         });
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&v).expect("JSON serialises")
         );
     } else {
         for f in exported.files() {
-            println!("{}", f.display());
+            outln!("{}", f.display());
         }
         if let Some(cmd) = &identify {
             eprintln!(

@@ -21,6 +21,7 @@ mod replay;
 mod run;
 mod shell_docs;
 mod signal;
+pub(crate) mod stdout;
 
 pub use export::{export, ExportArgs};
 pub use failure::Failure;

@@ -2,6 +2,7 @@
 //! diagnosis, or the contract's JSON), its plot, where a run's files went,
 //! and the damage of a recovered record.
 
+use crate::cli::stdout::{out, outln};
 use std::path::{Path, PathBuf};
 
 use super::Failure;
@@ -21,9 +22,9 @@ pub(crate) fn print_analysis(
 ) -> Result<(), Failure> {
     let report = analysis.report();
     if json {
-        println!("{}", report.to_json_pretty());
+        outln!("{}", report.to_json_pretty());
     } else {
-        print!("{}", analysis.text());
+        out!("{}", analysis.text());
         print_diagnosis_text(report);
     }
     if let Some(path) = svg {
@@ -40,7 +41,7 @@ pub(crate) fn print_analysis(
 /// The diagnosis of a report, as text, after a blank line.
 fn print_diagnosis_text(report: &IdentificationReport) {
     if let Some(d) = &report.diagnosis {
-        print!("\n{}", render_diagnosis_text(d));
+        out!("\n{}", render_diagnosis_text(d));
     }
 }
 
@@ -61,15 +62,15 @@ pub(crate) struct RunFiles {
 impl RunFiles {
     /// Say where the files went (after the text report).
     pub(crate) fn print(&self) {
-        println!(
+        outln!(
             "\nrecord: {} ({} messages)",
             self.mcap.display(),
             self.messages
         );
-        println!("report: {}", self.report.display());
-        println!("plot:   {}", self.svg.display());
+        outln!("report: {}", self.report.display());
+        outln!("plot:   {}", self.svg.display());
         if let Some(path) = &self.residuals_svg {
-            println!("gap:    {}", path.display());
+            outln!("gap:    {}", path.display());
         }
     }
 }

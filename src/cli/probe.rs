@@ -1,6 +1,7 @@
 //! `motorbench probe`: check a rig's wiring (DC or induction machine)
 //! before a test; see [`crate::bench::probe()`] for what is driven.
 
+use crate::cli::stdout::outln;
 use std::path::PathBuf;
 
 use clap::Args;
@@ -47,7 +48,7 @@ pub async fn probe(args: ProbeArgs) -> Result<(), Failure> {
 
 /// A stage's id and what it can do.
 fn print_stage(name: &str, stage: &dyn PowerStage) {
-    println!(
+    outln!(
         "{name}: {} (current limit: {}, largest set point {})",
         stage.id(),
         if stage.capabilities().current_limit {
@@ -62,12 +63,12 @@ fn print_stage(name: &str, stage: &dyn PowerStage) {
 /// The probe's lines and its verdict (exit code 1 when anything failed).
 fn print_report(report: &ProbeReport, actuate: bool) -> Result<(), Failure> {
     for line in &report.lines {
-        println!("{line}");
+        outln!("{line}");
     }
     if !report.passed() {
         return Err(Failure::runtime("probe: something failed (see above)"));
     }
-    println!(
+    outln!(
         "probe: every channel read{}",
         if actuate {
             ", every command accepted"

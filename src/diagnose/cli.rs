@@ -2,6 +2,7 @@
 //! `motorbench blind` (the blind benchmark); the binary's `main` only
 //! dispatches here.
 
+use crate::cli::stdout::{out, outln};
 use std::path::{Path, PathBuf};
 
 use clap::{Args, Subcommand};
@@ -40,12 +41,12 @@ pub fn run_diagnose(args: DiagnoseArgs) -> u8 {
         Err(e) => return fail(4, &e.to_string()),
     };
     if args.json {
-        println!(
+        outln!(
             "{}",
             serde_json::to_string_pretty(&run.report).expect("a diagnosis serialises")
         );
     } else {
-        print!("{}", render_diagnosis_text(&run.report));
+        out!("{}", render_diagnosis_text(&run.report));
     }
     if let Some(path) = &args.svg {
         if let Err(e) = write_residual_svg(&run.plot, path) {
@@ -103,7 +104,7 @@ pub fn run_blind(args: BlindArgs) -> u8 {
             match generate_suite(&out, seed, plans, &tick) {
                 Ok(m) => {
                     bar.finish_and_clear();
-                    println!(
+                    outln!(
                         "{} cases written to {} (seed {seed}); truth in {}",
                         m.cases.len(),
                         out.display(),
@@ -128,12 +129,12 @@ fn score(dir: &Path, json: bool) -> u8 {
         Ok(score) => {
             bar.finish_and_clear();
             if json {
-                println!(
+                outln!(
                     "{}",
                     serde_json::to_string_pretty(&score).expect("a score serialises")
                 );
             } else {
-                print!("{score}");
+                out!("{score}");
             }
             0
         }

@@ -477,3 +477,26 @@ fn a_reversed_wattmeter_is_refused_naming_the_file_and_column() {
         );
     }
 }
+
+#[test]
+fn a_reader_that_goes_away_ends_the_output_without_a_panic() {
+    // `motorbench identify … | head -0`: the pipe is closed before the
+    // report is written.
+    let data = "tests/data/im_lab/load.csv";
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_motorbench"))
+        .args(["identify", "--kind", "im_slip_sweep", "--json", data])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_ne!(out.status.code(), Some(101), "{stderr}");
+    assert!(
+        out.status.code().is_some(),
+        "killed by a signal: {:?}",
+        out.status
+    );
+}
