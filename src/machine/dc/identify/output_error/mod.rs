@@ -289,6 +289,7 @@ pub fn output_error(
         [0.0; NP]
     };
     let params = problem.params_at(&(best.at.x + Vector6::from(shift)));
+    physical(&params, candidates.iter().map(|(_, s)| *s))?;
     unc.ci95 = uncertainty::intervals(&params, &unc.std_ln, unc.dof);
     if unc.residual_variance > MISFIT_VARIANCE {
         warnings.push(format!(
@@ -394,6 +395,50 @@ fn channel_noise<'a>(
         current: weight[0],
         speed: weight[1],
     }
+}
+
+/// Refuse an optimum no turning motor has, judged by the record alone:
+/// a static torque above the largest electromagnetic torque the record
+/// shows (`K·|i|max`: the rotor would never have turned), or an inertia
+/// whose kinetic energy at the record's top speed exceeds all the
+/// electrical energy the armature took in. Such an optimum is a local one
+/// the start led to; the other methods still report.
+fn physical<'a>(
+    p: &DcParams,
+    segments: impl Iterator<Item = &'a DcSegment> + Clone,
+) -> Result<(), NotApplicable> {
+    let i_max = segments
+        .clone()
+        .flat_map(|s| s.current.iter())
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    if p.tst > p.k * i_max {
+        return Err(NotApplicable::Unidentifiable(format!(
+            "the fit ends at Tst = {:.4e} N*m, more than the largest torque the record shows \
+             (K·|i|max = {:.4e} N*m): a rotor that turns cannot have it, so this optimum is \
+             not physical",
+            p.tst,
+            p.k * i_max
+        )));
+    }
+    let mut energy = 0.0;
+    let (mut w_first, mut w_max) = (None, 0.0f64);
+    for s in segments {
+        for k in 1..s.time.len() {
+            energy += (s.voltage[k] * s.current[k]).max(0.0) * (s.time[k] - s.time[k - 1]);
+        }
+        w_first.get_or_insert(s.speed.first().map_or(0.0, |w| w.abs()));
+        w_max = s.speed.iter().fold(w_max, |m, w| m.max(w.abs()));
+    }
+    let gained = 0.5 * p.j * (w_max.powi(2) - w_first.unwrap_or(0.0).powi(2));
+    if gained > energy {
+        return Err(NotApplicable::Unidentifiable(format!(
+            "the fit ends at J = {:.4e} kg*m^2, whose kinetic energy at the record's top speed \
+             ({gained:.4e} J) exceeds all the electrical energy the armature took in \
+             ({energy:.4e} J), so this optimum is not physical",
+            p.j
+        )));
+    }
+    Ok(())
 }
 
 /// `σ = √(mean(Δy²)/2)` over the first differences `d`, leaving out a
@@ -809,6 +854,20 @@ mod tests {
             segments,
             ..Default::default()
         }
+    }
+
+    #[test]
+    fn an_optimum_no_turning_motor_has_is_refused() {
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let rec = record(&p, &[60.0, 248.0], 0.6, 1);
+        let segs = || rec.segments.iter();
+        assert!(physical(&p, segs()).is_ok());
+        let stuck = DcParams { tst: 1e3, ..p };
+        let e = physical(&stuck, segs()).unwrap_err().to_string();
+        assert!(e.contains("Tst") && e.contains("not physical"), "{e}");
+        let heavy = DcParams { j: 1e4, ..p };
+        let e = physical(&heavy, segs()).unwrap_err().to_string();
+        assert!(e.contains("kinetic energy"), "{e}");
     }
 
     #[test]
