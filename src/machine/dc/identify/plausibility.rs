@@ -228,22 +228,24 @@ fn check_power_flows_in(record: &Record) -> Result<(), ImplausibleInput> {
                 (net + u * v, gross + (u * v).abs())
             })
     };
-    let checks: [(&'static str, ChannelOf, &str); 2] = [
+    let checks: [(&'static str, &str, ChannelOf, &str); 2] = [
         (
             "armature_current_A",
+            "i",
             current_of,
             "the electrical input power U·i is negative on balance: a motor driven by its \
              armature takes power in; is the current sensor's polarity reversed (negate the column)?",
         ),
         (
             "speed_rad_s",
+            "ω",
             speed_of,
             "the speed turns against the armature voltage on balance: a motor turns the way \
              its voltage drives it; does the encoder or tachometer count the other way (negate \
              the column)?",
         ),
     ];
-    for (column, y, why) in checks {
+    for (column, symbol, y, why) in checks {
         let (net, gross) = balance(y);
         if gross > 0.0 && net < -AGAINST * gross {
             let seg = driven[0];
@@ -252,10 +254,8 @@ fn check_power_flows_in(record: &Record) -> Result<(), ImplausibleInput> {
                 label: seg.label.clone(),
                 column,
                 reason: format!(
-                    "{why} (Σ U·{} is {:.0} % of Σ |U·{}| over the driven segments)",
-                    if column == "speed_rad_s" { "ω" } else { "i" },
+                    "{why} (Σ U·{symbol} is {:.0} % of Σ |U·{symbol}| over the driven segments)",
                     100.0 * net / gross,
-                    if column == "speed_rad_s" { "ω" } else { "i" },
                 ),
             });
         }
