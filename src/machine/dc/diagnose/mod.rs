@@ -799,7 +799,7 @@ fn prepare_runs<'a>(
                 heat += seg_heat;
                 continue;
             }
-            None if !at_rest => Start::Settled(seg.voltage[0]),
+            None if !at_rest => first_state(seg),
             _ => Start::Rest,
         };
         let continues = match (prev, runs.last()) {
@@ -833,6 +833,39 @@ fn prepare_runs<'a>(
         ));
     }
     Ok(runs)
+}
+
+/// The start of a record's first segment, not at rest: settled at its
+/// first voltage when the speed holds still over its first samples (a
+/// record that begins on a held level), else the measured state at its
+/// first sample (a record whose first sample is already inside a
+/// transient: a closed loop's first command, a file cut after the step).
+/// Assuming a settled start there would begin the simulation at the
+/// first command's steady speed, however far from the measured one.
+fn first_state(seg: &DcSegment) -> Start {
+    let n = seg.speed.len();
+    let m = (n / 20).clamp(4, 32).min(n);
+    let head = &seg.speed[..m];
+    let half = m / 2;
+    let mean = |y: &[f64]| y.iter().sum::<f64>() / y.len().max(1) as f64;
+    let drift = (mean(&head[half..]) - mean(&head[..half])).abs();
+    // Noise from the whole segment's sample-to-sample changes (robust to
+    // its steps); a quantised reading whose changes are mostly zero still
+    // has its step as the resolution.
+    let sigma = crate::diagnose::decision::noise_sigma(&seg.speed);
+    let step = seg
+        .speed
+        .windows(2)
+        .map(|w| (w[1] - w[0]).abs())
+        .filter(|d| *d > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    let resolution = if step.is_finite() { step } else { 0.0 };
+    let tolerance = (4.0 * sigma / (half.max(1) as f64).sqrt()).max(2.0 * resolution);
+    if drift <= tolerance {
+        Start::Settled(seg.voltage[0])
+    } else {
+        Start::State(seg.current[0], seg.speed[0])
+    }
 }
 
 /// How a segment whose first sample is at `first` (s) follows one whose

@@ -416,10 +416,15 @@ pub fn identify_dc(record: &Record) -> Identification {
 
     // The full model, fitted to every step at once, started from the
     // transient method that validated best (moments or Pasek) when one
-    // applied, else from its own steady-state and transient estimates.
+    // applied with a motor's parameters, else from its own steady-state,
+    // transient or equation-error estimates. A transient fit built on a
+    // steady-state fit that a brush drop or a closed loop has pushed to a
+    // negative Ra is no start: it is refused as a report value below, and
+    // it would refuse output error with it.
     let score = |t: &TransientFit| t.validation_nrmse.unwrap_or(f64::INFINITY);
     let start = transient
         .iter()
+        .filter(|t| t.params.validate().is_ok())
         .min_by(|a, b| score(a).total_cmp(&score(b)))
         .map(|t| t.params);
     let output_error = enter_method(

@@ -300,40 +300,8 @@ const BLOCK: usize = 25;
 /// encoder's speed (±1 count is tens of rad/s at 2 kHz) constant although
 /// it changes by many counts: averaging resolves what one reading cannot.
 fn excitation(prepared: &[Prepared]) -> Result<String, NotApplicable> {
-    let changes = |f: fn(&DcSegment) -> &Vec<f64>| {
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        let mut noise = 0.0f64;
-        for p in prepared {
-            let y = f(p.seg);
-            noise = noise.max(white_noise(y));
-            for block in y.chunks(BLOCK) {
-                let m = block.iter().sum::<f64>() / block.len() as f64;
-                lo = lo.min(m);
-                hi = hi.max(m);
-            }
-        }
-        let span = hi - lo;
-        span > 0.0 && span > 12.0 * noise / (BLOCK as f64).sqrt()
-    };
-    if !changes(|s| &s.voltage) {
-        return Err(NotApplicable::Missing(
-            "does not apply: the voltage never changes (the record has no excitation: apply \
-             voltage steps, a ramp or a PRBS to the armature)"
-                .into(),
-        ));
-    }
-    if !changes(|s| &s.speed) {
-        return Err(NotApplicable::Missing(
-            "does not apply: the speed is constant (the rotor does not respond to the voltage: \
-             is it blocked, or is the speed sensor connected?)"
-                .into(),
-        ));
-    }
-    if !changes(|s| &s.current) {
-        return Err(NotApplicable::Missing(
-            "does not apply: the current never changes (is the current sensor connected?)".into(),
-        ));
-    }
+    let segments: Vec<&DcSegment> = prepared.iter().map(|p| p.seg).collect();
+    excites(&segments)?;
     let moving = prepared
         .iter()
         .flat_map(|p| &p.moving)
@@ -344,6 +312,55 @@ fn excitation(prepared: &[Prepared]) -> Result<String, NotApplicable> {
     } else {
         String::new()
     })
+}
+
+/// Whether `segments` excite the model at all: the voltage (or, from a
+/// start away from its steady state, the current and the speed), the
+/// speed and the current each change beyond their noise; `Err`
+/// saying which does not, in words a user can act on. Every method that
+/// fits the model's dynamics asks this first: a record without
+/// excitation leaves any optimum an artefact of its start.
+pub(crate) fn excites(segments: &[&DcSegment]) -> Result<(), NotApplicable> {
+    let changes = |f: fn(&DcSegment) -> &Vec<f64>| {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        let mut noise = 0.0f64;
+        for seg in segments {
+            let y = f(seg);
+            noise = noise.max(white_noise(y));
+            for block in y.chunks(BLOCK) {
+                let m = block.iter().sum::<f64>() / block.len() as f64;
+                lo = lo.min(m);
+                hi = hi.max(m);
+            }
+        }
+        let span = hi - lo;
+        span > 0.0 && span > 12.0 * noise / (BLOCK as f64).sqrt()
+    };
+    // A voltage held through the whole record still excites the model
+    // when the record starts away from that level's steady state (a step
+    // from rest just before the first sample): its current and speed
+    // then move.
+    let responds = changes(|s| &s.current) && changes(|s| &s.speed);
+    if !changes(|s| &s.voltage) && !responds {
+        return Err(NotApplicable::Missing(
+            "the voltage never changes (the record has no excitation: apply \
+             voltage steps, a ramp or a PRBS to the armature)"
+                .into(),
+        ));
+    }
+    if !changes(|s| &s.speed) {
+        return Err(NotApplicable::Missing(
+            "the speed is constant (the rotor does not respond to the voltage: \
+             is it blocked, or is the speed sensor connected?)"
+                .into(),
+        ));
+    }
+    if !changes(|s| &s.current) {
+        return Err(NotApplicable::Missing(
+            "the current never changes (is the current sensor connected?)".into(),
+        ));
+    }
+    Ok(())
 }
 
 /// An estimate with its uncertainty, in row order (La, Ra, K, J, f, Tst).

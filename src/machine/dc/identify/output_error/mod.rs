@@ -168,7 +168,9 @@ pub fn output_error(
             "needs at least one step segment of {MIN_SAMPLES} samples or more"
         )));
     }
-    let noise = channel_noise(candidates.iter().map(|(_, s)| *s), &mut warnings);
+    let segments: Vec<&DcSegment> = candidates.iter().map(|(_, s)| *s).collect();
+    super::equation_error::excites(&segments)?;
+    let noise = channel_noise(segments.iter().copied(), &mut warnings);
     let sigma = [noise.current, noise.speed];
 
     let mut ee_start = None;
