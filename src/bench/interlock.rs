@@ -39,6 +39,7 @@ use motorbench_drivers::{
 use tokio::sync::{mpsc, oneshot, watch, Mutex, Notify};
 use tokio::time::Instant;
 
+use super::escalation::escalate;
 use super::supervisor::{Readings, SafetyMonitor, StopCause, SUPERVISOR_ID};
 
 /// The power stage, shared by the sequencer's [`InterlockedStage`] and the
@@ -61,6 +62,9 @@ pub struct StopReport {
     /// Data time of the first batch read after the safe-state command
     /// returned, ns (when one came).
     pub first_safe_t_ns: Option<u64>,
+    /// The escalation's steps, when a stage's output stayed on after the
+    /// safe command (see `bench/escalation.rs`), in order.
+    pub escalation: Vec<String>,
 }
 
 impl StopReport {
@@ -266,6 +270,10 @@ impl PowerStage for InterlockedStage {
 
     async fn safe_state(&mut self) -> Result<(), DriverError> {
         self.stage.lock().await.safe_state().await
+    }
+
+    async fn read_output_enabled(&mut self) -> Result<Option<bool>, DriverError> {
+        self.stage.lock().await.read_output_enabled().await
     }
 
     async fn set_current_limit(&mut self, amperes: f64) -> Result<(), DriverError> {
@@ -735,16 +743,26 @@ impl Task {
         self.shared.stopped.store(true, Ordering::SeqCst);
         // Every stage at once; each under its lock, so no command of the
         // sequencer's gets past it.
+        let last_resort = self.monitor.supervision().last_resort.clone();
+        let last_resort = last_resort.as_ref();
         let results = futures_util::future::join_all(self.stages.iter().map(|stage| async move {
             let mut stage = stage.lock().await;
             let r = stage.safe_state().await;
-            (stage.id().to_string(), r)
+            // A stage that acknowledged without acting: escalate.
+            let escalation = escalate(stage.as_mut(), last_resort).await;
+            (stage.id().to_string(), r, escalation)
         }))
         .await;
-        let failures: Vec<(String, String)> = results
-            .into_iter()
-            .filter_map(|(id, r)| r.err().map(|e| (id, e.to_string())))
-            .collect();
+        let mut escalation = Vec::new();
+        let mut failures: Vec<(String, String)> = Vec::new();
+        for (id, r, e) in results {
+            escalation.extend(e.steps);
+            match (r, e.outcome) {
+                (Err(r), _) => failures.push((id, r.to_string())),
+                (Ok(()), Err(e)) => failures.push((id, e)),
+                (Ok(()), Ok(())) => {}
+            }
+        }
         let safe_state = match failures.as_slice() {
             [] => Ok(()),
             [(_, e)] if self.stages.len() == 1 => Err(e.clone()),
@@ -764,6 +782,7 @@ impl Task {
             safe_state,
             safe_after,
             first_safe_t_ns: None,
+            escalation,
         };
         match &report.safe_state {
             Ok(()) => tracing::warn!(target: "motorbench::supervisor", "{}", report.describe()),

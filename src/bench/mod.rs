@@ -8,6 +8,7 @@
 //! [`crate::machine`].
 
 mod encoder;
+pub mod escalation;
 mod interlock;
 mod limits;
 mod probe;

@@ -261,6 +261,19 @@ impl<'a> Sequencer<'a> {
         Ok(Checked::Batch(Read { batch, speed }))
     }
 
+    /// Hand a fault the plan saw itself (a command refused or failed) to
+    /// the supervisor as a device fault, so that it commands the safe
+    /// state (escalating if a stage ignores it), records the stop and
+    /// latches the rig as for its own trips. A stop of the supervisor's
+    /// own is not handed back. `false` without a supervisor.
+    pub async fn hand_over(&mut self, reason: &str) -> bool {
+        if reason.starts_with("stopped by the safety supervisor") {
+            return false;
+        }
+        let cause = StopCause::DeviceFault(reason.to_string());
+        self.stops.trip(cause, self.t_ns).await
+    }
+
     /// The sensors' sampling statistics, one event per channel.
     pub async fn sampling_summary(&mut self) -> Result<(), RecordError> {
         let stats = self.sensors.sampling_stats();
