@@ -373,6 +373,11 @@ impl Supervised {
                 }
             }
         }
+        for entry in link_events(recording.session.links(), recording.sink.last_t_ns()) {
+            if let Err(e) = recording.push(entry).await {
+                tracing::error!("recording the links' health failed: {e}");
+            }
+        }
         handle.finish().await;
         let winding_rise_k = task.await.map_or(0.0, |s| s.winding_rise_k);
         let end = RunEnd {
@@ -402,6 +407,35 @@ fn stop_event(s: &StopReport) -> Entry {
             message: format!("safety supervisor: {}; {first}", s.describe()),
         },
     }
+}
+
+/// The record's account of the links that had errors or retries during
+/// the test (one info event each, at `t_ns`): what a retried fault cost.
+fn link_events(links: &[LinkHealth], t_ns: u64) -> Vec<Entry> {
+    links
+        .iter()
+        .filter_map(|l| {
+            let c = l.counts();
+            let kinds: Vec<String> = c
+                .by_kind()
+                .into_iter()
+                .filter(|(_, n)| *n > 0)
+                .map(|(k, n)| format!("{k} {n}"))
+                .collect();
+            (!kinds.is_empty()).then(|| Entry::Event {
+                t_ns,
+                event: Event {
+                    level: EventLevel::Info,
+                    message: format!(
+                        "link {}: {} requests; {}",
+                        l.name(),
+                        c.requests,
+                        kinds.join(", ")
+                    ),
+                },
+            })
+        })
+        .collect()
 }
 
 /// The record's account of the supervisor's escalation after a stop: one

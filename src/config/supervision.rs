@@ -17,6 +17,7 @@ pub(crate) struct RawSupervisor {
     bus_loss_timeout_s: Option<f64>,
     estop_channel: Option<String>,
     last_resort_command: Option<Vec<String>>,
+    stuck_after_s: Option<f64>,
     #[serde(default)]
     thermal: RawThermal,
 }
@@ -93,6 +94,9 @@ pub struct Supervision {
     /// What to run when a stage's output stays enabled after the safe
     /// command and the output disable (`last_resort_command`).
     pub last_resort: Option<LastResort>,
+    /// Warn when a channel holds exactly one value this long while the
+    /// drive changes, s (`stuck_after_s`); `None`: no such warning.
+    pub stuck_after: Option<f64>,
     /// The winding-temperature estimate.
     pub thermal: ThermalModel,
 }
@@ -107,6 +111,7 @@ impl Supervision {
             bus_loss_timeout: DEFAULT_BUS_LOSS_TIMEOUT_S,
             estop_channel: None,
             last_resort: None,
+            stuck_after: None,
             thermal: ThermalModel {
                 rated_current,
                 rated_rise: DEFAULT_RATED_RISE_K,
@@ -180,6 +185,10 @@ impl RawSupervisor {
                 Some(LastResort { argv })
             }
         };
+        let stuck_after = match self.stuck_after_s {
+            None => None,
+            Some(v) => Some(timeout("stuck_after_s", v)?),
+        };
         let t = self.thermal;
         let rated_current = match t.rated_current {
             Some(v) => v,
@@ -222,6 +231,7 @@ impl RawSupervisor {
             bus_loss_timeout,
             estop_channel: self.estop_channel,
             last_resort,
+            stuck_after,
             thermal: ThermalModel {
                 rated_current,
                 rated_rise,

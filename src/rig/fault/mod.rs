@@ -9,8 +9,8 @@
 //! - [`FaultyStage`] (`stage.rs`): a [`PowerStage`] that limits its
 //!   current, or acknowledges the safe command (and the output disable)
 //!   without acting on it;
-//! - [`FaultyService`] (`reply.rs`): a served Modbus device that does not
-//!   answer, answers with an exception, or goes away;
+//! - [`ProtocolFaults`] (`reply.rs`): a served Modbus device that does
+//!   not answer, answers with an exception, or goes away;
 //! - [`FaultyLine`] (`line.rs`): a served RTU device's line whose replies
 //!   carry a wrong CRC or are preceded by garbage bytes.
 //!
@@ -22,12 +22,16 @@
 //! [`SensorStream`]: motorbench_drivers::SensorStream
 //! [`PowerStage`]: motorbench_drivers::PowerStage
 
+mod line;
+mod reply;
 mod sensors;
 mod stage;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
+pub use line::FaultyLine;
+pub use reply::ProtocolFaults;
 pub use sensors::FaultySensors;
 pub use stage::FaultyStage;
 
