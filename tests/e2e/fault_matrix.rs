@@ -72,7 +72,7 @@ fn config_with(
             None => text.push_str(&format!("\n[supervisor]\n{}\n", keys.join("\n"))),
         }
     }
-    let path = dir.join("faulty.toml");
+    let path = dir.join("rig.toml");
     std::fs::write(&path, format!("{text}\n{faults}\n")).unwrap();
     path
 }
@@ -250,7 +250,10 @@ fn dc_sim_run_encoder_losing_every_count_warns() {
         DC,
         "stuck_after_s = 0.5",
         "[[fault]]\nkind = \"encoder_loses_counts\"\nat_s = 0.3\n",
-        &[("timeout_s = 10 ", "timeout_s = 1 ")],
+        &[
+            ("timeout_s = 10 ", "timeout_s = 1 "),
+            ("coastdown = true", "coastdown = false"),
+        ],
     );
     r.assert_degraded("stuck sensor? `encoder_count` has held exactly");
 }
@@ -259,7 +262,7 @@ fn dc_sim_run_encoder_losing_every_count_warns() {
 fn dc_sim_run_supply_current_limit_warns() {
     let r = run(
         DC,
-        "[[fault]]\nkind = \"current_limit\"\nat_s = 0\nvalue = 0.05\n",
+        "[[fault]]\nkind = \"current_limit\"\nat_s = 0\nvalue = 0.15\n",
     );
     r.assert_degraded("the segment's voltage is not the commanded step");
     assert!(!r.record.supply_limits.is_empty());
@@ -478,15 +481,18 @@ fn dc_rtu_run_short_crc_errors_are_retried() {
 }
 
 #[test]
-fn dc_rtu_run_short_garbage_is_retried() {
+fn dc_rtu_run_short_garbage_is_skipped_by_the_decoder() {
+    // Noise before a reply is skipped by the RTU decoder as it looks for
+    // a frame: nothing is lost, nothing to retry.
     let _one = realtime();
     let r = run_with(
         RTU,
         PATIENT,
-        "[[fault]]\nkind = \"garbage\"\nat_s = 1.0\nfor_s = 0.1\ntarget = \"sensors\"\n",
+        "[[fault]]\nkind = \"garbage\"\nat_s = 1.0\nfor_s = 0.5\ntarget = \"sensors\"\n",
         &[],
     );
-    r.assert_retried();
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(r.events(EventLevel::Abort).is_empty());
 }
 
 #[test]
@@ -519,4 +525,274 @@ fn dc_tcp_run_stage_ignoring_the_safe_command_is_disabled_over_modbus() {
         aborts.iter().any(|m| m.ends_with("output disabled")),
         "{aborts:?}"
     );
+}
+
+#[test]
+fn dc_tcp_run_stage_refusing_every_command_aborts_as_device_fault() {
+    let _one = realtime();
+    let r = run(
+        TCP,
+        "[[fault]]\nkind = \"modbus_exception\"\nat_s = 0\ntarget = \"power_stage\"\nvalue = 4\n",
+    );
+    assert_eq!(r.code, Some(3), "{}", r.stderr);
+    // The plan's first command is refused; the plan hands the fault to
+    // the supervisor, whose safe-state command is refused too: said so.
+    let stop = r.stop();
+    assert!(
+        stop.starts_with("safety supervisor: device fault: power stage fault"),
+        "{stop}"
+    );
+    assert!(stop.contains("SAFE-STATE COMMAND FAILED"), "{stop}");
+}
+
+// ---- induction machine, `motorbench run` ----
+
+const IM: &str = "sim-im.toml";
+const IM_TCP: &str = "sim-modbus-im.toml";
+
+#[test]
+fn im_sim_run_nan_line_current_aborts_safe() {
+    let r = run(
+        IM,
+        "[[fault]]\nkind = \"nan\"\nat_s = 1.0\ntarget = \"line_current\"\n",
+    );
+    r.assert_aborted_safe("limit tripped: current NaN");
+}
+
+#[test]
+fn im_sim_run_clock_jump_aborts_safe() {
+    let r = run(
+        IM,
+        "[[fault]]\nkind = \"clock_jump\"\nat_s = 1.0\nvalue = -0.2\n",
+    );
+    r.assert_aborted_safe("clock jump");
+}
+
+#[test]
+fn im_sim_run_supply_ignoring_the_safe_command_is_disabled() {
+    let r = run(
+        IM,
+        "[[fault]]\nkind = \"ignore_safe_state\"\nat_s = 0\ntarget = \"supply\"\n\
+         [[fault]]\nkind = \"inf\"\nat_s = 1.0\ntarget = \"line_voltage\"\n",
+    );
+    r.assert_aborted_safe("limit tripped: voltage inf");
+    let aborts = r.events(EventLevel::Abort);
+    assert!(
+        aborts
+            .iter()
+            .any(|m| m.contains("output still enabled after the safe command")),
+        "{aborts:?}"
+    );
+    assert!(
+        aborts.iter().any(|m| m.ends_with("output disabled")),
+        "{aborts:?}"
+    );
+}
+
+#[test]
+fn im_tcp_run_short_meter_timeout_is_retried() {
+    let _one = realtime();
+    let r = run_with(
+        IM_TCP,
+        PATIENT,
+        "[[fault]]\nkind = \"bus_timeout\"\nat_s = 1.0\nfor_s = 0.15\ntarget = \"meter\"\n",
+        &[],
+    );
+    r.assert_retried();
+}
+
+#[test]
+fn im_tcp_run_encoder_disconnect_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        IM_TCP,
+        "[[fault]]\nkind = \"disconnect\"\nat_s = 1.0\ntarget = \"encoder\"\n",
+    );
+    r.assert_aborted_safe("device fault");
+}
+
+// ---- the daemon: `motorbench serve`, tests started through the API ----
+
+mod daemon {
+    use super::*;
+    use crate::common::daemon::{finished, get, wait_test, Served};
+    use serde_json::{json, Value};
+
+    /// A daemon on `shipped` with `supervisor` keys and `faults`, one
+    /// test started through the API (with `test` overriding `[test]`)
+    /// and run to its end: the daemon, its client, the test's status and
+    /// its record.
+    async fn daemon_test(
+        shipped: &str,
+        supervisor: &str,
+        faults: &str,
+        test: Option<Value>,
+    ) -> (
+        Served,
+        motorbench::serve::client::Client,
+        Value,
+        Record,
+        tempfile::TempDir,
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let config = config_with(shipped, supervisor, faults, &[], dir.path());
+        let records = dir.path().join("records");
+        let served = Served::start(&config, &records, dir.path(), &["--listen", "127.0.0.1:0"]);
+        let c = served.client(None);
+        let body = test.map(|t| json!({ "test": t }));
+        let r = c.post("/v1/rigs/rig/tests", body.as_ref()).await.unwrap();
+        assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+        let id = r.json()["id"].as_str().unwrap().to_string();
+        let s = wait_test(&c, &id, finished).await;
+        let record = read_mcap(&records.join(format!("{id}.mcap"))).unwrap();
+        (served, c, s, record, dir)
+    }
+
+    /// The rig is latched (`tripped`), refuses a new test, and is free
+    /// again after `ctl reset`.
+    async fn assert_latched_until_reset(served: &Served, c: &motorbench::serve::client::Client) {
+        assert_eq!(get(c, "/v1/rigs/rig").await["state"], "tripped");
+        let refused = c.post("/v1/rigs/rig/tests", None).await.unwrap();
+        assert_eq!(refused.status, 409);
+        assert_eq!(refused.json()["error"], "tripped");
+        let out = served.ctl(&["reset"]);
+        assert!(out.status.success(), "{:?}", common::text(&out));
+        assert_eq!(get(c, "/v1/rigs/rig").await["state"], "idle");
+    }
+
+    fn aborts(record: &Record) -> Vec<&str> {
+        record
+            .events
+            .iter()
+            .filter(|(_, e)| e.level == EventLevel::Abort)
+            .map(|(_, e)| e.message.as_str())
+            .collect()
+    }
+
+    const SHORT: fn() -> Option<Value> =
+        || Some(json!({"levels_V": [60, 248, 60], "coastdown": false}));
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_daemon_nan_current_aborts_safe_and_latches() {
+        let (served, c, s, _record, _dir) = daemon_test(
+            DC,
+            "",
+            "[[fault]]\nkind = \"nan\"\nat_s = 0.5\ntarget = \"armature_current\"\n",
+            SHORT(),
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "limit", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        assert_latched_until_reset(&served, &c).await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_daemon_clock_jump_aborts_safe_and_latches() {
+        let (served, c, s, _record, _dir) = daemon_test(
+            DC,
+            "",
+            "[[fault]]\nkind = \"clock_jump\"\nat_s = 0.5\nvalue = -0.1\n",
+            SHORT(),
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "clock_jump", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        assert_latched_until_reset(&served, &c).await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_daemon_stage_ignoring_the_disable_gets_the_last_resort_and_latches() {
+        let marker = tempfile::tempdir().unwrap();
+        let touched = marker.path().join("contactor-opened");
+        let (served, c, s, record, _dir) = daemon_test(
+            DC,
+            &format!("last_resort_command = [\"touch\", \"{}\"]", touched.display()),
+            "[[fault]]\nkind = \"ignore_disable\"\nat_s = 0\n\
+             [[fault]]\nkind = \"spike\"\nat_s = 0.5\ntarget = \"armature_voltage\"\nvalue = 1000\n",
+            SHORT(),
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "limit", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        let aborts = aborts(&record);
+        assert!(
+            aborts
+                .iter()
+                .any(|m| m.contains("running the last resort `touch")),
+            "{aborts:?}"
+        );
+        assert!(touched.exists(), "the last resort ran");
+        assert_latched_until_reset(&served, &c).await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_daemon_stuck_sensor_warns_and_completes() {
+        let (_served, _c, s, record, _dir) = daemon_test(
+            DC,
+            "stuck_after_s = 0.5",
+            "[[fault]]\nkind = \"stuck\"\nat_s = 0.3\ntarget = \"armature_voltage\"\n",
+            SHORT(),
+        )
+        .await;
+        assert_eq!(s["outcome"], "completed", "{s}");
+        assert!(
+            record
+                .events
+                .iter()
+                .any(|(_, e)| e.level == EventLevel::Warn
+                    && e.message.contains("stuck sensor? `armature_voltage`")),
+            "{:?}",
+            record.events
+        );
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_tcp_daemon_stage_refusing_commands_latches_as_device_fault() {
+        let _one = realtime();
+        let (served, c, s, _record, _dir) = daemon_test(
+            TCP,
+            "",
+            "[[fault]]\nkind = \"modbus_exception\"\nat_s = 0\ntarget = \"power_stage\"\nvalue = 4\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "device_fault", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], false, "{s}");
+        assert_latched_until_reset(&served, &c).await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_tcp_daemon_sensor_disconnect_aborts_safe_and_latches() {
+        let _one = realtime();
+        let (served, c, s, _record, _dir) = daemon_test(
+            TCP,
+            "",
+            "[[fault]]\nkind = \"disconnect\"\nat_s = 1.0\ntarget = \"sensors\"\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "device_fault", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        assert_latched_until_reset(&served, &c).await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn im_daemon_nan_line_current_aborts_safe_and_latches() {
+        let (served, c, s, _record, _dir) = daemon_test(
+            IM,
+            "",
+            "[[fault]]\nkind = \"nan\"\nat_s = 1.0\ntarget = \"line_current\"\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "limit", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        assert_latched_until_reset(&served, &c).await;
+    }
 }
