@@ -264,6 +264,8 @@ pub(crate) struct FaultRig<'a> {
     pub rtu: bool,
     /// The stages a stage fault may name.
     pub stages: &'a [&'a str],
+    /// The stage that feeds the machine takes a current limit.
+    pub current_limit: bool,
 }
 
 /// Validate `raw` (from `source`) for a rig offering `rig`.
@@ -393,6 +395,13 @@ pub(crate) fn validate_faults(
                 ));
             }
         }
+        if kind == FaultKind::CurrentLimit && !rig.current_limit {
+            return Err(bad(
+                "kind",
+                "a current_limit fault needs a supply that takes a current limit (a DC rig's)"
+                    .into(),
+            ));
+        }
         if kind.on_stage() {
             if let Some(t) = r.target.as_deref() {
                 if !rig.stages.contains(&t) {
@@ -440,6 +449,7 @@ mod tests {
         served: &[],
         rtu: false,
         stages: &["power_stage"],
+        current_limit: true,
     };
 
     #[test]
@@ -498,6 +508,7 @@ mod tests {
             served: &["power_stage", "sensors"],
             rtu: false,
             stages: &["power_stage"],
+            current_limit: true,
         };
         assert!(e(
             "[[fault]]\nkind = \"crc_error\"\nat_s = 1\ntarget = \"sensors\"\n",

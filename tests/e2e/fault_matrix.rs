@@ -253,6 +253,10 @@ fn dc_sim_run_encoder_losing_every_count_warns() {
         &[
             ("timeout_s = 10 ", "timeout_s = 1 "),
             ("coastdown = true", "coastdown = false"),
+            (
+                "levels_V = [60, 248, 60, 154, 248, 107, 201, 60]",
+                "levels_V = [60, 248]",
+            ),
         ],
     );
     r.assert_degraded("stuck sensor? `encoder_count` has held exactly");
@@ -611,6 +615,47 @@ fn im_tcp_run_encoder_disconnect_aborts_safe() {
     r.assert_aborted_safe("device fault");
 }
 
+#[test]
+fn im_tcp_run_meter_device_failure_exception_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        IM_TCP,
+        "[[fault]]\nkind = \"modbus_exception\"\nat_s = 1.0\ntarget = \"meter\"\nvalue = 4\n",
+    );
+    r.assert_aborted_safe("device fault");
+}
+
+#[test]
+fn im_rtu_run_short_crc_errors_on_the_encoder_are_retried() {
+    let _one = realtime();
+    let r = run_with(
+        IM_TCP,
+        PATIENT,
+        "[[fault]]\nkind = \"crc_error\"\nat_s = 1.0\nfor_s = 0.1\ntarget = \"encoder\"\n",
+        &[("simulate = \"tcp\"", "simulate = \"rtu\"")],
+    );
+    r.assert_retried();
+}
+
+#[test]
+fn im_current_limit_is_refused_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = config_with(
+        IM,
+        "",
+        "[[fault]]\nkind = \"current_limit\"\nat_s = 0\nvalue = 1\n",
+        &[],
+        dir.path(),
+    );
+    let out = common::motorbench(&["run", "--config", config.to_str().unwrap()]);
+    let (_, stderr) = common::text(&out);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("fault[0].kind: a current_limit fault needs"),
+        "{stderr}"
+    );
+}
+
 // ---- the daemon: `motorbench serve`, tests started through the API ----
 
 mod daemon {
@@ -793,6 +838,48 @@ mod daemon {
         assert_eq!(s["outcome"], "aborted", "{s}");
         assert_eq!(s["stop"]["kind"], "limit", "{s}");
         assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        assert_latched_until_reset(&served, &c).await;
+    }
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_tcp_daemon_short_sensor_timeout_is_retried() {
+        let _one = realtime();
+        let (_served, c, s, record, _dir) = daemon_test(
+            TCP,
+            PATIENT,
+            "[[fault]]\nkind = \"bus_timeout\"\nat_s = 1.0\nfor_s = 0.15\ntarget = \"sensors\"\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "completed", "{s}");
+        assert!(
+            record
+                .events
+                .iter()
+                .any(|(_, e)| e.message.starts_with("link ") && e.message.contains("retry ")),
+            "{:?}",
+            record.events
+        );
+        assert_eq!(get(&c, "/v1/rigs/rig").await["state"], "idle");
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn im_daemon_supply_ignoring_the_safe_command_is_disabled_and_latches() {
+        let (served, c, s, record, _dir) = daemon_test(
+            IM,
+            "",
+            "[[fault]]\nkind = \"ignore_safe_state\"\nat_s = 0\ntarget = \"supply\"\n\
+             [[fault]]\nkind = \"spike\"\nat_s = 1.0\ntarget = \"line_current\"\nvalue = 1000\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "limit", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        let aborts = aborts(&record);
+        assert!(
+            aborts.iter().any(|m| m.ends_with("output disabled")),
+            "{aborts:?}"
+        );
         assert_latched_until_reset(&served, &c).await;
     }
 }

@@ -548,6 +548,7 @@ impl Config {
                 served,
                 rtu,
                 stages: &["power_stage"],
+                current_limit: true,
             },
         )?;
 

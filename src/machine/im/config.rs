@@ -613,6 +613,7 @@ impl ImRunConfig {
                 served: &served,
                 rtu,
                 stages,
+                current_limit: false,
             },
         )?;
         Ok(ImRunConfig {
