@@ -743,24 +743,28 @@ impl Task {
         self.shared.stopped.store(true, Ordering::SeqCst);
         // Every stage at once; each under its lock, so no command of the
         // sequencer's gets past it.
-        let last_resort = self.monitor.supervision().last_resort.clone();
-        let last_resort = last_resort.as_ref();
         let results = futures_util::future::join_all(self.stages.iter().map(|stage| async move {
             let mut stage = stage.lock().await;
-            let r = stage.safe_state().await;
-            // A stage that acknowledged without acting: escalate.
-            let escalation = escalate(stage.as_mut(), last_resort).await;
-            (stage.id().to_string(), r, escalation)
+            stage.safe_state().await
         }))
         .await;
+        let safe_after = requested.elapsed();
+        // A stage that acknowledged the safe command may not have acted on
+        // it: read back, escalate (a failed command is reported as such).
+        let last_resort = self.monitor.supervision().last_resort.clone();
         let mut escalation = Vec::new();
         let mut failures: Vec<(String, String)> = Vec::new();
-        for (id, r, e) in results {
+        for (stage, r) in self.stages.iter().zip(results) {
+            let mut stage = stage.lock().await;
+            let id = stage.id().to_string();
+            if let Err(e) = r {
+                failures.push((id, e.to_string()));
+                continue;
+            }
+            let e = escalate(stage.as_mut(), last_resort.as_ref()).await;
             escalation.extend(e.steps);
-            match (r, e.outcome) {
-                (Err(r), _) => failures.push((id, r.to_string())),
-                (Ok(()), Err(e)) => failures.push((id, e)),
-                (Ok(()), Ok(())) => {}
+            if let Err(e) = e.outcome {
+                failures.push((id, e));
             }
         }
         let safe_state = match failures.as_slice() {
@@ -772,7 +776,6 @@ impl Task {
                 .collect::<Vec<_>>()
                 .join("; ")),
         };
-        let safe_after = requested.elapsed();
         if safe_state.is_err() {
             self.shared.safe_state_failed.store(true, Ordering::Relaxed);
         }
