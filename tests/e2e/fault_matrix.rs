@@ -22,10 +22,10 @@ use crate::common::{self, replay::only_mcap};
 /// Held by the tests that run on the wall clock (the protocol-served
 /// rigs): they run one after the other, so as not to disturb each
 /// other's sampling.
-static REALTIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+static REALTIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
 
-fn realtime() -> std::sync::MutexGuard<'static, ()> {
-    REALTIME.lock().unwrap_or_else(|e| e.into_inner())
+fn realtime() -> tokio::sync::MutexGuard<'static, ()> {
+    REALTIME.blocking_lock()
 }
 
 /// A shipped configuration with `supervisor` keys set in its
@@ -796,7 +796,7 @@ mod daemon {
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn dc_tcp_daemon_stage_refusing_commands_latches_as_device_fault() {
-        let _one = realtime();
+        let _one = REALTIME.lock().await;
         let (served, c, s, _record, _dir) = daemon_test(
             TCP,
             "",
@@ -812,7 +812,7 @@ mod daemon {
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn dc_tcp_daemon_sensor_disconnect_aborts_safe_and_latches() {
-        let _one = realtime();
+        let _one = REALTIME.lock().await;
         let (served, c, s, _record, _dir) = daemon_test(
             TCP,
             "",
@@ -842,7 +842,7 @@ mod daemon {
     }
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn dc_tcp_daemon_short_sensor_timeout_is_retried() {
-        let _one = realtime();
+        let _one = REALTIME.lock().await;
         let (_served, c, s, record, _dir) = daemon_test(
             TCP,
             PATIENT,
