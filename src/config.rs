@@ -8,6 +8,7 @@
 
 mod can;
 mod error;
+mod fault;
 mod key_line;
 mod limits;
 pub(crate) mod modbus;
@@ -19,6 +20,8 @@ mod test_config;
 pub use can::{CanLink, CanTransport};
 pub use error::ConfigError;
 pub(crate) use error::{bounded, invalid, syntax_error};
+pub(crate) use fault::{validate_faults, FaultRig, RawFault};
+pub use fault::{Fault, FaultKind, FaultPlan, MAX_FAULTS};
 pub use key_line::key_line;
 pub use limits::Limits;
 pub use modbus::{LinkSpec, ModbusDeviceLink, ModbusRig, SensorLink, SimulatedTransport};
@@ -34,7 +37,7 @@ pub use crate::machine::dc::config::{
 };
 pub use retention::{Retention, DEFAULT_MAX_TOTAL_GIB};
 pub use supervision::{
-    Supervision, ThermalModel, DEFAULT_AMBIENT_C, DEFAULT_BUS_LOSS_TIMEOUT_S,
+    LastResort, Supervision, ThermalModel, DEFAULT_AMBIENT_C, DEFAULT_BUS_LOSS_TIMEOUT_S,
     DEFAULT_MAX_WINDING_C, DEFAULT_RATED_RISE_K, DEFAULT_STALE_TIMEOUT_S,
     DEFAULT_THERMAL_TIME_CONSTANT_S,
 };

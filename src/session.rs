@@ -83,7 +83,10 @@ impl Session {
     /// Open `machine`'s rig; `realtime` paces a simulated rig at the wall
     /// clock.
     pub async fn open(machine: Box<dyn Machine>, realtime: bool) -> Result<Session, SessionError> {
-        let rig = machine.open_rig(realtime).await?;
+        let mut rig = machine.open_rig(realtime).await?;
+        if let Some(plan) = machine.faults().filter(|p| !p.is_empty()) {
+            rig = crate::rig::fault::inject(rig, plan)?;
+        }
         // The rig's buses, then the links its sensors read themselves.
         let mut links = rig.links;
         links.extend(rig.sensors.link_health());
@@ -364,6 +367,16 @@ impl Supervised {
             if let Err(e) = recording.push(stop_event(s)).await {
                 tracing::error!("recording the supervisor's stop failed: {e}");
             }
+            for entry in escalation_events(s) {
+                if let Err(e) = recording.push(entry).await {
+                    tracing::error!("recording the supervisor's escalation failed: {e}");
+                }
+            }
+        }
+        for entry in link_events(recording.session.links(), recording.sink.last_t_ns()) {
+            if let Err(e) = recording.push(entry).await {
+                tracing::error!("recording the links' health failed: {e}");
+            }
         }
         handle.finish().await;
         let winding_rise_k = task.await.map_or(0.0, |s| s.winding_rise_k);
@@ -394,6 +407,50 @@ fn stop_event(s: &StopReport) -> Entry {
             message: format!("safety supervisor: {}; {first}", s.describe()),
         },
     }
+}
+
+/// The record's account of the links that had errors or retries during
+/// the test (one info event each, at `t_ns`): what a retried fault cost.
+fn link_events(links: &[LinkHealth], t_ns: u64) -> Vec<Entry> {
+    links
+        .iter()
+        .filter_map(|l| {
+            let c = l.counts();
+            let kinds: Vec<String> = c
+                .by_kind()
+                .into_iter()
+                .filter(|(_, n)| *n > 0)
+                .map(|(k, n)| format!("{k} {n}"))
+                .collect();
+            (!kinds.is_empty()).then(|| Entry::Event {
+                t_ns,
+                event: Event {
+                    level: EventLevel::Info,
+                    message: format!(
+                        "link {}: {} requests; {}",
+                        l.name(),
+                        c.requests,
+                        kinds.join(", ")
+                    ),
+                },
+            })
+        })
+        .collect()
+}
+
+/// The record's account of the supervisor's escalation after a stop: one
+/// abort event per step.
+fn escalation_events(s: &StopReport) -> Vec<Entry> {
+    s.escalation
+        .iter()
+        .map(|step| Entry::Event {
+            t_ns: s.requested_t_ns,
+            event: Event {
+                level: EventLevel::Abort,
+                message: format!("safety supervisor: {step}"),
+            },
+        })
+        .collect()
 }
 
 /// A concluded test.

@@ -56,6 +56,14 @@ pub trait PowerStage: Send {
         })
     }
 
+    /// Read back whether the output is enabled, as the stage itself
+    /// reports it (not as last commanded): `Some(true)` after a safe
+    /// command means the stage did not act on it. Optional: `None` (the
+    /// default) when the stage cannot tell.
+    async fn read_output_enabled(&mut self) -> Result<Option<bool>, DriverError> {
+        Ok(None)
+    }
+
     /// The keep-alive timeout of the stage's heartbeat, when it has one:
     /// once armed by a first [`PowerStage::heartbeat`], a stage that is not
     /// petted again within this time goes to its safe state by itself, so a
@@ -111,5 +119,6 @@ mod tests {
         assert!(matches!(e, DriverError::Unsupported { .. }));
         let e = stage.set_frequency(12.5).await.unwrap_err();
         assert_eq!(e.to_string(), "plain does not support a frequency command");
+        assert_eq!(stage.read_output_enabled().await, Ok(None));
     }
 }

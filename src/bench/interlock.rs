@@ -39,6 +39,7 @@ use motorbench_drivers::{
 use tokio::sync::{mpsc, oneshot, watch, Mutex, Notify};
 use tokio::time::Instant;
 
+use super::escalation::escalate;
 use super::supervisor::{Readings, SafetyMonitor, StopCause, SUPERVISOR_ID};
 
 /// The power stage, shared by the sequencer's [`InterlockedStage`] and the
@@ -61,6 +62,9 @@ pub struct StopReport {
     /// Data time of the first batch read after the safe-state command
     /// returned, ns (when one came).
     pub first_safe_t_ns: Option<u64>,
+    /// The escalation's steps, when a stage's output stayed on after the
+    /// safe command (see `bench/escalation.rs`), in order.
+    pub escalation: Vec<String>,
 }
 
 impl StopReport {
@@ -266,6 +270,10 @@ impl PowerStage for InterlockedStage {
 
     async fn safe_state(&mut self) -> Result<(), DriverError> {
         self.stage.lock().await.safe_state().await
+    }
+
+    async fn read_output_enabled(&mut self) -> Result<Option<bool>, DriverError> {
+        self.stage.lock().await.read_output_enabled().await
     }
 
     async fn set_current_limit(&mut self, amperes: f64) -> Result<(), DriverError> {
@@ -737,14 +745,28 @@ impl Task {
         // sequencer's gets past it.
         let results = futures_util::future::join_all(self.stages.iter().map(|stage| async move {
             let mut stage = stage.lock().await;
-            let r = stage.safe_state().await;
-            (stage.id().to_string(), r)
+            stage.safe_state().await
         }))
         .await;
-        let failures: Vec<(String, String)> = results
-            .into_iter()
-            .filter_map(|(id, r)| r.err().map(|e| (id, e.to_string())))
-            .collect();
+        let safe_after = requested.elapsed();
+        // A stage that acknowledged the safe command may not have acted on
+        // it: read back, escalate (a failed command is reported as such).
+        let last_resort = self.monitor.supervision().last_resort.clone();
+        let mut escalation = Vec::new();
+        let mut failures: Vec<(String, String)> = Vec::new();
+        for (stage, r) in self.stages.iter().zip(results) {
+            let mut stage = stage.lock().await;
+            let id = stage.id().to_string();
+            if let Err(e) = r {
+                failures.push((id, e.to_string()));
+                continue;
+            }
+            let e = escalate(stage.as_mut(), last_resort.as_ref()).await;
+            escalation.extend(e.steps);
+            if let Err(e) = e.outcome {
+                failures.push((id, e));
+            }
+        }
         let safe_state = match failures.as_slice() {
             [] => Ok(()),
             [(_, e)] if self.stages.len() == 1 => Err(e.clone()),
@@ -754,7 +776,6 @@ impl Task {
                 .collect::<Vec<_>>()
                 .join("; ")),
         };
-        let safe_after = requested.elapsed();
         if safe_state.is_err() {
             self.shared.safe_state_failed.store(true, Ordering::Relaxed);
         }
@@ -764,6 +785,7 @@ impl Task {
             safe_state,
             safe_after,
             first_safe_t_ns: None,
+            escalation,
         };
         match &report.safe_state {
             Ok(()) => tracing::warn!(target: "motorbench::supervisor", "{}", report.describe()),

@@ -8,6 +8,7 @@
 //! [`crate::machine`].
 
 mod encoder;
+pub mod escalation;
 mod interlock;
 mod limits;
 mod probe;
@@ -17,6 +18,7 @@ pub(crate) mod sequencer;
 mod settle;
 mod sink;
 mod stop_path;
+mod stuck;
 mod supervisor;
 mod thermal;
 
@@ -32,6 +34,7 @@ pub use sampling::SamplingEvents;
 pub use settle::SettleDetector;
 pub use sink::{sensor_channels_with_speed, BenchError, Outcome, RecordSink};
 pub use stop_path::StopPath;
+pub use stuck::StuckDetector;
 pub use supervisor::{
     HeatingBudget, MonitorError, Readings, SafetyMonitor, SafetyRules, StopCause, SUPERVISOR_ID,
 };

@@ -22,7 +22,7 @@ use motorbench_drivers::{DriverError, PowerStage, SampleBatch, SensorStream};
 use tokio::sync::watch;
 
 use super::{Progress, RecordSink, SafetyMonitor, SamplingEvents, SpeedFromEncoder, StopCause};
-use super::{StopPath, SUPERVISOR_ID};
+use super::{StopPath, StuckDetector, SUPERVISOR_ID};
 use crate::record::{
     Entry, Event, EventLevel, RecordError, SegmentKind, SegmentMarker, SegmentPhase,
 };
@@ -81,6 +81,8 @@ pub(crate) struct Sequencer<'a> {
     speed: SpeedChannel,
     encoder: SpeedFromEncoder,
     sampling: SamplingEvents,
+    /// The stuck-sensor warning, when configured.
+    stuck: Option<StuckDetector>,
     t_ns: u64,
     /// The supervisor has taken a trip of ours: record on, check nothing,
     /// until it ends the stream.
@@ -115,7 +117,12 @@ impl<'a> Sequencer<'a> {
         nominal_hz: f64,
     ) -> Sequencer<'a> {
         let stale = stale_timeout(sensors.channels().iter().map(|c| c.rate_hz), nominal_hz);
+        let stuck = monitor.supervision().stuck_after.map(|after| {
+            let quantities = sensors.channels().iter().map(|c| c.quantity.clone());
+            StuckDetector::new(quantities.collect(), after)
+        });
         Sequencer {
+            stuck,
             operator: stops.operator_flag(),
             sensors,
             sink,
@@ -181,6 +188,9 @@ impl<'a> Sequencer<'a> {
     /// Record a command value on record channel `channel`.
     pub async fn command(&mut self, channel: usize, value: f64) -> Result<(), RecordError> {
         let t_ns = self.t_ns;
+        if let Some(s) = &mut self.stuck {
+            s.command(t_ns);
+        }
         self.push(Entry::Samples {
             t_ns,
             values: vec![(channel, value)],
@@ -253,12 +263,32 @@ impl<'a> Sequencer<'a> {
         for message in self.sampling.admit(self.sensors.take_warnings()) {
             self.event(EventLevel::Warn, message).await?;
         }
+        let stuck = match &mut self.stuck {
+            Some(s) if !self.tripped => s.check(&batch),
+            _ => Vec::new(),
+        };
+        for message in stuck {
+            self.event(EventLevel::Warn, message).await?;
+        }
         if !self.tripped {
             if let Err(cause) = self.monitor.check(&batch) {
                 return Ok(Checked::Trip(cause));
             }
         }
         Ok(Checked::Batch(Read { batch, speed }))
+    }
+
+    /// Hand a fault the plan saw itself (a command refused or failed) to
+    /// the supervisor as a device fault, so that it commands the safe
+    /// state (escalating if a stage ignores it), records the stop and
+    /// latches the rig as for its own trips. A stop of the supervisor's
+    /// own is not handed back. `false` without a supervisor.
+    pub async fn hand_over(&mut self, reason: &str) -> bool {
+        if reason.starts_with("stopped by the safety supervisor") {
+            return false;
+        }
+        let cause = StopCause::DeviceFault(reason.to_string());
+        self.stops.trip(cause, self.t_ns).await
     }
 
     /// The sensors' sampling statistics, one event per channel.

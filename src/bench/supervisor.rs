@@ -144,6 +144,15 @@ pub enum StopCause {
         /// The timeout, s.
         timeout_s: f64,
     },
+    /// The sample time went backwards, or jumped ahead by more than the
+    /// stale timeout from one batch to the next: the readings' clock
+    /// cannot be trusted (nor any rate or integral computed on it).
+    ClockJump {
+        /// Data time of the batch before, s.
+        from_s: f64,
+        /// Data time of the batch that jumped, s.
+        to_s: f64,
+    },
     /// The sensor stream delivered nothing for too long (wall clock).
     BusLoss {
         /// Driver id of the stream.
@@ -174,7 +183,7 @@ impl StopCause {
     }
 
     /// A short machine-readable name: `limit`, `winding_temperature`,
-    /// `heating_budget`, `stale_channel`, `bus_loss`, `device_fault`, `sequencer_stalled`,
+    /// `heating_budget`, `stale_channel`, `clock_jump`, `bus_loss`, `device_fault`, `sequencer_stalled`,
     /// `emergency_stop`, `operator_abort`, `shutdown`.
     pub fn kind(&self) -> &'static str {
         match self {
@@ -182,6 +191,7 @@ impl StopCause {
             StopCause::WindingTemperature { .. } => "winding_temperature",
             StopCause::HeatingBudget { .. } => "heating_budget",
             StopCause::StaleChannel { .. } => "stale_channel",
+            StopCause::ClockJump { .. } => "clock_jump",
             StopCause::BusLoss { .. } => "bus_loss",
             StopCause::DeviceFault(_) => "device_fault",
             StopCause::SequencerStalled => "sequencer_stalled",
@@ -215,6 +225,10 @@ impl std::fmt::Display for StopCause {
             } => write!(
                 f,
                 "stale data: no new {quantity} reading for {silent_s:.3} s (timeout {timeout_s} s)"
+            ),
+            StopCause::ClockJump { from_s, to_s } => write!(
+                f,
+                "clock jump: the sample time went from {from_s:.4} s to {to_s:.4} s"
             ),
             StopCause::BusLoss { stream, timeout_s } => write!(
                 f,
@@ -361,6 +375,12 @@ impl SafetyMonitor {
         self
     }
 
+    /// What it enforces beyond the limits (and the supervisor's last
+    /// resort).
+    pub fn supervision(&self) -> &Supervision {
+        &self.supervision
+    }
+
     /// The latest readings.
     pub fn readings(&self) -> Readings {
         self.readings
@@ -379,6 +399,15 @@ impl SafetyMonitor {
     /// Check one batch; the first reason to stop, if any.
     pub fn check(&mut self, batch: &SampleBatch) -> Result<(), StopCause> {
         let t = batch.t_ns;
+        if let Some(last) = self.last_t {
+            let stale_ns = (self.supervision.stale_timeout * 1e9) as u64;
+            if t < last || t - last > stale_ns {
+                return Err(StopCause::ClockJump {
+                    from_s: last as f64 * 1e-9,
+                    to_s: t as f64 * 1e-9,
+                });
+            }
+        }
         let dt_s = self
             .last_t
             .map_or(0.0, |last| t.saturating_sub(last) as f64 * 1e-9);
@@ -640,6 +669,27 @@ mod tests {
             }
             other => panic!("{other:?}"),
         }
+    }
+
+    #[test]
+    fn a_clock_that_goes_back_or_jumps_ahead_trips() {
+        let mut m = monitor(|_| {});
+        m.check(&all(10, 0.0, 0.0, 0.0)).unwrap();
+        m.check(&all(10, 0.0, 0.0, 0.0)).unwrap();
+        let e = m.check(&all(9, 0.0, 0.0, 0.0)).unwrap_err();
+        assert_eq!(e.kind(), "clock_jump");
+        assert!(e.latches());
+        let mut m = monitor(|_| {});
+        m.check(&all(10, 0.0, 0.0, 0.0)).unwrap();
+        // The default stale timeout is 0.25 s: 250 ms is no jump, 251 is.
+        m.check(&all(260, 0.0, 0.0, 0.0)).unwrap();
+        assert_eq!(
+            m.check(&all(511, 0.0, 0.0, 0.0)),
+            Err(StopCause::ClockJump {
+                from_s: 0.26,
+                to_s: 0.511
+            })
+        );
     }
 
     #[test]

@@ -16,6 +16,8 @@ pub(crate) struct RawSupervisor {
     stale_timeout_s: Option<f64>,
     bus_loss_timeout_s: Option<f64>,
     estop_channel: Option<String>,
+    last_resort_command: Option<Vec<String>>,
+    stuck_after_s: Option<f64>,
     #[serde(default)]
     thermal: RawThermal,
 }
@@ -65,6 +67,18 @@ pub struct ThermalModel {
     pub max_winding: f64,
 }
 
+/// The supervisor's last resort when a stage's output stays enabled after
+/// the safe command and the output disable: a program run with its
+/// arguments (e.g. one that opens a contactor or trips the e-stop loop).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct LastResort {
+    /// The program and its arguments.
+    pub argv: Vec<String>,
+}
+
+/// Arguments a last-resort command may have, the program included.
+pub const MAX_LAST_RESORT_ARGS: usize = 64;
+
 /// The validated `[supervisor]` section.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Supervision {
@@ -77,6 +91,12 @@ pub struct Supervision {
     /// Sensor quantity of the emergency-stop input (a reading ≥ 0.5 is an
     /// emergency stop), if the rig has one.
     pub estop_channel: Option<String>,
+    /// What to run when a stage's output stays enabled after the safe
+    /// command and the output disable (`last_resort_command`).
+    pub last_resort: Option<LastResort>,
+    /// Warn when a channel holds exactly one value this long while the
+    /// drive changes, s (`stuck_after_s`); `None`: no such warning.
+    pub stuck_after: Option<f64>,
     /// The winding-temperature estimate.
     pub thermal: ThermalModel,
 }
@@ -90,6 +110,8 @@ impl Supervision {
             stale_timeout: DEFAULT_STALE_TIMEOUT_S,
             bus_loss_timeout: DEFAULT_BUS_LOSS_TIMEOUT_S,
             estop_channel: None,
+            last_resort: None,
+            stuck_after: None,
             thermal: ThermalModel {
                 rated_current,
                 rated_rise: DEFAULT_RATED_RISE_K,
@@ -145,6 +167,28 @@ impl RawSupervisor {
                 return Err(invalid("estop_channel", "must not be empty".into()));
             }
         }
+        let last_resort = match self.last_resort_command {
+            None => None,
+            Some(argv) => {
+                if argv.first().is_none_or(|p| p.trim().is_empty()) {
+                    return Err(invalid(
+                        "last_resort_command",
+                        "must name a program: [\"program\", \"argument\", …]".into(),
+                    ));
+                }
+                if argv.len() > MAX_LAST_RESORT_ARGS {
+                    return Err(invalid(
+                        "last_resort_command",
+                        format!("{} arguments; at most {MAX_LAST_RESORT_ARGS}", argv.len()),
+                    ));
+                }
+                Some(LastResort { argv })
+            }
+        };
+        let stuck_after = match self.stuck_after_s {
+            None => None,
+            Some(v) => Some(timeout("stuck_after_s", v)?),
+        };
         let t = self.thermal;
         let rated_current = match t.rated_current {
             Some(v) => v,
@@ -186,6 +230,8 @@ impl RawSupervisor {
             stale_timeout,
             bus_loss_timeout,
             estop_channel: self.estop_channel,
+            last_resort,
+            stuck_after,
             thermal: ThermalModel {
                 rated_current,
                 rated_rise,

@@ -35,7 +35,7 @@ use async_trait::async_trait;
 use motorbench_drivers::{ChannelInfo, LinkHealth, PowerStage, SensorStream};
 
 use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
-use crate::config::Retention;
+use crate::config::{FaultPlan, Retention};
 use crate::diagnose::{attach_diagnosis, ResidualPlot};
 use crate::record::{ChannelSpec, Record, SegmentKind};
 use crate::report::IdentificationReport;
@@ -159,6 +159,11 @@ pub trait Machine: Send + Sync {
         progress: &dyn Progress,
         stops: StopPath<'_>,
     ) -> Result<Outcome, BenchError>;
+    /// The faults the configuration injects (`[[fault]]`), none by
+    /// default.
+    fn faults(&self) -> Option<&FaultPlan> {
+        None
+    }
     /// The analysis of a record this test made (CPU work: call it off the
     /// reactor); `truth` is the simulated machine.
     fn analyser(&self, truth: Option<Truth>) -> Analyser;

@@ -18,6 +18,7 @@ use motorbench_drivers::{ChannelInfo, DriverError, LinkHealth};
 
 use crate::config::{LinkSpec, ModbusDeviceLink};
 
+pub mod fault;
 mod modbus_server;
 mod wall_clock;
 
@@ -62,6 +63,9 @@ pub enum RigError {
     /// A device could not be reached while setting up.
     #[error(transparent)]
     Driver(#[from] DriverError),
+    /// A `[[fault]]` entry does not fit the rig.
+    #[error("{0}")]
+    Fault(String),
 }
 
 /// The Modbus client of a device on `link`, or of the simulated device

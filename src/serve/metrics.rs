@@ -272,7 +272,7 @@ impl Metrics {
 
 const HELP_FINISHED: &str = "Tests finished, per rig and outcome (completed, aborted, failed)";
 const HELP_STOPPED: &str = "Tests stopped by the safety supervisor, per rig and cause \
-     (operator_abort, emergency_stop, limit, winding_temperature, stale_channel, bus_loss, \
+     (operator_abort, emergency_stop, limit, winding_temperature, stale_channel, clock_jump, bus_loss, \
      device_fault, …)";
 const HELP_ESTOPS: &str =
     "Emergency stops requested, per rig and source (API, SIGUSR1), idle or not";

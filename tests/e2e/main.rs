@@ -21,6 +21,7 @@ mod degenerate_dc;
 mod diagnose_cli;
 mod diagnose_dc_shaft;
 mod export;
+mod fault_matrix;
 mod foxglove_layout;
 mod identify_csv;
 mod im_identify_cli;

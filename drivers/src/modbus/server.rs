@@ -159,6 +159,23 @@ pub trait SimulatedDevice: Send + Sync {
     }
 }
 
+/// What a served device does in place of its answer (fault injection:
+/// see [`Interference`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Interfere {
+    /// No answer at all (the client times out).
+    Silence,
+    /// This exception code in place of the answer.
+    Exception(u8),
+}
+
+/// Asked before every request addressed to the device: `Some` replaces
+/// the answer (the request is not acted on). For simulated faults.
+pub trait Interference: Send + Sync {
+    /// What to do in place of answering, if anything.
+    fn interfere(&self) -> Option<Interfere>;
+}
+
 /// A device that only stores what is written.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct PassiveDevice;
@@ -179,13 +196,25 @@ pub struct BankService {
     unit: u8,
     bank: SharedBank,
     device: Arc<dyn SimulatedDevice>,
+    interference: Option<Arc<dyn Interference>>,
 }
 
 impl BankService {
     /// Answer requests to `unit` (others are ignored, as on a shared line)
     /// from `bank`, with `device`'s behaviour.
     pub fn new(unit: u8, bank: SharedBank, device: Arc<dyn SimulatedDevice>) -> BankService {
-        BankService { unit, bank, device }
+        BankService {
+            unit,
+            bank,
+            device,
+            interference: None,
+        }
+    }
+
+    /// The same service, asking `interference` before every answer.
+    pub fn with_interference(mut self, interference: Arc<dyn Interference>) -> BankService {
+        self.interference = Some(interference);
+        self
     }
 
     fn handle(&self, req: Request<'static>) -> Result<Response, ExceptionCode> {
@@ -273,7 +302,11 @@ impl tokio_modbus::server::Service for BankService {
             // Not addressed to us: silence, as on a shared RS-485 line.
             return future::ready(Ok(None));
         }
-        future::ready(self.handle(req.request).map(Some))
+        match self.interference.as_ref().and_then(|i| i.interfere()) {
+            Some(Interfere::Silence) => future::ready(Ok(None)),
+            Some(Interfere::Exception(code)) => future::ready(Err(ExceptionCode::new(code))),
+            None => future::ready(self.handle(req.request).map(Some)),
+        }
     }
 }
 

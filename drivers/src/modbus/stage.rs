@@ -154,6 +154,18 @@ impl PowerStage for ModbusPowerStage {
         self.enable(enabled).await
     }
 
+    /// The enable register read back (`None` without one).
+    async fn read_output_enabled(&mut self) -> Result<Option<bool>, DriverError> {
+        let Some((reg, on, _)) = &self.enable else {
+            return Ok(None);
+        };
+        let r = self
+            .bus
+            .read(self.unit, vec![reg.clone()], Priority::Urgent)
+            .await?;
+        Ok(r.values.first().map(|v| v.round() == f64::from(*on)))
+    }
+
     async fn safe_state(&mut self) -> Result<(), DriverError> {
         let off = self.enable(false).await;
         let zero = self

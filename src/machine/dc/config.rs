@@ -10,9 +10,9 @@ use serde::Deserialize;
 
 use crate::bounds;
 use crate::config::{
-    bounded, invalid, modbus, syntax_error, ConfigError, Limits, ModbusRig, RawRetention,
-    RawSupervisor, Retention, SensorLink, SimulatedTransport, Supervision, DEFAULT_CONFIG,
-    DEFAULT_CONFIG_NAME,
+    bounded, invalid, modbus, syntax_error, validate_faults, ConfigError, FaultPlan, FaultRig,
+    Limits, ModbusRig, RawFault, RawRetention, RawSupervisor, Retention, SensorLink,
+    SimulatedTransport, Supervision, DEFAULT_CONFIG, DEFAULT_CONFIG_NAME,
 };
 use crate::excerpt::quoted;
 use crate::model::DcParams;
@@ -29,6 +29,8 @@ struct RawConfig {
     supervisor: RawSupervisor,
     #[serde(default)]
     records: RawRetention,
+    #[serde(default)]
+    fault: Vec<RawFault>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -245,6 +247,8 @@ pub struct Config {
     pub supervision: Supervision,
     /// How long the daemon keeps this rig's records.
     pub retention: Retention,
+    /// The faults injected on purpose (`[[fault]]`); empty on a real test.
+    pub faults: FaultPlan,
 }
 
 impl Config {
@@ -527,6 +531,26 @@ impl Config {
 
         let supervision = raw.supervisor.validate(source, &raw.limits, &nameplate)?;
         let retention = raw.records.validate(source)?;
+        let (served, rtu): (&[&str], bool) = match &backend {
+            Backend::Modbus {
+                rig,
+                simulated: Some(_),
+            } => (
+                &["power_stage", "sensors"],
+                rig.simulate == Some(SimulatedTransport::Rtu),
+            ),
+            _ => (&[], false),
+        };
+        let faults = validate_faults(
+            source,
+            raw.fault,
+            FaultRig {
+                served,
+                rtu,
+                stages: &["power_stage"],
+                current_limit: true,
+            },
+        )?;
 
         Ok(Config {
             source: source.to_string(),
@@ -540,6 +564,7 @@ impl Config {
             settle: st,
             supervision,
             retention,
+            faults,
         })
     }
 }

@@ -42,6 +42,7 @@ pub struct Rig {
 }
 
 async fn modbus_rig(
+    faults: &[crate::config::Fault],
     m: &ModbusRig,
     simulated: Option<&crate::config::SimulatedRig>,
     sample_rate_hz: f64,
@@ -62,6 +63,7 @@ async fn modbus_rig(
                     t,
                     (&m.power_stage.profile, m.power_stage.unit_id),
                     daq,
+                    faults,
                 )
                 .await?,
             )
@@ -265,7 +267,13 @@ pub async fn build_rig(cfg: &Config, realtime: bool) -> Result<Rig, RigError> {
             })
         }
         Backend::Modbus { rig, simulated } => {
-            modbus_rig(rig, simulated.as_ref(), cfg.sample_rate_hz).await
+            modbus_rig(
+                &cfg.faults.protocol_faults(),
+                rig,
+                simulated.as_ref(),
+                cfg.sample_rate_hz,
+            )
+            .await
         }
     }
 }

@@ -311,6 +311,7 @@ impl Bench<'_> {
         open: Option<(usize, &PlanStep)>,
         reason: String,
     ) -> Result<Outcome, RecordError> {
+        self.seq.hand_over(&reason).await;
         let safe = safe_state_all(&mut [&mut *self.stage]).await.remove(0);
         let message = match &safe {
             Ok(()) => format!("{reason}; power stage commanded to its safe state"),

@@ -27,7 +27,8 @@ use tokio::io::AsyncWriteExt;
 use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
-use crate::config::{SimulatedRig, SimulatedTransport};
+use crate::config::{Fault, SimulatedRig, SimulatedTransport};
+use crate::rig::fault::ProtocolFaults;
 use crate::rig::{
     enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock,
 };
@@ -265,14 +266,18 @@ impl std::fmt::Debug for ServedRig {
 impl ServedRig {
     /// Serve `sim` (its plant stepped at `plant_rate_hz`): the supply with
     /// `supply`'s register map on its unit, over `transport`; the sensors
-    /// as `daq` says.
+    /// as `daq` says; each device (`power_stage`, `sensors`) with the
+    /// protocol faults of `faults` that target it (on the time since now).
     pub async fn start(
         sim: &SimulatedRig,
         plant_rate_hz: f64,
         transport: SimulatedTransport,
         supply: (&DeviceProfile, u8),
         daq: ServedDaq<'_>,
+        faults: &[Fault],
     ) -> Result<ServedRig, ServeError> {
+        let epoch = Instant::now();
+        let faults_of = |device: &str| ProtocolFaults::for_device(faults, device, epoch);
         let (stage, sensors) =
             sim_rig(sim, plant_rate_hz, false).map_err(|e| ServeError::Motor(e.to_string()))?;
         let plant = Arc::new(Mutex::new(RealtimePlant {
@@ -307,10 +312,11 @@ impl ServedRig {
         let stage_bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(sp)));
         let stage_service = BankService::new(su, stage_bank.clone(), Arc::new(supply_dev));
         let mut pty_ends = Vec::new();
-        let mut serve =
-            |service: BankService, baud: u32| serve_device(transport, service, baud, &mut pty_ends);
+        let mut serve = |service: BankService, baud: u32, device: &str| {
+            serve_device(transport, service, baud, &mut pty_ends, faults_of(device))
+        };
         let baud = |p: &DeviceProfile| p.serial.map_or(115_200, |s| s.baud_rate);
-        let (stage_link, stage_task) = serve(stage_service, baud(sp))?;
+        let (stage_link, stage_task) = serve(stage_service, baud(sp), "power_stage")?;
         let (daq_link, daq_task, daq_bank) = match daq {
             ServedDaq::Modbus(dp, du) => {
                 let daq_dev = DaqDevice {
@@ -321,7 +327,7 @@ impl ServedRig {
                 };
                 let bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(dp)));
                 let service = BankService::new(du, bank.clone(), Arc::new(daq_dev));
-                let (link, task) = serve(service, baud(dp))?;
+                let (link, task) = serve(service, baud(dp), "sensors")?;
                 (link, task, bank)
             }
             ServedDaq::Stream { framing, rate_hz } => {

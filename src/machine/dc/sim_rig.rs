@@ -257,6 +257,10 @@ impl PowerStage for SimPowerStage {
         Ok(())
     }
 
+    async fn read_output_enabled(&mut self) -> Result<Option<bool>, DriverError> {
+        Ok(Some(lock(&self.plant).enabled))
+    }
+
     async fn set_current_limit(&mut self, amperes: f64) -> Result<(), DriverError> {
         if !(amperes.is_finite() && amperes > 0.0) {
             return Err(DriverError::Device {

@@ -21,8 +21,8 @@ use super::{ImModbusRig, ImSweepPlan, SimImRigConfig, StandardTestsPlan};
 use crate::bench::SafetyRules;
 use crate::bounds;
 use crate::config::{
-    bounded, invalid, syntax_error, ConfigError, Limits, RawRetention, RawSupervisor, Retention,
-    Supervision,
+    bounded, invalid, syntax_error, validate_faults, ConfigError, FaultPlan, FaultRig, Limits,
+    RawFault, RawRetention, RawSupervisor, Retention, Supervision,
 };
 use crate::excerpt::quoted;
 use crate::identify::slip_grid;
@@ -59,6 +59,8 @@ pub struct ImRunConfig {
     pub standard: Option<StandardTestsPlan>,
     /// The circuit identification fits.
     pub model: ImModel,
+    /// The faults injected on purpose (`[[fault]]`); empty on a real test.
+    pub faults: FaultPlan,
 }
 
 #[derive(Debug, Deserialize)]
@@ -72,6 +74,8 @@ struct Raw {
     supervisor: RawSupervisor,
     #[serde(default)]
     records: RawRetention,
+    #[serde(default)]
+    fault: Vec<RawFault>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -584,6 +588,34 @@ impl ImRunConfig {
             serde_json::to_value(plate).map_err(|e| bad("motor.nameplate", e.to_string()))?;
         let supervision = raw.supervisor.validate(source, &limits, &nameplate)?;
         let retention = raw.records.validate(source)?;
+        let served: Vec<&str> = match &modbus {
+            Some(m) if m.simulate.is_some() && simulated.is_some() => {
+                let mut d = vec!["supply", "dynamometer", "meter", "encoder"];
+                if m.dc_source.is_some() {
+                    d.push("dc_source");
+                }
+                d
+            }
+            _ => Vec::new(),
+        };
+        let rtu = modbus
+            .as_ref()
+            .is_some_and(|m| m.simulate == Some(crate::config::SimulatedTransport::Rtu));
+        let stages: &[&str] = if standard.is_some() {
+            &["supply", "dynamometer", "dc_source"]
+        } else {
+            &["supply", "dynamometer"]
+        };
+        let faults = validate_faults(
+            source,
+            raw.fault,
+            FaultRig {
+                served: &served,
+                rtu,
+                stages,
+                current_limit: false,
+            },
+        )?;
         Ok(ImRunConfig {
             source: source.into(),
             text: text.into(),
@@ -598,6 +630,7 @@ impl ImRunConfig {
             plan,
             standard,
             model,
+            faults,
         })
     }
 

@@ -173,6 +173,10 @@ impl Machine for ImRunConfig {
         (self.supervision.bus_loss_timeout, self.sample_rate_hz)
     }
 
+    fn faults(&self) -> Option<&crate::config::FaultPlan> {
+        Some(&self.faults)
+    }
+
     fn retention(&self) -> Retention {
         self.retention
     }

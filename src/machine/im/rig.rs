@@ -90,6 +90,7 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
                 (ServedDevice::of(&m.meter), &m.meter_channels),
                 (ServedDevice::of(&m.encoder), &m.encoder_channels),
                 m.dc_source.as_ref().map(|d| ServedDevice::of(&d.device)),
+                &cfg.faults.protocol_faults(),
             )
             .await?,
         ),

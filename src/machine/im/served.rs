@@ -41,8 +41,10 @@ use tokio::task::JoinHandle;
 use super::sim_rig::{
     channel, sim_im_rig, SimDcSource, SimDyno, SimImRigConfig, SimImSensors, SimVfd,
 };
+use crate::config::Fault;
 use crate::config::{ModbusDeviceLink, SimulatedTransport};
 use crate::model::Connection;
+use crate::rig::fault::ProtocolFaults;
 use crate::rig::{
     enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock,
 };
@@ -455,7 +457,9 @@ impl ServedImRig {
         meter: (ServedDevice<'_>, &[(String, String)]),
         encoder: (ServedDevice<'_>, &[(String, String)]),
         dc_source: Option<ServedDevice<'_>>,
+        faults: &[Fault],
     ) -> Result<ServedImRig, ServeError> {
+        let epoch = std::time::Instant::now();
         let cfg = SimImRigConfig {
             sample_rate_hz: plant_rate_hz,
             ..sim.clone()
@@ -589,21 +593,24 @@ impl ServedImRig {
         let mut tasks = Vec::new();
         let mut serve = |profile: &DeviceProfile,
                          unit: u8,
-                         device: Arc<dyn SimulatedDevice>|
+                         device: Arc<dyn SimulatedDevice>,
+                         role: &str|
          -> Result<(ServedLink, SharedBank), ServeError> {
             let bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(profile)));
             let service = BankService::new(unit, bank.clone(), device);
             let baud = profile.serial.map_or(115_200, |s| s.baud_rate);
-            let (link, task) = serve_device(transport, service, baud, &mut pty_ends)?;
+            let faults = ProtocolFaults::for_device(faults, role, epoch);
+            let (link, task) = serve_device(transport, service, baud, &mut pty_ends, faults)?;
             tasks.push(task);
             Ok((link, bank))
         };
-        let (supply_link, supply_bank) = serve(sd.profile, sd.unit, Arc::new(supply_dev))?;
-        let (dyno_link, dyno_bank) = serve(dd.profile, dd.unit, Arc::new(dyno_dev))?;
-        let (meter_link, _) = serve(md.profile, md.unit, Arc::new(meter_dev))?;
-        let (encoder_link, _) = serve(ed.profile, ed.unit, Arc::new(encoder_dev))?;
+        let (supply_link, supply_bank) =
+            serve(sd.profile, sd.unit, Arc::new(supply_dev), "supply")?;
+        let (dyno_link, dyno_bank) = serve(dd.profile, dd.unit, Arc::new(dyno_dev), "dynamometer")?;
+        let (meter_link, _) = serve(md.profile, md.unit, Arc::new(meter_dev), "meter")?;
+        let (encoder_link, _) = serve(ed.profile, ed.unit, Arc::new(encoder_dev), "encoder")?;
         let dc_source_link = match dc_dev {
-            Some((d, dev)) => Some(serve(d.profile, d.unit, Arc::new(dev))?.0),
+            Some((d, dev)) => Some(serve(d.profile, d.unit, Arc::new(dev), "dc_source")?.0),
             None => None,
         };
         Ok(ServedImRig {

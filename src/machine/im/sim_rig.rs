@@ -560,6 +560,10 @@ impl PowerStage for SimVfd {
         Ok(())
     }
 
+    async fn read_output_enabled(&mut self) -> Result<Option<bool>, DriverError> {
+        Ok(Some(lock(&self.plant).vfd_enabled))
+    }
+
     /// The output frequency, in (0, rated] Hz (the simulated machine runs
     /// at its rated frequency or below, its reactances in proportion).
     async fn set_frequency(&mut self, hz: f64) -> Result<(), DriverError> {

@@ -632,6 +632,11 @@ pub(super) async fn run_im_plan(
         Some(tests) => sweep.run_standard(tests).await,
         None => sweep.run().await,
     };
+    // A fault the plan saw itself goes to the supervisor (safe state,
+    // escalation, latch).
+    if let Err(Halt::Fault(reason)) = &result {
+        sweep.seq.hand_over(reason).await;
+    }
     // Safe state first, whatever happened: every stage at once, the
     // supply first.
     let safe = safe_state_all(&mut all_stages(

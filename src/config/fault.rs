@@ -1,0 +1,542 @@
+//! The `[[fault]]` array of a test configuration: faults injected into
+//! the rig on purpose, to show what the bench does about each (the fault
+//! matrix of `docs/reliability.md`). Each entry names a `kind`, when it
+//! starts (`at_s`, test time), how long it lasts (`for_s`, optional:
+//! to the end of the test), what it acts on (`target`: a sensor channel's
+//! quantity, or a device's role, where the kind needs one) and a `value`
+//! where the kind takes one. Unknown kinds and keys are refused with the
+//! key (`fault[2].kind`) named, as everywhere in the configuration.
+//!
+//! A configuration without `[[fault]]` injects nothing: the wrappers in
+//! [`crate::rig::fault`] are not even put in place.
+
+use serde::Deserialize;
+
+use super::{invalid, ConfigError};
+use crate::excerpt::quoted;
+
+/// One raw `[[fault]]` entry.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawFault {
+    kind: String,
+    at_s: f64,
+    for_s: Option<f64>,
+    target: Option<String>,
+    value: Option<f64>,
+}
+
+/// What a fault does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FaultKind {
+    /// A sensor channel (`target`) holds one value: `value`, or its
+    /// latest reading before the fault.
+    Stuck,
+    /// A sensor channel's readings are offset by `value` (one reading, or
+    /// for `for_s`).
+    Spike,
+    /// A sensor channel reads NaN.
+    Nan,
+    /// A sensor channel reads +∞ (−∞ when `value` is negative).
+    Inf,
+    /// The sample timestamps jump by `value` seconds (negative: back).
+    ClockJump,
+    /// The encoder count loses the fraction `value` (default 1: all) of
+    /// its counts while the fault lasts.
+    EncoderLosesCounts,
+    /// The supply limits its current at `value` A (from its next command
+    /// on).
+    CurrentLimit,
+    /// The power stage (`target`, default every stage) answers the safe
+    /// command but does not act on it.
+    IgnoreSafeState,
+    /// The power stage ignores the safe command and the output disable.
+    IgnoreDisable,
+    /// A served device (`target`) does not answer.
+    BusTimeout,
+    /// A served device (`target`) answers with the Modbus exception code
+    /// `value` (default 4, server device failure).
+    ModbusException,
+    /// A served device's link (`target`) goes away for good.
+    Disconnect,
+    /// A served RTU device's replies (`target`) carry a wrong CRC.
+    CrcError,
+    /// Garbage bytes on a served RTU device's line (`target`) before each
+    /// reply.
+    Garbage,
+}
+
+impl FaultKind {
+    /// Every kind, with its name in `kind`.
+    pub const ALL: [(FaultKind, &'static str); 14] = [
+        (FaultKind::Stuck, "stuck"),
+        (FaultKind::Spike, "spike"),
+        (FaultKind::Nan, "nan"),
+        (FaultKind::Inf, "inf"),
+        (FaultKind::ClockJump, "clock_jump"),
+        (FaultKind::EncoderLosesCounts, "encoder_loses_counts"),
+        (FaultKind::CurrentLimit, "current_limit"),
+        (FaultKind::IgnoreSafeState, "ignore_safe_state"),
+        (FaultKind::IgnoreDisable, "ignore_disable"),
+        (FaultKind::BusTimeout, "bus_timeout"),
+        (FaultKind::ModbusException, "modbus_exception"),
+        (FaultKind::Disconnect, "disconnect"),
+        (FaultKind::CrcError, "crc_error"),
+        (FaultKind::Garbage, "garbage"),
+    ];
+
+    /// The name in `kind`.
+    pub fn name(self) -> &'static str {
+        FaultKind::ALL
+            .iter()
+            .find(|(k, _)| *k == self)
+            .map_or("?", |(_, n)| n)
+    }
+
+    fn parse(name: &str) -> Option<FaultKind> {
+        FaultKind::ALL
+            .iter()
+            .find(|(_, n)| *n == name)
+            .map(|(k, _)| *k)
+    }
+
+    /// Acts on a sensor channel's readings.
+    pub fn on_sensors(self) -> bool {
+        matches!(
+            self,
+            FaultKind::Stuck
+                | FaultKind::Spike
+                | FaultKind::Nan
+                | FaultKind::Inf
+                | FaultKind::ClockJump
+                | FaultKind::EncoderLosesCounts
+        )
+    }
+
+    /// Acts on a power stage.
+    pub fn on_stage(self) -> bool {
+        matches!(
+            self,
+            FaultKind::CurrentLimit | FaultKind::IgnoreSafeState | FaultKind::IgnoreDisable
+        )
+    }
+
+    /// Acts on a served device's protocol (a protocol-served rig only).
+    pub fn on_protocol(self) -> bool {
+        matches!(
+            self,
+            FaultKind::BusTimeout
+                | FaultKind::ModbusException
+                | FaultKind::Disconnect
+                | FaultKind::CrcError
+                | FaultKind::Garbage
+        )
+    }
+
+    /// Only on an RTU line.
+    pub fn rtu_only(self) -> bool {
+        matches!(self, FaultKind::CrcError | FaultKind::Garbage)
+    }
+
+    /// `target` is required.
+    fn needs_target(self) -> bool {
+        matches!(
+            self,
+            FaultKind::Stuck | FaultKind::Spike | FaultKind::Nan | FaultKind::Inf
+        ) || self.on_protocol()
+    }
+
+    /// `value` is required.
+    fn needs_value(self) -> bool {
+        matches!(
+            self,
+            FaultKind::Spike | FaultKind::ClockJump | FaultKind::CurrentLimit
+        )
+    }
+
+    /// `value` means something.
+    fn takes_value(self) -> bool {
+        self.needs_value()
+            || matches!(
+                self,
+                FaultKind::Stuck
+                    | FaultKind::Inf
+                    | FaultKind::EncoderLosesCounts
+                    | FaultKind::ModbusException
+            )
+    }
+
+    /// `target` means something.
+    fn takes_target(self) -> bool {
+        self.needs_target() || matches!(self, FaultKind::IgnoreSafeState | FaultKind::IgnoreDisable)
+    }
+}
+
+/// One validated fault. See the module docs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Fault {
+    /// Its index in `[[fault]]` (for messages: `fault[i]`).
+    pub index: usize,
+    /// What it does.
+    pub kind: FaultKind,
+    /// When it starts, s of test time.
+    pub at_s: f64,
+    /// How long it lasts, s; `None`: to the end of the test (a spike
+    /// without it lasts one reading).
+    pub for_s: Option<f64>,
+    /// The channel's quantity or the device's role it acts on.
+    pub target: Option<String>,
+    /// The kind's value.
+    pub value: Option<f64>,
+}
+
+impl Fault {
+    /// Whether the fault acts at test time `t_s`.
+    pub fn active(&self, t_s: f64) -> bool {
+        t_s >= self.at_s && self.for_s.is_none_or(|d| t_s < self.at_s + d)
+    }
+
+    /// Its key prefix in messages: `fault[i]`.
+    pub fn key(&self) -> String {
+        format!("fault[{}]", self.index)
+    }
+
+    /// One line for a person and the record.
+    pub fn describe(&self) -> String {
+        let mut s = format!("{} {} at {} s", self.key(), self.kind.name(), self.at_s);
+        if let Some(d) = self.for_s {
+            s.push_str(&format!(" for {d} s"));
+        }
+        if let Some(t) = &self.target {
+            s.push_str(&format!(" on {t}"));
+        }
+        if let Some(v) = self.value {
+            s.push_str(&format!(" (value {v})"));
+        }
+        s
+    }
+}
+
+/// The validated `[[fault]]` array; empty when the file has none.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct FaultPlan {
+    /// The faults, in file order.
+    pub faults: Vec<Fault>,
+}
+
+impl FaultPlan {
+    /// No fault at all.
+    pub fn is_empty(&self) -> bool {
+        self.faults.is_empty()
+    }
+
+    /// The faults acting on sensor readings.
+    pub fn sensor_faults(&self) -> Vec<Fault> {
+        self.of(FaultKind::on_sensors)
+    }
+
+    /// The faults acting on power stages.
+    pub fn stage_faults(&self) -> Vec<Fault> {
+        self.of(FaultKind::on_stage)
+    }
+
+    /// The faults acting on served devices' protocols.
+    pub fn protocol_faults(&self) -> Vec<Fault> {
+        self.of(FaultKind::on_protocol)
+    }
+
+    fn of(&self, which: impl Fn(FaultKind) -> bool) -> Vec<Fault> {
+        self.faults
+            .iter()
+            .filter(|f| which(f.kind))
+            .cloned()
+            .collect()
+    }
+}
+
+/// What the rig offers the faults, for their validation.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct FaultRig<'a> {
+    /// The devices a protocol fault may name (empty: the rig is not
+    /// served behind a protocol).
+    pub served: &'a [&'a str],
+    /// The served devices are on RTU lines.
+    pub rtu: bool,
+    /// The stages a stage fault may name.
+    pub stages: &'a [&'a str],
+    /// The stage that feeds the machine takes a current limit.
+    pub current_limit: bool,
+}
+
+/// Validate `raw` (from `source`) for a rig offering `rig`.
+pub(crate) fn validate_faults(
+    source: &str,
+    raw: Vec<RawFault>,
+    rig: FaultRig<'_>,
+) -> Result<FaultPlan, ConfigError> {
+    if raw.len() > MAX_FAULTS {
+        return Err(invalid(
+            source,
+            "fault",
+            format!("{} faults; at most {MAX_FAULTS}", raw.len()),
+        ));
+    }
+    let mut faults = Vec::with_capacity(raw.len());
+    for (index, r) in raw.into_iter().enumerate() {
+        let key = |k: &str| format!("fault[{index}].{k}");
+        let bad = |k: &str, why: String| invalid(source, &key(k), why);
+        let kind = FaultKind::parse(&r.kind).ok_or_else(|| {
+            bad(
+                "kind",
+                format!(
+                    "unknown fault {} (this version has: {})",
+                    quoted(&r.kind),
+                    FaultKind::ALL.map(|(_, n)| format!("\"{n}\"")).join(", ")
+                ),
+            )
+        })?;
+        if !(r.at_s.is_finite() && r.at_s >= 0.0 && r.at_s <= MAX_TIME_S) {
+            return Err(bad(
+                "at_s",
+                format!("{} must be 0 to {MAX_TIME_S} s", r.at_s),
+            ));
+        }
+        if let Some(d) = r.for_s {
+            if !(d.is_finite() && d > 0.0 && d <= MAX_TIME_S) {
+                return Err(bad(
+                    "for_s",
+                    format!("{d} must be > 0 and ≤ {MAX_TIME_S} s"),
+                ));
+            }
+            if kind == FaultKind::ClockJump || kind == FaultKind::Disconnect {
+                return Err(bad(
+                    "for_s",
+                    format!("a {} is a step: it takes no duration", kind.name()),
+                ));
+            }
+        }
+        match (&r.target, kind.takes_target(), kind.needs_target()) {
+            (None, _, true) => {
+                return Err(bad(
+                    "target",
+                    format!("missing: a {} fault needs one", kind.name()),
+                ))
+            }
+            (Some(_), false, _) => {
+                return Err(bad(
+                    "target",
+                    format!("a {} fault takes no target", kind.name()),
+                ))
+            }
+            (Some(t), ..) if t.trim().is_empty() => {
+                return Err(bad("target", "must not be empty".into()))
+            }
+            _ => {}
+        }
+        match (r.value, kind.takes_value(), kind.needs_value()) {
+            (None, _, true) => {
+                return Err(bad(
+                    "value",
+                    format!("missing: a {} fault needs one", kind.name()),
+                ))
+            }
+            (Some(_), false, _) => {
+                return Err(bad(
+                    "value",
+                    format!("a {} fault takes no value", kind.name()),
+                ))
+            }
+            (Some(v), ..) if !v.is_finite() => {
+                return Err(bad("value", format!("{v} must be finite")))
+            }
+            _ => {}
+        }
+        let value_check = match (kind, r.value) {
+            (FaultKind::CurrentLimit, Some(v)) if v <= 0.0 => Some(format!("{v} A must be > 0")),
+            (FaultKind::EncoderLosesCounts, Some(v)) if !(v > 0.0 && v <= 1.0) => {
+                Some(format!("{v} must be a fraction of the counts, > 0 and ≤ 1"))
+            }
+            (FaultKind::ModbusException, Some(v))
+                if !(1.0..=255.0).contains(&v) || v.fract() != 0.0 =>
+            {
+                Some(format!("{v} is not a Modbus exception code (1 to 255)"))
+            }
+            (FaultKind::ClockJump, Some(0.0)) => Some("a jump of 0 s is no jump".into()),
+            _ => None,
+        };
+        if let Some(why) = value_check {
+            return Err(bad("value", why));
+        }
+        if kind.on_protocol() {
+            if rig.served.is_empty() {
+                return Err(bad(
+                    "kind",
+                    format!(
+                        "a {} fault needs a rig served behind its protocol (rig.modbus.simulate)",
+                        kind.name()
+                    ),
+                ));
+            }
+            if kind.rtu_only() && !rig.rtu {
+                return Err(bad(
+                    "kind",
+                    format!("a {} fault needs the rig served over RTU", kind.name()),
+                ));
+            }
+            let t = r.target.as_deref().unwrap_or_default();
+            if !rig.served.contains(&t) {
+                return Err(bad(
+                    "target",
+                    format!(
+                        "no served device {} (this rig serves: {})",
+                        quoted(t),
+                        rig.served.join(", ")
+                    ),
+                ));
+            }
+        }
+        if kind == FaultKind::CurrentLimit && !rig.current_limit {
+            return Err(bad(
+                "kind",
+                "a current_limit fault needs a supply that takes a current limit (a DC rig's)"
+                    .into(),
+            ));
+        }
+        if kind.on_stage() {
+            if let Some(t) = r.target.as_deref() {
+                if !rig.stages.contains(&t) {
+                    return Err(bad(
+                        "target",
+                        format!(
+                            "no stage {} (this rig has: {})",
+                            quoted(t),
+                            rig.stages.join(", ")
+                        ),
+                    ));
+                }
+            }
+        }
+        faults.push(Fault {
+            index,
+            kind,
+            at_s: r.at_s,
+            for_s: r.for_s,
+            target: r.target,
+            value: r.value,
+        });
+    }
+    Ok(FaultPlan { faults })
+}
+
+/// The most faults one test may inject.
+pub const MAX_FAULTS: usize = 64;
+/// The latest time a fault may start or the longest it may last, s.
+pub const MAX_TIME_S: f64 = 86_400.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn raw(text: &str) -> Vec<RawFault> {
+        #[derive(Deserialize)]
+        struct Doc {
+            fault: Vec<RawFault>,
+        }
+        toml::from_str::<Doc>(text).unwrap().fault
+    }
+
+    const DC: FaultRig<'static> = FaultRig {
+        served: &[],
+        rtu: false,
+        stages: &["power_stage"],
+        current_limit: true,
+    };
+
+    #[test]
+    fn a_fault_plan_validates_and_says_when_each_acts() {
+        let plan = validate_faults(
+            "t.toml",
+            raw("[[fault]]\nkind = \"stuck\"\nat_s = 1.0\nfor_s = 0.5\ntarget = \"armature_current\"\n\
+                 [[fault]]\nkind = \"ignore_safe_state\"\nat_s = 0\n"),
+            DC,
+        )
+        .unwrap();
+        assert_eq!(plan.sensor_faults().len(), 1);
+        assert_eq!(plan.stage_faults().len(), 1);
+        let f = &plan.faults[0];
+        assert!(!f.active(0.99) && f.active(1.0) && f.active(1.49) && !f.active(1.5));
+        assert!(plan.faults[1].active(1e6));
+        assert_eq!(
+            f.describe(),
+            "fault[0] stuck at 1 s for 0.5 s on armature_current"
+        );
+    }
+
+    #[test]
+    fn bad_faults_name_their_key() {
+        let e = |text: &str, rig| {
+            validate_faults("t.toml", raw(text), rig)
+                .unwrap_err()
+                .to_string()
+        };
+        let unknown = e("[[fault]]\nkind = \"gremlins\"\nat_s = 1\n", DC);
+        assert!(
+            unknown.starts_with("t.toml: fault[0].kind: unknown fault \"gremlins\""),
+            "{unknown}"
+        );
+        assert!(e("[[fault]]\nkind = \"nan\"\nat_s = 1\n", DC).contains("fault[0].target: missing"));
+        assert!(e(
+            "[[fault]]\nkind = \"spike\"\nat_s = 1\ntarget = \"x\"\n",
+            DC
+        )
+        .contains("fault[0].value: missing"));
+        assert!(
+            e("[[fault]]\nkind = \"nan\"\nat_s = -1\ntarget = \"x\"\n", DC)
+                .contains("fault[0].at_s")
+        );
+        assert!(e(
+            "[[fault]]\nkind = \"clock_jump\"\nat_s = 1\nvalue = 1\nfor_s = 2\n",
+            DC
+        )
+        .contains("fault[0].for_s"));
+        assert!(e(
+            "[[fault]]\nkind = \"bus_timeout\"\nat_s = 1\nfor_s = 1\ntarget = \"power_stage\"\n",
+            DC
+        )
+        .contains("needs a rig served behind its protocol"));
+        let tcp = FaultRig {
+            served: &["power_stage", "sensors"],
+            rtu: false,
+            stages: &["power_stage"],
+            current_limit: true,
+        };
+        assert!(e(
+            "[[fault]]\nkind = \"crc_error\"\nat_s = 1\ntarget = \"sensors\"\n",
+            tcp
+        )
+        .contains("needs the rig served over RTU"));
+        assert!(e(
+            "[[fault]]\nkind = \"disconnect\"\nat_s = 1\ntarget = \"daq\"\n",
+            tcp
+        )
+        .contains("fault[0].target: no served device \"daq\""));
+        assert!(e(
+            "[[fault]]\nkind = \"ignore_disable\"\nat_s = 1\ntarget = \"supply\"\n",
+            DC
+        )
+        .contains("fault[0].target: no stage \"supply\""));
+        assert!(e(
+            "[[fault]]\nkind = \"encoder_loses_counts\"\nat_s = 1\nvalue = 2\n",
+            DC
+        )
+        .contains("fault[0].value"));
+        // Unknown keys are refused by the parser (with their line).
+        let text = "[[fault]]\nkind = \"nan\"\nat_s = 1\nwhen = 2\n";
+        #[derive(Debug, Deserialize)]
+        #[allow(dead_code)]
+        struct Doc {
+            fault: Vec<RawFault>,
+        }
+        assert!(toml::from_str::<Doc>(text).is_err());
+    }
+}

@@ -1,0 +1,885 @@
+//! The fault matrix (`docs/reliability.md`): one test per row, each a
+//! fault injected through the configuration's `[[fault]]` array into a
+//! shipped rig (the in-process simulation, or the simulation served
+//! behind Modbus TCP or RTU, whose protocol faults then go through the
+//! real client stack), run through `motorbench run --config` or the
+//! daemon's HTTP API, and the outcome the row promises checked in what
+//! the test left behind (exit code, record, daemon state):
+//!
+//! - retried: the test completes, the retries counted;
+//! - degraded: the test completes with a warning event saying why;
+//! - aborted: the test ends as aborted (exit code 3), the supervisor's
+//!   stop with its cause and the rig commanded safe in the record.
+//!
+//! No assertion is on a duration.
+
+use std::path::{Path, PathBuf};
+
+use motorbench::record::{read_mcap, EventLevel, Record};
+
+use crate::common::{self, replay::only_mcap};
+
+/// Held by the tests that run on the wall clock (the protocol-served
+/// rigs): they run one after the other, so as not to disturb each
+/// other's sampling.
+static REALTIME: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+fn realtime() -> tokio::sync::MutexGuard<'static, ()> {
+    REALTIME.blocking_lock()
+}
+
+/// A shipped configuration with `supervisor` keys set in its
+/// `[supervisor]` section (replacing the same keys), `faults` appended
+/// and each `(from, to)` of `replace` made, written into `dir` with its
+/// device profiles' paths made absolute.
+fn config_with(
+    shipped: &str,
+    supervisor: &str,
+    faults: &str,
+    replace: &[(&str, &str)],
+    dir: &Path,
+) -> PathBuf {
+    let config_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("config");
+    let mut text = std::fs::read_to_string(config_dir.join(shipped))
+        .unwrap()
+        .replace(
+            "profile = \"devices/",
+            &format!("profile = \"{}/devices/", config_dir.display()),
+        );
+    for (from, to) in replace {
+        assert!(text.contains(from), "{shipped} has no `{from}`");
+        text = text.replace(from, to);
+    }
+    let keys: Vec<&str> = supervisor
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .collect();
+    if !keys.is_empty() {
+        let names: Vec<String> = keys
+            .iter()
+            .map(|k| format!("{} ", k.split('=').next().unwrap().trim()))
+            .collect();
+        text = text
+            .lines()
+            .filter(|l| !names.iter().any(|n| l.starts_with(n.as_str())))
+            .collect::<Vec<_>>()
+            .join("\n");
+        match text.find("\n[supervisor]") {
+            Some(at) => {
+                let end = at + text[at + 1..].find('\n').unwrap() + 1;
+                text.insert_str(end + 1, &format!("{}\n", keys.join("\n")));
+            }
+            None => text.push_str(&format!("\n[supervisor]\n{}\n", keys.join("\n"))),
+        }
+    }
+    let path = dir.join("rig.toml");
+    std::fs::write(&path, format!("{text}\n{faults}\n")).unwrap();
+    path
+}
+
+/// What `motorbench run` left: its exit code, stderr and record.
+struct Ran {
+    code: Option<i32>,
+    stderr: String,
+    record: Record,
+    _dir: tempfile::TempDir,
+}
+
+impl Ran {
+    fn events(&self, level: EventLevel) -> Vec<&str> {
+        self.record
+            .events
+            .iter()
+            .filter(|(_, e)| e.level == level)
+            .map(|(_, e)| e.message.as_str())
+            .collect()
+    }
+
+    /// The supervisor's account of its stop.
+    fn stop(&self) -> &str {
+        self.events(EventLevel::Info)
+            .into_iter()
+            .find(|m| m.starts_with("safety supervisor: "))
+            .unwrap_or_else(|| panic!("no supervisor stop in {:?}", self.record.events))
+    }
+
+    /// The plan's abort event (not the supervisor's escalation steps).
+    fn plan_abort(&self) -> &str {
+        self.events(EventLevel::Abort)
+            .into_iter()
+            .find(|m| !m.starts_with("safety supervisor: "))
+            .unwrap_or_else(|| panic!("no abort event in {:?}", self.record.events))
+    }
+
+    /// Aborted (exit code 3) by the supervisor for `cause` (its text
+    /// starts so), the rig commanded to its safe state.
+    fn assert_aborted_safe(&self, cause: &str) {
+        assert_eq!(self.code, Some(3), "{}", self.stderr);
+        let stop = self.stop();
+        assert!(
+            stop.starts_with(&format!("safety supervisor: {cause}")),
+            "{stop}"
+        );
+        assert!(stop.contains("rig commanded to its safe state"), "{stop}");
+        let abort = self.plan_abort();
+        assert!(abort.contains("safe state"), "{abort}");
+        assert!(!abort.contains("FAILED"), "{abort}");
+    }
+
+    /// Completed (exit code 0), a link's retries (or reconnects) in the
+    /// record.
+    fn assert_retried(&self) {
+        assert_eq!(self.code, Some(0), "{}", self.stderr);
+        assert!(self.events(EventLevel::Abort).is_empty());
+        let links = self.events(EventLevel::Info);
+        assert!(
+            links
+                .iter()
+                .any(|m| m.starts_with("link ")
+                    && (m.contains("retry ") || m.contains("reconnect "))),
+            "no retry counted in {links:?}"
+        );
+    }
+
+    /// Completed (exit code 0) with a warning containing `warning`.
+    fn assert_degraded(&self, warning: &str) {
+        assert_eq!(self.code, Some(0), "{}", self.stderr);
+        let warnings = self.events(EventLevel::Warn);
+        assert!(
+            warnings.iter().any(|w| w.contains(warning)),
+            "no warning with `{warning}` in {warnings:?}"
+        );
+        assert!(self.events(EventLevel::Abort).is_empty());
+    }
+}
+
+/// `motorbench run --config` of `shipped` with `faults` appended.
+fn run(shipped: &str, faults: &str) -> Ran {
+    run_with(shipped, "", faults, &[])
+}
+
+/// `motorbench run --config` of `shipped` as [`config_with`] makes it.
+fn run_with(shipped: &str, supervisor: &str, faults: &str, replace: &[(&str, &str)]) -> Ran {
+    let dir = tempfile::tempdir().unwrap();
+    let config = config_with(shipped, supervisor, faults, replace, dir.path());
+    let out_dir = dir.path().join("out");
+    let out = common::motorbench(&[
+        "run",
+        "--config",
+        config.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
+        "--no-diagnose",
+    ]);
+    let (_, stderr) = common::text(&out);
+    assert!(out_dir.exists(), "no record written: {stderr}");
+    let record = read_mcap(&only_mcap(&out_dir)).unwrap();
+    Ran {
+        code: out.status.code(),
+        stderr,
+        record,
+        _dir: dir,
+    }
+}
+
+const DC: &str = "sim-dc.toml";
+
+// ---- DC, simulated rig, `motorbench run` ----
+
+#[test]
+fn dc_sim_run_nan_current_aborts_safe() {
+    let r = run(
+        DC,
+        "[[fault]]\nkind = \"nan\"\nat_s = 1.0\ntarget = \"armature_current\"\n",
+    );
+    r.assert_aborted_safe("limit tripped: current NaN");
+}
+
+#[test]
+fn dc_sim_run_inf_voltage_aborts_safe() {
+    let r = run(
+        DC,
+        "[[fault]]\nkind = \"inf\"\nat_s = 1.0\ntarget = \"armature_voltage\"\n",
+    );
+    r.assert_aborted_safe("limit tripped: voltage inf");
+}
+
+#[test]
+fn dc_sim_run_current_spike_beyond_the_limit_aborts_safe() {
+    let r = run(
+        DC,
+        "[[fault]]\nkind = \"spike\"\nat_s = 1.0\ntarget = \"armature_current\"\nvalue = 20\n",
+    );
+    r.assert_aborted_safe("limit tripped: current");
+}
+
+#[test]
+fn dc_sim_run_clock_jump_back_aborts_safe() {
+    let r = run(
+        DC,
+        "[[fault]]\nkind = \"clock_jump\"\nat_s = 1.0\nvalue = -0.5\n",
+    );
+    r.assert_aborted_safe("clock jump: the sample time went from");
+}
+
+#[test]
+fn dc_sim_run_clock_jump_ahead_aborts_safe() {
+    let r = run(
+        DC,
+        "[[fault]]\nkind = \"clock_jump\"\nat_s = 1.0\nvalue = 2.0\n",
+    );
+    r.assert_aborted_safe("clock jump: the sample time went from");
+}
+
+#[test]
+fn dc_sim_run_stuck_current_warns() {
+    let r = run_with(
+        DC,
+        "stuck_after_s = 0.5",
+        "[[fault]]\nkind = \"stuck\"\nat_s = 0.3\ntarget = \"armature_current\"\n",
+        &[],
+    );
+    r.assert_degraded("stuck sensor? `armature_current` has held exactly");
+}
+
+#[test]
+fn dc_sim_run_encoder_losing_every_count_warns() {
+    // A shaft that seems not to turn never settles: a short settle
+    // timeout keeps the test short.
+    let r = run_with(
+        DC,
+        "stuck_after_s = 0.5",
+        "[[fault]]\nkind = \"encoder_loses_counts\"\nat_s = 0.3\n",
+        &[
+            ("timeout_s = 10 ", "timeout_s = 1 "),
+            ("coastdown = true", "coastdown = false"),
+            (
+                "levels_V = [60, 248, 60, 154, 248, 107, 201, 60]",
+                "levels_V = [60, 248]",
+            ),
+        ],
+    );
+    r.assert_degraded("stuck sensor? `encoder_count` has held exactly");
+}
+
+#[test]
+fn dc_sim_run_supply_current_limit_warns() {
+    let r = run(
+        DC,
+        "[[fault]]\nkind = \"current_limit\"\nat_s = 0\nvalue = 0.15\n",
+    );
+    r.assert_degraded("the segment's voltage is not the commanded step");
+    assert!(!r.record.supply_limits.is_empty());
+}
+
+#[test]
+fn dc_sim_run_stage_ignoring_the_safe_command_is_disabled() {
+    let r = run(
+        DC,
+        "[[fault]]\nkind = \"ignore_safe_state\"\nat_s = 0\n\
+         [[fault]]\nkind = \"nan\"\nat_s = 1.0\ntarget = \"armature_current\"\n",
+    );
+    r.assert_aborted_safe("limit tripped: current NaN");
+    let aborts = r.events(EventLevel::Abort);
+    assert!(
+        aborts
+            .iter()
+            .any(|m| m.contains("output still enabled after the safe command")),
+        "{aborts:?}"
+    );
+    assert!(
+        aborts.iter().any(|m| m.ends_with("output disabled")),
+        "{aborts:?}"
+    );
+}
+
+#[test]
+fn dc_sim_run_stage_ignoring_the_disable_gets_the_last_resort() {
+    let dir = tempfile::tempdir().unwrap();
+    let marker = dir.path().join("contactor-opened");
+    let r = run_with(
+        DC,
+        &format!(
+            "last_resort_command = [\"touch\", \"{}\"]",
+            marker.display()
+        ),
+        "[[fault]]\nkind = \"ignore_disable\"\nat_s = 0\n\
+         [[fault]]\nkind = \"nan\"\nat_s = 1.0\ntarget = \"armature_current\"\n",
+        &[],
+    );
+    r.assert_aborted_safe("limit tripped: current NaN");
+    let aborts = r.events(EventLevel::Abort);
+    assert!(
+        aborts.iter().any(|m| m.contains(
+            "output still enabled after the output disable: running the last resort `touch"
+        )),
+        "{aborts:?}"
+    );
+    assert!(aborts.iter().any(|m| m.ends_with("done")), "{aborts:?}");
+    assert!(marker.exists(), "the last resort ran");
+}
+
+#[test]
+fn dc_sim_run_stage_ignoring_the_disable_without_a_last_resort_reports_it_unsafe() {
+    let r = run(
+        DC,
+        "[[fault]]\nkind = \"ignore_disable\"\nat_s = 0\n\
+         [[fault]]\nkind = \"nan\"\nat_s = 1.0\ntarget = \"armature_current\"\n",
+    );
+    assert_eq!(r.code, Some(3), "{}", r.stderr);
+    let stop = r.stop();
+    assert!(stop.contains("SAFE-STATE COMMAND FAILED"), "{stop}");
+    let aborts = r.events(EventLevel::Abort);
+    assert!(
+        aborts
+            .iter()
+            .any(|m| m.contains("THE STAGE MAY STILL BE DRIVING THE MACHINE")),
+        "{aborts:?}"
+    );
+}
+
+#[test]
+fn dc_bad_fault_entries_are_refused_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    for (extra, key) in [
+        (
+            "[[fault]]\nkind = \"gremlins\"\nat_s = 1\n",
+            "fault[0].kind",
+        ),
+        ("[[fault]]\nkind = \"nan\"\nat_s = 1\n", "fault[0].target"),
+        (
+            "[[fault]]\nkind = \"nan\"\nat_s = 1\ntarget = \"armature_current\"\n\
+             [[fault]]\nkind = \"bus_timeout\"\nat_s = 1\ntarget = \"sensors\"\n",
+            "fault[1].kind",
+        ),
+        (
+            "[[fault]]\nkind = \"nan\"\nat_s = 1\nwhen = 2\n",
+            "unknown field `when`",
+        ),
+    ] {
+        let config = config_with(DC, "", extra, &[], dir.path());
+        let out_dir = dir.path().join("out");
+        let out = common::motorbench(&[
+            "run",
+            "--config",
+            config.to_str().unwrap(),
+            "--out",
+            out_dir.to_str().unwrap(),
+        ]);
+        let (_, stderr) = common::text(&out);
+        assert_eq!(out.status.code(), Some(2), "{stderr}");
+        assert!(stderr.contains(key), "{key}: {stderr}");
+    }
+    // A target the rig does not have is refused when the rig is opened.
+    let r = {
+        let config = config_with(
+            DC,
+            "",
+            "[[fault]]\nkind = \"nan\"\nat_s = 1\ntarget = \"torque\"\n",
+            &[],
+            dir.path(),
+        );
+        let out_dir = dir.path().join("out");
+        common::motorbench(&[
+            "run",
+            "--config",
+            config.to_str().unwrap(),
+            "--out",
+            out_dir.to_str().unwrap(),
+        ])
+    };
+    let (_, stderr) = common::text(&r);
+    assert_ne!(r.status.code(), Some(0), "{stderr}");
+    assert!(
+        stderr.contains("fault[0].target: the rig has no `torque` channel"),
+        "{stderr}"
+    );
+}
+
+// ---- DC, simulated rig served over Modbus TCP / RTU, `motorbench run` ----
+
+const TCP: &str = "sim-modbus-dc.toml";
+const RTU: &str = "sim-modbus-rtu-dc.toml";
+
+/// A supervisor that waits out a retried call: a poll retried twice
+/// (200 ms deadline each) delivers nothing for about 0.45 s.
+const PATIENT: &str = "bus_loss_timeout_s = 1.5\nstale_timeout_s = 1.5";
+
+#[test]
+fn dc_tcp_run_short_sensor_timeout_is_retried() {
+    let _one = realtime();
+    let r = run_with(
+        TCP,
+        PATIENT,
+        "[[fault]]\nkind = \"bus_timeout\"\nat_s = 1.0\nfor_s = 0.15\ntarget = \"sensors\"\n",
+        &[],
+    );
+    r.assert_retried();
+}
+
+#[test]
+fn dc_tcp_run_long_sensor_timeout_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        TCP,
+        "[[fault]]\nkind = \"bus_timeout\"\nat_s = 1.0\nfor_s = 30\ntarget = \"sensors\"\n",
+    );
+    r.assert_aborted_safe("device fault: sensor stream");
+}
+
+#[test]
+fn dc_tcp_run_busy_exception_is_retried() {
+    let _one = realtime();
+    let r = run_with(
+        TCP,
+        PATIENT,
+        "[[fault]]\nkind = \"modbus_exception\"\nat_s = 1.0\nfor_s = 0.02\ntarget = \"sensors\"\nvalue = 6\n",
+        &[],
+    );
+    r.assert_retried();
+}
+
+#[test]
+fn dc_tcp_run_device_failure_exception_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        TCP,
+        "[[fault]]\nkind = \"modbus_exception\"\nat_s = 1.0\ntarget = \"sensors\"\nvalue = 4\n",
+    );
+    r.assert_aborted_safe("device fault");
+}
+
+#[test]
+fn dc_tcp_run_sensor_disconnect_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        TCP,
+        "[[fault]]\nkind = \"disconnect\"\nat_s = 1.0\ntarget = \"sensors\"\n",
+    );
+    r.assert_aborted_safe("device fault: link to modbus-sensors failed");
+}
+
+#[test]
+fn dc_tcp_run_stage_disconnect_aborts_and_reports_the_failed_safe_state() {
+    let _one = realtime();
+    let r = run(
+        TCP,
+        "[[fault]]\nkind = \"disconnect\"\nat_s = 1.0\ntarget = \"power_stage\"\n",
+    );
+    assert_eq!(r.code, Some(3), "{}", r.stderr);
+    let abort = r.plan_abort();
+    assert!(abort.contains("power stage"), "{abort}");
+    assert!(abort.contains("SAFE-STATE COMMAND FAILED"), "{abort}");
+}
+
+#[test]
+fn dc_rtu_run_short_crc_errors_are_retried() {
+    let _one = realtime();
+    let r = run_with(
+        RTU,
+        PATIENT,
+        "[[fault]]\nkind = \"crc_error\"\nat_s = 1.0\nfor_s = 0.1\ntarget = \"sensors\"\n",
+        &[],
+    );
+    r.assert_retried();
+}
+
+#[test]
+fn dc_rtu_run_short_garbage_is_skipped_by_the_decoder() {
+    // Noise before a reply is skipped by the RTU decoder as it looks for
+    // a frame: nothing is lost, nothing to retry.
+    let _one = realtime();
+    let r = run_with(
+        RTU,
+        PATIENT,
+        "[[fault]]\nkind = \"garbage\"\nat_s = 1.0\nfor_s = 0.5\ntarget = \"sensors\"\n",
+        &[],
+    );
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    assert!(r.events(EventLevel::Abort).is_empty());
+}
+
+#[test]
+fn dc_rtu_run_lasting_crc_errors_abort_safe() {
+    let _one = realtime();
+    let r = run(
+        RTU,
+        "[[fault]]\nkind = \"crc_error\"\nat_s = 1.0\ntarget = \"sensors\"\n",
+    );
+    r.assert_aborted_safe("device fault: sensor stream");
+}
+
+#[test]
+fn dc_tcp_run_stage_ignoring_the_safe_command_is_disabled_over_modbus() {
+    let _one = realtime();
+    let r = run(
+        TCP,
+        "[[fault]]\nkind = \"ignore_safe_state\"\nat_s = 0\n\
+         [[fault]]\nkind = \"nan\"\nat_s = 1.0\ntarget = \"armature_current\"\n",
+    );
+    r.assert_aborted_safe("limit tripped: current NaN");
+    let aborts = r.events(EventLevel::Abort);
+    assert!(
+        aborts
+            .iter()
+            .any(|m| m.contains("output still enabled after the safe command")),
+        "{aborts:?}"
+    );
+    assert!(
+        aborts.iter().any(|m| m.ends_with("output disabled")),
+        "{aborts:?}"
+    );
+}
+
+#[test]
+fn dc_tcp_run_stage_refusing_every_command_aborts_as_device_fault() {
+    let _one = realtime();
+    let r = run(
+        TCP,
+        "[[fault]]\nkind = \"modbus_exception\"\nat_s = 0\ntarget = \"power_stage\"\nvalue = 4\n",
+    );
+    assert_eq!(r.code, Some(3), "{}", r.stderr);
+    // The plan's first command is refused; the plan hands the fault to
+    // the supervisor, whose safe-state command is refused too: said so.
+    let stop = r.stop();
+    assert!(
+        stop.starts_with("safety supervisor: device fault: power stage fault"),
+        "{stop}"
+    );
+    assert!(stop.contains("SAFE-STATE COMMAND FAILED"), "{stop}");
+}
+
+// ---- induction machine, `motorbench run` ----
+
+const IM: &str = "sim-im.toml";
+const IM_TCP: &str = "sim-modbus-im.toml";
+
+#[test]
+fn im_sim_run_nan_line_current_aborts_safe() {
+    let r = run(
+        IM,
+        "[[fault]]\nkind = \"nan\"\nat_s = 1.0\ntarget = \"line_current\"\n",
+    );
+    r.assert_aborted_safe("limit tripped: current NaN");
+}
+
+#[test]
+fn im_sim_run_clock_jump_aborts_safe() {
+    let r = run(
+        IM,
+        "[[fault]]\nkind = \"clock_jump\"\nat_s = 1.0\nvalue = -0.2\n",
+    );
+    r.assert_aborted_safe("clock jump");
+}
+
+#[test]
+fn im_sim_run_supply_ignoring_the_safe_command_is_disabled() {
+    let r = run(
+        IM,
+        "[[fault]]\nkind = \"ignore_safe_state\"\nat_s = 0\ntarget = \"supply\"\n\
+         [[fault]]\nkind = \"inf\"\nat_s = 1.0\ntarget = \"line_voltage\"\n",
+    );
+    r.assert_aborted_safe("limit tripped: voltage inf");
+    let aborts = r.events(EventLevel::Abort);
+    assert!(
+        aborts
+            .iter()
+            .any(|m| m.contains("output still enabled after the safe command")),
+        "{aborts:?}"
+    );
+    assert!(
+        aborts.iter().any(|m| m.ends_with("output disabled")),
+        "{aborts:?}"
+    );
+}
+
+#[test]
+fn im_tcp_run_short_meter_timeout_is_retried() {
+    let _one = realtime();
+    let r = run_with(
+        IM_TCP,
+        PATIENT,
+        "[[fault]]\nkind = \"bus_timeout\"\nat_s = 1.0\nfor_s = 0.15\ntarget = \"meter\"\n",
+        &[],
+    );
+    r.assert_retried();
+}
+
+#[test]
+fn im_tcp_run_encoder_disconnect_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        IM_TCP,
+        "[[fault]]\nkind = \"disconnect\"\nat_s = 1.0\ntarget = \"encoder\"\n",
+    );
+    r.assert_aborted_safe("device fault");
+}
+
+#[test]
+fn im_tcp_run_meter_device_failure_exception_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        IM_TCP,
+        "[[fault]]\nkind = \"modbus_exception\"\nat_s = 1.0\ntarget = \"meter\"\nvalue = 4\n",
+    );
+    r.assert_aborted_safe("device fault");
+}
+
+#[test]
+fn im_rtu_run_short_crc_errors_on_the_encoder_are_retried() {
+    let _one = realtime();
+    let r = run_with(
+        IM_TCP,
+        PATIENT,
+        "[[fault]]\nkind = \"crc_error\"\nat_s = 1.0\nfor_s = 0.1\ntarget = \"encoder\"\n",
+        &[("simulate = \"tcp\"", "simulate = \"rtu\"")],
+    );
+    r.assert_retried();
+}
+
+#[test]
+fn im_current_limit_is_refused_naming_the_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = config_with(
+        IM,
+        "",
+        "[[fault]]\nkind = \"current_limit\"\nat_s = 0\nvalue = 1\n",
+        &[],
+        dir.path(),
+    );
+    let out = common::motorbench(&["run", "--config", config.to_str().unwrap()]);
+    let (_, stderr) = common::text(&out);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("fault[0].kind: a current_limit fault needs"),
+        "{stderr}"
+    );
+}
+
+// ---- the daemon: `motorbench serve`, tests started through the API ----
+
+mod daemon {
+    use super::*;
+    use crate::common::daemon::{finished, get, wait_test, Served};
+    use serde_json::{json, Value};
+
+    /// A daemon on `shipped` with `supervisor` keys and `faults`, one
+    /// test started through the API (with `test` overriding `[test]`)
+    /// and run to its end: the daemon, its client, the test's status and
+    /// its record.
+    async fn daemon_test(
+        shipped: &str,
+        supervisor: &str,
+        faults: &str,
+        test: Option<Value>,
+    ) -> (
+        Served,
+        motorbench::serve::client::Client,
+        Value,
+        Record,
+        tempfile::TempDir,
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let config = config_with(shipped, supervisor, faults, &[], dir.path());
+        let records = dir.path().join("records");
+        let served = Served::start(&config, &records, dir.path(), &["--listen", "127.0.0.1:0"]);
+        let c = served.client(None);
+        let body = test.map(|t| json!({ "test": t }));
+        let r = c.post("/v1/rigs/rig/tests", body.as_ref()).await.unwrap();
+        assert_eq!(r.status, 201, "{}", String::from_utf8_lossy(&r.body));
+        let id = r.json()["id"].as_str().unwrap().to_string();
+        let s = wait_test(&c, &id, finished).await;
+        let record = read_mcap(&records.join(format!("{id}.mcap"))).unwrap();
+        (served, c, s, record, dir)
+    }
+
+    /// The rig is latched (`tripped`), refuses a new test, and is free
+    /// again after `ctl reset`.
+    async fn assert_latched_until_reset(served: &Served, c: &motorbench::serve::client::Client) {
+        assert_eq!(get(c, "/v1/rigs/rig").await["state"], "tripped");
+        let refused = c.post("/v1/rigs/rig/tests", None).await.unwrap();
+        assert_eq!(refused.status, 409);
+        assert_eq!(refused.json()["error"], "tripped");
+        let out = served.ctl(&["reset"]);
+        assert!(out.status.success(), "{:?}", common::text(&out));
+        assert_eq!(get(c, "/v1/rigs/rig").await["state"], "idle");
+    }
+
+    fn aborts(record: &Record) -> Vec<&str> {
+        record
+            .events
+            .iter()
+            .filter(|(_, e)| e.level == EventLevel::Abort)
+            .map(|(_, e)| e.message.as_str())
+            .collect()
+    }
+
+    const SHORT: fn() -> Option<Value> =
+        || Some(json!({"levels_V": [60, 248, 60], "coastdown": false}));
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_daemon_nan_current_aborts_safe_and_latches() {
+        let (served, c, s, _record, _dir) = daemon_test(
+            DC,
+            "",
+            "[[fault]]\nkind = \"nan\"\nat_s = 0.5\ntarget = \"armature_current\"\n",
+            SHORT(),
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "limit", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        assert_latched_until_reset(&served, &c).await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_daemon_clock_jump_aborts_safe_and_latches() {
+        let (served, c, s, _record, _dir) = daemon_test(
+            DC,
+            "",
+            "[[fault]]\nkind = \"clock_jump\"\nat_s = 0.5\nvalue = -0.1\n",
+            SHORT(),
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "clock_jump", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        assert_latched_until_reset(&served, &c).await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_daemon_stage_ignoring_the_disable_gets_the_last_resort_and_latches() {
+        let marker = tempfile::tempdir().unwrap();
+        let touched = marker.path().join("contactor-opened");
+        let (served, c, s, record, _dir) = daemon_test(
+            DC,
+            &format!("last_resort_command = [\"touch\", \"{}\"]", touched.display()),
+            "[[fault]]\nkind = \"ignore_disable\"\nat_s = 0\n\
+             [[fault]]\nkind = \"spike\"\nat_s = 0.5\ntarget = \"armature_voltage\"\nvalue = 1000\n",
+            SHORT(),
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "limit", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        let aborts = aborts(&record);
+        assert!(
+            aborts
+                .iter()
+                .any(|m| m.contains("running the last resort `touch")),
+            "{aborts:?}"
+        );
+        assert!(touched.exists(), "the last resort ran");
+        assert_latched_until_reset(&served, &c).await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_daemon_stuck_sensor_warns_and_completes() {
+        let (_served, _c, s, record, _dir) = daemon_test(
+            DC,
+            "stuck_after_s = 0.5",
+            "[[fault]]\nkind = \"stuck\"\nat_s = 0.3\ntarget = \"armature_voltage\"\n",
+            SHORT(),
+        )
+        .await;
+        assert_eq!(s["outcome"], "completed", "{s}");
+        assert!(
+            record
+                .events
+                .iter()
+                .any(|(_, e)| e.level == EventLevel::Warn
+                    && e.message.contains("stuck sensor? `armature_voltage`")),
+            "{:?}",
+            record.events
+        );
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_tcp_daemon_stage_refusing_commands_latches_as_device_fault() {
+        let _one = REALTIME.lock().await;
+        let (served, c, s, _record, _dir) = daemon_test(
+            TCP,
+            "",
+            "[[fault]]\nkind = \"modbus_exception\"\nat_s = 0\ntarget = \"power_stage\"\nvalue = 4\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "device_fault", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], false, "{s}");
+        assert_latched_until_reset(&served, &c).await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_tcp_daemon_sensor_disconnect_aborts_safe_and_latches() {
+        let _one = REALTIME.lock().await;
+        let (served, c, s, _record, _dir) = daemon_test(
+            TCP,
+            "",
+            "[[fault]]\nkind = \"disconnect\"\nat_s = 1.0\ntarget = \"sensors\"\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "device_fault", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        assert_latched_until_reset(&served, &c).await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn im_daemon_nan_line_current_aborts_safe_and_latches() {
+        let (served, c, s, _record, _dir) = daemon_test(
+            IM,
+            "",
+            "[[fault]]\nkind = \"nan\"\nat_s = 1.0\ntarget = \"line_current\"\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "limit", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        assert_latched_until_reset(&served, &c).await;
+    }
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_tcp_daemon_short_sensor_timeout_is_retried() {
+        let _one = REALTIME.lock().await;
+        let (_served, c, s, record, _dir) = daemon_test(
+            TCP,
+            PATIENT,
+            "[[fault]]\nkind = \"bus_timeout\"\nat_s = 1.0\nfor_s = 0.15\ntarget = \"sensors\"\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "completed", "{s}");
+        assert!(
+            record
+                .events
+                .iter()
+                .any(|(_, e)| e.message.starts_with("link ") && e.message.contains("retry ")),
+            "{:?}",
+            record.events
+        );
+        assert_eq!(get(&c, "/v1/rigs/rig").await["state"], "idle");
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn im_daemon_supply_ignoring_the_safe_command_is_disabled_and_latches() {
+        let (served, c, s, record, _dir) = daemon_test(
+            IM,
+            "",
+            "[[fault]]\nkind = \"ignore_safe_state\"\nat_s = 0\ntarget = \"supply\"\n\
+             [[fault]]\nkind = \"spike\"\nat_s = 1.0\ntarget = \"line_current\"\nvalue = 1000\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], "limit", "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        let aborts = aborts(&record);
+        assert!(
+            aborts.iter().any(|m| m.ends_with("output disabled")),
+            "{aborts:?}"
+        );
+        assert_latched_until_reset(&served, &c).await;
+    }
+}
