@@ -21,7 +21,8 @@
 //!   supervisor task ([`bench::supervise`]: heartbeat, bus loss, stops,
 //!   latching) that [`session`] starts with every record.
 //! - [`rig`]: what every machine's rig shares (Modbus clients and bus
-//!   sharing, the simulated device served behind a profile).
+//!   sharing, the simulated device served behind a profile), and the
+//!   faults a test's `[[fault]]` array injects into it ([`rig::fault`]).
 //! - [`machine`]: what differs between machines, behind one trait
 //!   ([`machine::Machine`]: the plan's steps, the rig's stages, the
 //!   record's channels, the analysis and its report); the DC machine

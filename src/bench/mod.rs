@@ -2,8 +2,10 @@
 //! reads through (`sequencer`: select on the stop, stale-data timeout,
 //! recording into the [`RecordSink`], every batch checked with the one
 //! [`SafetyMonitor`], the safe state first), settle detection, limits, the
-//! speed from an encoder, progress, `probe`, and the safety supervisor
-//! task that watches a daemon's test independently of the sequencing.
+//! speed from an encoder, progress, `probe`, the safety supervisor
+//! task that watches a daemon's test independently of the sequencing,
+//! its escalation when a stage ignores the safe command
+//! (`escalation.rs`), and the stuck-sensor warning (`stuck.rs`).
 //! The machines' plans (the DC steps, the IM sweep) and rigs are in
 //! [`crate::machine`].
 

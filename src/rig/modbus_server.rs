@@ -78,8 +78,9 @@ pub fn serve_device(
             }
         }
     };
-    // A disconnect stops the server (its connections close, its line goes
-    // silent) for good.
+    // A disconnect stops the server for good: its TCP connections close
+    // and new ones are refused; an RTU device's pseudo-terminal goes away,
+    // as a USB adapter pulled out.
     let task = match faults.as_ref().and_then(ProtocolFaults::disconnect_at) {
         None => task,
         Some(at_s) => tokio::spawn(async move {

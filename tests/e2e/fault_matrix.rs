@@ -549,6 +549,18 @@ fn dc_tcp_run_stage_refusing_every_command_aborts_as_device_fault() {
     assert!(stop.contains("SAFE-STATE COMMAND FAILED"), "{stop}");
 }
 
+#[test]
+fn dc_rtu_run_sensor_disconnect_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        RTU,
+        "[[fault]]\nkind = \"disconnect\"\nat_s = 1.0\ntarget = \"sensors\"\n",
+    );
+    // The served line's pseudo-terminal goes away with its server, as a
+    // USB adapter pulled out: the port cannot be opened again.
+    r.assert_aborted_safe("device fault: link to");
+}
+
 // ---- induction machine, `motorbench run` ----
 
 const IM: &str = "sim-im.toml";
@@ -881,5 +893,26 @@ mod daemon {
             "{aborts:?}"
         );
         assert_latched_until_reset(&served, &c).await;
+    }
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_rtu_daemon_short_crc_errors_are_retried() {
+        let _one = REALTIME.lock().await;
+        let (_served, c, s, record, _dir) = daemon_test(
+            RTU,
+            PATIENT,
+            "[[fault]]\nkind = \"crc_error\"\nat_s = 1.0\nfor_s = 0.1\ntarget = \"sensors\"\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "completed", "{s}");
+        assert!(
+            record
+                .events
+                .iter()
+                .any(|(_, e)| e.message.starts_with("link ") && e.message.contains("retry ")),
+            "{:?}",
+            record.events
+        );
+        assert_eq!(get(&c, "/v1/rigs/rig").await["state"], "idle");
     }
 }
