@@ -20,6 +20,7 @@ mod dc_step;
 mod degenerate_dc;
 mod diagnose_cli;
 mod diagnose_dc_shaft;
+mod early_result;
 mod export;
 mod foxglove_layout;
 mod identify_csv;
