@@ -34,6 +34,7 @@ mod peers_modbus;
 mod peers_serial;
 mod peers_slcan;
 mod record_v2;
+mod recover;
 mod shell_docs;
 mod sim_can;
 mod sim_merged_sensors;
