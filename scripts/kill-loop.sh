@@ -4,7 +4,8 @@
 # the whole run (test, identification, diagnosis, report writing). After
 # each kill the record must replay (`motorbench replay`, up to its last
 # flushed chunk) and open in the Python `mcap` package; scripts/kill_check.py
-# measures what the kill lost. See docs/reliability.md.
+# measures what the kill lost; then `motorbench recover` finishes the cut
+# record and the Python seeking (indexed) reader must open it. See docs/reliability.md.
 #
 #   scripts/kill-loop.sh [--kills N] [--seed S] [--work DIR] [--config TOML]
 #                        [--bin PATH] [--python PATH]
@@ -83,6 +84,14 @@ for i in $(seq 1 "$kills"); do
     rc=$?
     set -e
     info=$("$python" "$check" check "$rec" --kill-unix-ns "$kill_ns" --test-end-s "$test_end_s")
+    # Finish the cut record for indexed readers (the cut file is kept as
+    # RECORD.damaged), then open it with the seeking reader.
+    set +e
+    "$bin" recover "$rec" > "$out/recover.out" 2>&1
+    recover_rc=$?
+    set -e
+    after=$("$python" "$check" recovered "$rec")
+    info="${info%\}}, \"recover_rc\": $recover_rc, ${after#\{}"
     printf '{"i":%d,"delay_s":%s,"status":"%s","record":true,"replay_rc":%d,"files":"%s",%s\n' \
         "$i" "$delay_s" "$status" "$rc" "$files" "${info#\{}" >> "$results"
     echo "kill $i at ${delay_s} s: replay exit $rc; $info"

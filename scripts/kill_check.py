@@ -12,6 +12,8 @@ object:
   sample), result (whether /bench/result is in the readable part)
 - kill_t_s: the kill's wall-clock time relative to the record's start
   (metadata motorbench.test start_time_ns)
+- `recovered RECORD` (after `motorbench recover`): whether the seeking
+  reader now opens it and how many messages it reads
 - lost_s: min(kill_t_s, test_end) - last_sample_t_s, the test time of
   data the kill lost. test_end is the length of an uninterrupted run's
   test (--test-end-s), or sooner when the readable part has an error
@@ -95,6 +97,26 @@ def nonseeking_count(path):
     return n
 
 
+def seeking_count(path):
+    """Messages the seeking reader reads, or None when it does not open."""
+    try:
+        with open(path, "rb") as f:
+            reader = SeekingReader(f)
+            if reader.get_summary() is None:
+                return None
+            return sum(1 for _ in reader.iter_messages(log_time_order=False))
+    except Exception:  # noqa: BLE001 - any failure means "does not open"
+        return None
+
+
+def recovered(a):
+    """After `motorbench recover`: does the seeking reader open the record,
+    and does it read as many messages as the cut file held?"""
+    n = seeking_count(a.record)
+    json.dump({"recovered_seeking": n is not None, "recovered_messages": n}, sys.stdout)
+    print()
+
+
 def check(a):
     w = walk(a.record)
     if seeking_opens(a.record):
@@ -156,6 +178,12 @@ def summary(a):
           f"{len(replayed)} / {len(with_rec)}")
     print("python mcap reader that opens them: "
           + ", ".join(f"{k} {v}" for k, v in sorted(readers.items())))
+    rec = [r for r in with_rec if "recover_rc" in r]
+    if rec:
+        opens = sum(bool(r.get("recovered_seeking")) for r in rec)
+        same = sum(r.get("recovered_messages") == r.get("messages") for r in rec)
+        print(f"after motorbench recover: seeking reader opens {opens} / {len(rec)}; "
+              f"same message count as the cut file in {same} / {len(rec)}")
     if during:
         lost = [r["lost_s"] for r in during]
         print(f"kills during the test: {len(during)}; data lost per kill, s: "
@@ -177,10 +205,12 @@ def main():
     c.add_argument("record")
     c.add_argument("--kill-unix-ns", type=int, required=True)
     c.add_argument("--test-end-s", type=float, required=True)
+    r = sub.add_parser("recovered", help="check one record after motorbench recover")
+    r.add_argument("record")
     s = sub.add_parser("summary", help="summarise kill-loop results (JSON lines)")
     s.add_argument("results")
     a = p.parse_args()
-    check(a) if a.cmd == "check" else summary(a)
+    {"check": check, "recovered": recovered, "summary": summary}[a.cmd](a)
 
 
 if __name__ == "__main__":

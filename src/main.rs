@@ -13,8 +13,8 @@ use std::process::ExitCode;
 
 use clap::{CommandFactory, Parser, Subcommand};
 use motorbench::cli::{
-    self, CompletionsArgs, ExportArgs, Failure, IdentifyArgs, ManArgs, ProbeArgs, ReplayArgs,
-    RunArgs,
+    self, CompletionsArgs, ExportArgs, Failure, IdentifyArgs, ManArgs, ProbeArgs, RecoverArgs,
+    ReplayArgs, RunArgs,
 };
 use motorbench::diagnose::cli::{run_blind, run_diagnose, BlindArgs, DiagnoseArgs};
 use motorbench::serve::cli::{run_ctl, run_serve, CtlArgs, ServeArgs};
@@ -42,6 +42,9 @@ enum Command {
     Probe(ProbeArgs),
     /// Read a recorded MCAP (also a truncated one) and identify the motor again.
     Replay(ReplayArgs),
+    /// Finish records cut by a killed process (no summary, no index) as
+    /// files indexed MCAP readers open; the cut file is kept beside.
+    Recover(RecoverArgs),
     /// Identify a motor from CSV files (one segment each) or one MCAP record.
     Identify(IdentifyArgs),
     /// Export a record for other tools: each segment as contract CSV
@@ -97,6 +100,7 @@ fn main() -> ExitCode {
         Command::Run(args) => block_on_cli(cli::run(args)),
         Command::Probe(args) => block_on_cli(cli::probe(args)),
         Command::Replay(args) => Failure::exit(cli::replay(args)),
+        Command::Recover(args) => Failure::exit(cli::recover(args)),
         Command::Identify(args) => Failure::exit(cli::identify(args)),
         Command::Export(args) => Failure::exit(cli::export(args)),
         Command::Diagnose(args) => ExitCode::from(run_diagnose(args)),

@@ -234,10 +234,15 @@ impl Recording {
     }
 
     /// Close the rig (its sensors, stages and any protocol servers), then
-    /// analyse the record off the reactor (diagnosed when `diagnose`),
-    /// record the report as `/bench/result` and finish the file. An
-    /// analysis that fails leaves the record as written (it replays); a
-    /// record that cannot be finished is in [`Concluded::recorded`].
+    /// analyse the record off the reactor and finish the file. The
+    /// identification is recorded as `/bench/result` as soon as it
+    /// exists; when `diagnose`, that first result is marked
+    /// `diagnosis_pending`, the diagnosis runs (off the reactor too) and
+    /// the whole report follows as a second `/bench/result`, so a process
+    /// killed during the diagnosis still leaves the identification in the
+    /// record. An analysis that fails leaves the record as written (it
+    /// replays); a record that cannot be finished is in
+    /// [`Concluded::recorded`].
     pub async fn conclude(self, diagnose: bool) -> Result<Concluded, SessionError> {
         let Recording {
             session,
@@ -256,9 +261,11 @@ impl Recording {
         drop((sensors, stages, keep_alive));
         let t_end = sink.last_t_ns();
         let (recorder, record) = sink.into_parts();
+        let recorder = recorder.expect("a recording session always records");
+        let kind = machine.kind();
         let analyser = machine.analyser(truth);
         let (mut analysed, record) = tokio::task::spawn_blocking(move || {
-            let analysed = analyser(&record, diagnose);
+            let analysed = analyser(&record, false);
             (analysed, record)
         })
         .await?;
@@ -268,23 +275,32 @@ impl Recording {
         let record_name = path
             .file_name()
             .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
+        let provenance =
+            |files| Provenance::new(&meta.motor_id, &meta.started_at, &record_name, files);
+        let mut sent = Ok(());
+        let record = if diagnose {
+            // The identification first: no file is written beside the
+            // record with it, and the diagnosis is still to come.
+            let mut early = analysed.analysis.report().clone();
+            early.diagnosis_pending = true;
+            early.provenance = Some(provenance(Vec::new()));
+            sent = recorder.send(result_entry(t_end, &early)).await;
+            let (diagnosed, record) = tokio::task::spawn_blocking(move || {
+                analysed.diagnose(&record, kind);
+                (analysed, record)
+            })
+            .await?;
+            analysed = diagnosed;
+            record
+        } else {
+            record
+        };
         let files = ReportFiles::names(&stem, analysed.residuals.is_some());
-        analysed.analysis.report_mut().provenance = Some(Provenance::new(
-            &meta.motor_id,
-            &meta.started_at,
-            &record_name,
-            files,
-        ));
-        let recorder = recorder.expect("a recording session always records");
-        let report =
-            serde_json::to_value(analysed.analysis.report()).expect("a report always serialises");
+        analysed.analysis.report_mut().provenance = Some(provenance(files));
+        let whole = result_entry(t_end, analysed.analysis.report());
         let recorded = async {
-            recorder
-                .send(Entry::Result {
-                    t_ns: t_end,
-                    report,
-                })
-                .await?;
+            sent?;
+            recorder.send(whole).await?;
             recorder.finish().await
         }
         .await;
@@ -298,6 +314,14 @@ impl Recording {
             record,
             recorded,
         })
+    }
+}
+
+/// A report as the `/bench/result` entry at `t_ns`.
+fn result_entry(t_ns: u64, report: &crate::report::IdentificationReport) -> Entry {
+    Entry::Result {
+        t_ns,
+        report: serde_json::to_value(report).expect("a report always serialises"),
     }
 }
 

@@ -1,6 +1,8 @@
 //! `motorbench replay`: read a record (also a truncated one), identify
 //! and diagnose it again, and compare with the `/bench/result` the run
-//! recorded.
+//! recorded: its last one, the whole report; or, where the run died
+//! during the diagnosis, the identification it recorded first (marked
+//! `diagnosis_pending`), compared with the replay's identification.
 
 use std::path::PathBuf;
 
@@ -9,7 +11,7 @@ use clap::Args;
 use super::output::{print_analysis, warn_if_damaged};
 use super::Failure;
 use crate::diagnose::write_residual_svg;
-use crate::machine::analyse_record;
+use crate::machine::{analyse_record, record_analysis_kind};
 use crate::record::{read_mcap, Record};
 use crate::report::{IdentificationReport, Provenance};
 
@@ -41,7 +43,13 @@ pub fn replay(args: ReplayArgs) -> Result<(), Failure> {
     let record = read_mcap(&args.log).map_err(Failure::bad_input)?;
     warn_if_damaged(&args.log, &record);
     let diagnose = !args.no_diagnose;
-    let mut analysed = analyse_record(&record, diagnose);
+    let mut analysed = analyse_record(&record, false);
+    // The identification alone, for a record whose run died before its
+    // diagnosis was recorded.
+    let identification = analysed.analysis.report().clone();
+    if diagnose {
+        analysed.diagnose(&record, record_analysis_kind(&record));
+    }
     analysed.analysis.report_mut().provenance = provenance(&record, &args.log);
     if let (Some(path), Some(plot)) = (&args.residuals_svg, &analysed.residuals) {
         write_residual_svg(plot, path).map_err(Failure::runtime)?;
@@ -53,7 +61,12 @@ pub fn replay(args: ReplayArgs) -> Result<(), Failure> {
             return identified;
         }
     }
-    compare_with_recorded(&record, analysis.report(), diagnose, args.check)?;
+    let replayed = Replayed {
+        report: analysis.report(),
+        identification: &identification,
+        diagnosed: diagnose,
+    };
+    compare_with_recorded(&record, &replayed, args.check)?;
     identified
 }
 
@@ -78,19 +91,44 @@ fn provenance(record: &Record, path: &std::path::Path) -> Option<Provenance> {
     })
 }
 
+/// A replay's report, for the comparison with the recorded one.
+struct Replayed<'a> {
+    /// The whole report (with the diagnosis when `diagnosed`).
+    report: &'a IdentificationReport,
+    /// The identification alone, before the diagnosis ran.
+    identification: &'a IdentificationReport,
+    /// Whether the replay diagnosed.
+    diagnosed: bool,
+}
+
 /// Say whether the replayed report equals the recorded `/bench/result`;
 /// with `check`, a difference is exit code 5.
 fn compare_with_recorded(
     record: &Record,
-    replayed: &IdentificationReport,
-    diagnosed: bool,
+    replayed: &Replayed<'_>,
     check: bool,
 ) -> Result<(), Failure> {
     let Some(recorded) = &record.recorded_result else {
         eprintln!("replay: the record holds no /bench/result to compare with");
         return Ok(());
     };
-    if same_result(recorded, replayed, diagnosed) {
+    let pending = recorded
+        .get("diagnosis_pending")
+        .and_then(|p| p.as_bool())
+        .unwrap_or(false);
+    let same = if pending {
+        same_result(recorded, replayed.identification, false)
+    } else {
+        same_result(recorded, replayed.report, replayed.diagnosed)
+    };
+    if same && pending {
+        eprintln!(
+            "replay: identical to the recorded /bench/result (the identification; \
+             the run ended before its diagnosis was recorded)"
+        );
+        return Ok(());
+    }
+    if same {
         eprintln!("replay: identical to the recorded /bench/result");
         return Ok(());
     }
@@ -107,7 +145,8 @@ fn compare_with_recorded(
 /// Whether `replayed` equals `recorded`. The provenance (file names,
 /// version) is not compared, nor the contract version the report was
 /// written under (a version 1 record replays under version 2: the report's
-/// JSON is the same in both). The diagnosis is compared only when both have
+/// JSON is the same in both), nor the `diagnosis_pending` mark. The
+/// diagnosis is compared only when both have
 /// one to compare: a replay with `--no-diagnose` (not `diagnosed`) leaves
 /// the record's out, and a record made with `--no-diagnose` (or before the
 /// diagnosis existed) has none.
@@ -123,6 +162,7 @@ fn same_result(
             // Where the report came from is not part of the result.
             obj.remove("provenance");
             obj.remove("schema_version");
+            obj.remove("diagnosis_pending");
         }
     }
     if !diagnosed || recorded.get("diagnosis").is_none() {
@@ -160,6 +200,10 @@ mod tests {
         let mut v1 = plain.clone();
         v1["schema_version"] = "1".into();
         assert!(same_result(&v1, &replayed, true));
+        // Nor the mark of a result recorded before its diagnosis.
+        let mut pending = plain.clone();
+        pending["diagnosis_pending"] = true.into();
+        assert!(same_result(&pending, &replayed, false));
         // Anything else that differs still differs.
         let mut other = diagnosed.clone();
         other["best"] = "steady_state".into();

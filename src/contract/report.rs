@@ -123,6 +123,13 @@ pub struct IdentificationReport {
     /// test: an additive extension of the contract.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub standard_tests: Option<StandardTestTables>,
+    /// `true` on the identification a test records as `/bench/result` as
+    /// soon as it exists, before its diagnosis runs: the record's last
+    /// `/bench/result` is then the whole report (with the diagnosis), and
+    /// this one stays only if the process died before it. An additive
+    /// extension of the contract; absent (`false`) on every other report.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub diagnosis_pending: bool,
 }
 
 /// Where a report comes from: the motor, the test's start, the record and
@@ -169,6 +176,7 @@ impl IdentificationReport {
             diagnosis: None,
             provenance: None,
             standard_tests: None,
+            diagnosis_pending: false,
         }
     }
 

@@ -190,14 +190,23 @@ impl Analysed {
         diagnose: bool,
         identify: impl FnOnce(&Record) -> A,
     ) -> Analysed {
-        let mut analysis = identify(record);
-        let residuals = diagnose
-            .then(|| attach_diagnosis(analysis.report_mut(), record, kind))
-            .flatten();
-        Analysed {
-            analysis: Box::new(analysis),
-            residuals,
+        let mut analysed = Analysed {
+            analysis: Box::new(identify(record)),
+            residuals: None,
+        };
+        if diagnose {
+            analysed.diagnose(record, kind);
         }
+        analysed
+    }
+
+    /// Attach the diagnosis of `record`, a test of `kind`, to this
+    /// identification's report (and keep its residuals): what
+    /// [`Analysed::of`] does when asked to diagnose, as a step of its own,
+    /// so that a test can record its identification before the diagnosis
+    /// runs.
+    pub fn diagnose(&mut self, record: &Record, kind: SegmentKind) {
+        self.residuals = attach_diagnosis(self.analysis.report_mut(), record, kind);
     }
 }
 
@@ -206,9 +215,25 @@ impl Analysed {
 /// the circuit its configuration named (else single cage with iron loss),
 /// any other as a DC record.
 pub fn analyse_record(record: &Record, diagnose: bool) -> Analysed {
-    if record.operating_points.is_empty() && record.standard_tests.is_empty() {
-        analyse_dc(record, None, diagnose)
-    } else {
+    if is_im_record(record) {
         analyse_im(record, None, im::recorded_model(record), diagnose)
+    } else {
+        analyse_dc(record, None, diagnose)
     }
+}
+
+/// The kind [`analyse_record`] analyses `record` as (and diagnoses it
+/// as, with [`Analysed::diagnose`]).
+pub fn record_analysis_kind(record: &Record) -> SegmentKind {
+    if is_im_record(record) {
+        SegmentKind::ImSlipSweep
+    } else {
+        SegmentKind::DcStep
+    }
+}
+
+/// Whether `record` is an induction machine's (it holds operating points
+/// or standard-test readings).
+fn is_im_record(record: &Record) -> bool {
+    !(record.operating_points.is_empty() && record.standard_tests.is_empty())
 }

@@ -14,7 +14,7 @@
 //!   chunk's CRC is checked *before* any of its records is handed on, so a
 //!   damaged chunk gives nothing.
 //!
-//! Header, channel and metadata records are handed on only if their
+//! Header, schema, channel and metadata records are handed on only if their
 //! length-prefixed strings lie inside the record (the parser reserves the
 //! memory a string's length declares before it reads the string).
 //!
@@ -50,7 +50,7 @@ pub(crate) fn chunk_limit(file_len: usize) -> usize {
 }
 
 /// Walks `bytes` as an MCAP file, calling `visit` with each header,
-/// metadata, channel and message record of its data section in file order,
+/// schema, metadata, channel and message record of its data section in file order,
 /// chunks opened. Returns where damage ended the walk, if anywhere.
 pub(crate) fn walk_records(bytes: &[u8], visit: &mut dyn FnMut(Record<'_>)) -> Option<Damage> {
     let options = LinearReaderOptions::default()
@@ -143,7 +143,7 @@ fn feed(reader: &mut LinearReader, unread: &mut &[u8], need: usize) {
 fn hand_on(opcode: u8, body: &[u8], visit: &mut dyn FnMut(Record<'_>)) -> Result<(), WalkError> {
     if !matches!(
         opcode,
-        op::HEADER | op::METADATA | op::CHANNEL | op::MESSAGE
+        op::HEADER | op::SCHEMA | op::METADATA | op::CHANNEL | op::MESSAGE
     ) {
         return Ok(());
     }
@@ -164,6 +164,7 @@ fn strings_fit(opcode: u8, body: &[u8]) -> bool {
     // Bytes before the first string, strings before the map, whether a map.
     let (fixed, strings, map) = match opcode {
         op::HEADER => (0, 2, false),
+        op::SCHEMA => (2, 3, false),
         op::CHANNEL => (4, 2, true),
         op::METADATA => (0, 1, true),
         _ => return true,

@@ -2,7 +2,9 @@
 //! (`shared/spec/data-format.md`), the recorder thread, and CSV import.
 //!
 //! - [`Recorder`] writes a test to MCAP off the async reactor.
-//! - [`read_mcap`] reads it back (also a truncated file) into a [`Record`].
+//! - [`read_mcap`] reads it back (also a truncated file) into a [`Record`];
+//!   [`recover_record`] finishes a cut file's readable part as a new file
+//!   with a summary and index (`motorbench recover`).
 //! - [`RecordBuilder`] turns entries into a [`Record`]; the live bench and
 //!   the reader share it, so a replay gives bit-identical data.
 //! - [`read_dc_csv`] imports one DC segment from CSV, [`read_im_csv`] one
@@ -26,6 +28,7 @@ mod im_tests;
 pub mod log_event;
 mod mcap_walk;
 mod reader;
+mod recover;
 pub mod schema;
 mod start;
 mod types;
@@ -41,6 +44,7 @@ pub use csv_im_tests::{
 pub use error::{LoadError, RecordError};
 pub use files::load_record_files;
 pub use reader::{build_record, read_entries, read_mcap, Entries};
+pub use recover::{recover_record, Recovered, DAMAGED_SUFFIX};
 pub use start::TestStart;
 pub use types::*;
 pub use writer::{library_name, Recorder, RecorderBacklog, RecorderStats, QUEUE_CAPACITY};

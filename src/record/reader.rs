@@ -6,7 +6,10 @@
 //! records are used), so a damaged file, e.g. cut by a killed process or
 //! with a flipped bit, still yields everything before the damage: the
 //! damage is taken as the end of the data and reported, with its byte
-//! offset, in [`Record::recovery`]. No index or summary is needed.
+//! offset, in [`Record::recovery`]. No index or summary is needed. A
+//! copy finished by `motorbench recover` ([`super::recover_record`])
+//! carries the cut file's damage in its `motorbench.recovery` metadata,
+//! and reads back with the same [`Record::recovery`].
 //!
 //! Refused as damaged ([`RecordError::Damaged`], naming the offset): a
 //! file damaged before its MCAP header or its `motorbench.test` metadata,
@@ -43,9 +46,10 @@ use super::error::{DecodeError, RecordError};
 use super::log_event::AnyEvent;
 use super::mcap_walk::{walk_records, Damage};
 use super::schema::{
-    is_sample_topic_for, COMMAND_PREFIX, MESSAGE_ENCODING, METADATA_NAME, METADATA_START_TIME_NS,
-    SENSOR_PREFIX, TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT,
-    TOPIC_STANDARD_TEST, TOPIC_SUPPLY_LIMIT,
+    is_sample_topic_for, COMMAND_PREFIX, MESSAGE_ENCODING, METADATA_NAME, METADATA_RECOVERY,
+    METADATA_START_TIME_NS, RECOVERY_MESSAGES, RECOVERY_OFFSET, RECOVERY_REASON, SENSOR_PREFIX,
+    TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT, TOPIC_STANDARD_TEST,
+    TOPIC_SUPPLY_LIMIT,
 };
 use super::types::{ChannelSpec, Entry, Record, Recovery, SegmentKind, TestMeta};
 use crate::contract::READ_SCHEMA_VERSIONS;
@@ -111,6 +115,8 @@ pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
     let mut state = Reading::new(path);
     let mut header_seen = false;
     let mut metadata: Option<BTreeMap<String, String>> = None;
+    // What was cut, in a recovered copy of a cut record.
+    let mut recovered: Option<BTreeMap<String, String>> = None;
     // The first content error; reported only if the metadata is in order
     // (a file of another schema_version is refused as such).
     let mut failure: Option<RecordError> = None;
@@ -119,6 +125,7 @@ pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
         McapRecord::Metadata(m) if m.name == METADATA_NAME && metadata.is_none() => {
             metadata = Some(m.metadata);
         }
+        McapRecord::Metadata(m) if m.name == METADATA_RECOVERY => recovered = Some(m.metadata),
         _ if failure.is_some() => {}
         other => {
             if let Err(e) = state.take(other) {
@@ -171,12 +178,24 @@ pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
             )
         })?;
     }
-    let recovery = damage.map(|d| Recovery {
-        messages,
-        offset: d.offset,
-        reason: damage_text(&d, file_len),
-    });
+    let recovery = damage
+        .map(|d| Recovery {
+            messages,
+            offset: d.offset,
+            reason: damage_text(&d, file_len),
+        })
+        .or_else(|| recovered.as_ref().and_then(recovery_note));
     Ok((meta, channels, entries, recovery))
+}
+
+/// The cut a recovered copy records (`motorbench.recovery`), as the cut
+/// file read: so the copy reads as the cut file did.
+fn recovery_note(note: &BTreeMap<String, String>) -> Option<Recovery> {
+    Some(Recovery {
+        messages: note.get(RECOVERY_MESSAGES)?.parse().ok()?,
+        offset: note.get(RECOVERY_OFFSET)?.parse().ok()?,
+        reason: note.get(RECOVERY_REASON)?.clone(),
+    })
 }
 
 /// `damaged at byte 8 of 1200 (0.7 % read): <reason>`.

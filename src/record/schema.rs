@@ -28,6 +28,20 @@ pub const METADATA_KEYS: [&str; 6] = [
 /// `log_time` (see [`super::TestStart`]).
 pub const METADATA_START_TIME_NS: &str = "start_time_ns";
 
+/// Name of the metadata record `motorbench recover` adds to the finished
+/// copy of a cut record: what was cut (an additive extension).
+pub const METADATA_RECOVERY: &str = "motorbench.recovery";
+
+/// Key of `motorbench.recovery`: the messages read before the cut.
+pub const RECOVERY_MESSAGES: &str = "messages";
+
+/// Key of `motorbench.recovery`: the byte offset of the cut in the cut file.
+pub const RECOVERY_OFFSET: &str = "damage_offset";
+
+/// Key of `motorbench.recovery`: where the cut was and what the reader
+/// found there, as [`super::Recovery`]'s reason.
+pub const RECOVERY_REASON: &str = "reason";
+
 /// Topic prefix of measured channels.
 pub const SENSOR_PREFIX: &str = "/sensor/";
 /// Topic prefix of commanded channels.

@@ -137,6 +137,32 @@ pub struct Daemon {
     metrics: Arc<Metrics>,
 }
 
+/// Finished tests the daemon keeps in memory (`GET /v1/tests`, `GET
+/// /v1/tests/{id}`), the most recent ones; older tests are in the records
+/// index (`GET /v1/records`) only. Unbounded, the list grew the daemon by
+/// several kB a test.
+pub const KEEP_FINISHED_TESTS: usize = 100;
+
+/// Drop the oldest (smallest id: ids sort by start time) finished entries
+/// of `tests` until at most `keep` finished ones are left; running ones
+/// always stay.
+fn prune_oldest_finished<V>(
+    tests: &mut BTreeMap<String, V>,
+    keep: usize,
+    finished: impl Fn(&V) -> bool,
+) {
+    let done = tests.values().filter(|v| finished(v)).count();
+    let drop: Vec<String> = tests
+        .iter()
+        .filter(|(_, v)| finished(v))
+        .take(done.saturating_sub(keep))
+        .map(|(k, _)| k.clone())
+        .collect();
+    for k in drop {
+        tests.remove(&k);
+    }
+}
+
 fn lock<T>(m: &StdMutex<T>) -> std::sync::MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
@@ -249,12 +275,14 @@ impl Daemon {
         }
     }
 
-    /// The test `id` run by this process.
+    /// The test `id` run by this process (while running, and among the
+    /// last [`KEEP_FINISHED_TESTS`] finished).
     pub fn test(&self, id: &str) -> Option<Arc<TestRun>> {
         lock(&self.tests).get(id).cloned()
     }
 
-    /// Every test run by this process, oldest first.
+    /// The tests run by this process, oldest first: the running ones and
+    /// the last [`KEEP_FINISHED_TESTS`] finished.
     pub fn tests(&self) -> Vec<Arc<TestRun>> {
         lock(&self.tests).values().cloned().collect()
     }
@@ -304,7 +332,13 @@ impl Daemon {
             run.status().plan
         );
         rt.running = Some(run.clone());
-        lock(&self.tests).insert(id, run.clone());
+        {
+            let mut tests = lock(&self.tests);
+            tests.insert(id, run.clone());
+            // A long-running daemon keeps the recent finished tests in
+            // memory; every test's record and outcome stay in the index.
+            prune_oldest_finished(&mut tests, KEEP_FINISHED_TESTS, |t| t.finished());
+        }
         drop(rt);
         self.metrics.test_started(rig_name);
         let rig = rig.clone();
@@ -417,5 +451,26 @@ impl Daemon {
         for j in jobs {
             let _ = j.await;
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_newest_finished_tests_are_kept_and_running_ones_stay() {
+        let mut tests: BTreeMap<String, bool> = (0..10)
+            .map(|i| (format!("t{i:02}"), i != 1 && i != 8))
+            .collect();
+        prune_oldest_finished(&mut tests, 3, |f| *f);
+        let left: Vec<&str> = tests.keys().map(String::as_str).collect();
+        assert_eq!(
+            left,
+            ["t01", "t07", "t08", "t09"],
+            "running t01 and t08 stay"
+        );
+        prune_oldest_finished(&mut tests, 3, |f| *f);
+        assert_eq!(tests.len(), 4, "nothing more to drop");
     }
 }
