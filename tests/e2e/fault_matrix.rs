@@ -85,14 +85,46 @@ struct Ran {
     _dir: tempfile::TempDir,
 }
 
+/// The messages of `record`'s events at `level`.
+fn events(record: &Record, level: EventLevel) -> Vec<&str> {
+    record
+        .events
+        .iter()
+        .filter(|(_, e)| e.level == level)
+        .map(|(_, e)| e.message.as_str())
+        .collect()
+}
+
+/// A link's retry (or reconnect) is counted among `record`'s events.
+fn assert_link_retried(record: &Record) {
+    let links = events(record, EventLevel::Info);
+    assert!(
+        links
+            .iter()
+            .any(|m| m.starts_with("link ") && (m.contains("retry ") || m.contains("reconnect "))),
+        "no retry counted in {links:?}"
+    );
+}
+
+/// The supervisor found the stage still enabled after its safe command
+/// and disabled the output.
+fn assert_escalated_to_disable(record: &Record) {
+    let aborts = events(record, EventLevel::Abort);
+    assert!(
+        aborts
+            .iter()
+            .any(|m| m.contains("output still enabled after the safe command")),
+        "{aborts:?}"
+    );
+    assert!(
+        aborts.iter().any(|m| m.ends_with("output disabled")),
+        "{aborts:?}"
+    );
+}
+
 impl Ran {
     fn events(&self, level: EventLevel) -> Vec<&str> {
-        self.record
-            .events
-            .iter()
-            .filter(|(_, e)| e.level == level)
-            .map(|(_, e)| e.message.as_str())
-            .collect()
+        events(&self.record, level)
     }
 
     /// The supervisor's account of its stop.
@@ -131,14 +163,7 @@ impl Ran {
     fn assert_retried(&self) {
         assert_eq!(self.code, Some(0), "{}", self.stderr);
         assert!(self.events(EventLevel::Abort).is_empty());
-        let links = self.events(EventLevel::Info);
-        assert!(
-            links
-                .iter()
-                .any(|m| m.starts_with("link ")
-                    && (m.contains("retry ") || m.contains("reconnect "))),
-            "no retry counted in {links:?}"
-        );
+        assert_link_retried(&self.record);
     }
 
     /// Completed (exit code 0) with a warning containing `warning`.
@@ -280,17 +305,7 @@ fn dc_sim_run_stage_ignoring_the_safe_command_is_disabled() {
          [[fault]]\nkind = \"nan\"\nat_s = 1.0\ntarget = \"armature_current\"\n",
     );
     r.assert_aborted_safe("limit tripped: current NaN");
-    let aborts = r.events(EventLevel::Abort);
-    assert!(
-        aborts
-            .iter()
-            .any(|m| m.contains("output still enabled after the safe command")),
-        "{aborts:?}"
-    );
-    assert!(
-        aborts.iter().any(|m| m.ends_with("output disabled")),
-        "{aborts:?}"
-    );
+    assert_escalated_to_disable(&r.record);
 }
 
 #[test]
@@ -518,17 +533,7 @@ fn dc_tcp_run_stage_ignoring_the_safe_command_is_disabled_over_modbus() {
          [[fault]]\nkind = \"nan\"\nat_s = 1.0\ntarget = \"armature_current\"\n",
     );
     r.assert_aborted_safe("limit tripped: current NaN");
-    let aborts = r.events(EventLevel::Abort);
-    assert!(
-        aborts
-            .iter()
-            .any(|m| m.contains("output still enabled after the safe command")),
-        "{aborts:?}"
-    );
-    assert!(
-        aborts.iter().any(|m| m.ends_with("output disabled")),
-        "{aborts:?}"
-    );
+    assert_escalated_to_disable(&r.record);
 }
 
 #[test]
@@ -592,17 +597,7 @@ fn im_sim_run_supply_ignoring_the_safe_command_is_disabled() {
          [[fault]]\nkind = \"inf\"\nat_s = 1.0\ntarget = \"line_voltage\"\n",
     );
     r.assert_aborted_safe("limit tripped: voltage inf");
-    let aborts = r.events(EventLevel::Abort);
-    assert!(
-        aborts
-            .iter()
-            .any(|m| m.contains("output still enabled after the safe command")),
-        "{aborts:?}"
-    );
-    assert!(
-        aborts.iter().any(|m| m.ends_with("output disabled")),
-        "{aborts:?}"
-    );
+    assert_escalated_to_disable(&r.record);
 }
 
 #[test]
@@ -717,13 +712,34 @@ mod daemon {
         assert_eq!(get(c, "/v1/rigs/rig").await["state"], "idle");
     }
 
+    /// The test aborted for a stop of `kind`, its safe state reached
+    /// (`safe`) or not, and the rig latched until reset.
+    async fn assert_aborted_and_latched(
+        served: &Served,
+        c: &motorbench::serve::client::Client,
+        s: &Value,
+        kind: &str,
+        safe: bool,
+    ) {
+        assert_eq!(s["outcome"], "aborted", "{s}");
+        assert_eq!(s["stop"]["kind"], kind, "{s}");
+        assert_eq!(s["stop"]["safe_state_ok"], safe, "{s}");
+        assert_latched_until_reset(served, c).await;
+    }
+
+    /// The test completed after a link's retries, the rig idle again.
+    async fn assert_completed_retried(
+        c: &motorbench::serve::client::Client,
+        s: &Value,
+        record: &Record,
+    ) {
+        assert_eq!(s["outcome"], "completed", "{s}");
+        assert_link_retried(record);
+        assert_eq!(get(c, "/v1/rigs/rig").await["state"], "idle");
+    }
+
     fn aborts(record: &Record) -> Vec<&str> {
-        record
-            .events
-            .iter()
-            .filter(|(_, e)| e.level == EventLevel::Abort)
-            .map(|(_, e)| e.message.as_str())
-            .collect()
+        events(record, EventLevel::Abort)
     }
 
     const SHORT: fn() -> Option<Value> =
@@ -738,10 +754,7 @@ mod daemon {
             SHORT(),
         )
         .await;
-        assert_eq!(s["outcome"], "aborted", "{s}");
-        assert_eq!(s["stop"]["kind"], "limit", "{s}");
-        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
-        assert_latched_until_reset(&served, &c).await;
+        assert_aborted_and_latched(&served, &c, &s, "limit", true).await;
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -753,10 +766,7 @@ mod daemon {
             SHORT(),
         )
         .await;
-        assert_eq!(s["outcome"], "aborted", "{s}");
-        assert_eq!(s["stop"]["kind"], "clock_jump", "{s}");
-        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
-        assert_latched_until_reset(&served, &c).await;
+        assert_aborted_and_latched(&served, &c, &s, "clock_jump", true).await;
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -771,9 +781,7 @@ mod daemon {
             SHORT(),
         )
         .await;
-        assert_eq!(s["outcome"], "aborted", "{s}");
-        assert_eq!(s["stop"]["kind"], "limit", "{s}");
-        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        assert_aborted_and_latched(&served, &c, &s, "limit", true).await;
         let aborts = aborts(&record);
         assert!(
             aborts
@@ -782,7 +790,6 @@ mod daemon {
             "{aborts:?}"
         );
         assert!(touched.exists(), "the last resort ran");
-        assert_latched_until_reset(&served, &c).await;
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -816,10 +823,7 @@ mod daemon {
             None,
         )
         .await;
-        assert_eq!(s["outcome"], "aborted", "{s}");
-        assert_eq!(s["stop"]["kind"], "device_fault", "{s}");
-        assert_eq!(s["stop"]["safe_state_ok"], false, "{s}");
-        assert_latched_until_reset(&served, &c).await;
+        assert_aborted_and_latched(&served, &c, &s, "device_fault", false).await;
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -832,10 +836,7 @@ mod daemon {
             None,
         )
         .await;
-        assert_eq!(s["outcome"], "aborted", "{s}");
-        assert_eq!(s["stop"]["kind"], "device_fault", "{s}");
-        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
-        assert_latched_until_reset(&served, &c).await;
+        assert_aborted_and_latched(&served, &c, &s, "device_fault", true).await;
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -847,10 +848,7 @@ mod daemon {
             None,
         )
         .await;
-        assert_eq!(s["outcome"], "aborted", "{s}");
-        assert_eq!(s["stop"]["kind"], "limit", "{s}");
-        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
-        assert_latched_until_reset(&served, &c).await;
+        assert_aborted_and_latched(&served, &c, &s, "limit", true).await;
     }
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn dc_tcp_daemon_short_sensor_timeout_is_retried() {
@@ -862,16 +860,7 @@ mod daemon {
             None,
         )
         .await;
-        assert_eq!(s["outcome"], "completed", "{s}");
-        assert!(
-            record
-                .events
-                .iter()
-                .any(|(_, e)| e.message.starts_with("link ") && e.message.contains("retry ")),
-            "{:?}",
-            record.events
-        );
-        assert_eq!(get(&c, "/v1/rigs/rig").await["state"], "idle");
+        assert_completed_retried(&c, &s, &record).await;
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -884,15 +873,12 @@ mod daemon {
             None,
         )
         .await;
-        assert_eq!(s["outcome"], "aborted", "{s}");
-        assert_eq!(s["stop"]["kind"], "limit", "{s}");
-        assert_eq!(s["stop"]["safe_state_ok"], true, "{s}");
+        assert_aborted_and_latched(&served, &c, &s, "limit", true).await;
         let aborts = aborts(&record);
         assert!(
             aborts.iter().any(|m| m.ends_with("output disabled")),
             "{aborts:?}"
         );
-        assert_latched_until_reset(&served, &c).await;
     }
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn dc_rtu_daemon_short_crc_errors_are_retried() {
@@ -904,15 +890,6 @@ mod daemon {
             None,
         )
         .await;
-        assert_eq!(s["outcome"], "completed", "{s}");
-        assert!(
-            record
-                .events
-                .iter()
-                .any(|(_, e)| e.message.starts_with("link ") && e.message.contains("retry ")),
-            "{:?}",
-            record.events
-        );
-        assert_eq!(get(&c, "/v1/rigs/rig").await["state"], "idle");
+        assert_completed_retried(&c, &s, &record).await;
     }
 }
