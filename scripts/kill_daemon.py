@@ -217,6 +217,15 @@ def summary(a, rows, restart_s):
         lost = [r["lost_s"] for r in during]
         print(f"kills during the plan: {len(during)}; data lost per kill, s: min {min(lost):.3f}, "
               f"median {statistics.median(lost):.3f}, max {max(lost):.3f}")
+    after = [r for r in with_rec if r["state"] != "running"]
+    if after:
+        res = sum(bool(r.get("result")) for r in after)
+        outs = {}
+        for r in after:
+            outs[str(r["entry_outcome"])] = outs.get(str(r["entry_outcome"]), 0) + 1
+        print(f"kills after the plan ended (identifying or finished): {len(after)}; "
+              f"/bench/result in the record: {res}; their entries: "
+              + ", ".join(f"{k} {v}" for k, v in sorted(outs.items())))
     bad = [r for r in rows if r["problems"]]
     print(f"index checks failed after {len(bad)} / {len(rows)} restarts")
     final = read_index(a.records)
@@ -283,8 +292,20 @@ def main():
             # holds the test's end) must not be marked interrupted.
             if entry and entry["outcome"] == "interrupted" and state != "running":
                 problems.append(f"{tid}: the plan had ended ({state}) but marked interrupted")
-            if entry and entry["outcome"] in FINISHED and cut:
-                problems.append(f"{tid}: marked {entry['outcome']} but the record is cut")
+            # A cut record is indexed as finished only when it holds its
+            # result (the identification, written before the diagnosis),
+            # with a reason saying what is missing; one that holds its
+            # result is never indexed as if it had none.
+            if entry and entry["outcome"] in FINISHED and cut and not (
+                    row.get("result") and entry.get("reason")):
+                problems.append(f"{tid}: marked {entry['outcome']} but the record is cut "
+                                f"(result in it: {row.get('result')})")
+            if entry and entry["outcome"] in ("unanalysed", "interrupted") and row.get("result"):
+                problems.append(f"{tid}: its record holds /bench/result but it is marked "
+                                f"{entry['outcome']}")
+            if entry and entry["outcome"] in FINISHED and not entry.get("key_results") \
+                    and row.get("result"):
+                problems.append(f"{tid}: {entry['outcome']} without key results")
             if row.get("replay_rc") not in (0, 4):
                 problems.append(f"{tid}: replay exit {row.get('replay_rc')}")
             if not row.get("recovered_seeking"):
