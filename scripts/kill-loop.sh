@@ -8,7 +8,13 @@
 # record and the Python seeking (indexed) reader must open it. See docs/reliability.md.
 #
 #   scripts/kill-loop.sh [--kills N] [--seed S] [--work DIR] [--config TOML]
-#                        [--bin PATH] [--python PATH]
+#                        [--bin PATH] [--python PATH] [--daemon [--im]]
+#
+# --daemon kills the daemon instead (scripts/kill_daemon.py): `motorbench
+# serve` on config/sim-dc-daemon.toml (--im: and config/sim-im.toml, the
+# rigs alternating), a test started through the API, SIGKILL at a random
+# time, a restart on the same records directory, then the index, the
+# records and the rig state are checked.
 #
 # --bin defaults to target/release/motorbench, --python to python3 (it
 # needs the `mcap` package, tests/python/requirements.txt). A reference run
@@ -21,6 +27,8 @@ kills=50
 seed=1
 work=""
 config=()
+daemon=0
+im=()
 script_name=kill-loop
 . "$here/bench-tools.sh"
 while [ $# -gt 0 ]; do
@@ -31,13 +39,19 @@ while [ $# -gt 0 ]; do
     --config) config=(--config "$2"); shift 2 ;;
     --bin) bin="$2"; shift 2 ;;
     --python) python="$2"; shift 2 ;;
-    -h|--help) sed -n 2,14p "$0"; exit 0 ;;
+    --daemon) daemon=1; shift ;;
+    --im) im=(--im); shift ;;
+    -h|--help) sed -n 2,20p "$0"; exit 0 ;;
     *) echo "kill-loop: unknown option $1" >&2; exit 2 ;;
     esac
 done
 require_tools mcap
 [ -n "$work" ] || work="$(mktemp -d -t motorbench-kill-loop.XXXXXX)"
 mkdir -p "$work"
+if [ "$daemon" = 1 ]; then
+    exec "$python" "$here/kill_daemon.py" --bin "$bin" --python "$python" --work "$work" \
+        --kills "$kills" --seed "$seed" "${im[@]}"
+fi
 check="$here/kill_check.py"
 results="$work/results.jsonl"
 : > "$results"

@@ -3,10 +3,13 @@
 
 Runs N tests back to back, alternating over the rigs given (`--rig NAME`
 with an optional JSON `[test]` override per rig, `--override NAME=JSON`),
-waits for each to finish, then samples the daemon's RSS (VmRSS), thread
-count (/proc/PID/status) and open descriptors (/proc/PID/fd). Writes one
-CSV row per test and prints the RSS slope per test over the second half
-(least squares) and the fd and thread counts first vs last.
+waits for each to finish, then samples the daemon's RSS (VmRSS, and its
+anonymous and file-backed parts RssAnon and RssFile), thread count
+(/proc/PID/status), open descriptors (/proc/PID/fd) and, when its
+/metrics has it, the tasks alive in its runtime
+(motorbench_runtime_alive_tasks; -1 when not). Writes one CSV row per
+test and prints the RSS slopes per test over the second half (least
+squares) and the fd, thread and task counts first vs last.
 """
 
 import argparse
@@ -34,10 +37,22 @@ def request(url, method="GET", body=None):
 def sample(pid):
     status = open(f"/proc/{pid}/status").read().splitlines()
     fields = dict(line.split(":", 1) for line in status if ":" in line)
-    rss_kb = int(fields["VmRSS"].split()[0])
+    kb = lambda key: int(fields[key].split()[0])  # noqa: E731
     threads = int(fields["Threads"])
     fds = len(os.listdir(f"/proc/{pid}/fd"))
-    return rss_kb, threads, fds
+    return kb("VmRSS"), threads, fds, kb("RssAnon"), kb("RssFile")
+
+
+def alive_tasks(api):
+    """motorbench_runtime_alive_tasks from /metrics, or -1."""
+    try:
+        with urllib.request.urlopen(f"{api}/metrics", timeout=30) as r:
+            for line in r.read().decode().splitlines():
+                if line.startswith("motorbench_runtime_alive_tasks "):
+                    return int(float(line.split()[1]))
+    except (urllib.error.URLError, ValueError):
+        pass
+    return -1
 
 
 def slope(xs, ys):
@@ -89,30 +104,35 @@ def main():
         overrides[rig] = json.loads(js)
 
     rows = []
-    rss0, th0, fd0 = sample(a.pid)
-    print(f"before the first test: RSS {rss0} kB, threads {th0}, fds {fd0}")
+    rss0, th0, fd0, anon0, file0 = sample(a.pid)
+    print(f"before the first test: RSS {rss0} kB (anon {anon0}, file {file0}), threads {th0}, "
+          f"fds {fd0}, tasks {alive_tasks(a.url)}")
     t0 = time.monotonic()
     outcomes = {}
     with open(a.csv, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["test", "rig", "id", "outcome", "seconds", "rss_kb", "threads", "fds"])
+        w.writerow(["test", "rig", "id", "outcome", "seconds", "rss_kb", "threads", "fds",
+                    "rss_anon_kb", "rss_file_kb", "tasks"])
         for i in range(1, a.tests + 1):
             if a.minutes is not None and time.monotonic() - t0 > a.minutes * 60:
                 break
             rig = a.rig[(i - 1) % len(a.rig)]
             ts = time.monotonic()
             tid, outcome, reason = run_one(a.url, rig, overrides.get(rig))
-            rss, th, fds = sample(a.pid)
+            tasks = alive_tasks(a.url)
+            rss, th, fds, anon, file_kb = sample(a.pid)
             key = f"{rig}:{outcome}"
             outcomes[key] = outcomes.get(key, 0) + 1
             if outcome != "completed":
                 print(f"test {i} ({rig}) {outcome}: {reason}", file=sys.stderr)
-            row = [i, rig, tid, outcome, round(time.monotonic() - ts, 2), rss, th, fds]
+            row = [i, rig, tid, outcome, round(time.monotonic() - ts, 2), rss, th, fds,
+                   anon, file_kb, tasks]
             w.writerow(row)
             f.flush()
             rows.append(row)
             if i % 25 == 0:
-                print(f"test {i}: RSS {rss} kB, threads {th}, fds {fds}", flush=True)
+                print(f"test {i}: RSS {rss} kB (anon {anon}), threads {th}, fds {fds}, "
+                      f"tasks {tasks}", flush=True)
 
     n = len(rows)
     print(f"\ntests run: {n} in {time.monotonic() - t0:.0f} s; outcomes: {outcomes}")
@@ -122,6 +142,10 @@ def main():
     s = slope([r[0] for r in half], [r[5] for r in half])
     print(f"RSS: first {rows[0][5]} kB, last {rows[-1][5]} kB, max {max(r[5] for r in rows)} kB")
     print(f"RSS slope over tests {half[0][0]}..{half[-1][0]} (least squares): {s:.2f} kB/test")
+    sa = slope([r[0] for r in half], [r[8] for r in half])
+    print(f"RssAnon: first {rows[0][8]} kB, last {rows[-1][8]} kB; slope {sa:.2f} kB/test; "
+          f"RssFile: first {rows[0][9]} kB, last {rows[-1][9]} kB")
+    print(f"tasks: first {rows[0][10]}, last {rows[-1][10]}, max {max(r[10] for r in rows)}")
     print(f"threads: first {rows[0][6]}, last {rows[-1][6]}, max {max(r[6] for r in rows)}")
     print(f"fds: first {rows[0][7]}, last {rows[-1][7]}, max {max(r[7] for r in rows)}")
 

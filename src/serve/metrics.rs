@@ -134,6 +134,7 @@ pub struct Metrics {
     bus_errors: Family<BusErrorLabels, Counter>,
     last_duration: Family<RigLabel, FloatGauge>,
     api_requests: Family<RequestLabels, Counter>,
+    alive_tasks: Gauge,
     /// Serialises scrapes (the rig gauges are set, then encoded).
     scrape: Mutex<()>,
 }
@@ -165,6 +166,7 @@ impl Metrics {
             bus_errors: registered(&mut r, "bus_errors", HELP_BUS_ERRORS, None),
             last_duration: registered(&mut r, "last_test_duration", HELP_LAST, Some(Unit::Seconds)),
             api_requests: registered(&mut r, "api_requests", HELP_REQUESTS, None),
+            alive_tasks: registered(&mut r, "runtime_alive_tasks", HELP_TASKS, None),
             scrape: Mutex::new(()),
             registry: r,
         }
@@ -245,6 +247,13 @@ impl Metrics {
             .inc();
     }
 
+    /// The tasks alive in the daemon's runtime now (set before a scrape;
+    /// a count that grows from test to test is a leaked task).
+    pub fn set_alive_tasks(&self, tasks: usize) {
+        self.alive_tasks
+            .set(i64::try_from(tasks).unwrap_or(i64::MAX));
+    }
+
     /// The text exposition, with each rig's state, winding temperature
     /// and recorder backlog as given.
     pub fn render(&self, rigs: &[RigSample]) -> String {
@@ -292,6 +301,8 @@ const HELP_BUS_ERRORS: &str = "Bus errors, per rig, bus (its configured address,
      simulated:ROLE) and kind (timeout, exception, link_error, decode_error, lost, retry, \
      reconnect)";
 const HELP_LAST: &str = "Wall-clock duration of the rig's last finished test";
+const HELP_TASKS: &str = "Tasks alive in the daemon's async runtime now (the API's connections, \
+     the running tests' tasks, the daemon's own), for finding leaked tasks";
 const HELP_REQUESTS: &str =
     "API requests answered, per method, route (the path template) and status";
 
@@ -334,6 +345,11 @@ pub async fn metrics(State(d): State<std::sync::Arc<Daemon>>) -> Response {
             winding_c: r.winding_c,
         });
     }
+    d.metrics().set_alive_tasks(
+        tokio::runtime::Handle::current()
+            .metrics()
+            .num_alive_tasks(),
+    );
     (
         [(header::CONTENT_TYPE, CONTENT_TYPE)],
         d.metrics().render(&rigs),
@@ -360,6 +376,7 @@ mod tests {
         });
         m.emergency_stop("rig", "API");
         m.api_request("GET".into(), "/v1/rigs".into(), 200);
+        m.set_alive_tasks(9);
         m.links_used(
             "rig",
             &[LinkGrowth {
@@ -389,6 +406,7 @@ mod tests {
             "motorbench_last_test_duration_seconds{rig=\"rig\"} 2.5",
             "motorbench_api_requests_total{method=\"GET\",route=\"/v1/rigs\",status=\"200\"} 1",
             "motorbench_recorder_backlog{rig=\"rig\"} 7",
+            "motorbench_runtime_alive_tasks 9",
             "motorbench_bus_requests_total{rig=\"rig\",bus=\"tcp:10.0.0.5:502\"} 40",
             "motorbench_bus_errors_total{rig=\"rig\",bus=\"tcp:10.0.0.5:502\",kind=\"timeout\"} 3",
             "motorbench_bus_errors_total{rig=\"rig\",bus=\"tcp:10.0.0.5:502\",kind=\"exception\"} 0",

@@ -7,7 +7,10 @@
 //! On open, entries still marked `running` belong to a daemon that died
 //! mid-test: they become `interrupted`, with what the MCAP reader could
 //! recover, or `unanalysed` when the plan had ended and only the analysis
-//! was cut short (`data_complete`). MCAP files the index does not know (a
+//! was cut short (`data_complete`), unless the record already holds its
+//! `/bench/result` (the identification is written before the diagnosis):
+//! then `completed` or `aborted` with its key results, the reason saying
+//! what is missing. MCAP files the index does not know (a
 //! new or a cut index) are added from the records themselves: metadata,
 //! result and abort event; [`RecordsIndex::adopt_orphans`] gives them
 //! their rig.
@@ -182,11 +185,18 @@ impl IndexEntry {
     }
 }
 
-#[derive(Debug, Serialize, Deserialize)]
+#[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct IndexFile {
     version: u32,
     records: Vec<IndexEntry>,
+}
+
+/// The index file as written: the entries borrowed, not copied.
+#[derive(Serialize)]
+struct IndexFileRef<'a> {
+    version: u32,
+    records: &'a [IndexEntry],
 }
 
 /// The index could not be read or written.
@@ -261,7 +271,17 @@ impl RecordsIndex {
         let mut interrupted = Vec::new();
         for e in &mut index.entries {
             if e.outcome == RecordOutcome::Running {
-                (e.outcome, e.reason) = if e.data_complete {
+                let read = read_entries(&dir.join(&e.mcap));
+                // The analysis writes the identification into the record
+                // as soon as it exists: a record that holds it keeps it.
+                let identified = match &read {
+                    Ok((_, _, entries, _)) if e.data_complete => identified(entries, &e.mcap),
+                    _ => None,
+                };
+                (e.outcome, e.reason) = if let Some((outcome, reason, key_results)) = identified {
+                    e.key_results = key_results;
+                    (outcome, Some(reason))
+                } else if e.data_complete {
                     (
                         RecordOutcome::Unanalysed,
                         Some(format!(
@@ -276,7 +296,7 @@ impl RecordsIndex {
                         Some("the daemon stopped during the test (killed or crashed)".into()),
                     )
                 };
-                e.recovered = Some(recover(&dir.join(&e.mcap)));
+                e.recovered = Some(recovered_of(read));
                 e.bytes = files_size(dir, e);
                 interrupted.push(e.name.clone());
             }
@@ -369,17 +389,25 @@ impl RecordsIndex {
         self.save()
     }
 
-    /// Write the index atomically.
+    /// Write the index atomically. The entries are streamed into the
+    /// file, neither copied nor first rendered into one string: the index
+    /// grows with every test, and a transient copy of it on every save
+    /// made the daemon's heap grow with it (see `docs/reliability.md`).
     pub fn save(&self) -> Result<(), IndexError> {
         let path = self.dir.join(INDEX_FILE);
         let tmp = self.dir.join(format!("{INDEX_FILE}.tmp"));
-        let file = IndexFile {
+        let file = IndexFileRef {
             version: INDEX_VERSION,
-            records: self.entries.clone(),
+            records: &self.entries,
         };
-        let text = serde_json::to_string_pretty(&file).expect("the index serialises") + "\n";
-        let mut f = std::fs::File::create(&tmp).map_err(io_err(&tmp))?;
-        f.write_all(text.as_bytes()).map_err(io_err(&tmp))?;
+        let f = std::fs::File::create(&tmp).map_err(io_err(&tmp))?;
+        let mut w = std::io::BufWriter::new(f);
+        serde_json::to_writer_pretty(&mut w, &file).map_err(|e| IndexError::Io {
+            path: tmp.display().to_string(),
+            source: e.into(),
+        })?;
+        w.write_all(b"\n").map_err(io_err(&tmp))?;
+        let f = w.into_inner().map_err(|e| io_err(&tmp)(e.into_error()))?;
         f.sync_all().map_err(io_err(&tmp))?;
         drop(f);
         std::fs::rename(&tmp, &path).map_err(io_err(&path))?;
@@ -456,7 +484,12 @@ fn files_size(dir: &Path, e: &IndexEntry) -> u64 {
 
 /// What the MCAP reader gets back from a (possibly truncated) record.
 fn recover(path: &Path) -> Recovered {
-    match read_entries(path) {
+    recovered_of(read_entries(path))
+}
+
+/// [`Recovered`] from what [`read_entries`] returned.
+fn recovered_of(read: Result<crate::record::Entries, crate::record::RecordError>) -> Recovered {
+    match read {
         Ok((_, _, entries, recovery)) => {
             let last_t_ns = entries.iter().map(Entry::t_ns).max().unwrap_or(0);
             let messages: u64 = match &recovery {
@@ -572,6 +605,43 @@ fn outcome_of(entries: &[Entry]) -> (RecordOutcome, Option<String>, Option<KeyRe
     }
 }
 
+/// The outcome of a test whose daemon died during the analysis, when its
+/// record already holds a `/bench/result` (the identification, written
+/// before the diagnosis, or the whole report when only the report files
+/// were still to write): `completed` or `aborted` as the record says, with
+/// its key results and a reason saying what is missing. None when the
+/// record holds no result.
+fn identified(
+    entries: &[Entry],
+    mcap: &str,
+) -> Option<(RecordOutcome, String, Option<KeyResults>)> {
+    let report = entries.iter().rev().find_map(|e| match e {
+        Entry::Result { report, .. } => Some(report),
+        _ => None,
+    })?;
+    let (outcome, abort, key_results) = outcome_of(entries);
+    let pending = report
+        .get("diagnosis_pending")
+        .and_then(serde_json::Value::as_bool)
+        .unwrap_or(false);
+    let note = if pending {
+        format!(
+            "the daemon stopped during the diagnosis: the record holds the identification, \
+             not the diagnosis nor the report files; `motorbench replay {mcap}` reruns the analysis"
+        )
+    } else {
+        format!(
+            "the daemon stopped before writing the report files: the record holds the whole \
+             result; `motorbench replay {mcap}` remakes the report"
+        )
+    };
+    let reason = match abort {
+        Some(abort) => format!("{abort}; {note}"),
+        None => note,
+    };
+    Some((outcome, reason, key_results))
+}
+
 /// The best method's parameter values of a report (`best`, then
 /// `methods[best].params[key].value`).
 fn key_results_of(report: &serde_json::Value) -> Option<KeyResults> {
@@ -640,6 +710,104 @@ mod tests {
         drop(index);
         let (_, again) = RecordsIndex::open(dir.path()).unwrap();
         assert!(again.is_empty());
+    }
+
+    /// A record with samples and, when `result`, the identification as a
+    /// `/bench/result` marked `diagnosis_pending`; cut (no summary, as a
+    /// killed writer leaves it) when `cut`, keeping the result.
+    fn record(path: &Path, result: bool, cut: bool) {
+        use crate::record::{ChannelSpec, Recorder, SegmentKind, TestMeta, SCHEMA_VERSION};
+        let meta = TestMeta {
+            schema_version: SCHEMA_VERSION.into(),
+            kind: SegmentKind::DcStep,
+            motor_id: "m".into(),
+            started_at: "2026-11-21T10:00:00Z".into(),
+            nameplate: serde_json::json!({}),
+            config: String::new(),
+        };
+        let channels = [ChannelSpec::sensor("armature_voltage", "V", "daq0")];
+        let mut entries: Vec<Entry> = (0..100u64)
+            .map(|k| Entry::Samples {
+                t_ns: k * 1_000_000,
+                values: vec![(0, 12.0)],
+            })
+            .collect();
+        if result {
+            entries.push(Entry::Result {
+                t_ns: 100_000_000,
+                report: serde_json::json!({"best": "steady_state", "diagnosis_pending": true,
+                    "methods": {"steady_state": {"params": {"K": {"value": 1.3}}}}}),
+            });
+        }
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .build()
+            .unwrap();
+        rt.block_on(async {
+            let rec = Recorder::start(path, &meta, &channels, 64).unwrap();
+            for e in entries {
+                rec.send(e).await.unwrap();
+            }
+            rec.finish().await.unwrap();
+        });
+        if cut {
+            // The longest cut of the file that no longer reads whole: the
+            // summary gone, the chunks (and the result) kept.
+            let bytes = std::fs::read(path).unwrap();
+            let n = (1..bytes.len())
+                .rev()
+                .find(|&n| {
+                    std::fs::write(path, &bytes[..n]).unwrap();
+                    matches!(read_entries(path), Ok((_, _, _, Some(_))))
+                })
+                .unwrap();
+            std::fs::write(path, &bytes[..n]).unwrap();
+        }
+    }
+
+    #[test]
+    fn a_record_holding_its_identification_is_not_marked_unanalysed() {
+        let dir = tempfile::tempdir().unwrap();
+        let (mut index, _) = RecordsIndex::open(dir.path()).unwrap();
+        // Killed during the diagnosis (the record cut, the identification
+        // in it); killed before the report files (the record whole);
+        // killed before the identification; killed during the plan.
+        for (name, result, cut, data_complete) in [
+            ("diagnosing", true, true, true),
+            ("reporting", true, false, true),
+            ("identifying", false, true, true),
+            ("running", false, true, false),
+        ] {
+            record(&dir.path().join(format!("{name}.mcap")), result, cut);
+            let mut e = entry(name, "rig", 1.0, RecordOutcome::Running);
+            e.data_complete = data_complete;
+            index.insert(e).unwrap();
+        }
+        drop(index);
+        let (index, marked) = RecordsIndex::open(dir.path()).unwrap();
+        assert_eq!(marked.len(), 4);
+        let k = |name: &str| index.get(name).unwrap().key_results.clone();
+        let diagnosing = index.get("diagnosing").unwrap();
+        assert_eq!(diagnosing.outcome, RecordOutcome::Completed);
+        assert_eq!(k("diagnosing").unwrap().params["K"], 1.3);
+        let why = diagnosing.reason.as_deref().unwrap();
+        assert!(why.contains("during the diagnosis"), "{why}");
+        assert!(diagnosing.recovered.as_ref().unwrap().damage.is_some());
+        let reporting = index.get("reporting").unwrap();
+        assert_eq!(reporting.outcome, RecordOutcome::Completed);
+        assert!(reporting
+            .reason
+            .as_deref()
+            .unwrap()
+            .contains("report files"));
+        assert!(reporting.recovered.as_ref().unwrap().damage.is_none());
+        assert_eq!(k("reporting").unwrap().method, "steady_state");
+        let identifying = index.get("identifying").unwrap();
+        assert_eq!(identifying.outcome, RecordOutcome::Unanalysed);
+        assert!(k("identifying").is_none());
+        assert_eq!(
+            index.get("running").unwrap().outcome,
+            RecordOutcome::Interrupted
+        );
     }
 
     #[test]

@@ -728,7 +728,7 @@ async fn measure_watchdog_gaps_over_many_full_plan_tests() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_record_killed_during_its_analysis_is_unanalysed_and_a_cut_index_is_rebuilt() {
+async fn a_record_killed_during_its_analysis_keeps_what_it_holds_and_a_cut_index_is_rebuilt() {
     let dir = tempfile::tempdir().unwrap();
     let records = dir.path().join("records");
     let mut served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
@@ -743,8 +743,18 @@ async fn a_record_killed_during_its_analysis_is_unanalysed_and_a_cut_index_is_re
     let served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
     let c = served.client(None);
     let entry = record_entry(&c, &cut).await;
-    // Unless the analysis had finished before the kill landed.
-    if entry["outcome"] != "completed" {
+    if entry["outcome"] == "completed" {
+        // The record held its result (the identification is written
+        // before the diagnosis, or the analysis had finished before the
+        // kill landed): its key results are in the index.
+        let rec = read_mcap(&records.join(format!("{cut}.mcap"))).unwrap();
+        let best = rec
+            .recorded_result
+            .as_ref()
+            .and_then(|r| r["best"].as_str());
+        assert!(best.is_some(), "{entry}");
+        assert_eq!(entry["key_results"]["method"].as_str(), best, "{entry}");
+    } else {
         assert_eq!(entry["outcome"], "unanalysed", "{entry}");
         let reason = entry["reason"].as_str().unwrap();
         assert!(reason.contains("motorbench replay"), "{reason}");
