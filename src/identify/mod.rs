@@ -10,6 +10,7 @@
 //! `standard_tests`). Both are pure functions of the record, so a
 //! replayed record gives the same report, bit for bit.
 
+pub(crate) mod least_squares;
 mod nrmse;
 pub(crate) mod square_root;
 pub(crate) mod stats;

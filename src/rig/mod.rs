@@ -20,9 +20,13 @@ use crate::config::{LinkSpec, ModbusDeviceLink};
 
 pub mod fault;
 mod modbus_server;
+mod pacing;
+mod setpoint;
 mod wall_clock;
 
 pub use modbus_server::serve_device;
+pub(crate) use pacing::Pacing;
+pub(crate) use setpoint::{check_frequency, check_setpoint};
 pub(crate) use wall_clock::WallClock;
 
 /// What `probe` needs to read every channel once.
@@ -219,6 +223,36 @@ pub(crate) fn enable_written(
         raw if raw == *on => Ok(Some(true)),
         raw if raw == *off => Ok(Some(false)),
         _ => Err(ExceptionCode::IllegalDataValue),
+    }
+}
+
+/// The optional readback registers of a served DC supply, from its
+/// profile: `voltage_out` and `current_out` show the output the plant
+/// measures.
+#[derive(Debug, Clone)]
+pub(crate) struct SupplyReadback {
+    voltage_out: Option<Register>,
+    current_out: Option<Register>,
+}
+
+impl SupplyReadback {
+    /// The readback registers `profile` has.
+    pub(crate) fn of(profile: &DeviceProfile) -> SupplyReadback {
+        SupplyReadback {
+            voltage_out: profile.register("voltage_out").cloned(),
+            current_out: profile.register("current_out").cloned(),
+        }
+    }
+
+    /// Show the output voltage `v` and current `i` (a supply reads back
+    /// no negative output).
+    pub(crate) fn show(&self, bank: &mut RegisterBank, v: f64, i: f64) {
+        if let Some(r) = &self.voltage_out {
+            bank.set(r, v.max(0.0));
+        }
+        if let Some(r) = &self.current_out {
+            bank.set(r, i.max(0.0));
+        }
     }
 }
 

@@ -30,7 +30,8 @@ use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
 use crate::config::{Fault, SimulatedRig, SimulatedTransport};
 use crate::rig::fault::ProtocolFaults;
 use crate::rig::{
-    enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock,
+    enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink,
+    SupplyReadback, WallClock,
 };
 
 /// The simulated plant on the wall clock.
@@ -102,20 +103,18 @@ struct SupplyDevice {
     setpoint: Register,
     enable: Option<(Register, u16, u16)>,
     current_limit: Option<Register>,
-    voltage_out: Option<Register>,
-    current_out: Option<Register>,
+    readback: SupplyReadback,
 }
 
 impl SimulatedDevice for SupplyDevice {
     fn before_read(&self, bank: &mut RegisterBank) {
         let mut p = lock(&self.plant);
         p.catch_up();
-        if let Some(r) = &self.voltage_out {
-            bank.set(r, p.reading(channel::VOLTAGE).max(0.0));
-        }
-        if let Some(r) = &self.current_out {
-            bank.set(r, p.reading(channel::CURRENT).max(0.0));
-        }
+        self.readback.show(
+            bank,
+            p.reading(channel::VOLTAGE),
+            p.reading(channel::CURRENT),
+        );
     }
 
     fn after_write(
@@ -306,8 +305,7 @@ impl ServedRig {
                 Some(n) => Some(register(sp, n)?),
                 None => None,
             },
-            voltage_out: sp.register("voltage_out").cloned(),
-            current_out: sp.register("current_out").cloned(),
+            readback: SupplyReadback::of(sp),
         };
         let stage_bank: SharedBank = Arc::new(Mutex::new(RegisterBank::for_profile(sp)));
         let stage_service = BankService::new(su, stage_bank.clone(), Arc::new(supply_dev));

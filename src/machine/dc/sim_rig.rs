@@ -19,6 +19,7 @@ use rand_distr::{Distribution, Normal};
 
 use crate::config::SimulatedRig;
 use crate::model::{DcMotor, DcState, ParamError, Terminal};
+use crate::rig::Pacing;
 
 const STAGE_ID: &str = "sim-supply";
 const SENSORS_ID: &str = "sim-daq";
@@ -117,7 +118,7 @@ pub struct SimSensors {
     voltage: Adc,
     current: Adc,
     counts_per_rad: f64,
-    realtime_start: Option<tokio::time::Instant>,
+    pacing: Pacing,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -186,7 +187,11 @@ pub fn sim_rig(
         voltage: Adc::new(s.voltage_noise, s.voltage_full_scale, s.voltage_bits),
         current: Adc::new(s.current_noise, s.current_full_scale, s.current_bits),
         counts_per_rad: f64::from(s.encoder_lines) * 4.0 / std::f64::consts::TAU,
-        realtime_start: realtime.then(tokio::time::Instant::now),
+        pacing: if realtime {
+            Pacing::wall_from_now()
+        } else {
+            Pacing::Virtual
+        },
     };
     Ok((SimPowerStage { plant }, sensors))
 }
@@ -305,17 +310,12 @@ impl SensorStream for SimSensors {
     async fn next_batch(&mut self) -> Result<SampleBatch, DriverError> {
         let batch = self.sample();
         let step = (batch.t_ns as f64 / self.period_ns).round() as u64;
-        if let Some(start) = self.realtime_start {
-            tokio::time::sleep_until(start + Duration::from_nanos(batch.t_ns)).await;
-        } else if step % 1024 == 0 {
-            // Let other tasks (signal handlers, the recorder's queue) run.
-            tokio::task::yield_now().await;
-        }
+        self.pacing.wait(batch.t_ns, step).await;
         Ok(batch)
     }
 
     fn virtual_clock(&self) -> bool {
-        self.realtime_start.is_none()
+        self.pacing.is_virtual()
     }
 }
 

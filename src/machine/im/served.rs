@@ -46,7 +46,8 @@ use crate::config::{ModbusDeviceLink, SimulatedTransport};
 use crate::model::Connection;
 use crate::rig::fault::ProtocolFaults;
 use crate::rig::{
-    enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink, WallClock,
+    enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink,
+    SupplyReadback, WallClock,
 };
 
 /// The simulated machine, supply and dynamometer on the wall clock.
@@ -133,6 +134,18 @@ impl VfdRegisters {
         })
     }
 
+    /// Show the drive's state in its readback registers: the output
+    /// frequency (`frequency` while `running`, else 0) and the status
+    /// word.
+    fn show_state(&self, bank: &mut RegisterBank, running: bool, frequency: f64) {
+        if let Some(r) = &self.output_frequency {
+            bank.set(r, if running { frequency } else { 0.0 });
+        }
+        if let Some(r) = &self.status {
+            bank.set(r, if running { STATUS_RUNNING } else { 0.0 });
+        }
+    }
+
     /// (run, coast) from the control word in `bank`.
     fn command(&self, bank: &RegisterBank) -> (bool, bool) {
         let raw = bank.get(&self.control) as u16;
@@ -158,14 +171,9 @@ impl SimulatedDevice for SupplyDevice {
         let mut p = lock(&self.plant);
         p.catch_up();
         let running = self.running(bank);
-        if let Some(r) = &self.regs.output_frequency {
-            bank.set(r, if running { p.vfd.frequency() } else { 0.0 });
-        }
+        self.regs.show_state(bank, running, p.vfd.frequency());
         if let Some(r) = &self.regs.output_current {
             bank.set(r, p.reading(channel::LINE_CURRENT).max(0.0));
-        }
-        if let Some(r) = &self.regs.status {
-            bank.set(r, if running { STATUS_RUNNING } else { 0.0 });
         }
     }
 
@@ -206,12 +214,7 @@ impl SimulatedDevice for DynoDevice {
         lock(&self.plant).catch_up();
         let (run, _) = self.regs.command(bank);
         let f = bank.get(&self.regs.frequency);
-        if let Some(r) = &self.regs.output_frequency {
-            bank.set(r, if run { f } else { 0.0 });
-        }
-        if let Some(r) = &self.regs.status {
-            bank.set(r, if run { STATUS_RUNNING } else { 0.0 });
-        }
+        self.regs.show_state(bank, run, f);
     }
 
     fn after_write(
@@ -333,8 +336,7 @@ struct DcSourceDevice {
     /// The current limit: the current driven.
     current: Register,
     enable: (Register, u16, u16),
-    voltage_out: Option<Register>,
-    current_out: Option<Register>,
+    readback: SupplyReadback,
     /// The sensors' DC voltage and current channels.
     channels: (usize, usize),
 }
@@ -344,12 +346,7 @@ impl SimulatedDevice for DcSourceDevice {
         let mut p = lock(&self.plant);
         p.catch_up();
         let (v, i) = self.channels;
-        if let Some(r) = &self.voltage_out {
-            bank.set(r, p.reading(v).max(0.0));
-        }
-        if let Some(r) = &self.current_out {
-            bank.set(r, p.reading(i).max(0.0));
-        }
+        self.readback.show(bank, p.reading(v), p.reading(i));
     }
 
     fn after_write(
@@ -581,8 +578,7 @@ impl ServedImRig {
                         compliance: register(d.profile, &map.setpoint)?,
                         current: register(d.profile, current)?,
                         enable: (register(d.profile, enable)?, *on, *off),
-                        voltage_out: d.profile.register("voltage_out").cloned(),
-                        current_out: d.profile.register("current_out").cloned(),
+                        readback: SupplyReadback::of(d.profile),
                         channels,
                     },
                 ))

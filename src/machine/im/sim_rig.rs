@@ -41,6 +41,7 @@ use rand_distr::{Distribution, Normal, StandardNormal};
 use crate::model::{
     at_frequency, free_rotor_slip, terminal_resistance, ImCircuit, ImCircuitError, ImSupply,
 };
+use crate::rig::{check_frequency, check_setpoint, Pacing};
 
 const VFD_ID: &str = "sim-vfd";
 const DYNO_ID: &str = "sim-dyno";
@@ -282,8 +283,7 @@ pub struct SimImSensors {
     rng: StdRng,
     noise: Option<Normal<f64>>,
     counts_per_rad: f64,
-    paced: bool,
-    realtime_start: Option<tokio::time::Instant>,
+    pacing: Pacing,
 }
 
 /// Why a simulated induction-machine rig cannot be built.
@@ -375,8 +375,7 @@ pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors)
             rng,
             noise,
             counts_per_rad,
-            paced: false,
-            realtime_start: None,
+            pacing: Pacing::Virtual,
         },
     ))
 }
@@ -401,7 +400,7 @@ impl SimImSensors {
     /// wall-clock time since the first read reaches its data time, as on a
     /// real rig (the daemon and `run --realtime` use this).
     pub fn paced(mut self) -> SimImSensors {
-        self.paced = true;
+        self.pacing = Pacing::wall_from_first_batch();
         self
     }
 
@@ -531,12 +530,7 @@ impl PowerStage for SimVfd {
     async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
         let mut p = lock(&self.plant);
         let max = p.cfg.supply.line_voltage;
-        if !(value.is_finite() && (0.0..=max * 1.0001).contains(&value)) {
-            return Err(DriverError::Device {
-                device: VFD_ID.into(),
-                reason: format!("voltage set point {value} V outside [0, {max}] V"),
-            });
-        }
+        check_setpoint(VFD_ID, "voltage", "V", value, max, 1.0001)?;
         p.vfd_setpoint = value;
         Ok(())
     }
@@ -569,12 +563,7 @@ impl PowerStage for SimVfd {
     async fn set_frequency(&mut self, hz: f64) -> Result<(), DriverError> {
         let mut p = lock(&self.plant);
         let rated = p.cfg.supply.frequency;
-        if !(hz.is_finite() && hz > 0.0 && hz <= rated * 1.0001) {
-            return Err(DriverError::Device {
-                device: VFD_ID.into(),
-                reason: format!("frequency {hz} Hz outside (0, {rated}] Hz"),
-            });
-        }
+        check_frequency(VFD_ID, hz, rated, 1.0001)?;
         p.frequency = hz.min(rated);
         Ok(())
     }
@@ -597,12 +586,7 @@ impl PowerStage for SimDyno {
     async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
         let mut p = lock(&self.plant);
         let max = 1.2 * p.synchronous_speed();
-        if !(value.is_finite() && (0.0..=max).contains(&value)) {
-            return Err(DriverError::Device {
-                device: DYNO_ID.into(),
-                reason: format!("speed set point {value} rad/s outside [0, {max}] rad/s"),
-            });
-        }
+        check_setpoint(DYNO_ID, "speed", "rad/s", value, max, 1.0)?;
         p.dyno_setpoint = value;
         Ok(())
     }
@@ -637,12 +621,7 @@ impl PowerStage for SimDcSource {
     async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
         let mut p = lock(&self.plant);
         let max = p.cfg.dc_source_max_current.unwrap_or(0.0);
-        if !(value.is_finite() && (0.0..=max).contains(&value)) {
-            return Err(DriverError::Device {
-                device: DC_SOURCE_ID.into(),
-                reason: format!("DC current set point {value} A outside [0, {max}] A"),
-            });
-        }
+        check_setpoint(DC_SOURCE_ID, "DC current", "A", value, max, 1.0)?;
         p.dc_setpoint = value;
         Ok(())
     }
@@ -678,21 +657,15 @@ impl SensorStream for SimImSensors {
     }
 
     async fn next_batch(&mut self) -> Result<SampleBatch, DriverError> {
-        if self.paced && self.realtime_start.is_none() {
-            self.realtime_start = Some(tokio::time::Instant::now());
-        }
+        self.pacing.start();
         let batch = self.sample();
-        if let Some(start) = self.realtime_start {
-            tokio::time::sleep_until(start + std::time::Duration::from_nanos(batch.t_ns)).await;
-        } else if lock(&self.plant).step % 1024 == 0 {
-            // Let other tasks (signal handlers, the recorder's queue) run.
-            tokio::task::yield_now().await;
-        }
+        let step = lock(&self.plant).step;
+        self.pacing.wait(batch.t_ns, step).await;
         Ok(batch)
     }
 
     fn virtual_clock(&self) -> bool {
-        !self.paced
+        self.pacing.is_virtual()
     }
 }
 

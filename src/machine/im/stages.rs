@@ -28,6 +28,8 @@ use async_trait::async_trait;
 use motorbench_drivers::modbus::{BusHandle, ModbusPowerStage, Priority, Register};
 use motorbench_drivers::{DriverError, PowerStage, StageCapabilities};
 
+use crate::rig::{check_frequency, check_setpoint};
+
 /// The supply VFD; see the module docs.
 #[derive(Debug)]
 pub struct VfdSupply {
@@ -78,15 +80,7 @@ impl PowerStage for VfdSupply {
     }
 
     async fn set_setpoint(&mut self, volts: f64) -> Result<(), DriverError> {
-        if !(volts.is_finite() && (0.0..=self.max_voltage).contains(&volts)) {
-            return Err(DriverError::Device {
-                device: self.id().to_string(),
-                reason: format!(
-                    "voltage set point {volts} V outside [0, {}] V",
-                    self.max_voltage
-                ),
-            });
-        }
+        check_setpoint(self.id(), "voltage", "V", volts, self.max_voltage, 1.0)?;
         self.bus
             .write(self.unit, &self.voltage, volts, Priority::Urgent)
             .await
@@ -104,12 +98,7 @@ impl PowerStage for VfdSupply {
     }
 
     async fn set_frequency(&mut self, hz: f64) -> Result<(), DriverError> {
-        if !(hz.is_finite() && hz > 0.0 && hz <= self.rated_hz) {
-            return Err(DriverError::Device {
-                device: self.id().to_string(),
-                reason: format!("frequency {hz} Hz outside (0, {}] Hz", self.rated_hz),
-            });
-        }
+        check_frequency(self.id(), hz, self.rated_hz, 1.0)?;
         self.drive.set_setpoint(hz).await?;
         self.frequency_hz = hz;
         Ok(())
@@ -155,15 +144,7 @@ impl PowerStage for DcCurrentSource {
     }
 
     async fn set_setpoint(&mut self, amperes: f64) -> Result<(), DriverError> {
-        if !(amperes.is_finite() && (0.0..=self.max_current).contains(&amperes)) {
-            return Err(DriverError::Device {
-                device: self.id().to_string(),
-                reason: format!(
-                    "DC current set point {amperes} A outside [0, {}] A",
-                    self.max_current
-                ),
-            });
-        }
+        check_setpoint(self.id(), "DC current", "A", amperes, self.max_current, 1.0)?;
         self.drive.set_current_limit(amperes).await?;
         self.drive.set_setpoint(self.compliance_voltage).await
     }

@@ -3,12 +3,12 @@
 //! held-out residuals of a model over folds, and linearised 95 %
 //! intervals of a fit.
 
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::storage::Owned;
-use nalgebra::{DMatrix, DVector, Dyn};
+use levenberg_marquardt::LevenbergMarquardt;
+use nalgebra::{DMatrix, DVector};
 
 use super::data::SweepSet;
 use super::effects::ImAugmentation;
+use crate::identify::least_squares::{AtParams, Residuals};
 use crate::identify::PRACTICAL_LIMIT;
 
 /// A fitted model.
@@ -39,11 +39,10 @@ struct Problem<'a> {
     model: ImAugmentation,
     data: &'a SweepSet,
     idx: &'a [usize],
-    x: DVector<f64>,
 }
 
 impl Problem<'_> {
-    fn residuals_at(&self, x: &[f64]) -> Option<DVector<f64>> {
+    fn residuals_of(&self, x: &[f64]) -> Option<DVector<f64>> {
         let n = self.idx.len();
         let mut r = DVector::zeros(2 * n);
         for (j, &k) in self.idx.iter().enumerate() {
@@ -55,31 +54,17 @@ impl Problem<'_> {
     }
 }
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for Problem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.x.copy_from(x);
+impl Residuals for Problem<'_> {
+    fn rows(&self) -> usize {
+        2 * self.idx.len()
     }
 
-    fn params(&self) -> DVector<f64> {
-        self.x.clone()
+    fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
+        self.residuals_of(x.as_slice())
     }
 
-    fn residuals(&self) -> Option<DVector<f64>> {
-        // A large finite residual outside the physical region rejects the
-        // trial step (None would end the run).
-        Some(
-            self.residuals_at(self.x.as_slice())
-                .filter(|r| r.iter().all(|v| v.is_finite()))
-                .unwrap_or_else(|| DVector::from_element(2 * self.idx.len(), 1e100)),
-        )
-    }
-
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        jacobian(self.model, self.data, self.idx, self.x.as_slice())
+    fn jacobian_at(&self, x: &DVector<f64>) -> Option<DMatrix<f64>> {
+        jacobian(self.model, self.data, self.idx, x.as_slice())
     }
 }
 
@@ -90,21 +75,16 @@ fn jacobian(
     idx: &[usize],
     x: &[f64],
 ) -> Option<DMatrix<f64>> {
-    let p = Problem {
-        model,
-        data,
-        idx,
-        x: DVector::from_column_slice(x),
-    };
+    let p = Problem { model, data, idx };
     let n = idx.len();
     let mut jac = DMatrix::zeros(2 * n, x.len());
     let mut xp = x.to_vec();
     for j in 0..x.len() {
         let h = 1e-6 * (1.0 + x[j].abs());
         xp[j] = x[j] + h;
-        let up = p.residuals_at(&xp)?;
+        let up = p.residuals_of(&xp)?;
         xp[j] = x[j] - h;
-        let dn = p.residuals_at(&xp)?;
+        let dn = p.residuals_of(&xp)?;
         xp[j] = x[j];
         jac.set_column(j, &((up - dn) / (2.0 * h)));
     }
@@ -124,14 +104,12 @@ pub fn fit(
         if s.len() != model.len() {
             continue;
         }
-        let problem = Problem {
-            model,
-            data,
-            idx,
+        let problem = AtParams {
+            problem: Problem { model, data, idx },
             x: DVector::from_column_slice(s),
         };
         if problem
-            .residuals_at(s)
+            .residuals_of(s)
             .is_none_or(|r| !r.iter().all(|v| v.is_finite()))
         {
             continue;
@@ -139,7 +117,7 @@ pub fn fit(
         let lm = LevenbergMarquardt::new().with_patience(100).with_tol(1e-10);
         let (p, _report) = lm.minimize(problem);
         let x: Vec<f64> = p.x.iter().copied().collect();
-        let Some(r) = p.residuals_at(&x) else {
+        let Some(r) = p.residuals_of(&x) else {
             continue;
         };
         let cost = r.norm_squared();

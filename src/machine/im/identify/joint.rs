@@ -36,11 +36,11 @@ use std::cell::Cell;
 use std::collections::BTreeMap;
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
-use nalgebra::storage::Owned;
-use nalgebra::{DMatrix, DVector, Dyn};
+use nalgebra::{DMatrix, DVector};
 
 use super::standard_tests::{temperature_factor, StandardTestsReduction};
 use crate::contract::{MethodReport, ParamEstimate};
+use crate::identify::least_squares::{AtParams, Residuals};
 use crate::identify::stats::t975;
 use crate::machine::im::COPPER_ALPHA;
 use crate::model::{
@@ -139,7 +139,6 @@ struct JointProblem<'a> {
     /// `Xs/Xr`.
     ratio: f64,
     rs_bounds: (f64, f64),
-    x: DVector<f64>,
     evaluations: Cell<usize>,
 }
 
@@ -190,6 +189,12 @@ impl JointProblem<'_> {
                 .map(|n| (n.line_current, n.input_power)),
         }
     }
+}
+
+impl Residuals for JointProblem<'_> {
+    fn rows(&self) -> usize {
+        2 * self.readings.len()
+    }
 
     fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
         self.evaluations.set(self.evaluations.get() + 1);
@@ -202,41 +207,18 @@ impl JointProblem<'_> {
         }
         out.iter().all(|v| v.is_finite()).then_some(out)
     }
-}
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for JointProblem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn residuals(&self) -> Option<DVector<f64>> {
-        // Outside the valid region a large finite residual rejects the
-        // step (`None` would end the run).
-        Some(
-            self.residuals_at(&self.x)
-                .unwrap_or_else(|| DVector::from_element(2 * self.readings.len(), 1e100)),
-        )
-    }
-
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let r0 = self.residuals_at(&self.x)?;
+    fn jacobian_at(&self, x: &DVector<f64>) -> Option<DMatrix<f64>> {
+        let r0 = self.residuals_at(x)?;
         let mut jac = DMatrix::zeros(r0.len(), Q);
         for j in 0..Q {
-            let h = STEP * self.x[j].abs().max(1.0);
-            let mut x = self.x.clone();
-            x[j] += h;
-            let r = self.residuals_at(&x)?;
+            let h = STEP * x[j].abs().max(1.0);
+            let mut xh = x.clone();
+            xh[j] += h;
+            let r = self.residuals_at(&xh)?;
             jac.set_column(j, &((r - &r0) / h));
         }
         Some(jac)
-    }
-
-    fn params(&self) -> DVector<f64> {
-        self.x.clone()
-    }
-
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.x.copy_from(x);
     }
 }
 
@@ -336,14 +318,16 @@ pub fn fit_joint(
     if x0.iter().any(|v| !v.is_finite()) {
         return Err(JointFitError::Start);
     }
-    let problem = JointProblem {
-        readings: &data,
-        connection,
-        rated_frequency,
-        ratio,
-        rs_bounds,
+    let problem = AtParams {
+        problem: JointProblem {
+            readings: &data,
+            connection,
+            rated_frequency,
+            ratio,
+            rs_bounds,
+            evaluations: Cell::new(0),
+        },
         x: x0,
-        evaluations: Cell::new(0),
     };
     let solver = LevenbergMarquardt::new()
         .with_patience(MAX_EVALUATIONS / (Q + 1))

@@ -22,13 +22,13 @@
 //!   derived from it. Whatever stays weak is flagged and given no interval.
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
-use nalgebra::storage::Owned;
-use nalgebra::{DMatrix, DVector, Dyn};
+use nalgebra::{DMatrix, DVector};
 
 use super::error::ImFitError;
 use super::identifiability::{weak_directions, Identifiability};
 use super::recursive::paper_cost;
 use super::sweep::{predict, predict_gradient_into, Channels, PhaseData, MAX_PARAMS};
+use crate::identify::least_squares::{AtParams, Residuals};
 use crate::identify::stats::t975;
 use crate::model::{standstill_rotor_leakage, ImCircuit, ImModel, ImParam, LeakageSplit};
 
@@ -265,15 +265,10 @@ struct SweepProblem<'a> {
     param: Parametrisation,
     weights: Weighting,
     model_params: &'static [ImParam],
-    x: DVector<f64>,
     evaluations: std::cell::Cell<usize>,
 }
 
 impl SweepProblem<'_> {
-    fn rows(&self) -> usize {
-        self.data.len() * if self.channels.uses_power() { 2 } else { 1 }
-    }
-
     /// Scaled, not yet whitened residual pairs.
     fn raw_residuals(&self, c: &ImCircuit) -> Vec<(f64, f64)> {
         let d = self.data;
@@ -289,27 +284,16 @@ impl SweepProblem<'_> {
     }
 }
 
-impl LeastSquaresProblem<f64, Dyn, Dyn> for SweepProblem<'_> {
-    type ResidualStorage = Owned<f64, Dyn>;
-    type JacobianStorage = Owned<f64, Dyn, Dyn>;
-    type ParameterStorage = Owned<f64, Dyn>;
-
-    fn set_params(&mut self, x: &DVector<f64>) {
-        self.x.copy_from(x);
+impl Residuals for SweepProblem<'_> {
+    fn rows(&self) -> usize {
+        self.data.len() * if self.channels.uses_power() { 2 } else { 1 }
     }
 
-    fn params(&self) -> DVector<f64> {
-        self.x.clone()
-    }
-
-    fn residuals(&self) -> Option<DVector<f64>> {
+    /// `None` outside the valid region (an element over- or
+    /// underflowing).
+    fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
         self.evaluations.set(self.evaluations.get() + 1);
-        // Outside the valid region (an element over- or underflowing),
-        // answer with a large finite residual so that the trial step is
-        // rejected and the trust region shrinks; `None` would end the run.
-        let Some(c) = self.param.circuit(&self.x) else {
-            return Some(DVector::from_element(self.rows(), 1e100));
-        };
+        let c = self.param.circuit(x)?;
         let n = self.data.len();
         let l = &self.weights.l_inv;
         let mut r = DVector::zeros(self.rows());
@@ -321,15 +305,11 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for SweepProblem<'_> {
                 r[k] = l[0][0] * ri;
             }
         }
-        if r.iter().all(|v| v.is_finite()) {
-            Some(r)
-        } else {
-            Some(DVector::from_element(self.rows(), 1e100))
-        }
+        Some(r)
     }
 
-    fn jacobian(&self) -> Option<DMatrix<f64>> {
-        let c = self.param.circuit(&self.x)?;
+    fn jacobian_at(&self, x: &DVector<f64>) -> Option<DMatrix<f64>> {
+        let c = self.param.circuit(x)?;
         let t = self.param.chain(&c, self.model_params);
         let d = self.data;
         let n = d.len();
@@ -385,14 +365,14 @@ pub fn evaluation_bound(points: usize, q: usize) -> usize {
 
 /// How one Levenberg–Marquardt run ended.
 struct Solved<'a> {
-    problem: SweepProblem<'a>,
+    problem: AtParams<SweepProblem<'a>>,
     cost: f64,
     converged: bool,
     /// Stopped at its evaluation bound, not converged.
     at_bound: bool,
 }
 
-fn solve(problem: SweepProblem<'_>, tol: f64, max_evaluations: usize) -> Solved<'_> {
+fn solve(problem: AtParams<SweepProblem<'_>>, tol: f64, max_evaluations: usize) -> Solved<'_> {
     let start_ok = problem.residuals().is_some();
     if !start_ok {
         return Solved {
@@ -518,14 +498,16 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, ImFitError> {
     let mut evaluations = 0;
     let make = |param: Parametrisation, weights: Weighting, start: &ImCircuit| {
         let x = param.x_of(start);
-        SweepProblem {
-            data,
-            channels: opts.channels,
-            param,
-            weights,
-            model_params,
+        AtParams {
+            problem: SweepProblem {
+                data,
+                channels: opts.channels,
+                param,
+                weights,
+                model_params,
+                evaluations: std::cell::Cell::new(0),
+            },
             x,
-            evaluations: std::cell::Cell::new(0),
         }
     };
 
@@ -835,7 +817,7 @@ impl Analysis {
     }
 }
 
-fn analyse(problem: &SweepProblem<'_>) -> Result<Analysis, ImFitError> {
+fn analyse(problem: &AtParams<SweepProblem<'_>>) -> Result<Analysis, ImFitError> {
     let jac_log = problem.jacobian().ok_or_else(|| {
         ImFitError::Unidentifiable("the Jacobian is not finite at the solution".into())
     })?;

@@ -6,6 +6,7 @@
 //! branch are known (IEEE 112's correction for the current `Xm` takes).
 
 use super::error::StandardTestsError;
+use super::phase::PhaseReading;
 use super::regression::through_origin;
 use crate::contract::LockedRotorRow;
 use crate::model::{Connection, C64};
@@ -83,20 +84,12 @@ pub(super) fn locked_rotor(
     let mut rows = Vec::new();
     let (mut i2, mut p, mut q) = (Vec::new(), Vec::new(), Vec::new());
     for (k, r) in readings.iter().enumerate() {
-        let v = connection.phase_voltage(r.line_voltage);
-        let i = connection.phase_current(r.line_current);
-        let pph = r.input_power / 3.0;
-        let s = v * i;
-        if pph >= s {
-            return Err(StandardTestsError::PowerFactor {
-                test: "locked-rotor",
-                index: k + 1,
-                segment: r.segment,
-                power: r.input_power,
-                apparent: 3.0 * s,
-            });
-        }
-        let qph = (s * s - pph * pph).sqrt();
+        let PhaseReading {
+            v,
+            i,
+            p: pph,
+            q: qph,
+        } = PhaseReading::of(r, k, "locked-rotor", connection)?;
         rows.push(LockedRotorRow {
             segment: r.segment,
             line_voltage: r.line_voltage,

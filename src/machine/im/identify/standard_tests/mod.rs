@@ -29,6 +29,7 @@ mod dc_resistance;
 mod error;
 mod locked_rotor;
 mod no_load;
+mod phase;
 mod reduce;
 mod regression;
 #[cfg(test)]

@@ -6,6 +6,7 @@
 //! and the core loss at rated voltage.
 
 use super::error::StandardTestsError;
+use super::phase::PhaseReading;
 use super::regression::{line, polynomial, powers, through_origin};
 use crate::contract::{NoLoadRow, XmCurve};
 use crate::model::{Connection, C64};
@@ -103,19 +104,12 @@ pub(super) fn rows(
     let pk = constant_losses(readings, connection, rs);
     let mut rows = Vec::new();
     for (k, r) in readings.iter().enumerate() {
-        let v = connection.phase_voltage(r.line_voltage);
-        let i = connection.phase_current(r.line_current);
-        let (pph, s) = (r.input_power / 3.0, v * i);
-        if pph >= s {
-            return Err(StandardTestsError::PowerFactor {
-                test: "no-load",
-                index: k + 1,
-                segment: r.segment,
-                power: r.input_power,
-                apparent: 3.0 * s,
-            });
-        }
-        let qph = (s * s - pph * pph).sqrt();
+        let PhaseReading {
+            v,
+            i,
+            p: pph,
+            q: qph,
+        } = PhaseReading::of(r, k, "no-load", connection)?;
         // The phase current lags the voltage by φ.
         let current = C64::new(pph / v, -qph / v);
         let e2 = (C64::new(v, 0.0) - current * C64::new(rs, xs)).norm_sqr();
