@@ -391,8 +391,8 @@ impl RecordsIndex {
 
     /// Write the index atomically. The entries are streamed into the
     /// file, neither copied nor first rendered into one string: the index
-    /// grows with every test, and a transient copy of it on every save
-    /// made the daemon's heap grow with it (see `docs/reliability.md`).
+    /// grows with every test, and a save (three per test) would otherwise
+    /// allocate about three times its size each time.
     pub fn save(&self) -> Result<(), IndexError> {
         let path = self.dir.join(INDEX_FILE);
         let tmp = self.dir.join(format!("{INDEX_FILE}.tmp"));
