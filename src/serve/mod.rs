@@ -22,6 +22,7 @@ pub mod client;
 pub mod connections;
 pub mod ctl;
 pub mod jobs;
+pub mod latch_file;
 pub mod link_tally;
 pub mod metrics;
 pub mod page;

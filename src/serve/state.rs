@@ -8,19 +8,20 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex as StdMutex};
 use std::time::SystemTime;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use tokio::sync::Mutex;
 use tokio::task::JoinHandle;
 use tokio::time::Instant;
 
 use super::jobs::{prepare, SetupError, StopStatus, TestRun};
+use super::latch_file::LatchStore;
 use super::metrics::Metrics;
 use super::records_index::{IndexError, RecordsIndex};
 use super::rig_config::RigConfig;
 use crate::bench::{StopCause, StopReport};
 
 /// A latched stop: the rig refuses new tests until an operator resets it.
-#[derive(Debug, Clone, PartialEq, Serialize, utoipa::ToSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct Latch {
     /// Machine-readable cause (`emergency_stop`, `limit`, …).
     pub kind: String,
@@ -40,7 +41,7 @@ impl Latch {
     }
 }
 
-fn now_rfc3339() -> String {
+pub(super) fn now_rfc3339() -> String {
     humantime::format_rfc3339_seconds(SystemTime::now()).to_string()
 }
 
@@ -135,6 +136,8 @@ pub struct Daemon {
     jobs: StdMutex<Vec<JoinHandle<()>>>,
     stopping: AtomicBool,
     metrics: Arc<Metrics>,
+    /// The latches as kept on disk (`latches.json`): a restart keeps them.
+    latches: Arc<LatchStore>,
 }
 
 /// Finished tests the daemon keeps in memory (`GET /v1/tests`, `GET
@@ -193,6 +196,8 @@ impl Daemon {
         for (name, cfg) in &rigs {
             index.apply_retention(name, &cfg.retention(), SystemTime::now())?;
         }
+        let names: Vec<String> = rigs.iter().map(|(n, _)| n.clone()).collect();
+        let latches = Arc::new(LatchStore::open(records, &names));
         let rigs = rigs
             .into_iter()
             .map(|(name, cfg)| {
@@ -201,7 +206,13 @@ impl Daemon {
                     cfg,
                     runtime: Mutex::new(RigRuntime {
                         running: None,
-                        latch: None,
+                        latch: latches.get(&name).inspect(|l| {
+                            tracing::warn!(
+                                "rig {name}: still latched from before the restart ({}); \
+                                 `motorbench ctl reset` clears it",
+                                l.message
+                            )
+                        }),
                         winding_rise_k: 0.0,
                         winding_at: Instant::now(),
                     }),
@@ -216,6 +227,7 @@ impl Daemon {
             jobs: StdMutex::new(Vec::new()),
             stopping: AtomicBool::new(false),
             metrics: Arc::new(Metrics::new()),
+            latches,
         })
     }
 
@@ -342,6 +354,7 @@ impl Daemon {
         drop(rt);
         self.metrics.test_started(rig_name);
         let rig = rig.clone();
+        let latches = self.latches.clone();
         let handle = tokio::spawn(async move {
             let end = job.run().await;
             let mut rt = rig.runtime.lock().await;
@@ -349,7 +362,9 @@ impl Daemon {
             rt.winding_at = Instant::now();
             if let Some(stop) = &end.latch {
                 if rt.latch.is_none() {
-                    rt.latch = Some(Latch::from_report(stop));
+                    let latch = Latch::from_report(stop);
+                    latches.set(&rig.name, Some(latch.clone()));
+                    rt.latch = Some(latch);
                 }
             }
         });
@@ -409,6 +424,7 @@ impl Daemon {
         tracing::warn!("rig {rig_name}: {}", latch.message);
         // The latch set here wins over the job's own: the operator's stop
         // is what must be acknowledged.
+        self.latches.set(rig_name, Some(latch.clone()));
         rig.runtime.lock().await.latch = Some(latch);
         Ok(self.rig_status(rig).await)
     }
@@ -426,6 +442,7 @@ impl Daemon {
             ));
         }
         if let Some(l) = rt.latch.take() {
+            self.latches.set(rig_name, None);
             tracing::info!("rig {rig_name}: reset by the operator (was: {})", l.message);
         }
         drop(rt);

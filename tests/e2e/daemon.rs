@@ -995,3 +995,30 @@ async fn at_the_connection_limit_emergency_stop_still_works() {
     assert_eq!(rig["state"], "tripped", "{rig}");
     assert!(served.log().contains("too many") || served.log().contains("the limit"));
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_latch_survives_a_killed_daemon_until_reset() {
+    let dir = tempfile::tempdir().unwrap();
+    let records = dir.path().join("records");
+    let served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+    let out = served.ctl(&["estop"]);
+    assert!(out.status.success(), "{:?}", common::text(&out));
+    assert_eq!(get(&c, "/v1/rigs/rig").await["state"], "tripped");
+    // SIGKILL (Served's drop), then a new daemon on the same records.
+    drop(served);
+    let served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+    let rig = get(&c, "/v1/rigs/rig").await;
+    assert_eq!(rig["state"], "tripped", "{rig}");
+    assert_eq!(rig["trip"]["kind"], "emergency_stop", "{rig}");
+    let refused = start(&c, None).await;
+    assert_eq!(refused.status, 409);
+    let out = served.ctl(&["reset"]);
+    assert!(out.status.success(), "{:?}", common::text(&out));
+    // The reset is kept too.
+    drop(served);
+    let served = start_daemon(dir.path(), &records, &["--listen", "127.0.0.1:0"]);
+    let c = served.client(None);
+    assert_eq!(get(&c, "/v1/rigs/rig").await["state"], "idle");
+}
