@@ -123,8 +123,16 @@ async fn run(client: &mut ModbusClient, job: Job) {
         } => {
             client.set_unit(unit);
             let sent = Instant::now();
+            let retries = client.stats().retries;
             let values = read_registers(client, &registers, max_gap).await;
             let answered = Instant::now();
+            // A retried request's values are from its last attempt: stamped
+            // from the first, a count read after a 0.2 s timeout would make
+            // a speed estimate 0.2 s too short (a false overspeed).
+            let sent = match client.last_sent() {
+                Some(last) if client.stats().retries > retries => last.max(sent),
+                _ => sent,
+            };
             let _ = reply.send(values.map(|values| Reading {
                 values,
                 sent,

@@ -115,6 +115,9 @@ pub struct ModbusClient {
     ctx: Option<Context>,
     policy: CallPolicy,
     stats: LinkStats,
+    /// When the latest attempt of a call was sent: after a retry, the
+    /// reply's values are from then, not from the first attempt.
+    last_sent: Option<tokio::time::Instant>,
 }
 
 impl std::fmt::Debug for ModbusClient {
@@ -137,6 +140,7 @@ impl ModbusClient {
             ctx: None,
             policy,
             stats: LinkStats::default(),
+            last_sent: None,
         }
     }
 
@@ -284,6 +288,11 @@ impl ModbusClient {
         }
     }
 
+    /// When the latest attempt of a call was sent.
+    pub fn last_sent(&self) -> Option<tokio::time::Instant> {
+        self.last_sent
+    }
+
     /// Send one request; retry per the policy when it is idempotent.
     pub async fn call(&mut self, req: Request<'static>) -> Result<Response, DriverError> {
         self.stats.calls += 1;
@@ -298,6 +307,7 @@ impl ModbusClient {
                 self.stats.retries += 1;
                 tokio::time::sleep(self.policy.retry_delay).await;
             }
+            self.last_sent = Some(tokio::time::Instant::now());
             match self.attempt(req.clone()).await {
                 Ok(r) => return Ok(r),
                 Err(e) if e.is_link_failure() => {
