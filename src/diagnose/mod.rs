@@ -17,6 +17,7 @@ pub mod cli;
 pub mod decision;
 mod plot;
 mod text;
+mod threads;
 
 pub use crate::contract::{
     Candidate, Diagnosis, Gap, GapRegion, LookAlike, NominalFit, ParamCorrection, RegionAxis,
@@ -26,6 +27,7 @@ pub use crate::machine::dc::diagnose::diagnose_dc;
 pub use crate::machine::im::diagnose::diagnose_im;
 pub use plot::{write_residual_svg, ResidualPanel, ResidualPlot, ResidualPlotError};
 pub use text::render_diagnosis_text;
+pub use threads::{worker_threads, THREADS_VAR};
 
 use crate::model::Connection;
 use crate::record::{Record, SegmentKind};

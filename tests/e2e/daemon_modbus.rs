@@ -632,8 +632,14 @@ async fn one_daemon_runs_a_dc_test_and_an_im_sweep_and_aborts_the_sweep_with_bot
         assert_eq!(m.count("bus_errors_total", &timeouts), 1, "{bus}");
     }
     // Wait for a point with the supply on (not a cool-down), then abort.
+    // The live feed's last sample and the supply's registers are read
+    // together: a feed a poll behind may still show the voltage of a
+    // point whose cool-down has begun.
     let s = wait_test(&c, &sweep, |s| {
+        let b = lock_bank(&im.supply.bank);
         s["values"]["voltage"].as_f64().unwrap_or(0.0) > 300.0
+            && b.get(&control) == 1.0
+            && b.get(&frequency) == 50.0
     })
     .await;
     assert_eq!(s["state"], "running", "{s}");

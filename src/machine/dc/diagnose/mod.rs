@@ -575,11 +575,10 @@ fn nominal_estimates(f: &Fitted) -> BTreeMap<String, ParamEstimate> {
         .collect()
 }
 
-/// Work on every core: `f` over `items`, results in order.
+/// Work on every core (or on `MOTORBENCH_THREADS` of them): `f` over
+/// `items`, results in order.
 fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
-    let workers = std::thread::available_parallelism()
-        .map_or(1, |n| n.get())
-        .min(items.len().max(1));
+    let workers = crate::diagnose::worker_threads().min(items.len().max(1));
     let next = AtomicUsize::new(0);
     let results: Mutex<Vec<Option<R>>> = Mutex::new((0..items.len()).map(|_| None).collect());
     std::thread::scope(|scope| {
