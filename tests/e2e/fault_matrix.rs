@@ -613,6 +613,20 @@ fn im_tcp_run_short_meter_timeout_is_retried() {
 }
 
 #[test]
+fn im_tcp_run_supply_ignoring_the_safe_command_is_disabled_over_modbus() {
+    let _one = realtime();
+    let r = run(
+        IM_TCP,
+        "[[fault]]\nkind = \"ignore_safe_state\"\nat_s = 0\ntarget = \"supply\"\n\
+         [[fault]]\nkind = \"inf\"\nat_s = 1.0\ntarget = \"line_voltage\"\n",
+    );
+    r.assert_aborted_safe("limit tripped: voltage inf");
+    // The VFD's control word read back still says run after the ignored
+    // safe command: the supervisor disables the output over Modbus.
+    assert_escalated_to_disable(&r.record);
+}
+
+#[test]
 fn im_tcp_run_encoder_disconnect_aborts_safe() {
     let _one = realtime();
     let r = run(

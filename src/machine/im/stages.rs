@@ -22,7 +22,9 @@
 //!   the supply's own (output off, set point zero).
 //!
 //! Each wraps a [`ModbusPowerStage`] over the profile's `[power_stage]`
-//! section, so heartbeat, retries and refusals behave as for the DC rig.
+//! section, so heartbeat, retries, refusals and the read-back of the
+//! enable register (what the supervisor checks after a safe command)
+//! behave as for the DC rig.
 
 use async_trait::async_trait;
 use motorbench_drivers::modbus::{BusHandle, ModbusPowerStage, Priority, Register};
@@ -97,6 +99,11 @@ impl PowerStage for VfdSupply {
         self.drive.safe_state().await
     }
 
+    /// The drive's run command read back from its control word.
+    async fn read_output_enabled(&mut self) -> Result<Option<bool>, DriverError> {
+        self.drive.read_output_enabled().await
+    }
+
     async fn set_frequency(&mut self, hz: f64) -> Result<(), DriverError> {
         check_frequency(self.id(), hz, self.rated_hz, 1.0)?;
         self.drive.set_setpoint(hz).await?;
@@ -155,6 +162,11 @@ impl PowerStage for DcCurrentSource {
 
     async fn safe_state(&mut self) -> Result<(), DriverError> {
         self.drive.safe_state().await
+    }
+
+    /// The supply's output switch read back.
+    async fn read_output_enabled(&mut self) -> Result<Option<bool>, DriverError> {
+        self.drive.read_output_enabled().await
     }
 
     async fn set_current_limit(&mut self, amperes: f64) -> Result<(), DriverError> {
@@ -225,5 +237,11 @@ impl PowerStage for VfdDyno {
 
     async fn safe_state(&mut self) -> Result<(), DriverError> {
         self.drive.safe_state().await
+    }
+
+    /// The drive's run command read back from its control word (a coast
+    /// stop reads as not running).
+    async fn read_output_enabled(&mut self) -> Result<Option<bool>, DriverError> {
+        self.drive.read_output_enabled().await
     }
 }

@@ -149,6 +149,8 @@ struct FitProblem<'a> {
     spec: &'a FitSpec,
     runs: &'a [SegmentRun<'a>],
     w: Weights,
+    /// Rows left out of the fit (their residuals count as zero).
+    mask: Option<&'a [bool]>,
     rows: usize,
     x: DVector<f64>,
     last: RefCell<Option<Linearisation>>,
@@ -163,6 +165,13 @@ impl FitProblem<'_> {
         let m = self.spec.model_at(x);
         if !runs_residuals(&m, self.runs, &self.w, r) {
             return false;
+        }
+        if let Some(mask) = self.mask {
+            for (v, out) in r.iter_mut().zip(mask) {
+                if *out {
+                    *v = 0.0;
+                }
+            }
         }
         r.len() == self.rows && r.iter().all(|v| v.is_finite())
     }
@@ -313,12 +322,24 @@ pub struct Fitted {
 /// Fit `spec` to `runs` weighted by `w`, at most `patience` (×P)
 /// evaluations. `None` when the start itself is refused.
 pub fn fit(spec: &FitSpec, runs: &[SegmentRun], w: &Weights, patience: usize) -> Option<Fitted> {
+    fit_masked(spec, runs, w, patience, None)
+}
+
+/// [`fit`] without the rows `mask` marks (a cross-validation fold's).
+pub fn fit_masked(
+    spec: &FitSpec,
+    runs: &[SegmentRun],
+    w: &Weights,
+    patience: usize,
+    mask: Option<&[bool]>,
+) -> Option<Fitted> {
     let rows: usize = runs.iter().map(segment_rows).sum();
     let np = spec.len();
     let problem = FitProblem {
         spec,
         runs,
         w: *w,
+        mask,
         rows,
         x: DVector::zeros(np),
         last: RefCell::new(None),
@@ -422,6 +443,7 @@ pub fn one_step_refit(
             spec: &refit,
             runs: std::slice::from_ref(&runs[next]),
             w: *w,
+            mask: None,
             rows,
             x: DVector::zeros(np),
             last: RefCell::new(None),

@@ -18,6 +18,7 @@
 //!    best significant, physically signed candidate, else `none`.
 
 mod candidates;
+mod cv;
 mod fit;
 mod gap;
 mod model;
@@ -174,7 +175,9 @@ pub fn diagnose_dc(
         NominalFold(usize),
         CandidateAll(&'d CandidateDef),
     }
-    let mut jobs: Vec<Job> = (0..runs.len()).map(Job::NominalFold).collect();
+    let cv = std::env::var("MOTORBENCH_EXPERIMENT_HELDOUT").as_deref() == Ok("cv");
+    let nominal_jobs = if cv { 0 } else { runs.len() };
+    let mut jobs: Vec<Job> = (0..nominal_jobs).map(Job::NominalFold).collect();
     jobs.extend(defs.iter().map(Job::CandidateAll));
     enum Out {
         Fold(Option<HeldOutSeries>),
@@ -205,12 +208,19 @@ pub fn diagnose_dc(
                     runs[n].seg.index
                 )))
             }
-            Out::All(Some(f)) => cand_all.push((n - runs.len(), f)),
+            Out::All(Some(f)) => cand_all.push((n - nominal_jobs, f)),
             Out::All(None) => warnings.push(format!(
                 "candidate {:?} could not be fitted",
-                defs[n - runs.len()].effect
+                defs[n - nominal_jobs].effect
             )),
         }
+    }
+    if cv {
+        nominal_folds =
+            cv::cross_validated(&nominal_spec, &nominal_all, &runs, &weights, PATIENCE_FOLD)
+                .ok_or_else(|| {
+                    DiagnoseError::NominalFit("a cross-validation refit failed".into())
+                })?;
     }
     // An effect fitted more than once (sensor lag on either channel, shaft
     // compliance from each resonance start): keep the fit that explains
@@ -241,9 +251,21 @@ pub fn diagnose_dc(
             )
         })
         .collect();
-    let fold_outs = par_map(&jobs2, |&(c, h)| {
-        fold(&specs[c], &cand_all[c].1, &runs, h, &weights)
-    });
+    let fold_outs = if cv {
+        Vec::new()
+    } else {
+        par_map(&jobs2, |&(c, h)| {
+            fold(&specs[c], &cand_all[c].1, &runs, h, &weights)
+        })
+    };
+    let cv_outs = if cv {
+        let cs: Vec<usize> = (0..cand_all.len()).collect();
+        par_map(&cs, |&c| {
+            cv::cross_validated(&specs[c], &cand_all[c].1, &runs, &weights, PATIENCE_FOLD)
+        })
+    } else {
+        Vec::new()
+    };
 
     let w = [weights.current, weights.speed];
     // A held-out segment the nominal predicts far worse than the others (a
@@ -266,17 +288,42 @@ pub fn diagnose_dc(
         .iter()
         .map(|m| m.max(median_ms).max(f64::MIN_POSITIVE))
         .collect();
+    let nrmse_blocks = std::env::var("MOTORBENCH_EXPERIMENT_HELDOUT").as_deref() == Ok("nrmse");
+    let spread_w = |y: &[f64]| {
+        let m = y.iter().sum::<f64>() / y.len().max(1) as f64;
+        let ss: f64 = y.iter().map(|v| (v - m).powi(2)).sum();
+        if ss > 0.0 {
+            ss.sqrt().recip()
+        } else {
+            0.0
+        }
+    };
+    let seg_w: Vec<(f64, f64)> = runs
+        .iter()
+        .map(|r| {
+            let wi = if r.coast {
+                0.0
+            } else {
+                spread_w(&r.seg.current)
+            };
+            (wi, spread_w(&r.seg.speed))
+        })
+        .collect();
     let family = |all: Fitted, transforms: Vec<Transform>, folds: Vec<HeldOutSeries>| {
         let mut blocks = Vec::new();
         let mut sse = 0.0;
-        for (s, scale) in folds.iter().zip(&fold_scale) {
+        for ((s, scale), sw) in folds.iter().zip(&fold_scale).zip(&seg_w) {
             let sq: Vec<f64> = s
                 .weighted_squares(w[0], w[1])
                 .iter()
                 .map(|v| v / scale)
                 .collect();
             sse += sq.iter().sum::<f64>();
-            blocks.extend(block_sums(&sq, BLOCK));
+            if nrmse_blocks {
+                blocks.extend(block_sums(&s.weighted_squares(sw.0, sw.1), BLOCK));
+            } else {
+                blocks.extend(block_sums(&sq, BLOCK));
+            }
         }
         let validation = folds.iter().map(|s| s.nrmse).sum::<f64>() / folds.len().max(1) as f64;
         FamilyResult {
@@ -291,10 +338,14 @@ pub fn diagnose_dc(
     let nominal = family(nominal_all.clone(), Vec::new(), nominal_folds);
     let mut families: Vec<(Effect, FamilyResult)> = Vec::new();
     for (c, (d, f)) in cand_all.iter().enumerate() {
-        let folds: Option<Vec<HeldOutSeries>> = fold_outs[c * runs.len()..(c + 1) * runs.len()]
-            .iter()
-            .cloned()
-            .collect();
+        let folds: Option<Vec<HeldOutSeries>> = if cv {
+            cv_outs[c].clone()
+        } else {
+            fold_outs[c * runs.len()..(c + 1) * runs.len()]
+                .iter()
+                .cloned()
+                .collect()
+        };
         match folds {
             Some(folds) => families.push((
                 defs[*d].effect,
@@ -534,7 +585,15 @@ pub fn diagnose_dc(
         },
         candidates: candidates_report,
         verdict,
-        validation: format!("leave-one-segment-out ({} folds)", runs.len()),
+        validation: if cv {
+            format!(
+                "interleaved blocks ({} folds of {}-sample blocks)",
+                cv::CV_FOLDS,
+                cv::CV_BLOCK
+            )
+        } else {
+            format!("leave-one-segment-out ({} folds)", runs.len())
+        },
         warnings,
     };
     Ok(DiagnosisRun { report, plot })

@@ -817,6 +817,25 @@ impl Analysis {
     }
 }
 
+/// The factor `max(θ, floor)/θ` that turns each log-scale Jacobian column
+/// into one with respect to `θ/s`. An element the fit drove all the way
+/// to zero (its log below the smallest float) has a log-scale column of
+/// zeros, from which no scaled column follows: its factor is 0, and the
+/// element counts as at its bound, not as a Jacobian that is not finite.
+fn column_scales(theta: &[f64], floor: f64) -> Vec<f64> {
+    theta
+        .iter()
+        .map(|&t| {
+            let r = t.max(floor) / t;
+            if r.is_finite() && t > 0.0 {
+                r
+            } else {
+                0.0
+            }
+        })
+        .collect()
+}
+
 fn analyse(problem: &AtParams<SweepProblem<'_>>) -> Result<Analysis, ImFitError> {
     let jac_log = problem.jacobian().ok_or_else(|| {
         ImFitError::Unidentifiable("the Jacobian is not finite at the solution".into())
@@ -836,7 +855,7 @@ fn analyse(problem: &AtParams<SweepProblem<'_>>) -> Result<Analysis, ImFitError>
         .iter()
         .map(|&p| c.get(p).unwrap_or(1.0))
         .collect();
-    let ratio: Vec<f64> = theta.iter().map(|&t| t.max(floor) / t).collect();
+    let ratio = column_scales(&theta, floor);
     let mut jac = jac_log;
     for (j, rj) in ratio.iter().enumerate() {
         jac.column_mut(j).scale_mut(*rj);
@@ -876,13 +895,18 @@ fn analyse(problem: &AtParams<SweepProblem<'_>>) -> Result<Analysis, ImFitError>
             cov[(j, j)] = f64::INFINITY;
         }
     }
-    let cov = DMatrix::from_fn(q, q, |i, j| cov[(i, j)] * ratio[i] * ratio[j]);
+    let cov = DMatrix::from_fn(q, q, |i, j| match (ratio[i], ratio[j]) {
+        // An element driven to zero itself: its column says nothing.
+        (0.0, _) | (_, 0.0) if i == j => f64::INFINITY,
+        (0.0, _) | (_, 0.0) => 0.0,
+        (ri, rj) => cov[(i, j)] * ri * rj,
+    });
     let at_bound = problem
         .param
         .free
         .iter()
         .zip(&theta)
-        .filter(|(_, &t)| t < floor)
+        .filter(|(_, &t)| t.is_nan() || t < floor)
         .map(|(p, _)| *p)
         .collect();
     Ok(Analysis {
@@ -898,6 +922,18 @@ fn analyse(problem: &AtParams<SweepProblem<'_>>) -> Result<Analysis, ImFitError>
 mod tests {
     use super::*;
     use crate::identify::{slip_grid, SlipSweep, SweepNoise};
+
+    #[test]
+    fn an_element_driven_to_zero_scales_its_column_to_nothing_not_to_nan() {
+        // An ordinary element keeps its column; one below the floor is
+        // scaled up to it; one at zero (exp of a log below -745) gets 0.
+        let scales = column_scales(&[2.0, 1e-6, 0.0, f64::NAN], 1e-3);
+        assert_eq!(scales[0], 1.0);
+        assert!((scales[1] - 1e3).abs() < 1e-6);
+        assert_eq!(scales[2], 0.0);
+        assert_eq!(scales[3], 0.0);
+        assert!(scales.iter().all(|s| s.is_finite()));
+    }
     use crate::model::im_fixtures::{single_cage, STAR_400V_50HZ};
     use crate::model::with_leakage_split;
     use proptest::prelude::*;

@@ -1,0 +1,174 @@
+//! Interleaved time-block cross-validation of a DC fit.
+//!
+//! The record's samples are cut into blocks of [`CV_BLOCK`] samples,
+//! numbered across the whole record, and block `b` belongs to fold
+//! `b mod CV_FOLDS`. Each fold refits the model without its blocks' rows
+//! and simulates the whole record with the refit; each sample's held-out
+//! residual is the one of the fold that left it out. Every fold sees every
+//! segment's operating range, so an effect that shows only at the largest
+//! current is not judged by an extrapolation from smaller ones (which
+//! leave-one-segment-out does), and every sample is predicted once.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::fit::{fit_masked, refit_spec, runs_residuals, segment_rows, FitSpec, Fitted, Weights};
+use super::gap::HeldOutSeries;
+use super::model::{AugModel, SegmentRun};
+
+/// Folds of the interleaved cross-validation.
+pub const CV_FOLDS: usize = 5;
+
+/// Samples per block of the interleaving: longer than the residuals'
+/// correlation at the rates DC records are taken (the decision's blocks
+/// are 32 samples), so that a held-out block is not predicted by the
+/// noise of the blocks beside it.
+pub const CV_BLOCK: usize = 128;
+
+/// Largest change of a transformed parameter a one-step fold refit takes
+/// (as the leave-one-segment-out refit's).
+const ONE_STEP_LIMIT: f64 = 0.05;
+
+/// The fold of the sample numbered `g` across the record.
+fn fold_of(g: usize) -> usize {
+    (g / CV_BLOCK) % CV_FOLDS
+}
+
+/// Per row of the record's residual vector ([`runs_residuals`] order):
+/// the fold that holds it out.
+fn row_folds(runs: &[SegmentRun]) -> Vec<usize> {
+    let mut out = Vec::with_capacity(runs.iter().map(segment_rows).sum());
+    let mut g = 0usize;
+    for run in runs {
+        for _ in 0..run.len() {
+            let f = fold_of(g);
+            out.push(f);
+            if !run.coast {
+                out.push(f);
+            }
+            g += 1;
+        }
+    }
+    out
+}
+
+/// The model refit without fold `f`'s rows: one Gauss–Newton step from
+/// `all`'s optimum when it is short and the linearisation predicts its
+/// decrease, else an iterated fit from `all` with those rows masked.
+fn refit_fold(
+    spec: &FitSpec,
+    all: &Fitted,
+    runs: &[SegmentRun],
+    rows: &[usize],
+    f: usize,
+    w: &Weights,
+    patience: usize,
+) -> Option<AugModel> {
+    let refit = refit_spec(spec, all);
+    let at = &all.at;
+    let np = refit.len();
+    if at.jac.ncols() == np && at.r.len() == rows.len() {
+        let mut normal = at.normal.clone();
+        let mut gradient = at.gradient.clone();
+        let mut sse0 = at.r.norm_squared();
+        for (row, _) in rows.iter().enumerate().filter(|(_, k)| **k == f) {
+            let j = at.jac.row(row);
+            let r = at.r[row];
+            normal -= j.transpose() * j;
+            gradient -= j.transpose() * r;
+            sse0 -= r * r;
+        }
+        if let Some(step) = step_within_limit(&normal, &gradient) {
+            let model = refit.model_at(&step);
+            let mut r = Vec::new();
+            if runs_residuals(&model, runs, w, &mut r) && r.len() == rows.len() {
+                let sse1: f64 = r
+                    .iter()
+                    .zip(rows)
+                    .filter(|(_, k)| **k != f)
+                    .map(|(v, _)| v * v)
+                    .sum();
+                let predicted = -(2.0 * gradient.dot(&step) + step.dot(&(&normal * &step)));
+                let actual = sse0 - sse1;
+                let linear = if predicted <= 1e-9 * sse0 {
+                    actual >= -1e-9 * sse0
+                } else {
+                    (0.8..=1.25).contains(&(actual / predicted))
+                };
+                if sse1.is_finite() && linear {
+                    return Some(model);
+                }
+            }
+        }
+    }
+    let mask: Vec<bool> = rows.iter().map(|k| *k == f).collect();
+    fit_masked(&refit, runs, w, patience, Some(&mask)).map(|m| m.model)
+}
+
+/// The Gauss–Newton step, if every component is within the limit.
+fn step_within_limit(normal: &DMatrix<f64>, gradient: &DVector<f64>) -> Option<DVector<f64>> {
+    let step = normal.clone().cholesky()?.solve(&(-gradient));
+    step.iter()
+        .all(|v| v.is_finite() && v.abs() <= ONE_STEP_LIMIT)
+        .then_some(step)
+}
+
+/// The cross-validated residual series of every run: each sample
+/// predicted by the fold that left it out. `None` when a fold's refit or
+/// simulation fails.
+pub fn cross_validated(
+    spec: &FitSpec,
+    all: &Fitted,
+    runs: &[SegmentRun],
+    w: &Weights,
+    patience: usize,
+) -> Option<Vec<HeldOutSeries>> {
+    let rows = row_folds(runs);
+    let mut sims: Vec<(Vec<f64>, Vec<f64>)> = runs
+        .iter()
+        .map(|r| (vec![0.0; r.len()], vec![0.0; r.len()]))
+        .collect();
+    let offsets: Vec<usize> = runs
+        .iter()
+        .scan(0usize, |g, r| {
+            let o = *g;
+            *g += r.len();
+            Some(o)
+        })
+        .collect();
+    for f in 0..CV_FOLDS {
+        let model = refit_fold(spec, all, runs, &rows, f, w, patience)?;
+        let mut counts = vec![0usize; runs.len()];
+        let ok = model.simulate_runs(runs, &mut |n, i, s| {
+            let k = counts[n];
+            if k < runs[n].len() && fold_of(offsets[n] + k) == f {
+                sims[n].0[k] = i;
+                sims[n].1[k] = s;
+            }
+            counts[n] += 1;
+        });
+        if !ok {
+            return None;
+        }
+    }
+    runs.iter()
+        .zip(&sims)
+        .map(|(r, (si, sw))| super::series_of(r, si, sw))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_fold_holds_out_a_fifth_of_the_blocks_in_turn() {
+        let folds: Vec<usize> = (0..CV_BLOCK * CV_FOLDS * 2).map(fold_of).collect();
+        for f in 0..CV_FOLDS {
+            let n = folds.iter().filter(|k| **k == f).count();
+            assert_eq!(n, 2 * CV_BLOCK, "fold {f}");
+        }
+        assert_eq!(fold_of(CV_BLOCK - 1), 0);
+        assert_eq!(fold_of(CV_BLOCK), 1);
+        assert_eq!(fold_of(CV_BLOCK * CV_FOLDS), 0);
+    }
+}
