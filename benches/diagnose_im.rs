@@ -35,6 +35,7 @@ fn bench(c: &mut Criterion) {
     let lab = load_record_files(SegmentKind::ImSlipSweep, &files, None, None).expect("lab record");
     let star = DiagnoseOptions {
         connection: Some(Connection::Star),
+        ..Default::default()
     };
     let points = lab.operating_points.len();
     group.bench_function(format!("lab record ({points} points)"), |b| {

@@ -55,6 +55,11 @@ export CLIPPY_ARGS="-D__CLIPPY_HACKERY__warnings__CLIPPY_HACKERY__"
 # with two tests, and the tests that poll a served rig on the wall clock
 # must not be starved by a diagnosis spread over both.
 export MOTORBENCH_THREADS=1
+# A CI run builds once from nothing: incremental compilation's caches
+# would only cost time there.
+if [ "${CI:-}" = "true" ]; then
+    export CARGO_INCREMENTAL=0
+fi
 echo "== cargo build --all-targets, linted by clippy (warnings are errors)"
 cargo build --workspace --all-targets --locked
 if cargo nextest --version >/dev/null 2>&1; then

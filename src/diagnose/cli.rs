@@ -35,6 +35,7 @@ pub fn run_diagnose(args: DiagnoseArgs) -> u8 {
     };
     let options = DiagnoseOptions {
         connection: args.input.connection(),
+        ..Default::default()
     };
     let run = match diagnose(&record, args.input.kind(), &options) {
         Ok(run) => run,

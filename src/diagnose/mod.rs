@@ -74,6 +74,10 @@ pub fn diagnose(
 pub struct DiagnoseOptions {
     /// Induction machine: winding connection (overrides the record's nameplate).
     pub connection: Option<Connection>,
+    /// DC: hold out interleaved time blocks (`Some(true)`) or whole
+    /// segments (`Some(false)`); `None` leaves it to
+    /// `MOTORBENCH_DC_VALIDATION` (segments unless it says `interleaved`).
+    pub dc_interleaved: Option<bool>,
 }
 
 /// A diagnosis and the residual series behind its plot.

@@ -161,6 +161,7 @@ fn diagnosis_gives_physical_answers_only() {
         &lab_record(),
         &DiagnoseOptions {
             connection: Some(Connection::Star),
+            ..Default::default()
         },
     )
     .expect("the record is diagnosed");

@@ -440,6 +440,41 @@ mod tests {
     }
 
     #[tokio::test(start_paused = true)]
+    async fn a_retried_read_is_stamped_from_its_last_attempt() {
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        // A Modbus TCP server on a duplex: "busy" to the first request,
+        // register 0 = 1234 to the second.
+        let (ours, mut theirs) = tokio::io::duplex(256);
+        tokio::spawn(async move {
+            for n in 0..2 {
+                let mut head = [0u8; 7];
+                theirs.read_exact(&mut head).await.unwrap();
+                let len = usize::from(u16::from_be_bytes([head[4], head[5]])) - 1;
+                let mut pdu = vec![0u8; len];
+                theirs.read_exact(&mut pdu).await.unwrap();
+                let reply: Vec<u8> = if n == 0 {
+                    vec![0x83, 0x06]
+                } else {
+                    vec![0x03, 2, 0x04, 0xD2]
+                };
+                let mut frame = head[..4].to_vec();
+                frame.extend_from_slice(&(reply.len() as u16 + 1).to_be_bytes());
+                frame.push(head[6]);
+                frame.extend_from_slice(&reply);
+                theirs.write_all(&frame).await.unwrap();
+            }
+        });
+        let policy = CallPolicy::default();
+        let mut c = ModbusClient::attach_tcp("daq", ours, 1, policy);
+        let t0 = tokio::time::Instant::now();
+        assert_eq!(c.read_holding(0, 1).await.unwrap(), vec![1234]);
+        assert_eq!(c.stats().retries, 1);
+        // The values are from the second attempt, sent a retry delay
+        // after the first: a sample stamped at the first would be early.
+        assert_eq!(c.last_sent(), Some(t0 + policy.retry_delay));
+    }
+
+    #[tokio::test(start_paused = true)]
     async fn a_refused_tcp_connection_is_a_link_error() {
         // Bind and drop a listener: its port is closed now.
         let addr = std::net::TcpListener::bind("127.0.0.1:0")

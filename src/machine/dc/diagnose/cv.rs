@@ -8,6 +8,11 @@
 //! segment's operating range, so an effect that shows only at the largest
 //! current is not judged by an extrapolation from smaller ones (which
 //! leave-one-segment-out does), and every sample is predicted once.
+//!
+//! Opt-in (`MOTORBENCH_DC_VALIDATION=interleaved`): on the blind suites it
+//! names more withheld effects and runs four times faster than leaving
+//! one segment out, but it also named an effect in two third-party `none`
+//! records (docs/diagnosis-dc.md, Status), so it is not the default.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -27,6 +32,27 @@ pub const CV_BLOCK: usize = 128;
 /// Largest change of a transformed parameter a one-step fold refit takes
 /// (as the leave-one-segment-out refit's).
 const ONE_STEP_LIMIT: f64 = 0.05;
+
+/// The environment variable that picks the DC diagnosis's held-out
+/// scheme: `segments` (leave one segment out, the default) or
+/// `interleaved` (this module).
+pub const VALIDATION_VAR: &str = "MOTORBENCH_DC_VALIDATION";
+
+/// Whether [`VALIDATION_VAR`] asks for interleaved blocks; a value that
+/// names no scheme is warned of and the default kept.
+pub fn interleaved_requested(warnings: &mut Vec<String>) -> bool {
+    match std::env::var(VALIDATION_VAR).as_deref() {
+        Ok("interleaved") => true,
+        Ok("segments") | Err(_) => false,
+        Ok(other) => {
+            warnings.push(format!(
+                "{VALIDATION_VAR}={other:?} names no held-out scheme (segments or \
+                 interleaved); leaving one segment out"
+            ));
+            false
+        }
+    }
+}
 
 /// The fold of the sample numbered `g` across the record.
 fn fold_of(g: usize) -> usize {

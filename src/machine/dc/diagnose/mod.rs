@@ -104,7 +104,7 @@ struct FamilyResult {
 /// Diagnose a `dc_step` record.
 pub fn diagnose_dc(
     record: &Record,
-    _options: &DiagnoseOptions,
+    options: &DiagnoseOptions,
 ) -> Result<DiagnosisRun, DiagnoseError> {
     let mut warnings = record.notes.clone();
     warnings.extend(crate::identify::clipped_channels(record));
@@ -175,7 +175,11 @@ pub fn diagnose_dc(
         NominalFold(usize),
         CandidateAll(&'d CandidateDef),
     }
-    let cv = std::env::var("MOTORBENCH_EXPERIMENT_HELDOUT").as_deref() == Ok("cv");
+    // Held out: whole segments (the default), or interleaved time blocks
+    // where `MOTORBENCH_DC_VALIDATION=interleaved` asks for them (cv.rs).
+    let cv = options
+        .dc_interleaved
+        .unwrap_or_else(|| cv::interleaved_requested(&mut warnings));
     let nominal_jobs = if cv { 0 } else { runs.len() };
     let mut jobs: Vec<Job> = (0..nominal_jobs).map(Job::NominalFold).collect();
     jobs.extend(defs.iter().map(Job::CandidateAll));
@@ -288,42 +292,17 @@ pub fn diagnose_dc(
         .iter()
         .map(|m| m.max(median_ms).max(f64::MIN_POSITIVE))
         .collect();
-    let nrmse_blocks = std::env::var("MOTORBENCH_EXPERIMENT_HELDOUT").as_deref() == Ok("nrmse");
-    let spread_w = |y: &[f64]| {
-        let m = y.iter().sum::<f64>() / y.len().max(1) as f64;
-        let ss: f64 = y.iter().map(|v| (v - m).powi(2)).sum();
-        if ss > 0.0 {
-            ss.sqrt().recip()
-        } else {
-            0.0
-        }
-    };
-    let seg_w: Vec<(f64, f64)> = runs
-        .iter()
-        .map(|r| {
-            let wi = if r.coast {
-                0.0
-            } else {
-                spread_w(&r.seg.current)
-            };
-            (wi, spread_w(&r.seg.speed))
-        })
-        .collect();
     let family = |all: Fitted, transforms: Vec<Transform>, folds: Vec<HeldOutSeries>| {
         let mut blocks = Vec::new();
         let mut sse = 0.0;
-        for ((s, scale), sw) in folds.iter().zip(&fold_scale).zip(&seg_w) {
+        for (s, scale) in folds.iter().zip(&fold_scale) {
             let sq: Vec<f64> = s
                 .weighted_squares(w[0], w[1])
                 .iter()
                 .map(|v| v / scale)
                 .collect();
             sse += sq.iter().sum::<f64>();
-            if nrmse_blocks {
-                blocks.extend(block_sums(&s.weighted_squares(sw.0, sw.1), BLOCK));
-            } else {
-                blocks.extend(block_sums(&sq, BLOCK));
-            }
+            blocks.extend(block_sums(&sq, BLOCK));
         }
         let validation = folds.iter().map(|s| s.nrmse).sum::<f64>() / folds.len().max(1) as f64;
         FamilyResult {
@@ -1253,5 +1232,30 @@ mod tests {
         record.segments.truncate(1);
         let err = diagnose_dc(&record, &DiagnoseOptions::default()).unwrap_err();
         assert!(matches!(err, DiagnoseError::NotEnoughData(_)), "{err}");
+    }
+
+    /// Interleaved blocks held out: a withheld armature reaction is named
+    /// and closed to the noise, the report says how it was held out.
+    #[test]
+    fn interleaved_blocks_name_a_withheld_effect() {
+        let mut rng = StdRng::seed_from_u64(3);
+        let case = simulate_dc_case(Some(Effect::ArmatureReaction), &mut rng);
+        let options = DiagnoseOptions {
+            dc_interleaved: Some(true),
+            ..Default::default()
+        };
+        let d = diagnose_dc(&case.record, &options).unwrap().report;
+        assert!(
+            d.validation.starts_with("interleaved blocks"),
+            "{}",
+            d.validation
+        );
+        assert_eq!(d.verdict.effect, "armature_reaction", "{:?}", d.candidates);
+        assert!(
+            d.verdict.gap_after < 2.0 * d.gap.noise_floor,
+            "{:?}",
+            d.verdict
+        );
+        assert!(d.verdict.gap_after < d.verdict.gap_before);
     }
 }

@@ -546,6 +546,7 @@ mod tests {
     fn star() -> DiagnoseOptions {
         DiagnoseOptions {
             connection: Some(Connection::Star),
+            ..Default::default()
         }
     }
 
