@@ -14,9 +14,10 @@
 //! one segment out, but it also named an effect in two third-party `none`
 //! records (docs/diagnosis-dc.md, Status), so it is not the default.
 
-use nalgebra::{DMatrix, DVector};
-
-use super::fit::{fit_masked, refit_spec, runs_residuals, segment_rows, FitSpec, Fitted, Weights};
+use super::fit::{
+    fit_masked, gauss_newton_step, refit_spec, runs_residuals, segment_rows, step_landed, FitSpec,
+    Fitted, Weights,
+};
 use super::gap::HeldOutSeries;
 use super::model::{AugModel, SegmentRun};
 
@@ -28,10 +29,6 @@ pub const CV_FOLDS: usize = 5;
 /// are 32 samples), so that a held-out block is not predicted by the
 /// noise of the blocks beside it.
 pub const CV_BLOCK: usize = 128;
-
-/// Largest change of a transformed parameter a one-step fold refit takes
-/// (as the leave-one-segment-out refit's).
-const ONE_STEP_LIMIT: f64 = 0.05;
 
 /// The environment variable that picks the DC diagnosis's held-out
 /// scheme: `segments` (leave one segment out, the default) or
@@ -79,7 +76,9 @@ fn row_folds(runs: &[SegmentRun]) -> Vec<usize> {
 
 /// The model refit without fold `f`'s rows: one Gauss–Newton step from
 /// `all`'s optimum when it is short and the linearisation predicts its
-/// decrease, else an iterated fit from `all` with those rows masked.
+/// decrease (the tests of the leave-one-segment-out refit,
+/// [`super::fit::one_step_refit`]), else an iterated fit from `all` with
+/// those rows masked.
 fn refit_fold(
     spec: &FitSpec,
     all: &Fitted,
@@ -103,7 +102,7 @@ fn refit_fold(
             gradient -= j.transpose() * r;
             sse0 -= r * r;
         }
-        if let Some(step) = step_within_limit(&normal, &gradient) {
+        if let Some(step) = gauss_newton_step(&normal, &gradient) {
             let model = refit.model_at(&step);
             let mut r = Vec::new();
             if runs_residuals(&model, runs, w, &mut r) && r.len() == rows.len() {
@@ -113,14 +112,7 @@ fn refit_fold(
                     .filter(|(_, k)| **k != f)
                     .map(|(v, _)| v * v)
                     .sum();
-                let predicted = -(2.0 * gradient.dot(&step) + step.dot(&(&normal * &step)));
-                let actual = sse0 - sse1;
-                let linear = if predicted <= 1e-9 * sse0 {
-                    actual >= -1e-9 * sse0
-                } else {
-                    (0.8..=1.25).contains(&(actual / predicted))
-                };
-                if sse1.is_finite() && linear {
+                if step_landed(&normal, &gradient, &step, sse0, sse1) {
                     return Some(model);
                 }
             }
@@ -128,14 +120,6 @@ fn refit_fold(
     }
     let mask: Vec<bool> = rows.iter().map(|k| *k == f).collect();
     fit_masked(&refit, runs, w, patience, Some(&mask)).map(|m| m.model)
-}
-
-/// The Gauss–Newton step, if every component is within the limit.
-fn step_within_limit(normal: &DMatrix<f64>, gradient: &DVector<f64>) -> Option<DVector<f64>> {
-    let step = normal.clone().cholesky()?.solve(&(-gradient));
-    step.iter()
-        .all(|v| v.is_finite() && v.abs() <= ONE_STEP_LIMIT)
-        .then_some(step)
 }
 
 /// The cross-validated residual series of every run: each sample

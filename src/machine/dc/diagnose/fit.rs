@@ -462,15 +462,28 @@ pub fn one_step_refit(
         return None;
     }
     let sse1: f64 = r.iter().map(|v| v * v).sum();
-    // The decrease the linearisation predicts, ‖r‖² − ‖r + JΔ‖².
-    let predicted = -(2.0 * gradient.dot(&step) + step.dot(&(&normal * &step)));
+    step_landed(&normal, &gradient, &step, sse0, sse1).then_some(model)
+}
+
+/// Whether a Gauss–Newton `step` on the problem `(normal, gradient)`
+/// landed where the linearisation said: the sum of squares fell from
+/// `sse0` to `sse1` by what it predicts, ‖r‖² − ‖r + JΔ‖², within
+/// [`ONE_STEP_AGREEMENT`].
+pub fn step_landed(
+    normal: &DMatrix<f64>,
+    gradient: &DVector<f64>,
+    step: &DVector<f64>,
+    sse0: f64,
+    sse1: f64,
+) -> bool {
+    let predicted = -(2.0 * gradient.dot(step) + step.dot(&(normal * step)));
     let actual = sse0 - sse1;
     let linear = if predicted <= 1e-9 * sse0 {
         actual >= -1e-9 * sse0
     } else {
         (ONE_STEP_AGREEMENT.0..=ONE_STEP_AGREEMENT.1).contains(&(actual / predicted))
     };
-    (sse1.is_finite() && linear).then_some(model)
+    sse1.is_finite() && linear
 }
 
 /// Range of the ratio of the actual to the predicted decrease of the
@@ -484,7 +497,7 @@ const ONE_STEP_AGREEMENT: (f64, f64) = (0.8, 1.25);
 /// held-out segment, and would predict that segment with what it was
 /// fitted to (a misspecified nominal model then looks better held out than
 /// it is).
-fn gauss_newton_step(normal: &DMatrix<f64>, gradient: &DVector<f64>) -> Option<DVector<f64>> {
+pub fn gauss_newton_step(normal: &DMatrix<f64>, gradient: &DVector<f64>) -> Option<DVector<f64>> {
     let step = normal.clone().cholesky()?.solve(&(-gradient));
     step.iter()
         .all(|v| v.is_finite() && v.abs() <= ONE_STEP_LIMIT)
