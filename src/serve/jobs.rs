@@ -16,7 +16,7 @@ use tokio::sync::{watch, Mutex};
 use super::link_tally::LinkTally;
 use super::metrics::{Metrics, TestEnd};
 use super::records_index::{
-    unix_s, IndexEntry, IndexError, KeyResults, RecordOutcome, RecordsIndex,
+    on_index, unix_s, with_locked, IndexEntry, IndexError, KeyResults, RecordOutcome, RecordsIndex,
 };
 use crate::bench::{Outcome, Progress, Readings, StopCause, StopReport, SupervisorHandle};
 use crate::diagnose::write_residual_svg;
@@ -279,7 +279,7 @@ pub async fn prepare(
     let plan = m.plan_summary();
     let now = SystemTime::now();
     let started_at = humantime::format_rfc3339_seconds(now).to_string();
-    let mut idx = index.lock().await;
+    let idx = Arc::clone(&index).lock_owned().await;
     let name = idx.new_name(&motor_id, &started_at);
     let dir = idx.dir().to_path_buf();
     let supervised = session.record_to(
@@ -287,7 +287,7 @@ pub async fn prepare(
         crate::record::TestStart::from_system_time(now).rfc3339(),
         initial_rise_k,
     )?;
-    idx.insert(IndexEntry::running(
+    let entry = IndexEntry::running(
         &name,
         rig,
         &motor_id,
@@ -295,8 +295,8 @@ pub async fn prepare(
         &plan,
         started_at,
         unix_s(now),
-    ))?;
-    drop(idx);
+    );
+    with_locked(idx, move |idx| idx.insert(entry)).await?;
 
     let (status, _) = watch::channel(TestStatus::running(&name, rig, &motor_id, plan));
     let run = Arc::new(TestRun {
@@ -395,7 +395,11 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
     // Every segment is on disk (the recorder flushes at each marker): a
     // daemon killed from here on leaves a record that only lacks its
     // analysis, marked so on the next start.
-    if let Err(e) = index.lock().await.update(&name, |e| e.data_complete = true) {
+    let complete = name.clone();
+    let updated = on_index(&index, move |idx| {
+        idx.update(&complete, |e| e.data_complete = true)
+    });
+    if let Err(e) = updated.await {
         tracing::error!("{name}: updating the index failed: {e}");
     }
     run.status.send_modify(|s| s.state = TestState::Identifying);
@@ -484,24 +488,29 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
         None => (outcome, reason),
     };
     let finished_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
-    {
-        let mut idx = index.lock().await;
-        let updated = idx.update(&name, |e| {
+    let (indexed, reason_kept) = (name.clone(), reason.clone());
+    let rig = run.status.borrow().rig.clone();
+    let (updated, retained) = on_index(&index, move |idx| {
+        let updated = idx.update(&indexed, |e| {
             e.outcome = outcome;
-            e.reason = reason.clone();
+            e.reason = reason_kept;
             e.finished_at = Some(finished_at);
             e.key_results = key_results;
             e.report = report_ok.then_some(report_name);
             e.svg = svg_ok.then_some(svg_name);
             e.residuals_svg = residuals_ok.then_some(residuals_name);
         });
-        if let Err(e) = updated {
-            tracing::error!("{name}: updating the index failed: {e}");
-        }
-        let rig = run.status.borrow().rig.clone();
-        if let Err(e) = idx.apply_retention(&rig, &retention, SystemTime::now()) {
-            tracing::error!("retention: {e}");
-        }
+        (
+            updated,
+            idx.apply_retention(&rig, &retention, SystemTime::now()),
+        )
+    })
+    .await;
+    if let Err(e) = updated {
+        tracing::error!("{name}: updating the index failed: {e}");
+    }
+    if let Err(e) = retained {
+        tracing::error!("retention: {e}");
     }
     match outcome {
         RecordOutcome::Completed => tracing::info!("{name}: test complete"),
@@ -533,18 +542,21 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
 /// Mark a test failed in the index and its status.
 async fn finish_failed(
     run: &TestRun,
-    index: &Mutex<RecordsIndex>,
+    index: &Arc<Mutex<RecordsIndex>>,
     name: &str,
     reason: Option<String>,
     stop: Option<&StopReport>,
 ) {
     let finished_at = humantime::format_rfc3339_seconds(SystemTime::now()).to_string();
-    let updated = index.lock().await.update(name, |e| {
-        e.outcome = RecordOutcome::Failed;
-        e.reason = reason.clone();
-        e.finished_at = Some(finished_at);
+    let (indexed, reason_kept) = (name.to_string(), reason.clone());
+    let updated = on_index(index, move |idx| {
+        idx.update(&indexed, |e| {
+            e.outcome = RecordOutcome::Failed;
+            e.reason = reason_kept;
+            e.finished_at = Some(finished_at);
+        })
     });
-    if let Err(e) = updated {
+    if let Err(e) = updated.await {
         tracing::error!("{name}: updating the index failed: {e}");
     }
     run.status.send_modify(|s| {

@@ -19,6 +19,7 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::{SystemTime, UNIX_EPOCH};
 
 use serde::{Deserialize, Serialize};
@@ -223,6 +224,31 @@ fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> IndexError + '_ {
 pub fn unix_s(t: SystemTime) -> f64 {
     t.duration_since(UNIX_EPOCH)
         .map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// Runs `f` on the daemon's shared index under its lock, on tokio's
+/// blocking pool: a save writes and fsyncs the file and its directory,
+/// and on the reactor's thread that would stall every other task (the
+/// live feed, the API, another rig's test) for as long as the disk takes.
+pub async fn on_index<R: Send + 'static>(
+    index: &Arc<tokio::sync::Mutex<RecordsIndex>>,
+    f: impl FnOnce(&mut RecordsIndex) -> R + Send + 'static,
+) -> R {
+    with_locked(Arc::clone(index).lock_owned().await, f).await
+}
+
+/// [`on_index`] for a lock already held.
+pub async fn with_locked<R: Send + 'static>(
+    mut index: tokio::sync::OwnedMutexGuard<RecordsIndex>,
+    f: impl FnOnce(&mut RecordsIndex) -> R + Send + 'static,
+) -> R {
+    match tokio::task::spawn_blocking(move || f(&mut index)).await {
+        Ok(r) => r,
+        Err(e) => match e.try_into_panic() {
+            Ok(panic) => std::panic::resume_unwind(panic),
+            Err(e) => panic!("the records index's task did not run: {e}"),
+        },
+    }
 }
 
 /// The records directory and its index. See the module docs.
@@ -678,6 +704,29 @@ mod tests {
 
     fn write(dir: &Path, name: &str, bytes: usize) {
         std::fs::write(dir.join(format!("{name}.mcap")), vec![0u8; bytes]).unwrap();
+    }
+
+    /// The work runs off the runtime's thread: on a current-thread
+    /// runtime, a closure that waits for another task of that runtime
+    /// would wait forever if it ran on the runtime's own thread.
+    #[tokio::test(flavor = "current_thread")]
+    async fn index_work_runs_off_the_runtime_thread() {
+        let dir = tempfile::tempdir().unwrap();
+        let (index, _) = RecordsIndex::open(dir.path()).unwrap();
+        let index = Arc::new(tokio::sync::Mutex::new(index));
+        let (tx, rx) = std::sync::mpsc::channel();
+        let other = tokio::spawn(async move { tx.send(()).unwrap() });
+        let saved = on_index(&index, move |idx| {
+            let other_task_ran = rx.recv_timeout(std::time::Duration::from_secs(10)).is_ok();
+            idx.insert(entry("a", "rig", 1.0, RecordOutcome::Completed))
+                .unwrap();
+            other_task_ran
+        })
+        .await;
+        assert!(saved, "the runtime's other task did not run meanwhile");
+        other.await.unwrap();
+        assert!(index.lock().await.get("a").is_some());
+        assert!(dir.path().join(INDEX_FILE).exists());
     }
 
     #[test]
