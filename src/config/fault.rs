@@ -262,6 +262,10 @@ pub(crate) struct FaultRig<'a> {
     pub served: &'a [&'a str],
     /// The served devices are on RTU lines.
     pub rtu: bool,
+    /// The served devices that stream records on a serial line instead of
+    /// answering Modbus requests (a streaming DAQ): they have a line
+    /// whatever the transport, and no exception replies.
+    pub streams: &'a [&'a str],
     /// The stages a stage fault may name.
     pub stages: &'a [&'a str],
     /// The stage that feeds the machine takes a current limit.
@@ -377,13 +381,17 @@ pub(crate) fn validate_faults(
                     ),
                 ));
             }
-            if kind.rtu_only() && !rig.rtu {
+            let t = r.target.as_deref().unwrap_or_default();
+            let streams = rig.streams.contains(&t);
+            if kind.rtu_only() && !rig.rtu && !streams {
                 return Err(bad(
                     "kind",
-                    format!("a {} fault needs the rig served over RTU", kind.name()),
+                    format!(
+                        "a {} fault needs the rig served over RTU, or a streaming serial DAQ as its target",
+                        kind.name()
+                    ),
                 ));
             }
-            let t = r.target.as_deref().unwrap_or_default();
             if !rig.served.contains(&t) {
                 return Err(bad(
                     "target",
@@ -391,6 +399,15 @@ pub(crate) fn validate_faults(
                         "no served device {} (this rig serves: {})",
                         quoted(t),
                         rig.served.join(", ")
+                    ),
+                ));
+            }
+            if kind == FaultKind::ModbusException && streams {
+                return Err(bad(
+                    "kind",
+                    format!(
+                        "{} streams records on a serial line: it answers no Modbus request, so it has no exception to reply with",
+                        quoted(t)
                     ),
                 ));
             }
@@ -448,6 +465,7 @@ mod tests {
     const DC: FaultRig<'static> = FaultRig {
         served: &[],
         rtu: false,
+        streams: &[],
         stages: &["power_stage"],
         current_limit: true,
     };
@@ -507,6 +525,7 @@ mod tests {
         let tcp = FaultRig {
             served: &["power_stage", "sensors"],
             rtu: false,
+            streams: &[],
             stages: &["power_stage"],
             current_limit: true,
         };
@@ -515,6 +534,30 @@ mod tests {
             tcp
         )
         .contains("needs the rig served over RTU"));
+        // A streaming DAQ has a line over TCP too, but no exception reply.
+        let streaming = FaultRig {
+            streams: &["sensors"],
+            ..tcp
+        };
+        let line_faults = "[[fault]]\nkind = \"crc_error\"\nat_s = 1\ntarget = \"sensors\"\n\
+             [[fault]]\nkind = \"garbage\"\nat_s = 1\ntarget = \"sensors\"\n";
+        assert_eq!(
+            validate_faults("t.toml", raw(line_faults), streaming)
+                .unwrap()
+                .protocol_faults()
+                .len(),
+            2
+        );
+        assert!(e(
+            "[[fault]]\nkind = \"garbage\"\nat_s = 1\ntarget = \"power_stage\"\n",
+            streaming
+        )
+        .contains("needs the rig served over RTU"));
+        assert!(e(
+            "[[fault]]\nkind = \"modbus_exception\"\nat_s = 1\ntarget = \"sensors\"\n",
+            streaming
+        )
+        .contains("fault[0].kind: \"sensors\" streams records on a serial line"));
         assert!(e(
             "[[fault]]\nkind = \"disconnect\"\nat_s = 1\ntarget = \"daq\"\n",
             tcp

@@ -566,10 +566,71 @@ fn dc_rtu_run_sensor_disconnect_aborts_safe() {
     r.assert_aborted_safe("device fault: link to");
 }
 
+// ---- DC, a streaming serial DAQ beside a Modbus TCP supply ----
+
+const SERIAL: &str = "sim-modbus-serial-dc.toml";
+
+/// The binary framing (the shipped one) or the ASCII one.
+const ASCII: (&str, &str) = ("framing = \"binary\"", "framing = \"ascii\"");
+const ASCII_CHANNELS: (&str, &str) = (
+    "channels = { armature_voltage = \"0\", armature_current = \"1\", encoder_count = \"2\" }",
+    "channels = { armature_voltage = \"armature_voltage\", armature_current = \"armature_current\", encoder_count = \"encoder_count\" }",
+);
+
+#[test]
+fn dc_serial_run_garbage_on_the_daq_stream_is_skipped_with_a_warning() {
+    let _one = realtime();
+    let r = run(
+        SERIAL,
+        "[[fault]]\nkind = \"garbage\"\nat_s = 1.0\nfor_s = 0.1\ntarget = \"sensors\"\n",
+    );
+    r.assert_degraded("garbage on the line");
+}
+
+#[test]
+fn dc_serial_run_ascii_checksum_errors_on_the_daq_stream_are_refused_with_a_warning() {
+    let _one = realtime();
+    let r = run_with(
+        SERIAL,
+        "",
+        "[[fault]]\nkind = \"crc_error\"\nat_s = 1.0\nfor_s = 0.1\ntarget = \"sensors\"\n",
+        &[ASCII, ASCII_CHANNELS],
+    );
+    r.assert_degraded("frame(s) refused");
+}
+
+#[test]
+fn dc_serial_run_daq_stream_hang_up_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        SERIAL,
+        "[[fault]]\nkind = \"disconnect\"\nat_s = 1.0\ntarget = \"sensors\"\n",
+    );
+    r.assert_aborted_safe("device fault: serial:");
+    assert!(r.stop().contains("sample stream ended"), "{}", r.stop());
+}
+
+#[test]
+fn dc_serial_run_silent_daq_stream_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        SERIAL,
+        "[[fault]]\nkind = \"bus_timeout\"\nat_s = 1.0\nfor_s = 5\ntarget = \"sensors\"\n",
+    );
+    r.assert_aborted_safe("device fault: sensor stream serial:");
+    assert!(r.stop().contains("delivered nothing"), "{}", r.stop());
+}
+
 // ---- induction machine, `motorbench run` ----
 
 const IM: &str = "sim-im.toml";
 const IM_TCP: &str = "sim-modbus-im.toml";
+
+/// The shipped Modbus sweep cut to 6 points, for the rows whose fault
+/// comes and goes in the first seconds: the retry is what they test, and
+/// the sweep's other 10 points would only add half a minute of wall clock
+/// (the served rig runs in real time).
+const IM_TCP_SHORT: (&str, &str) = ("points = 16 ", "points = 6 ");
 
 #[test]
 fn im_sim_run_nan_line_current_aborts_safe() {
@@ -607,7 +668,7 @@ fn im_tcp_run_short_meter_timeout_is_retried() {
         IM_TCP,
         PATIENT,
         "[[fault]]\nkind = \"bus_timeout\"\nat_s = 1.0\nfor_s = 0.15\ntarget = \"meter\"\n",
-        &[],
+        &[IM_TCP_SHORT],
     );
     r.assert_retried();
 }
@@ -653,7 +714,7 @@ fn im_rtu_run_short_crc_errors_on_the_encoder_are_retried() {
         IM_TCP,
         PATIENT,
         "[[fault]]\nkind = \"crc_error\"\nat_s = 1.0\nfor_s = 0.1\ntarget = \"encoder\"\n",
-        &[("simulate = \"tcp\"", "simulate = \"rtu\"")],
+        &[("simulate = \"tcp\"", "simulate = \"rtu\""), IM_TCP_SHORT],
     );
     r.assert_retried();
 }

@@ -531,15 +531,19 @@ impl Config {
 
         let supervision = raw.supervisor.validate(source, &raw.limits, &nameplate)?;
         let retention = raw.records.validate(source)?;
-        let (served, rtu): (&[&str], bool) = match &backend {
+        let (served, rtu, streams): (&[&str], bool, &[&str]) = match &backend {
             Backend::Modbus {
                 rig,
                 simulated: Some(_),
             } => (
                 &["power_stage", "sensors"],
                 rig.simulate == Some(SimulatedTransport::Rtu),
+                match rig.sensors {
+                    SensorLink::Serial { .. } => &["sensors"],
+                    SensorLink::Modbus(_) => &[],
+                },
             ),
-            _ => (&[], false),
+            _ => (&[], false, &[]),
         };
         let faults = validate_faults(
             source,
@@ -547,6 +551,7 @@ impl Config {
             FaultRig {
                 served,
                 rtu,
+                streams,
                 stages: &["power_stage"],
                 current_limit: true,
             },

@@ -28,7 +28,7 @@ use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
 use crate::config::{Fault, SimulatedRig, SimulatedTransport};
-use crate::rig::fault::ProtocolFaults;
+use crate::rig::fault::{ProtocolFaults, StreamRecordFate};
 use crate::rig::{
     enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink,
     SupplyReadback, WallClock,
@@ -182,12 +182,13 @@ pub enum ServedDaq<'a> {
 /// Stream the plant's sensor readings as records, one per `period` on the
 /// DAQ's own clock: a slot the host runs late still sends the readings of
 /// its own instant (the frames of missed slots then go out together, as
-/// from a DAQ's buffer).
+/// from a DAQ's buffer). Each record passes the DAQ's `faults` first.
 async fn stream_daq(
     plant: SharedPlant,
     mut io: SerialStream,
     framing: SerialFraming,
     period: std::time::Duration,
+    faults: Option<ProtocolFaults>,
 ) {
     let mut tick = tokio::time::interval(period);
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
@@ -228,6 +229,15 @@ async fn stream_daq(
         let bytes = match framing {
             SerialFraming::Ascii => ascii::encode(&record),
             SerialFraming::Binary => binary::encode(&record),
+        };
+        let fate = match &faults {
+            Some(f) => f.stream_record(framing, bytes),
+            None => StreamRecordFate::Send(bytes),
+        };
+        let bytes = match fate {
+            StreamRecordFate::Send(b) => b,
+            StreamRecordFate::Drop => continue,
+            StreamRecordFate::HangUp => return,
         };
         if io.write_all(&bytes).await.is_err() {
             return;
@@ -332,7 +342,13 @@ impl ServedRig {
                 let pty = pty_pair().map_err(|e| ServeError::Io(e.to_string()))?;
                 let settings = SerialSettings::new_8n1(&pty.device_path, 921_600);
                 let period = std::time::Duration::from_secs_f64(1.0 / rate_hz);
-                let task = tokio::spawn(stream_daq(plant.clone(), pty.host, framing, period));
+                let task = tokio::spawn(stream_daq(
+                    plant.clone(),
+                    pty.host,
+                    framing,
+                    period,
+                    faults_of("sensors"),
+                ));
                 pty_ends.push(pty.device_end);
                 (
                     ServedLink::Stream(settings),

@@ -612,6 +612,7 @@ impl ImRunConfig {
             FaultRig {
                 served: &served,
                 rtu,
+                streams: &[],
                 stages,
                 current_limit: false,
             },

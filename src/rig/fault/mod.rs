@@ -12,7 +12,10 @@
 //! - [`ProtocolFaults`] (`reply.rs`): a served Modbus device that does
 //!   not answer, answers with an exception, or goes away;
 //! - [`FaultyLine`] (`line.rs`): a served RTU device's line whose replies
-//!   carry a wrong CRC or are preceded by garbage bytes.
+//!   carry a wrong CRC or are preceded by garbage bytes;
+//! - [`StreamRecordFate`] (`stream.rs`): a served streaming DAQ that falls
+//!   silent, hangs up, or sends records with a wrong check or after
+//!   garbage bytes.
 //!
 //! The sensor and stage faults act on the test time of the readings (the
 //! stage reads it from the [`FaultClock`] the sensors keep); the protocol
@@ -26,6 +29,7 @@ mod line;
 mod reply;
 mod sensors;
 mod stage;
+mod stream;
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
@@ -34,6 +38,7 @@ pub use line::FaultyLine;
 pub use reply::ProtocolFaults;
 pub use sensors::FaultySensors;
 pub use stage::FaultyStage;
+pub use stream::StreamRecordFate;
 
 use crate::config::FaultPlan;
 use crate::machine::OpenedRig;
