@@ -115,9 +115,15 @@ fn the_standard_tests_run_over_modbus_with_a_reduced_frequency_locked_rotor_test
     // cent of the input power; seen 1.1 % off when a loaded machine
     // shifted the polled samples, its 95 % interval then [1586, 1598]),
     // and Rr, which the load test's points pull with the slip of a polled
-    // encoder (seen from −0.3 % to +1.2 % over CI runs).
+    // encoder (seen from −0.3 % to +1.2 % over CI runs). The joint fit's
+    // Rs is the winding at the locked-rotor test's temperature (the DC
+    // reading corrected to it bounds it; src/machine/im/identify/joint.rs),
+    // so it is held to the truth at that temperature, as the reduction's
+    // is: against the 20 °C value it came out 1.5 % high once, the winding
+    // a few kelvin warm on a run the wall clock made longer.
     assert_eq!(v["best"], "joint", "{}", v["best"]);
     for (key, t) in TRUTH {
+        let t = if key == "Rs" { rs_hot } else { t };
         let got = value(&v, "joint", key);
         let tol = match key {
             "Pfw" => 0.03,
