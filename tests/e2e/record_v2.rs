@@ -147,3 +147,44 @@ async fn the_v1_fixture_replays_bit_identically_to_its_v2_copy() {
     let counts = common::python_check_mcap(&seed_path(), &[]);
     assert_eq!(counts["/bench/event"], 1);
 }
+
+/// The contract checker can fail: the seed record with five sample
+/// payloads forged (a boolean, an extra key, no value, NaN, a string) is
+/// refused, each forgery named.
+#[test]
+fn the_contract_checker_refuses_forged_sample_payloads() {
+    let dir = tempfile::tempdir().unwrap();
+    let forged = dir.path().join("forged.mcap");
+    let script = |name: &str| {
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/python")
+            .join(name)
+    };
+    let python = common::python::interpreter();
+    let out = std::process::Command::new(python)
+        .arg(script("forge_samples.py"))
+        .arg(seed_path())
+        .arg(&forged)
+        .output()
+        .unwrap();
+    let (_, stderr) = common::text(&out);
+    assert!(out.status.success(), "forge_samples.py: {stderr}");
+    let out = std::process::Command::new(python)
+        .arg(script("check_mcap.py"))
+        .arg(&forged)
+        .output()
+        .unwrap();
+    let (_, stderr) = common::text(&out);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    for want in [
+        "value True is not a number",
+        "keys ['unit', 'value'], want ['value']",
+        "keys [], want ['value']",
+        "payload is not JSON: NaN is not JSON",
+        "value '7' is not a number",
+    ] {
+        assert!(stderr.contains(want), "{want}: {stderr}");
+    }
+    // The record it was forged from passes.
+    common::python_check_mcap(&seed_path(), &[]);
+}
