@@ -78,20 +78,9 @@ impl FaultyLine {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::Fault;
 
     fn line(kind: FaultKind) -> FaultyLine {
-        let f = Fault {
-            index: 0,
-            kind,
-            at_s: 0.0,
-            for_s: None,
-            target: Some("sensors".into()),
-            value: None,
-        };
-        FaultyLine::new(
-            ProtocolFaults::for_device(&[f], "sensors", std::time::Instant::now()).unwrap(),
-        )
+        FaultyLine::new(ProtocolFaults::one(kind))
     }
 
     #[tokio::test]

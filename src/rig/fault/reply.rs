@@ -64,6 +64,23 @@ impl ProtocolFaults {
     }
 }
 
+#[cfg(test)]
+impl ProtocolFaults {
+    /// One fault of `kind` on the device `sensors`, from the start and
+    /// for good (the unit tests' fixture).
+    pub(crate) fn one(kind: FaultKind) -> ProtocolFaults {
+        let f = Fault {
+            index: 0,
+            kind,
+            at_s: 0.0,
+            for_s: None,
+            target: Some("sensors".into()),
+            value: None,
+        };
+        ProtocolFaults::for_device(&[f], "sensors", Instant::now()).expect("a fault on sensors")
+    }
+}
+
 impl Interference for ProtocolFaults {
     fn interfere(&self) -> Option<Interfere> {
         if self.acting(FaultKind::Disconnect).is_some()

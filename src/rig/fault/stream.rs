@@ -62,24 +62,9 @@ fn corrupt_check(framing: SerialFraming, frame: &mut [u8]) {
 
 #[cfg(test)]
 mod tests {
-    use std::time::Instant;
-
     use motorbench_drivers::serial::{ascii, binary, DecodeCounts, StreamRecord};
 
     use super::*;
-    use crate::config::Fault;
-
-    fn faults(kind: FaultKind) -> ProtocolFaults {
-        let f = Fault {
-            index: 0,
-            kind,
-            at_s: 0.0,
-            for_s: None,
-            target: Some("sensors".into()),
-            value: None,
-        };
-        ProtocolFaults::for_device(&[f], "sensors", Instant::now()).unwrap()
-    }
 
     fn record() -> StreamRecord {
         StreamRecord {
@@ -123,7 +108,7 @@ mod tests {
             assert_eq!(good, 1, "{framing:?}: the clean record decodes");
 
             let StreamRecordFate::Send(bad) =
-                faults(FaultKind::CrcError).stream_record(framing, frame.clone())
+                ProtocolFaults::one(FaultKind::CrcError).stream_record(framing, frame.clone())
             else {
                 panic!("{framing:?}: a record with a bad check is still sent");
             };
@@ -132,7 +117,7 @@ mod tests {
             assert!(counts.rejected >= 1, "{framing:?}: {counts:?}");
 
             let StreamRecordFate::Send(noisy) =
-                faults(FaultKind::Garbage).stream_record(framing, frame.clone())
+                ProtocolFaults::one(FaultKind::Garbage).stream_record(framing, frame.clone())
             else {
                 panic!("{framing:?}: a record after garbage is still sent");
             };
@@ -152,11 +137,12 @@ mod tests {
     fn a_silent_daq_drops_its_records_and_a_disconnected_one_hangs_up() {
         let frame = ascii::encode(&record());
         assert_eq!(
-            faults(FaultKind::BusTimeout).stream_record(SerialFraming::Ascii, frame.clone()),
+            ProtocolFaults::one(FaultKind::BusTimeout)
+                .stream_record(SerialFraming::Ascii, frame.clone()),
             StreamRecordFate::Drop
         );
         assert_eq!(
-            faults(FaultKind::Disconnect).stream_record(SerialFraming::Ascii, frame),
+            ProtocolFaults::one(FaultKind::Disconnect).stream_record(SerialFraming::Ascii, frame),
             StreamRecordFate::HangUp
         );
     }
