@@ -266,6 +266,10 @@ pub(crate) struct FaultRig<'a> {
     /// answering Modbus requests (a streaming DAQ): they have a line
     /// whatever the transport, and no exception replies.
     pub streams: &'a [&'a str],
+    /// The served devices on a CAN bus behind an SLCAN adapter (also in
+    /// `streams`): no Modbus, and no frame with a bad CRC ever reaches
+    /// the host (the CAN controllers retransmit it).
+    pub can: &'a [&'a str],
     /// The stages a stage fault may name.
     pub stages: &'a [&'a str],
     /// The stage that feeds the machine takes a current limit.
@@ -402,6 +406,15 @@ pub(crate) fn validate_faults(
                     ),
                 ));
             }
+            if kind == FaultKind::CrcError && rig.can.contains(&t) {
+                return Err(bad(
+                    "kind",
+                    format!(
+                        "{} is on a CAN bus, whose controllers retransmit a frame that fails its CRC by themselves: no bad frame reaches the bench (lose frames with bus_timeout, corrupt the adapter's line with garbage)",
+                        quoted(t)
+                    ),
+                ));
+            }
             if kind == FaultKind::ModbusException && streams {
                 return Err(bad(
                     "kind",
@@ -466,6 +479,7 @@ mod tests {
         served: &[],
         rtu: false,
         streams: &[],
+        can: &[],
         stages: &["power_stage"],
         current_limit: true,
     };
@@ -526,6 +540,7 @@ mod tests {
             served: &["power_stage", "sensors"],
             rtu: false,
             streams: &[],
+            can: &[],
             stages: &["power_stage"],
             current_limit: true,
         };
@@ -563,6 +578,38 @@ mod tests {
             tcp
         )
         .contains("fault[0].target: no served device \"daq\""));
+        // A CAN encoder behind an SLCAN adapter: its line takes garbage,
+        // but no bad CRC reaches the bench, and it answers no Modbus.
+        let can = FaultRig {
+            served: &["power_stage", "sensors", "encoder"],
+            streams: &["encoder"],
+            can: &["encoder"],
+            ..tcp
+        };
+        assert_eq!(
+            validate_faults(
+                "t.toml",
+                raw(
+                    "[[fault]]\nkind = \"garbage\"\nat_s = 1\ntarget = \"encoder\"\n\
+                     [[fault]]\nkind = \"bus_timeout\"\nat_s = 1\ntarget = \"encoder\"\n"
+                ),
+                can
+            )
+            .unwrap()
+            .protocol_faults()
+            .len(),
+            2
+        );
+        assert!(e(
+            "[[fault]]\nkind = \"crc_error\"\nat_s = 1\ntarget = \"encoder\"\n",
+            can
+        )
+        .contains("fault[0].kind: \"encoder\" is on a CAN bus"));
+        assert!(e(
+            "[[fault]]\nkind = \"modbus_exception\"\nat_s = 1\nvalue = 6\ntarget = \"encoder\"\n",
+            can
+        )
+        .contains("fault[0].kind: \"encoder\" streams records"));
         assert!(e(
             "[[fault]]\nkind = \"ignore_disable\"\nat_s = 1\ntarget = \"supply\"\n",
             DC

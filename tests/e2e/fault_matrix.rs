@@ -45,6 +45,10 @@ fn config_with(
         .replace(
             "profile = \"devices/",
             &format!("profile = \"{}/devices/", config_dir.display()),
+        )
+        .replace(
+            "dbc = \"devices/",
+            &format!("dbc = \"{}/devices/", config_dir.display()),
         );
     for (from, to) in replace {
         assert!(text.contains(from), "{shipped} has no `{from}`");
@@ -619,6 +623,47 @@ fn dc_serial_run_silent_daq_stream_aborts_safe() {
     );
     r.assert_aborted_safe("device fault: sensor stream serial:");
     assert!(r.stop().contains("delivered nothing"), "{}", r.stop());
+}
+
+/// The supply over Modbus TCP, the DAQ streaming on a serial line and a
+/// CANopen encoder behind an SLCAN adapter, all served.
+const CAN: &str = "sim-modbus-can-dc.toml";
+
+#[test]
+fn dc_can_run_garbage_on_the_encoder_line_is_skipped_with_a_warning() {
+    let _one = realtime();
+    let r = run(
+        CAN,
+        "[[fault]]\nkind = \"garbage\"\nat_s = 1.0\nfor_s = 0.1\ntarget = \"encoder\"\n",
+    );
+    r.assert_degraded("garbage on the line");
+    let warnings = r.events(EventLevel::Warn);
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.starts_with("slcan:") && w.contains("line(s) refused so far")),
+        "{warnings:?}"
+    );
+}
+
+#[test]
+fn dc_can_run_encoder_adapter_hang_up_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        CAN,
+        "[[fault]]\nkind = \"disconnect\"\nat_s = 1.0\ntarget = \"encoder\"\n",
+    );
+    r.assert_aborted_safe("device fault: slcan:");
+}
+
+#[test]
+fn dc_can_run_silent_encoder_aborts_safe() {
+    let _one = realtime();
+    let r = run(
+        CAN,
+        "[[fault]]\nkind = \"bus_timeout\"\nat_s = 1.0\nfor_s = 5\ntarget = \"encoder\"\n",
+    );
+    r.assert_aborted_safe("stale data: no new encoder_count reading");
 }
 
 // ---- induction machine, `motorbench run` ----

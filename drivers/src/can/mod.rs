@@ -44,4 +44,11 @@ pub trait FrameStream: Send {
 
     /// Wait for the next received frame.
     async fn recv(&mut self) -> Result<CanFrame, DriverError>;
+
+    /// Lines received so far that were not a frame the interface could
+    /// decode (garbage on a USB-CAN adapter's serial line). Default: 0,
+    /// for an interface that hands over whole frames or nothing.
+    fn malformed(&self) -> u64 {
+        0
+    }
 }

@@ -8,11 +8,15 @@
 //! time ([`PeriodicStamp`]): on the message's send grid, never after its
 //! arrival. A CANopen PDO carries no sequence number either, so frames are
 //! taken as delivered in order and none lost unless the message falls
-//! silent for longer than [`RESYNC_SILENCE_S`] (and ten periods): a host
-//! that stalls for a few periods (seen here: 21 ms on a loaded machine)
-//! then receives the waiting frames in one burst, and they must count as
-//! late, not lost, or the speed derived from them would jump. The
-//! jitter statistics are those of the arrivals (what the link did).
+//! silent for longer than [`RESYNC_SILENCE_S`] (and ten periods), or the
+//! frames after a shorter silence come at the message's period instead
+//! of in a burst ([`PeriodicStamp`]): a host that stalls for
+//! a few periods (seen here: 21 ms on a loaded machine) then receives the
+//! waiting frames in one burst, and they must count as late, not lost, or
+//! the speed derived from them would jump. Garbage on an adapter's line
+//! ([`FrameStream::malformed`]) is warned of and counted as the link's
+//! decode errors. The jitter statistics are those of the arrivals (what
+//! the link did).
 
 use async_trait::async_trait;
 use tokio::time::Instant;
@@ -48,6 +52,8 @@ pub struct CanSignalSensors<F> {
     warnings: Vec<String>,
     health: LinkHealth,
     lost_frames: u64,
+    /// Malformed lines of the interface reported so far.
+    malformed: u64,
 }
 
 /// A silence of a message longer than this (and than ten of its periods)
@@ -106,7 +112,18 @@ impl<F: FrameStream> CanSignalSensors<F> {
             warnings: Vec::new(),
             health: LinkHealth::new(name),
             lost_frames: 0,
+            malformed: 0,
         })
+    }
+}
+
+impl<F> CanSignalSensors<F> {
+    fn publish_health(&self) {
+        self.health.publish(&LinkCounts {
+            lost: self.lost_frames,
+            decode_errors: self.malformed,
+            ..LinkCounts::default()
+        });
     }
 }
 
@@ -124,6 +141,15 @@ impl<F: FrameStream> SensorStream for CanSignalSensors<F> {
         loop {
             let frame = self.frames.recv().await?;
             let arrival_ns = self.started.elapsed().as_nanos() as u64;
+            let malformed = self.frames.malformed();
+            if malformed > self.malformed {
+                self.malformed = malformed;
+                self.publish_health();
+                self.warnings.push(format!(
+                    "{}: garbage on the line: {malformed} line(s) refused so far",
+                    self.name
+                ));
+            }
             let Some(decoded) = self.map.decode(&frame) else {
                 continue;
             };
@@ -141,12 +167,9 @@ impl<F: FrameStream> SensorStream for CanSignalSensors<F> {
                         if t_ns.is_none() {
                             self.lost_frames += stamped.lost;
                         }
-                        self.health.publish(&LinkCounts {
-                            lost: self.lost_frames,
-                            ..LinkCounts::default()
-                        });
+                        self.publish_health();
                         self.warnings.push(format!(
-                            "{}: {} frame(s) of {signal} missing (silent for more than {RESYNC_SILENCE_S} s)",
+                            "{}: {} frame(s) of {signal} missing (a gap in its send grid)",
                             self.name, stamped.lost
                         ));
                     }
@@ -241,5 +264,65 @@ mod tests {
             }],
         );
         assert!(missing.is_err());
+    }
+
+    /// Garbage on an SLCAN adapter's line costs the frames it hits, and
+    /// is said: a warning with the count, and the link's decode errors.
+    #[tokio::test]
+    async fn garbage_on_an_slcan_line_is_counted_and_warned_of() {
+        use tokio::io::AsyncWriteExt;
+
+        let path = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../config/devices/cia406-encoder.dbc"
+        );
+        let map = SignalMap::parse(path, &std::fs::read_to_string(path).unwrap()).unwrap();
+        let (host_end, mut adapter) = tokio::io::duplex(4096);
+        let opts = crate::can::SlcanOptions {
+            bitrate: None,
+            listen_only: false,
+            ack_timeout: None,
+        };
+        let frames = crate::can::SlcanStream::open(host_end, "slcan", opts)
+            .await
+            .unwrap();
+        let info = ChannelInfo {
+            quantity: "encoder_count".into(),
+            unit: "count".into(),
+            source: "slcan".into(),
+            rate_hz: 1000.0,
+        };
+        let mut s = CanSignalSensors::new(
+            "slcan",
+            frames,
+            map.clone(),
+            vec![CanChannel {
+                signal: "position".into(),
+                info,
+            }],
+        )
+        .unwrap();
+        let line = |p: f64| {
+            crate::can::encode_frame(
+                &map.encode(CanId::Standard(0x181), &[("position", p)])
+                    .unwrap(),
+            )
+        };
+        let mut bytes = line(1.0);
+        bytes.extend_from_slice(b"\xFF\x00\xFF");
+        bytes.extend(line(2.0));
+        bytes.extend(line(3.0));
+        adapter.write_all(&bytes).await.unwrap();
+        let mut got = Vec::new();
+        for _ in 0..2 {
+            got.push(s.next_batch().await.unwrap().samples[0].value);
+        }
+        assert_eq!(got, vec![1.0, 3.0], "the frame after the noise is lost");
+        let warnings = s.take_warnings();
+        assert_eq!(
+            warnings,
+            vec!["slcan: garbage on the line: 1 line(s) refused so far".to_string()]
+        );
+        assert_eq!(s.link_health()[0].counts().decode_errors, 1);
     }
 }

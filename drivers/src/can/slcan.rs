@@ -273,11 +273,6 @@ impl<T: AsyncRead + AsyncWrite + Unpin + Send> SlcanStream<T> {
         Ok(s)
     }
 
-    /// Lines that could not be decoded (garbage on the line).
-    pub fn malformed(&self) -> u64 {
-        self.malformed
-    }
-
     /// Error answers (BEL) the adapter gave after opening.
     pub fn adapter_errors(&self) -> u64 {
         self.adapter_errors
@@ -365,6 +360,10 @@ impl<T: AsyncRead + AsyncWrite + Unpin + Send> FrameStream for SlcanStream<T> {
 
     async fn send(&mut self, frame: &CanFrame) -> Result<(), DriverError> {
         self.write(&encode_frame(frame)).await
+    }
+
+    fn malformed(&self) -> u64 {
+        self.malformed
     }
 
     async fn recv(&mut self) -> Result<CanFrame, DriverError> {

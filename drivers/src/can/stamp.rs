@@ -18,10 +18,17 @@
 //!   one pulls the phase earlier by itself) and recovers from a loss taken
 //!   for a delay.
 //!
-//! Losses shorter than `resync_periods` periods are taken for delays (CAN
-//! itself retransmits; on a healthy bus a late frame is far more common
-//! than a lost one); the stamps then run one period early until the creep
-//! catches up.
+//! Losses shorter than `resync_periods` periods are first taken for delays
+//! (CAN itself retransmits; on a healthy bus a late frame is far more
+//! common than a lost one). A delay leaves a backlog that drains in a
+//! burst, each frame's lag behind the grid a period less than the last;
+//! frames after a loss come at the grid's pace instead, at a steady lag.
+//! So when [`LAG_FRAMES`] frames in a row lag the grid by more than
+//! [`LAG_PERIODS`] periods, each within half a period of the lag before,
+//! the frames were lost: the index jumps to the slot nearest the arrival
+//! and the slots skipped count as lost (a few periods after the frames
+//! resume, where the stamps would otherwise have lagged until the creep
+//! caught up, for as many thousand frames as were lost).
 
 /// Estimates send times of one periodic message. See the module docs.
 #[derive(Debug, Clone, PartialEq)]
@@ -30,7 +37,19 @@ pub struct PeriodicStamp {
     resync_periods: f64,
     phase_ns: f64,
     last: Option<(i64, f64)>,
+    /// The last frame's lag behind the grid, ns.
+    last_lag: Option<f64>,
+    /// Frames in a row at a steady lag of more than [`LAG_PERIODS`].
+    paced: u32,
 }
+
+/// A lag behind the grid, in periods, beyond which frames that keep the
+/// grid's pace are taken for frames after a loss (a least-delayed frame
+/// pins the lag at 0; a healthy link's bursts stay within a few periods).
+pub const LAG_PERIODS: f64 = 4.0;
+
+/// Frames in a row at a steady lag beyond [`LAG_PERIODS`] that make a loss.
+pub const LAG_FRAMES: u32 = 3;
 
 /// What [`PeriodicStamp::arrived`] decided for one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -50,6 +69,8 @@ impl PeriodicStamp {
             resync_periods,
             phase_ns: 0.0,
             last: None,
+            last_lag: None,
+            paced: 0,
         }
     }
 
@@ -57,7 +78,7 @@ impl PeriodicStamp {
     pub fn arrived(&mut self, arrival_ns: u64) -> Stamped {
         let a = arrival_ns as f64;
         let p = self.period_ns;
-        let (n, lost) = match self.last {
+        let (mut n, mut lost) = match self.last {
             None => {
                 self.phase_ns = a;
                 (0, 0)
@@ -73,6 +94,12 @@ impl PeriodicStamp {
             }
         };
         let mut t = self.phase_ns + n as f64 * p;
+        if self.lags_after_a_loss(a - t) {
+            let skipped = ((a - t) / p).round() as i64;
+            n += skipped;
+            lost += skipped as u64;
+            t = self.phase_ns + n as f64 * p;
+        }
         if t > a {
             // Sent no later than it arrived: this frame is the least
             // delayed so far, and pins the phase.
@@ -87,6 +114,25 @@ impl PeriodicStamp {
             t_ns: t.max(0.0).round() as u64,
             lost,
         }
+    }
+}
+
+impl PeriodicStamp {
+    /// Whether a frame lagging the grid by `lag` ns completes a run of
+    /// [`LAG_FRAMES`] at a steady lag beyond [`LAG_PERIODS`] (see the
+    /// module docs); the run starts again after it.
+    fn lags_after_a_loss(&mut self, lag: f64) -> bool {
+        let p = self.period_ns;
+        let far = LAG_PERIODS * p;
+        let steady = lag > far && self.last_lag.is_some_and(|l| l > far && l - lag < p / 2.0);
+        self.paced = if steady { self.paced + 1 } else { 0 };
+        self.last_lag = Some(lag);
+        if self.paced + 1 >= LAG_FRAMES {
+            self.paced = 0;
+            self.last_lag = None;
+            return true;
+        }
+        false
     }
 }
 
@@ -125,6 +171,51 @@ mod tests {
         let after = s.arrived(31 * MS);
         assert_eq!(after.lost, 29);
         assert!(after.t_ns <= 31 * MS && after.t_ns >= 30 * MS, "{after:?}");
+    }
+
+    /// Frames at 500 Hz, the ones of `sent` (slot numbers) only, each
+    /// arriving `latency` after its send plus `extra` (by slot); the
+    /// stamps and the losses counted.
+    fn stamp(sent: &[u64], extra: impl Fn(u64) -> u64) -> (Vec<u64>, u64) {
+        let mut s = PeriodicStamp::new(500.0, 125.0);
+        let mut lost = 0;
+        let t = sent
+            .iter()
+            .map(|&k| {
+                let st = s.arrived(k * 2 * MS + 300_000 + extra(k));
+                lost += st.lost;
+                st.t_ns
+            })
+            .collect();
+        (t, lost)
+    }
+
+    #[test]
+    fn a_short_loss_is_counted_once_the_frames_after_it_keep_their_pace() {
+        // 100 ms of a 500 Hz message lost (slots 100 to 149), far less
+        // than the resynchronising silence of 125 periods.
+        let sent: Vec<u64> = (0..100).chain(150..300).collect();
+        let (t, lost) = stamp(&sent, |_| 0);
+        assert_eq!(lost, 50);
+        // A few frames after the loss, back on the send grid.
+        for (&k, &t) in sent.iter().zip(&t).skip(100 + LAG_FRAMES as usize) {
+            assert!(t.abs_diff(k * 2 * MS) <= MS, "slot {k}: {t} ns");
+        }
+    }
+
+    #[test]
+    fn a_backlog_draining_in_a_burst_is_a_delay_not_a_loss() {
+        // Slots 100 to 149 held up for 100 ms, then sent back to back
+        // (0.2 ms apart) ahead of slot 150: nothing is lost.
+        let sent: Vec<u64> = (0..300).collect();
+        let (t, lost) = stamp(&sent, |k| match k {
+            100..=149 => (150 - k) * 2 * MS - (150 - k) * 200_000,
+            _ => 0,
+        });
+        assert_eq!(lost, 0);
+        for (&k, &t) in sent.iter().zip(&t) {
+            assert!(t.abs_diff(k * 2 * MS) <= MS, "slot {k}: {t} ns");
+        }
     }
 
     proptest! {

@@ -10,9 +10,9 @@ use serde::Deserialize;
 
 use crate::bounds;
 use crate::config::{
-    bounded, invalid, modbus, syntax_error, validate_faults, ConfigError, FaultPlan, FaultRig,
-    Limits, ModbusRig, RawFault, RawRetention, RawSupervisor, Retention, SensorLink,
-    SimulatedTransport, Supervision, DEFAULT_CONFIG, DEFAULT_CONFIG_NAME,
+    bounded, invalid, modbus, syntax_error, validate_faults, CanLink, CanTransport, ConfigError,
+    FaultPlan, FaultRig, Limits, ModbusRig, RawFault, RawRetention, RawSupervisor, Retention,
+    SensorLink, SimulatedTransport, Supervision, DEFAULT_CONFIG, DEFAULT_CONFIG_NAME,
 };
 use crate::excerpt::quoted;
 use crate::model::DcParams;
@@ -531,27 +531,39 @@ impl Config {
 
         let supervision = raw.supervisor.validate(source, &raw.limits, &nameplate)?;
         let retention = raw.records.validate(source)?;
-        let (served, rtu, streams): (&[&str], bool, &[&str]) = match &backend {
-            Backend::Modbus {
-                rig,
-                simulated: Some(_),
-            } => (
-                &["power_stage", "sensors"],
-                rig.simulate == Some(SimulatedTransport::Rtu),
-                match rig.sensors {
-                    SensorLink::Serial { .. } => &["sensors"],
-                    SensorLink::Modbus(_) => &[],
-                },
-            ),
-            _ => (&[], false, &[]),
-        };
+        // The served devices: the supply, the sensors (a streaming DAQ or
+        // a Modbus one) and the CAN encoder where it is simulated behind
+        // an SLCAN adapter.
+        let (mut served, mut streams, mut can) = (Vec::new(), Vec::new(), Vec::new());
+        let mut rtu = false;
+        if let Backend::Modbus {
+            rig,
+            simulated: Some(_),
+        } = &backend
+        {
+            served.extend(["power_stage", "sensors"]);
+            rtu = rig.simulate == Some(SimulatedTransport::Rtu);
+            if let SensorLink::Serial { .. } = rig.sensors {
+                streams.push("sensors");
+            }
+            if let Some(CanLink {
+                transport: CanTransport::Slcan { .. },
+                ..
+            }) = rig.can
+            {
+                served.push("encoder");
+                streams.push("encoder");
+                can.push("encoder");
+            }
+        }
         let faults = validate_faults(
             source,
             raw.fault,
             FaultRig {
-                served,
+                served: &served,
                 rtu,
-                streams,
+                streams: &streams,
+                can: &can,
                 stages: &["power_stage"],
                 current_limit: true,
             },

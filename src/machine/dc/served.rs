@@ -28,7 +28,7 @@ use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
 use crate::config::{Fault, SimulatedRig, SimulatedTransport};
-use crate::rig::fault::{ProtocolFaults, StreamRecordFate};
+use crate::rig::fault::{FaultyLine, ProtocolFaults, StreamRecordFate};
 use crate::rig::{
     enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink,
     SupplyReadback, WallClock,
@@ -261,6 +261,8 @@ pub struct ServedRig {
     stage: SimPowerStage,
     plant: SharedPlant,
     encoder_task: Option<JoinHandle<()>>,
+    /// The protocol faults that target the CAN encoder (`encoder`).
+    encoder_faults: Option<ProtocolFaults>,
 }
 
 impl std::fmt::Debug for ServedRig {
@@ -368,6 +370,7 @@ impl ServedRig {
             stage,
             plant,
             encoder_task: None,
+            encoder_faults: faults_of("encoder"),
         })
     }
 
@@ -377,7 +380,9 @@ impl ServedRig {
     /// other signals zero. Like a real encoder's event timer, every slot is
     /// sent with the position at the slot's own time, also when the host
     /// runs the sender late (then the frames of the missed slots go out
-    /// together). Replaces an encoder started before.
+    /// together). The protocol faults on `encoder` act on it: while a
+    /// `bus_timeout` lasts it sends nothing; a `disconnect` ends the sender
+    /// and with it `frames`. Replaces an encoder started before.
     pub fn start_can_encoder(
         &mut self,
         frames: Box<dyn FrameStream>,
@@ -391,6 +396,7 @@ impl ServedRig {
                 register: "position".into(),
             })?;
         let plant = self.plant.clone();
+        let faults = self.encoder_faults.clone();
         let period = std::time::Duration::from_secs_f64(1.0 / rate_hz);
         let mut frames = frames;
         let task = tokio::spawn(async move {
@@ -398,6 +404,11 @@ impl ServedRig {
             tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
             loop {
                 let slot = tick.tick().await.into_std();
+                match faults.as_ref().and_then(ProtocolFaults::withheld) {
+                    Some(StreamRecordFate::HangUp) => return,
+                    Some(_) => continue,
+                    None => {}
+                }
                 let count = lock(&plant).readings_at(slot, &[channel::ENCODER]).1[0];
                 let position = count.rem_euclid(4_294_967_296.0);
                 let Some(frame) = map.encode(id, &[("position", position)]) else {
@@ -418,7 +429,8 @@ impl ServedRig {
     /// over SLCAN on a new pseudo-terminal pair, as a USB-CAN adapter would
     /// present it: the settings of the end the bench opens. The encoder's
     /// end sends no answers to setup commands: open the bench's end with
-    /// `ack_timeout: None`.
+    /// `ack_timeout: None`. While `garbage` on `encoder` lasts, noise
+    /// comes before each of its frames on that line ([`FaultyLine`]).
     pub async fn serve_can_encoder_on_pty(
         &mut self,
         map: SignalMap,
@@ -430,10 +442,23 @@ impl ServedRig {
             listen_only: false,
             ack_timeout: None,
         };
-        let encoder_side = SlcanStream::open(pty.host, "sim-cia406-encoder", opts)
-            .await
-            .map_err(|e| ServeError::Io(e.to_string()))?;
-        self.start_can_encoder(Box::new(encoder_side), map, rate_hz)?;
+        let io = |e: motorbench_drivers::DriverError| ServeError::Io(e.to_string());
+        let name = "sim-cia406-encoder";
+        let encoder_side: Box<dyn FrameStream> = match self
+            .encoder_faults
+            .as_ref()
+            .filter(|f| FaultyLine::needed(f))
+        {
+            None => Box::new(SlcanStream::open(pty.host, name, opts).await.map_err(io)?),
+            Some(f) => {
+                // The adapter's line through its faults: the encoder's
+                // end on an in-process pipe, relayed to the terminal.
+                let (adapter, line_end) = tokio::io::duplex(4096);
+                tokio::spawn(FaultyLine::new(f.clone()).relay(pty.host, line_end));
+                Box::new(SlcanStream::open(adapter, name, opts).await.map_err(io)?)
+            }
+        };
+        self.start_can_encoder(encoder_side, map, rate_hz)?;
         let settings = SerialSettings::new_8n1(&pty.device_path, 115_200);
         self._pty_ends.push(pty.device_end);
         Ok(settings)

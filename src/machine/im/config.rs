@@ -613,6 +613,7 @@ impl ImRunConfig {
                 served: &served,
                 rtu,
                 streams: &[],
+                can: &[],
                 stages,
                 current_limit: false,
             },

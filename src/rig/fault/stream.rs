@@ -30,11 +30,8 @@ impl ProtocolFaults {
     /// What becomes of `frame`, one record as `framing` encodes it, under
     /// the faults acting now.
     pub fn stream_record(&self, framing: SerialFraming, mut frame: Vec<u8>) -> StreamRecordFate {
-        if self.acting(FaultKind::Disconnect).is_some() {
-            return StreamRecordFate::HangUp;
-        }
-        if self.acting(FaultKind::BusTimeout).is_some() {
-            return StreamRecordFate::Drop;
+        if let Some(fate) = self.withheld() {
+            return fate;
         }
         if self.acting(FaultKind::CrcError).is_some() {
             corrupt_check(framing, &mut frame);
@@ -43,6 +40,24 @@ impl ProtocolFaults {
             frame.splice(0..0, GARBAGE);
         }
         StreamRecordFate::Send(frame)
+    }
+}
+
+impl ProtocolFaults {
+    /// Whether a streaming device withholds its next record or frame now:
+    /// [`StreamRecordFate::HangUp`] once a `disconnect` has happened,
+    /// [`StreamRecordFate::Drop`] while a `bus_timeout` lasts, else `None`
+    /// (it sends). The simulated CAN encoder's frames take only this: a
+    /// CAN controller retransmits a frame whose CRC fails by itself, and
+    /// garbage on an adapter's line is [`super::FaultyLine`]'s.
+    pub fn withheld(&self) -> Option<StreamRecordFate> {
+        if self.acting(FaultKind::Disconnect).is_some() {
+            Some(StreamRecordFate::HangUp)
+        } else if self.acting(FaultKind::BusTimeout).is_some() {
+            Some(StreamRecordFate::Drop)
+        } else {
+            None
+        }
     }
 }
 
