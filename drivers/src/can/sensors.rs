@@ -210,32 +210,36 @@ mod tests {
     use super::*;
     use crate::can::InProcessBus;
 
-    #[tokio::test]
-    async fn tpdo_positions_become_samples() {
+    /// The shipped CiA 406 encoder's DBC file.
+    fn encoder_dbc() -> SignalMap {
         let path = concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/../config/devices/cia406-encoder.dbc"
         );
-        let map = SignalMap::parse(path, &std::fs::read_to_string(path).unwrap()).unwrap();
-        let bus = InProcessBus::new(64);
-        let mut encoder = bus.endpoint("encoder");
-        let host = bus.endpoint("host");
+        SignalMap::parse(path, &std::fs::read_to_string(path).unwrap()).unwrap()
+    }
+
+    /// Its position at 1 kHz as the one channel `name` reads on `frames`.
+    fn positions<F: FrameStream>(name: &str, frames: F, map: &SignalMap) -> CanSignalSensors<F> {
         let info = ChannelInfo {
             quantity: "encoder_count".into(),
             unit: "count".into(),
-            source: "can".into(),
+            source: name.into(),
             rate_hz: 1000.0,
         };
-        let mut s = CanSignalSensors::new(
-            "can",
-            host,
-            map.clone(),
-            vec![CanChannel {
-                signal: "position".into(),
-                info,
-            }],
-        )
-        .unwrap();
+        let channel = CanChannel {
+            signal: "position".into(),
+            info,
+        };
+        CanSignalSensors::new(name, frames, map.clone(), vec![channel]).unwrap()
+    }
+
+    #[tokio::test]
+    async fn tpdo_positions_become_samples() {
+        let map = encoder_dbc();
+        let bus = InProcessBus::new(64);
+        let mut encoder = bus.endpoint("encoder");
+        let mut s = positions("can", bus.endpoint("host"), &map);
         let heartbeat = map
             .encode(CanId::Standard(0x701), &[("nmt_state", 5.0)])
             .unwrap();
@@ -272,11 +276,7 @@ mod tests {
     async fn garbage_on_an_slcan_line_is_counted_and_warned_of() {
         use tokio::io::AsyncWriteExt;
 
-        let path = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../config/devices/cia406-encoder.dbc"
-        );
-        let map = SignalMap::parse(path, &std::fs::read_to_string(path).unwrap()).unwrap();
+        let map = encoder_dbc();
         let (host_end, mut adapter) = tokio::io::duplex(4096);
         let opts = crate::can::SlcanOptions {
             bitrate: None,
@@ -286,22 +286,7 @@ mod tests {
         let frames = crate::can::SlcanStream::open(host_end, "slcan", opts)
             .await
             .unwrap();
-        let info = ChannelInfo {
-            quantity: "encoder_count".into(),
-            unit: "count".into(),
-            source: "slcan".into(),
-            rate_hz: 1000.0,
-        };
-        let mut s = CanSignalSensors::new(
-            "slcan",
-            frames,
-            map.clone(),
-            vec![CanChannel {
-                signal: "position".into(),
-                info,
-            }],
-        )
-        .unwrap();
+        let mut s = positions("slcan", frames, &map);
         let line = |p: f64| {
             crate::can::encode_frame(
                 &map.encode(CanId::Standard(0x181), &[("position", p)])
