@@ -984,6 +984,38 @@ mod daemon {
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_serial_daemon_garbage_on_the_daq_stream_completes_with_a_warning() {
+        let _one = REALTIME.lock().await;
+        let (_served, c, s, record, _dir) = daemon_test(
+            SERIAL,
+            "",
+            "[[fault]]\nkind = \"garbage\"\nat_s = 1.0\nfor_s = 0.1\ntarget = \"sensors\"\n",
+            None,
+        )
+        .await;
+        assert_eq!(s["outcome"], "completed", "{s}");
+        let warnings = events(&record, EventLevel::Warn);
+        assert!(
+            warnings.iter().any(|w| w.contains("garbage on the line")),
+            "{warnings:?}"
+        );
+        assert_eq!(get(&c, "/v1/rigs/rig").await["state"], "idle");
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn dc_can_daemon_silent_encoder_aborts_safe_and_latches() {
+        let _one = REALTIME.lock().await;
+        let (served, c, s, _record, _dir) = daemon_test(
+            CAN,
+            "",
+            "[[fault]]\nkind = \"bus_timeout\"\nat_s = 1.0\nfor_s = 5\ntarget = \"encoder\"\n",
+            None,
+        )
+        .await;
+        assert_aborted_and_latched(&served, &c, &s, "stale_channel", true).await;
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn im_daemon_supply_ignoring_the_safe_command_is_disabled_and_latches() {
         let (served, c, s, record, _dir) = daemon_test(
             IM,
