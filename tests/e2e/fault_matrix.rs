@@ -292,6 +292,30 @@ fn dc_sim_run_encoder_losing_every_count_warns() {
 }
 
 #[test]
+fn dc_sim_run_encoder_losing_half_its_counts_warns_against_the_nameplate() {
+    // Half of every count lost: the speed reads half, which the model
+    // fits as well with twice the K; only the nameplate tells.
+    let r = run(
+        DC,
+        "[[fault]]\nkind = \"encoder_loses_counts\"\nat_s = 0\nvalue = 0.5\n",
+    );
+    assert_eq!(r.code, Some(0), "{}", r.stderr);
+    let result = r.record.recorded_result.as_ref().expect("a result");
+    let warnings: Vec<&str> = result["warnings"]
+        .as_array()
+        .expect("warnings")
+        .iter()
+        .filter_map(|w| w.as_str())
+        .collect();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.starts_with("nameplate: K = ") && w.contains("lines per revolution")),
+        "{warnings:?}"
+    );
+}
+
+#[test]
 fn dc_sim_run_supply_current_limit_warns() {
     let r = run(
         DC,

@@ -8,7 +8,9 @@
 //! `equation_error` (the model's equations on filtered data, from any
 //! voltage excitation) and `output_error` (the full model simulated and
 //! fitted). Channel values no motor produces are refused first
-//! ([`check_plausible`]).
+//! ([`check_plausible`]); a best `K` far from what the nameplate implies
+//! is warned of (`nameplate.rs`: a speed reading scaled wrong fits as
+//! well as a right one).
 //! Identification is a pure function of the record, so a replayed record
 //! gives the same report, bit for bit.
 //!
@@ -20,6 +22,7 @@ mod error;
 mod level_error;
 mod levels;
 mod moments;
+mod nameplate;
 mod output_error;
 mod pasek;
 mod plausibility;
@@ -452,6 +455,11 @@ pub fn identify_dc(record: &Record) -> Identification {
             ));
             report.best = Some("equation_error".into());
         }
+    }
+    if let Some(meta) = &record.meta {
+        report
+            .warnings
+            .extend(nameplate::k_disagrees(&meta.nameplate, &report));
     }
     Identification {
         report,
