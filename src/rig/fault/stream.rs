@@ -7,7 +7,8 @@
 //! lasts each record comes after a few bytes of noise; while a
 //! `crc_error` lasts each record's check (the ASCII line's checksum, the
 //! binary frame's CRC) is wrong; once a `disconnect` has happened the DAQ
-//! hangs up its end of the line.
+//! hangs up its end of the line. The simulated CAN encoder's frames take
+//! the silence and the hang-up alone ([`ProtocolFaults::withheld`]).
 
 use motorbench_drivers::serial::SerialFraming;
 
@@ -41,9 +42,7 @@ impl ProtocolFaults {
         }
         StreamRecordFate::Send(frame)
     }
-}
 
-impl ProtocolFaults {
     /// Whether a streaming device withholds its next record or frame now:
     /// [`StreamRecordFate::HangUp`] once a `disconnect` has happened,
     /// [`StreamRecordFate::Drop`] while a `bus_timeout` lasts, else `None`
