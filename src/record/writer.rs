@@ -497,96 +497,8 @@ fn run(
             .queued
             .fetch_sub(batch.len() as u64, Ordering::Relaxed);
         for entry in batch.drain(..) {
-            let (t_ns, urgent) = match &entry {
-                Entry::Samples { t_ns, values } => {
-                    for &(index, value) in values {
-                        if value.is_finite() {
-                            payload.clear();
-                            serde_json::to_writer(&mut payload, &SamplePayload { value })
-                                .expect("serializing a sample cannot fail");
-                            write_message(&mut writer, &mut table, index, *t_ns, &payload)
-                                .map_err(mcap_err)?;
-                        } else {
-                            // JSON has no NaN or infinity: say so on /bench/event
-                            // instead of losing the reading silently.
-                            let event = Event {
-                            level: EventLevel::Warn,
-                            message: format!(
-                                "non-finite reading ({value}) on {} not representable in JSON; not recorded as a sample",
-                                table.topics[index]
-                            ),
-                        };
-                            write_event(&mut writer, &mut table, *t_ns, &event)
-                                .map_err(mcap_err)?;
-                        }
-                    }
-                    (*t_ns, false)
-                }
-                Entry::Segment { t_ns, marker } => {
-                    write_bench_json(
-                        &mut writer,
-                        &mut table,
-                        TOPIC_SEGMENT,
-                        *t_ns,
-                        marker,
-                        "a marker serializes",
-                    )
-                    .map_err(mcap_err)?;
-                    (*t_ns, true)
-                }
-                Entry::Event { t_ns, event } => {
-                    write_event(&mut writer, &mut table, *t_ns, event).map_err(mcap_err)?;
-                    (*t_ns, event.level == EventLevel::Abort)
-                }
-                Entry::OperatingPoint { t_ns, point } => {
-                    write_bench_json(
-                        &mut writer,
-                        &mut table,
-                        TOPIC_OPERATING_POINT,
-                        *t_ns,
-                        point,
-                        "a point serializes",
-                    )
-                    .map_err(mcap_err)?;
-                    (*t_ns, true)
-                }
-                Entry::SupplyLimit { t_ns, limit } => {
-                    write_bench_json(
-                        &mut writer,
-                        &mut table,
-                        TOPIC_SUPPLY_LIMIT,
-                        *t_ns,
-                        limit,
-                        "a supply limit serializes",
-                    )
-                    .map_err(mcap_err)?;
-                    (*t_ns, true)
-                }
-                Entry::StandardTest { t_ns, reading } => {
-                    write_bench_json(
-                        &mut writer,
-                        &mut table,
-                        TOPIC_STANDARD_TEST,
-                        *t_ns,
-                        reading,
-                        "a standard-test reading serializes",
-                    )
-                    .map_err(mcap_err)?;
-                    (*t_ns, true)
-                }
-                Entry::Result { t_ns, report } => {
-                    write_bench_json(
-                        &mut writer,
-                        &mut table,
-                        TOPIC_RESULT,
-                        *t_ns,
-                        report,
-                        "a JSON value serializes",
-                    )
-                    .map_err(mcap_err)?;
-                    (*t_ns, true)
-                }
-            };
+            let (t_ns, urgent) =
+                write_entry(&mut writer, &mut table, &mut payload, &entry).map_err(mcap_err)?;
             if urgent || t_ns >= last_flush.saturating_add(FLUSH_INTERVAL_NS) {
                 // Closes the chunk and flushes the BufWriter into the file.
                 writer.flush().map_err(mcap_err)?;
@@ -612,6 +524,100 @@ fn run(
         per_topic,
         backpressure_waits: 0,
         path: path.to_path_buf(),
+    })
+}
+
+/// Write one queued entry: its time and whether it must reach the disk at
+/// once (a segment marker, an abort, a point, a result).
+fn write_entry(
+    writer: &mut Writer<BufWriter<File>>,
+    table: &mut Channels,
+    payload: &mut Vec<u8>,
+    entry: &Entry,
+) -> Result<(u64, bool), mcap::McapError> {
+    Ok(match entry {
+        Entry::Samples { t_ns, values } => {
+            for &(index, value) in values {
+                if value.is_finite() {
+                    payload.clear();
+                    serde_json::to_writer(&mut *payload, &SamplePayload { value })
+                        .expect("serializing a sample cannot fail");
+                    write_message(writer, table, index, *t_ns, payload)?;
+                } else {
+                    // JSON has no NaN or infinity: say so on /bench/event
+                    // instead of losing the reading silently.
+                    let event = Event {
+                        level: EventLevel::Warn,
+                        message: format!(
+                            "non-finite reading ({value}) on {} not representable in JSON; \
+                             not recorded as a sample",
+                            table.topics[index]
+                        ),
+                    };
+                    write_event(writer, table, *t_ns, &event)?;
+                }
+            }
+            (*t_ns, false)
+        }
+        Entry::Segment { t_ns, marker } => {
+            write_bench_json(
+                writer,
+                table,
+                TOPIC_SEGMENT,
+                *t_ns,
+                marker,
+                "a marker serializes",
+            )?;
+            (*t_ns, true)
+        }
+        Entry::Event { t_ns, event } => {
+            write_event(writer, table, *t_ns, event)?;
+            (*t_ns, event.level == EventLevel::Abort)
+        }
+        Entry::OperatingPoint { t_ns, point } => {
+            write_bench_json(
+                writer,
+                table,
+                TOPIC_OPERATING_POINT,
+                *t_ns,
+                point,
+                "a point serializes",
+            )?;
+            (*t_ns, true)
+        }
+        Entry::SupplyLimit { t_ns, limit } => {
+            write_bench_json(
+                writer,
+                table,
+                TOPIC_SUPPLY_LIMIT,
+                *t_ns,
+                limit,
+                "a supply limit serializes",
+            )?;
+            (*t_ns, true)
+        }
+        Entry::StandardTest { t_ns, reading } => {
+            write_bench_json(
+                writer,
+                table,
+                TOPIC_STANDARD_TEST,
+                *t_ns,
+                reading,
+                "a standard-test reading serializes",
+            )?;
+            (*t_ns, true)
+        }
+        Entry::Result { t_ns, report } => {
+            write_bench_json(
+                writer,
+                table,
+                TOPIC_RESULT,
+                *t_ns,
+                report,
+                "a JSON value serializes",
+            )?;
+            (*t_ns, true)
+        }
     })
 }
 

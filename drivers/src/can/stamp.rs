@@ -115,9 +115,7 @@ impl PeriodicStamp {
             lost,
         }
     }
-}
 
-impl PeriodicStamp {
     /// Whether a frame lagging the grid by `lag` ns completes a run of
     /// [`LAG_FRAMES`] at a steady lag beyond [`LAG_PERIODS`] (see the
     /// module docs); the run starts again after it.
@@ -174,8 +172,8 @@ mod tests {
     }
 
     /// Frames at 500 Hz, the ones of `sent` (slot numbers) only, each
-    /// arriving `latency` after its send plus `extra` (by slot); the
-    /// stamps and the losses counted.
+    /// arriving 0.3 ms after its send plus `extra` (by slot); the stamps
+    /// and the losses counted.
     fn stamp(sent: &[u64], extra: impl Fn(u64) -> u64) -> (Vec<u64>, u64) {
         let mut s = PeriodicStamp::new(500.0, 125.0);
         let mut lost = 0;
