@@ -1,12 +1,14 @@
 //! Rig and test configuration: what every machine's configuration shares
-//! (errors naming file, line and key; `[limits]`, `[supervisor]`,
-//! `[records]`; Modbus and CAN links; sensor channels) and
+//! ([`CommonConfig`]: the motor, `[limits]`, `[supervisor]`, `[records]`,
+//! the faults; errors naming file, line and key; Modbus and CAN links;
+//! sensor channels) and
 //! [`TestConfig`], the test plan as a tagged enum mapped to its machine.
 //! Each machine's own file format lives with it: the DC machine's
 //! [`Config`] in `machine/dc/config.rs`, the induction machine's in
 //! `machine/im/config.rs`.
 
 mod can;
+mod common;
 mod error;
 mod fault;
 mod key_line;
@@ -18,6 +20,8 @@ mod supervision;
 mod test_config;
 
 pub use can::{CanLink, CanTransport};
+pub use common::CommonConfig;
+pub(crate) use common::{RawCommon, RawMotor};
 pub use error::ConfigError;
 pub(crate) use error::{bounded, invalid, syntax_error};
 pub(crate) use fault::{validate_faults, FaultRig, RawFault};

@@ -4,7 +4,9 @@
 //!
 //! - [`config`]: rig and test configuration (TOML), validated;
 //!   [`config::TestConfig`] names the test plan ([`config::PlanKind`],
-//!   `test.plan`), for the CLI, the daemon and the tests alike.
+//!   `test.plan`), for the CLI, the daemon and the tests alike; the keys
+//!   every machine's file shares (motor, sample rate, limits, supervisor,
+//!   records, faults) are validated once into a [`config::CommonConfig`].
 //! - [`contract`]: the data contract's serde types (the identification
 //!   report, the diagnosis, the version); depends on nothing else here.
 //! - [`bounds`]: the practical bounds on every number from outside that

@@ -84,7 +84,8 @@ impl Session {
     /// clock.
     pub async fn open(machine: Box<dyn Machine>, realtime: bool) -> Result<Session, SessionError> {
         let mut rig = machine.open_rig(realtime).await?;
-        if let Some(plan) = machine.faults().filter(|p| !p.is_empty()) {
+        let plan = &machine.common().faults;
+        if !plan.is_empty() {
             rig = crate::rig::fault::inject(rig, plan)?;
         }
         // The rig's buses, then the links its sensors read themselves.
@@ -123,10 +124,10 @@ impl Session {
         TestMeta {
             schema_version: SCHEMA_VERSION.to_string(),
             kind: self.machine.kind(),
-            motor_id: self.machine.motor_id().to_string(),
+            motor_id: self.machine.common().motor_id.clone(),
             started_at,
-            nameplate: self.machine.nameplate().clone(),
-            config: self.machine.config_text().to_string(),
+            nameplate: self.machine.common().nameplate.clone(),
+            config: self.machine.common().text.clone(),
         }
     }
 
@@ -185,7 +186,8 @@ impl Session {
             keep_alive,
             links,
         } = self;
-        let (bus_loss_s, rate_hz) = machine.bus_loss_and_rate();
+        let common = machine.common();
+        let (bus_loss_s, rate_hz) = (common.supervision.bus_loss_timeout, common.sample_rate_hz);
         let supervised = supervise_stages(
             stages.into_iter().zip(bounds.iter().copied()).collect(),
             sensors,
@@ -629,7 +631,7 @@ pub async fn commission(
     let session = Session::open(machine, opts.realtime).await?;
     let start = crate::record::TestStart::now();
     let stem = record_name(
-        session.machine().motor_id(),
+        &session.machine().common().motor_id,
         &start.rfc3339_seconds(),
         |s| dir.join(format!("{s}.mcap")).exists(),
     );

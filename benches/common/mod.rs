@@ -49,7 +49,8 @@ fn record_of(levels: Vec<f64>, coastdown: bool) -> Record {
         .build()
         .expect("a runtime");
     runtime.block_on(async {
-        let (mut stage, mut sensors) = sim_rig(sim, cfg.sample_rate_hz, false).expect("the rig");
+        let (mut stage, mut sensors) =
+            sim_rig(sim, cfg.common.sample_rate_hz, false).expect("the rig");
         let mut sink = RecordSink::new(
             None,
             None,

@@ -26,7 +26,7 @@ use motorbench_drivers::{ChannelInfo, SampleBatch};
 use serde::Serialize;
 
 use super::{SpeedFromEncoder, Trip, WindingTemperature};
-use crate::config::{Config, Limits, Supervision};
+use crate::config::{CommonConfig, Limits, Supervision};
 
 /// A winding heating budget: the excess heat `∫ max(0, (I/I_rated)² − 1) dt`,
 /// forgetting with a recovery time constant, may not pass `max_i2t_s` (the
@@ -54,12 +54,13 @@ pub struct SafetyRules {
 }
 
 impl SafetyRules {
-    /// The rules of a DC test: its `[limits]` and `[supervisor]` section.
-    pub fn dc(cfg: &Config) -> SafetyRules {
+    /// The rules of a test configured by `common` (its `[limits]` and
+    /// `[supervisor]` section), with the plan's heating budget if any.
+    pub fn of(common: &CommonConfig, heating: Option<HeatingBudget>) -> SafetyRules {
         SafetyRules {
-            limits: cfg.limits,
-            supervision: cfg.supervision.clone(),
-            heating: None,
+            limits: common.limits,
+            supervision: common.supervision.clone(),
+            heating,
         }
     }
 
@@ -540,6 +541,7 @@ impl SafetyMonitor {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::config::Config;
     use motorbench_drivers::Sample;
 
     fn info(q: &str) -> ChannelInfo {
@@ -560,7 +562,14 @@ mod tests {
             info("encoder_count"),
             info("emergency_stop"),
         ];
-        SafetyMonitor::new(cfg.limits, cfg.supervision, &channels, Some(1000.0), 0.0).unwrap()
+        SafetyMonitor::new(
+            cfg.common.limits,
+            cfg.common.supervision,
+            &channels,
+            Some(1000.0),
+            0.0,
+        )
+        .unwrap()
     }
 
     fn batch(t_ms: u64, values: &[(usize, f64)]) -> SampleBatch {
@@ -618,23 +627,23 @@ mod tests {
         assert_eq!(m.check(&all(4, 0.0, 0.0, 160.0)), Ok(()));
         assert_eq!(m.check(&all(8, 0.0, 0.0, 200.0)), Ok(()));
         assert_eq!(m.check(&all(12, 0.0, 0.0, 360.0)), Ok(()));
-        let mut m = monitor(|c| c.supervision.max_power = 500.0);
+        let mut m = monitor(|c| c.common.supervision.max_power = 500.0);
         assert_eq!(kind(&mut m, all(0, 250.0, 2.5, 0.0)), "power");
     }
 
     #[test]
     fn emergency_stop_input_trips() {
-        let mut m = monitor(|c| c.supervision.estop_channel = Some("emergency_stop".into()));
+        let mut m = monitor(|c| c.common.supervision.estop_channel = Some("emergency_stop".into()));
         m.check(&all(0, 0.0, 0.0, 0.0)).unwrap();
         let e = m.check(&batch(1, &[(0, 0.0), (1, 0.0), (2, 0.0), (3, 1.0)]));
         assert!(matches!(e, Err(StopCause::EmergencyStop { .. })), "{e:?}");
         assert!(e.unwrap_err().latches());
         // A configured input the rig does not have is refused up front.
         let mut cfg = Config::embedded_default();
-        cfg.supervision.estop_channel = Some("estop".into());
+        cfg.common.supervision.estop_channel = Some("estop".into());
         let e = SafetyMonitor::new(
-            cfg.limits,
-            cfg.supervision,
+            cfg.common.limits,
+            cfg.common.supervision,
             &[info("armature_current")],
             None,
             0.0,
@@ -654,7 +663,7 @@ mod tests {
 
     #[test]
     fn a_silent_channel_trips_after_the_stale_timeout() {
-        let mut m = monitor(|c| c.supervision.stale_timeout = 0.010);
+        let mut m = monitor(|c| c.common.supervision.stale_timeout = 0.010);
         m.check(&all(0, 0.0, 0.0, 0.0)).unwrap();
         // The current channel stops; the others go on.
         for t in 1..=10 {
@@ -728,7 +737,7 @@ mod tests {
         // Fast thermal model: τ = 10 s, rated 1.1 A → 80 K; 3 A is within
         // the current limit but heats the winding to 40 + 595 °C in steady
         // state, crossing 130 °C after τ·ln(595/(595−90)) ≈ 1.64 s.
-        let mut m = monitor(|c| c.supervision.thermal.time_constant = 10.0);
+        let mut m = monitor(|c| c.common.supervision.thermal.time_constant = 10.0);
         let mut tripped_at = None;
         for ms in 0..5000 {
             match m.check(&all(ms, 100.0, 3.0, 0.0)) {

@@ -29,14 +29,14 @@ pub async fn probe(args: ProbeArgs) -> Result<(), Failure> {
     eprintln!(
         "motorbench: probing {} ({}){}",
         cfg.describe(),
-        cfg.source(),
+        cfg.common().source,
         match (actuate, cfg.stages().len()) {
             (false, _) => ", reading only",
             (true, 1) => ", with the power stage at a harmless set point",
             (true, _) => ", with each power stage in turn at a harmless set point",
         }
     );
-    let max_current = cfg.limits().max_current;
+    let max_current = cfg.common().limits.max_current;
     let machine = cfg.into_machine();
     let mut rig = machine.open_rig(false).await.map_err(Failure::runtime)?;
     for s in &rig.stages {

@@ -257,13 +257,13 @@ mod tests {
         )
         .unwrap();
         let default = Config::embedded_default();
-        assert_eq!(written.supervision, default.supervision);
-        assert_eq!(written.retention, default.retention);
-        assert_eq!(written.limits, default.limits);
-        let rated = default.supervision.thermal.rated_current;
+        assert_eq!(written.common.supervision, default.common.supervision);
+        assert_eq!(written.common.retention, default.common.retention);
+        assert_eq!(written.common.limits, default.common.limits);
+        let rated = default.common.supervision.thermal.rated_current;
         assert_eq!(
-            super::Supervision::defaults(&default.limits, rated),
-            default.supervision
+            super::Supervision::defaults(&default.common.limits, rated),
+            default.common.supervision
         );
     }
 }

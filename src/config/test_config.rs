@@ -18,7 +18,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use super::{invalid, syntax_error, Config, ConfigError, Limits, Retention, Supervision};
+use super::{invalid, syntax_error, CommonConfig, Config, ConfigError};
 use crate::excerpt::quoted;
 use crate::machine::im::ImRunConfig;
 use crate::machine::Machine;
@@ -162,19 +162,12 @@ impl TestConfig {
         self.plan().machine()
     }
 
-    /// The motor under test.
-    pub fn motor_id(&self) -> &str {
+    /// What every test configuration holds: the file, the motor, the
+    /// sample rate, limits, supervision, retention, faults.
+    pub fn common(&self) -> &CommonConfig {
         match self {
-            TestConfig::Dc(c) => &c.motor_id,
-            TestConfig::Im(c) => &c.motor_id,
-        }
-    }
-
-    /// Where the configuration came from.
-    pub fn source(&self) -> &str {
-        match self {
-            TestConfig::Dc(c) => &c.source,
-            TestConfig::Im(c) => &c.source,
+            TestConfig::Dc(c) => &c.common,
+            TestConfig::Im(c) => &c.common,
         }
     }
 
@@ -195,30 +188,6 @@ impl TestConfig {
                 vec!["supply", "dynamometer", "dc_source"]
             }
             TestConfig::Im(_) => vec!["supply", "dynamometer"],
-        }
-    }
-
-    /// The test's limits.
-    pub fn limits(&self) -> &Limits {
-        match self {
-            TestConfig::Dc(c) => &c.limits,
-            TestConfig::Im(c) => &c.limits,
-        }
-    }
-
-    /// What the safety supervisor enforces beyond the limits.
-    pub fn supervision(&self) -> &Supervision {
-        match self {
-            TestConfig::Dc(c) => &c.supervision,
-            TestConfig::Im(c) => &c.supervision,
-        }
-    }
-
-    /// How long the rig's records are kept.
-    pub fn retention(&self) -> Retention {
-        match self {
-            TestConfig::Dc(c) => c.retention,
-            TestConfig::Im(c) => c.retention,
         }
     }
 }

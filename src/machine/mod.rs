@@ -35,7 +35,7 @@ use async_trait::async_trait;
 use motorbench_drivers::{ChannelInfo, LinkHealth, PowerStage, SensorStream};
 
 use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
-use crate::config::{FaultPlan, Retention};
+use crate::config::CommonConfig;
 use crate::diagnose::{attach_diagnosis, ResidualPlot};
 use crate::record::{ChannelSpec, Record, SegmentKind};
 use crate::report::IdentificationReport;
@@ -126,22 +126,17 @@ pub trait Analysis: Send {
 pub trait Machine: Send + Sync {
     /// The record's kind (the contract's `kind`).
     fn kind(&self) -> SegmentKind;
-    /// The motor's id.
-    fn motor_id(&self) -> &str;
-    /// The contract's nameplate.
-    fn nameplate(&self) -> &serde_json::Value;
-    /// The configuration's text, recorded in the record's metadata.
-    fn config_text(&self) -> &str;
+    /// What every test configuration holds: the file and its text
+    /// (recorded in the record's metadata), the motor's id and nameplate,
+    /// the sample rate, limits, supervision, retention, the faults it
+    /// injects.
+    fn common(&self) -> &CommonConfig;
     /// The test and its rig for a person: "`motor` on `rig` (`file`)".
     fn describe(&self) -> String;
     /// The plan for a person, one line.
     fn plan_summary(&self) -> String;
     /// The checks every batch of this test must pass.
     fn safety_rules(&self) -> SafetyRules;
-    /// The configured bus-loss timeout, s, and the sample rate, Hz.
-    fn bus_loss_and_rate(&self) -> (f64, f64);
-    /// The daemon's retention limits for this rig's records.
-    fn retention(&self) -> Retention;
     /// How long the plan's segments take.
     fn durations(&self) -> PlanDurations;
     /// The record's channels: the sensors', the derived speed, and one
@@ -159,11 +154,6 @@ pub trait Machine: Send + Sync {
         progress: &dyn Progress,
         stops: StopPath<'_>,
     ) -> Result<Outcome, BenchError>;
-    /// The faults the configuration injects (`[[fault]]`), none by
-    /// default.
-    fn faults(&self) -> Option<&FaultPlan> {
-        None
-    }
     /// The analysis of a record this test made (CPU work: call it off the
     /// reactor); `truth` is the simulated machine.
     fn analyser(&self, truth: Option<Truth>) -> Analyser;

@@ -274,7 +274,7 @@ pub async fn prepare(
     // servers alive for as long as the session holds them.
     let session = Session::open(machine, true).await?;
     let m = session.machine();
-    let motor_id = m.motor_id().to_string();
+    let motor_id = m.common().motor_id.clone();
     let kind = m.kind();
     let plan = m.plan_summary();
     let now = SystemTime::now();
@@ -382,7 +382,7 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
         ending.dir.clone(),
         ending.name.clone(),
     );
-    let retention = recording.machine().retention();
+    let retention = recording.machine().common().retention;
     let RunEnd {
         outcome,
         stop,

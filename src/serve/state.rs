@@ -68,7 +68,7 @@ pub struct Rig {
 impl Rig {
     /// The winding rise now, cooled since the last test, K.
     fn rise_now(rt: &RigRuntime, cfg: &RigConfig) -> f64 {
-        let tau = cfg.supervision().thermal.time_constant;
+        let tau = cfg.common().supervision.thermal.time_constant;
         rt.winding_rise_k * (-rt.winding_at.elapsed().as_secs_f64() / tau).exp()
     }
 }
@@ -187,14 +187,14 @@ impl Daemon {
         }
         let owners: Vec<(String, String)> = rigs
             .iter()
-            .map(|(name, cfg)| (name.clone(), cfg.motor_id().to_string()))
+            .map(|(name, cfg)| (name.clone(), cfg.common().motor_id.clone()))
             .collect();
         for name in index.adopt_orphans(&owners)? {
             let rig = index.get(&name).map_or("", |e| e.rig.as_str());
             tracing::info!("record {name} rebuilt from its file belongs to rig {rig} (its motor)");
         }
         for (name, cfg) in &rigs {
-            index.apply_retention(name, &cfg.retention(), SystemTime::now())?;
+            index.apply_retention(name, &cfg.common().retention, SystemTime::now())?;
         }
         let names: Vec<String> = rigs.iter().map(|(n, _)| n.clone()).collect();
         let latches = Arc::new(LatchStore::open(records, &names));
@@ -271,15 +271,15 @@ impl Daemon {
         };
         let winding_c = match running {
             Some(r) => r.status().values.winding_c,
-            None => rig.cfg.supervision().thermal.ambient + Rig::rise_now(&rt, &rig.cfg),
+            None => rig.cfg.common().supervision.thermal.ambient + Rig::rise_now(&rt, &rig.cfg),
         };
         RigStatus {
             name: rig.name.clone(),
-            motor_id: rig.cfg.motor_id().to_string(),
+            motor_id: rig.cfg.common().motor_id.clone(),
             backend: rig.cfg.describe(),
             machine: rig.cfg.machine().to_string(),
             stages: rig.cfg.stages().iter().map(|s| s.to_string()).collect(),
-            config: rig.cfg.source().to_string(),
+            config: rig.cfg.common().source.clone(),
             state: state.into(),
             running_test: running.map(|r| r.id()),
             trip: rt.latch.clone(),

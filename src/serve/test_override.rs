@@ -17,8 +17,8 @@ pub fn with_test_override(
     cfg: &Config,
     test: &serde_json::Map<String, serde_json::Value>,
 ) -> Result<Config, ConfigError> {
-    let source = format!("{} with the request's [test]", cfg.source);
-    let text = merged_text(&cfg.text, test, &source, &PLAN_KEYS)?;
+    let source = format!("{} with the request's [test]", cfg.common.source);
+    let text = merged_text(&cfg.common.text, test, &source, &PLAN_KEYS)?;
     Config::parse_composed(&source, &text)
 }
 
@@ -29,9 +29,9 @@ pub fn with_im_test_override(
     cfg: &ImRunConfig,
     test: &serde_json::Map<String, serde_json::Value>,
 ) -> Result<ImRunConfig, ConfigError> {
-    let source = format!("{} with the request's [test]", cfg.source);
-    let text = merged_text(&cfg.text, test, &source, &[])?;
-    let dir = std::path::Path::new(&cfg.source)
+    let source = format!("{} with the request's [test]", cfg.common.source);
+    let text = merged_text(&cfg.common.text, test, &source, &[])?;
+    let dir = std::path::Path::new(&cfg.common.source)
         .parent()
         .unwrap_or(std::path::Path::new("."));
     ImRunConfig::parse_composed(&source, dir, &text)
@@ -114,7 +114,11 @@ mod tests {
         );
         assert_eq!(c.settle.hold_s, 0.2);
         assert_eq!(c.settle.window_s, 0.1, "other settle keys kept");
-        assert!(c.text.contains("levels_V = [60, 248]"), "{}", c.text);
+        assert!(
+            c.common.text.contains("levels_V = [60, 248]"),
+            "{}",
+            c.common.text
+        );
     }
 
     #[test]

@@ -52,10 +52,11 @@ pub async fn record(cfg: &Config) -> Record {
     let Backend::Simulated(sim) = &cfg.backend else {
         panic!(
             "{}: a dry run to a record needs a simulated rig",
-            cfg.motor_id
+            cfg.common.motor_id
         )
     };
-    let (mut stage, mut sensors) = sim_rig(sim, cfg.sample_rate_hz, false).expect("a valid motor");
+    let (mut stage, mut sensors) =
+        sim_rig(sim, cfg.common.sample_rate_hz, false).expect("a valid motor");
     let mut sink = RecordSink::new(None, None, record_channels(sensors.channels(), stage.id()));
     let (_tx, rx) = tokio::sync::watch::channel(false);
     let counts_per_rev = f64::from(sim.sensors.encoder_lines) * 4.0;
@@ -71,6 +72,6 @@ pub async fn record(cfg: &Config) -> Record {
     )
     .await
     .expect("the record is written");
-    assert_eq!(outcome, Outcome::Completed, "{}", cfg.motor_id);
+    assert_eq!(outcome, Outcome::Completed, "{}", cfg.common.motor_id);
     sink.into_parts().1
 }

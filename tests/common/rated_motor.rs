@@ -111,8 +111,8 @@ pub fn config_for(motor: &RatedMotor, levels: &[f64], seed: u64, rng: &mut StdRn
     let volts: Vec<f64> = levels.iter().map(|f| f * u).collect();
     let top = volts.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let peak_bound = top / p.ra;
-    cfg.motor_id = format!("random-{:.0}W-{:.0}V", motor.power, u);
-    cfg.nameplate = serde_json::json!({
+    cfg.common.motor_id = format!("random-{:.0}W-{:.0}V", motor.power, u);
+    cfg.common.nameplate = serde_json::json!({
         "power_W": motor.power,
         "voltage_V": u,
         "current_A": motor.current,
@@ -122,20 +122,20 @@ pub fn config_for(motor: &RatedMotor, levels: &[f64], seed: u64, rng: &mut StdRn
         levels: volts,
         coastdown: false,
     };
-    cfg.limits.max_voltage = 1.1 * u;
-    cfg.limits.max_current = 1.25 * peak_bound;
-    cfg.limits.max_speed = 1.5 * top / p.k;
+    cfg.common.limits.max_voltage = 1.1 * u;
+    cfg.common.limits.max_current = 1.25 * peak_bound;
+    cfg.common.limits.max_speed = 1.5 * top / p.k;
     // The `[supervisor]` defaults a file with these limits and this
     // nameplate would get (power limit, winding estimate): `run` checks
     // them too.
-    cfg.supervision = Supervision::defaults(&cfg.limits, motor.current);
+    cfg.common.supervision = Supervision::defaults(&cfg.common.limits, motor.current);
     let Backend::Simulated(sim) = &mut cfg.backend else {
         unreachable!("the embedded default is the simulated rig")
     };
     sim.motor = *p;
     sim.power_stage.max_voltage = 1.2 * u;
     sim.power_stage.slew = 200.0 * u;
-    sim.power_stage.current_limit = 2.0 * cfg.limits.max_current;
+    sim.power_stage.current_limit = 2.0 * cfg.common.limits.max_current;
     let s = &mut sim.sensors;
     s.seed = seed;
     s.voltage_full_scale = 1.5 * u;

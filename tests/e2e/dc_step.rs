@@ -92,7 +92,7 @@ async fn default_run_identifies_the_seed_motor_and_replays_identically() {
     assert_eq!(again.report, live);
     // Where it came from: the motor, the start, the record and every file
     // written beside it, the version.
-    assert_eq!(provenance.motor_id, cfg.motor_id);
+    assert_eq!(provenance.motor_id, cfg.common.motor_id);
     let meta = replayed.meta.as_ref().unwrap();
     assert_eq!(provenance.started_at, meta.started_at);
     let dir = done.mcap_path.parent().unwrap();

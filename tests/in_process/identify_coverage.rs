@@ -48,7 +48,7 @@ async fn output_error_intervals_cover_the_truth_for_random_motors() {
             ..OutputErrorOptions::default()
         };
         let fit = output_error(&record, None, &options)
-            .unwrap_or_else(|e| panic!("motor {n} ({}): {e}", cfg.motor_id));
+            .unwrap_or_else(|e| panic!("motor {n} ({}): {e}", cfg.common.motor_id));
         let truth = values(&motor.params);
         let got = values(&fit.params);
         let u = &fit.uncertainty;

@@ -51,12 +51,12 @@ fn run(p: DcParams, v: f64, i: f64) -> motorbench::identify::Identification {
     sim.sensors.voltage_full_scale = 2.0 * v;
     sim.sensors.current_full_scale = 50.0 * i;
     sim.sensors.encoder_lines = 1 << 22;
-    cfg.limits.max_voltage = 2.0 * v;
-    cfg.limits.max_current = 1e6;
-    cfg.limits.max_speed = 1e6;
+    cfg.common.limits.max_voltage = 2.0 * v;
+    cfg.common.limits.max_current = 1e6;
+    cfg.common.limits.max_speed = 1e6;
     // The `[supervisor]` defaults that follow from these limits (the
     // power limit out of the way too), the winding rated at `i`.
-    cfg.supervision = Supervision::defaults(&cfg.limits, i);
+    cfg.common.supervision = Supervision::defaults(&cfg.common.limits, i);
     cfg.plan = Plan::DcStep {
         levels: [0.3, 1.0, 0.5, 0.8, 0.4].iter().map(|f| f * v).collect(),
         coastdown: false,

@@ -23,7 +23,7 @@ fn dc_config(max_speed: f64) -> Config {
         levels: vec![60.0, 248.0],
         coastdown: false,
     };
-    cfg.limits.max_speed = max_speed;
+    cfg.common.limits.max_speed = max_speed;
     cfg
 }
 
@@ -84,7 +84,9 @@ async fn an_im_limit_trip_under_run_goes_through_the_supervisor() {
 #[tokio::test]
 async fn an_operator_stop_under_run_goes_through_the_supervisor() {
     let done = run(
-        Box::new(dc_config(Config::embedded_default().limits.max_speed)),
+        Box::new(dc_config(
+            Config::embedded_default().common.limits.max_speed,
+        )),
         true,
     )
     .await;
@@ -102,7 +104,9 @@ async fn a_virtual_clock_rig_runs_to_the_end_under_the_supervisor() {
     // Both machines' whole plans, read as fast as the CPU allows: the
     // supervisor reads no faster than the sequencer takes batches.
     let dc = run(
-        Box::new(dc_config(Config::embedded_default().limits.max_speed)),
+        Box::new(dc_config(
+            Config::embedded_default().common.limits.max_speed,
+        )),
         false,
     )
     .await;

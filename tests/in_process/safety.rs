@@ -60,7 +60,7 @@ struct Ran {
 /// plant; `fail_after` batches the sensors fail; `hide` channels dropped.
 async fn run(cfg: &Config, fail_after: Option<usize>, hide_encoder: bool, stop: bool) -> Ran {
     let sim = cfg.backend.simulated().expect("a simulated rig");
-    let (mut stage, inner) = sim_rig(sim, cfg.sample_rate_hz, false).unwrap();
+    let (mut stage, inner) = sim_rig(sim, cfg.common.sample_rate_hz, false).unwrap();
     let mut channels = inner.channels().to_vec();
     if hide_encoder {
         channels.retain(|c| c.quantity != "encoder_count");
@@ -111,7 +111,7 @@ fn abort_event(record: &Record) -> (u64, String) {
 
 #[tokio::test]
 async fn speed_limit_trips_on_the_monitors_estimate_and_the_stage_is_safe() {
-    let cfg = config(|c| c.limits.max_speed = 100.0);
+    let cfg = config(|c| c.common.limits.max_speed = 100.0);
     let ran = run(&cfg, None, false, false).await;
     let Ok(Outcome::Aborted { reason }) = ran.outcome else {
         panic!("expected an abort")
@@ -139,7 +139,7 @@ async fn speed_limit_trips_on_the_monitors_estimate_and_the_stage_is_safe() {
     let k = seg.time.len() - 1;
     assert_eq!((seg.time[k] * 1e9).round() as u64, t_abort);
     assert!(seg.speed[k].abs() > 100.0, "{}", seg.speed[k]);
-    let periods = (seg.time[k] - seg.time[first]) * cfg.sample_rate_hz;
+    let periods = (seg.time[k] - seg.time[first]) * cfg.common.sample_rate_hz;
     assert!(periods.round() <= 8.0, "tripped {periods} periods late");
     assert!(
         seg.label.ends_with("248 V"),
@@ -153,7 +153,7 @@ async fn current_is_held_by_the_supply_below_the_trip_limit() {
     // A 1.2 A trip limit: the supply limits at 90 % of it, so the 1.3 A
     // start-up peak is held by the supply and the test completes.
     let cfg = config(|c| {
-        c.limits.max_current = 1.2;
+        c.common.limits.max_current = 1.2;
         c.plan = Plan::DcStep {
             levels: vec![60.0, 70.0],
             coastdown: false,

@@ -198,7 +198,7 @@ async fn motorbench_runs_im_sweep_checks_the_supervisors_power_limit() {
     // The sweep draws kilowatts at 400 V: a 1 kW `[supervisor]` power
     // limit ends it, as it would under the daemon.
     let r = im_sweep(
-        |c| c.supervision.max_power = 1000.0,
+        |c| c.common.supervision.max_power = 1000.0,
         usize::MAX,
         Fault::Silent,
     )
@@ -226,7 +226,7 @@ async fn dc_test(edit: impl FnOnce(&mut Config), after: usize, fault: Fault) -> 
     };
     edit(&mut cfg);
     let sim = cfg.backend.simulated().expect("a simulated rig");
-    let (mut stage, inner) = sim_rig(sim, cfg.sample_rate_hz, true).unwrap();
+    let (mut stage, inner) = sim_rig(sim, cfg.common.sample_rate_hz, true).unwrap();
     let (mut sensors, stop) = failing(inner, after, fault);
     let stopped_at = sensors.stopped_at.clone();
     let mut sink = RecordSink::new(
@@ -290,7 +290,7 @@ async fn motorbench_runs_dc_test_checks_the_supervisors_power_limit() {
     // 248 V at the no-load current is tens of watts: a 20 W `[supervisor]`
     // power limit ends the test, as it would under the daemon.
     let r = dc_test(
-        |c| c.supervision.max_power = 20.0,
+        |c| c.common.supervision.max_power = 20.0,
         usize::MAX,
         Fault::Silent,
     )

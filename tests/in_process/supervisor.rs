@@ -116,7 +116,7 @@ async fn run(
     stop_at: Option<(f64, StopCause)>,
 ) -> Ran {
     let sim = cfg.backend.simulated().expect("a simulated rig");
-    let (supply, inner) = sim_rig(sim, cfg.sample_rate_hz, true).unwrap();
+    let (supply, inner) = sim_rig(sim, cfg.common.sample_rate_hz, true).unwrap();
     let channels = inner.channels().to_vec();
     let sensors: Box<dyn SensorStream> = match sensors {
         Sensors::Sim => Box::new(inner),
@@ -132,15 +132,24 @@ async fn run(
     };
     let counts_per_rev = 4.0 * f64::from(sim.sensors.encoder_lines);
     let monitor = SafetyMonitor::new(
-        cfg.limits,
-        cfg.supervision.clone(),
+        cfg.common.limits,
+        cfg.common.supervision.clone(),
         &channels,
         Some(counts_per_rev),
         0.0,
     )
     .unwrap();
-    let timing = SupervisorTiming::new(cfg.supervision.bus_loss_timeout, cfg.sample_rate_hz);
-    let mut s = supervise(stage, sensors, monitor, timing, cfg.limits.max_voltage);
+    let timing = SupervisorTiming::new(
+        cfg.common.supervision.bus_loss_timeout,
+        cfg.common.sample_rate_hz,
+    );
+    let mut s = supervise(
+        stage,
+        sensors,
+        monitor,
+        timing,
+        cfg.common.limits.max_voltage,
+    );
     let handle = s.handle.clone();
     if let Some((at, cause)) = stop_at {
         let h = handle.clone();
@@ -243,7 +252,7 @@ async fn a_limit_only_the_supervisor_knows_trips_the_test() {
     // The 60 V → 248 V step draws ~1 kW for a moment; 500 W is a limit of
     // the supervisor only (the sequencer checks voltage, current, speed).
     let ran = run(
-        &config(|c| c.supervision.max_power = 500.0),
+        &config(|c| c.common.supervision.max_power = 500.0),
         Sensors::Sim,
         false,
         None,
@@ -270,7 +279,7 @@ async fn a_speed_limit_the_sequencer_sees_first_latches_through_the_supervisor()
     // row over four periods, so the sequencer sees the rising 60 V → 248 V
     // shaft cross 100 rad/s first. It hands the trip to the supervisor.
     let ran = run(
-        &config(|c| c.limits.max_speed = 100.0),
+        &config(|c| c.common.limits.max_speed = 100.0),
         Sensors::Sim,
         false,
         None,
@@ -303,7 +312,7 @@ async fn a_limit_both_checks_see_in_one_batch_leaves_the_rig_shown_safe() {
     // trips the supervisor and the sequencer on the same batch: the
     // record still goes on to the first sample read in the safe state.
     let ran = run(
-        &config(|c| c.limits.max_voltage = 248.0),
+        &config(|c| c.common.limits.max_voltage = 248.0),
         Sensors::Sim,
         false,
         None,
@@ -358,7 +367,7 @@ async fn failed_safe_state_stops_the_heartbeat_so_the_supply_makes_itself_safe()
     // The supervisor trips (power), its safe-state command is refused: it
     // is no longer healthy, stops petting, and the supply's own heartbeat
     // timeout switches the output off.
-    let cfg = config(|c| c.supervision.max_power = 500.0);
+    let cfg = config(|c| c.common.supervision.max_power = 500.0);
     let sim = cfg.backend.simulated().expect("a simulated rig");
     let ran = run(&cfg, Sensors::Sim, true, None).await;
     let stop = ran.stop.unwrap();

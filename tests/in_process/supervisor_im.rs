@@ -68,7 +68,7 @@ struct Ran {
 /// current limit at `max_current`; `stop_at_s` asks for `cause` once the
 /// test time passes it.
 async fn run(max_current: f64, stop_at: Option<(f64, StopCause)>) -> Ran {
-    run_with(|cfg| cfg.limits.max_current = max_current, stop_at).await
+    run_with(|cfg| cfg.common.limits.max_current = max_current, stop_at).await
 }
 
 /// [`run`] with the configuration edited by `edit`.
@@ -83,8 +83,8 @@ async fn run_with(edit: impl FnOnce(&mut ImRunConfig), stop_at: Option<(f64, Sto
     let sensors = sensors.paced();
     let channels = motorbench_drivers::SensorStream::channels(&sensors).to_vec();
     let monitor = SafetyMonitor::new(
-        cfg.limits,
-        cfg.supervision.clone(),
+        cfg.common.limits,
+        cfg.common.supervision.clone(),
         &channels,
         Some(cfg.plan.encoder_counts_per_rev),
         0.0,
@@ -105,16 +105,19 @@ async fn run_with(edit: impl FnOnce(&mut ImRunConfig), stop_at: Option<(f64, Sto
         vec![
             (
                 noting(Box::new(vfd.clone()), "supply"),
-                cfg.limits.max_voltage,
+                cfg.common.limits.max_voltage,
             ),
             (
                 noting(Box::new(dyno.clone()), "dynamometer"),
-                cfg.limits.max_speed,
+                cfg.common.limits.max_speed,
             ),
         ],
         Box::new(sensors),
         monitor,
-        SupervisorTiming::new(cfg.supervision.bus_loss_timeout, cfg.sample_rate_hz),
+        SupervisorTiming::new(
+            cfg.common.supervision.bus_loss_timeout,
+            cfg.common.sample_rate_hz,
+        ),
     );
     handle_slot.set(s.handle.clone()).unwrap();
     let handle = s.handle.clone();

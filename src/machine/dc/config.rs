@@ -10,9 +10,9 @@ use serde::Deserialize;
 
 use crate::bounds;
 use crate::config::{
-    bounded, invalid, modbus, syntax_error, validate_faults, CanLink, CanTransport, ConfigError,
-    FaultPlan, FaultRig, Limits, ModbusRig, RawFault, RawRetention, RawSupervisor, Retention,
-    SensorLink, SimulatedTransport, Supervision, DEFAULT_CONFIG, DEFAULT_CONFIG_NAME,
+    bounded, invalid, modbus, syntax_error, CanLink, CanTransport, CommonConfig, ConfigError,
+    FaultRig, Limits, ModbusRig, RawCommon, RawFault, RawMotor, RawRetention, RawSupervisor,
+    SensorLink, SimulatedTransport, DEFAULT_CONFIG, DEFAULT_CONFIG_NAME,
 };
 use crate::excerpt::quoted;
 use crate::model::DcParams;
@@ -31,14 +31,6 @@ struct RawConfig {
     records: RawRetention,
     #[serde(default)]
     fault: Vec<RawFault>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawMotor {
-    id: String,
-    #[serde(default)]
-    nameplate: toml::Table,
 }
 
 #[derive(Debug, Deserialize)]
@@ -225,30 +217,15 @@ pub enum Plan {
 /// A validated configuration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Config {
-    /// Where it came from (a path, or the embedded default's name).
-    pub source: String,
-    /// The text as given (recorded in the MCAP metadata).
-    pub text: String,
-    /// Motor id.
-    pub motor_id: String,
-    /// Nameplate as a JSON object.
-    pub nameplate: serde_json::Value,
+    /// What every test configuration holds: the file, the motor, the
+    /// sample rate, limits, supervision, retention, faults.
+    pub common: CommonConfig,
     /// Rig backend.
     pub backend: Backend,
-    /// Samples per second.
-    pub sample_rate_hz: f64,
-    /// Test limits.
-    pub limits: Limits,
     /// The plan.
     pub plan: Plan,
     /// Settle detection.
     pub settle: Settle,
-    /// What the safety supervisor enforces beyond `limits`.
-    pub supervision: Supervision,
-    /// How long the daemon keeps this rig's records.
-    pub retention: Retention,
-    /// The faults injected on purpose (`[[fault]]`); empty on a real test.
-    pub faults: FaultPlan,
 }
 
 impl Config {
@@ -286,12 +263,6 @@ impl Config {
                 Err(invalid(key, format!("{v} must be a finite number > 0")))
             }
         };
-
-        if raw.motor.id.trim().is_empty() {
-            return Err(invalid("motor.id", "must not be empty".into()));
-        }
-        let nameplate = serde_json::to_value(&raw.motor.nameplate)
-            .map_err(|e| invalid("motor.nameplate", e.to_string()))?;
 
         bounded(
             source,
@@ -529,8 +500,6 @@ impl Config {
             bounds::test_length(longest, fastest),
         )?;
 
-        let supervision = raw.supervisor.validate(source, &raw.limits, &nameplate)?;
-        let retention = raw.records.validate(source)?;
         // The served devices: the supply, the sensors (a streaming DAQ or
         // a Modbus one) and the CAN encoder where it is simulated behind
         // an SLCAN adapter.
@@ -556,9 +525,17 @@ impl Config {
                 can.push("encoder");
             }
         }
-        let faults = validate_faults(
+        let common = RawCommon {
+            motor: raw.motor,
+            supervisor: raw.supervisor,
+            records: raw.records,
+            fault: raw.fault,
+        }
+        .validate(
             source,
-            raw.fault,
+            text,
+            raw.rig.sample_rate_hz,
+            raw.limits,
             FaultRig {
                 served: &served,
                 rtu,
@@ -570,18 +547,10 @@ impl Config {
         )?;
 
         Ok(Config {
-            source: source.to_string(),
-            text: text.to_string(),
-            motor_id: raw.motor.id,
-            nameplate,
+            common,
             backend,
-            sample_rate_hz: raw.rig.sample_rate_hz,
-            limits: raw.limits,
             plan,
             settle: st,
-            supervision,
-            retention,
-            faults,
         })
     }
 }
@@ -604,7 +573,7 @@ mod tests {
         let c = Config::embedded_default();
         let sim = c.backend.simulated().unwrap();
         assert_eq!(sim.motor, DcParams::SEED_TABLE4_MOMENTS);
-        assert_eq!(c.nameplate["power_W"], 180);
+        assert_eq!(c.common.nameplate["power_W"], 180);
         assert!(
             matches!(&c.plan, Plan::DcStep { levels, coastdown: true } if levels[0] == 60.0 && levels[1] == 248.0)
         );
@@ -754,29 +723,29 @@ mod tests {
     #[test]
     fn supervisor_and_records_sections_default_and_validate() {
         let c = Config::embedded_default();
-        assert_eq!(c.supervision.max_power, 280.0 * 6.0);
+        assert_eq!(c.common.supervision.max_power, 280.0 * 6.0);
         assert_eq!(
-            c.supervision.thermal.rated_current, 1.1,
+            c.common.supervision.thermal.rated_current, 1.1,
             "from the nameplate"
         );
-        assert_eq!(c.supervision.stale_timeout, DEFAULT_STALE_TIMEOUT_S);
-        assert_eq!(c.supervision.estop_channel, None);
-        assert_eq!(c.retention.max_total_bytes, 20 << 30);
-        assert_eq!(c.retention.max_age_s, None);
+        assert_eq!(c.common.supervision.stale_timeout, DEFAULT_STALE_TIMEOUT_S);
+        assert_eq!(c.common.supervision.estop_channel, None);
+        assert_eq!(c.common.retention.max_total_bytes, 20 << 30);
+        assert_eq!(c.common.retention.max_age_s, None);
 
         let extra = "[supervisor]\nmax_power_W = 900\nestop_channel = \"emergency_stop\"\n\
             [supervisor.thermal]\ntime_constant_s = 60\nmax_winding_C = 100\n\
             [records]\nmax_total_GiB = 0.5\nmax_age_days = 30\n";
         let c = Config::parse("rig.toml", &format!("{DEFAULT_CONFIG}\n{extra}")).unwrap();
-        assert_eq!(c.supervision.max_power, 900.0);
+        assert_eq!(c.common.supervision.max_power, 900.0);
         assert_eq!(
-            c.supervision.estop_channel.as_deref(),
+            c.common.supervision.estop_channel.as_deref(),
             Some("emergency_stop")
         );
-        assert_eq!(c.supervision.thermal.time_constant, 60.0);
-        assert_eq!(c.supervision.thermal.max_winding, 100.0);
-        assert_eq!(c.retention.max_total_bytes, 1 << 29);
-        assert_eq!(c.retention.max_age_s, Some(30.0 * 86_400.0));
+        assert_eq!(c.common.supervision.thermal.time_constant, 60.0);
+        assert_eq!(c.common.supervision.thermal.max_winding, 100.0);
+        assert_eq!(c.common.retention.max_total_bytes, 1 << 29);
+        assert_eq!(c.common.retention.max_age_s, Some(30.0 * 86_400.0));
 
         let bad = |extra: &str| {
             Config::parse("rig.toml", &format!("{DEFAULT_CONFIG}\n{extra}"))

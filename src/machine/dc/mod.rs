@@ -49,7 +49,7 @@ use super::{
     RigStage, Truth,
 };
 use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
-use crate::config::{Config, Plan, Retention};
+use crate::config::{CommonConfig, Config, Plan};
 use crate::identify::{identify_dc, Identification};
 use crate::model::DcParams;
 use crate::record::{ChannelSpec, Record, SegmentKind};
@@ -104,24 +104,16 @@ impl Machine for Config {
         }
     }
 
-    fn motor_id(&self) -> &str {
-        &self.motor_id
-    }
-
-    fn nameplate(&self) -> &serde_json::Value {
-        &self.nameplate
-    }
-
-    fn config_text(&self) -> &str {
-        &self.text
+    fn common(&self) -> &CommonConfig {
+        &self.common
     }
 
     fn describe(&self) -> String {
         format!(
             "{} on {} ({})",
-            self.motor_id,
+            self.common.motor_id,
             self.backend.describe(),
-            self.source
+            self.common.source
         )
     }
 
@@ -137,19 +129,7 @@ impl Machine for Config {
     }
 
     fn safety_rules(&self) -> SafetyRules {
-        SafetyRules::dc(self)
-    }
-
-    fn bus_loss_and_rate(&self) -> (f64, f64) {
-        (self.supervision.bus_loss_timeout, self.sample_rate_hz)
-    }
-
-    fn faults(&self) -> Option<&crate::config::FaultPlan> {
-        Some(&self.faults)
-    }
-
-    fn retention(&self) -> Retention {
-        self.retention
+        SafetyRules::of(&self.common, None)
     }
 
     fn durations(&self) -> PlanDurations {
@@ -178,7 +158,7 @@ impl Machine for Config {
             stages: vec![RigStage {
                 name: "power stage",
                 stage: rig.stage,
-                max_setpoint: self.limits.max_voltage,
+                max_setpoint: self.common.limits.max_voltage,
             }],
             sensors: rig.sensors,
             counts_per_rev: rig.counts_per_rev,

@@ -254,7 +254,7 @@ async fn can_sensors(
 pub async fn build_rig(cfg: &Config, realtime: bool) -> Result<Rig, RigError> {
     match &cfg.backend {
         Backend::Simulated(sim) => {
-            let (stage, sensors) = sim_rig::sim_rig(sim, cfg.sample_rate_hz, realtime)
+            let (stage, sensors) = sim_rig::sim_rig(sim, cfg.common.sample_rate_hz, realtime)
                 .map_err(|e| RigError::Simulated(e.to_string()))?;
             Ok(Rig {
                 stage: Box::new(stage),
@@ -268,10 +268,10 @@ pub async fn build_rig(cfg: &Config, realtime: bool) -> Result<Rig, RigError> {
         }
         Backend::Modbus { rig, simulated } => {
             modbus_rig(
-                &cfg.faults.protocol_faults(),
+                &cfg.common.faults.protocol_faults(),
                 rig,
                 simulated.as_ref(),
-                cfg.sample_rate_hz,
+                cfg.common.sample_rate_hz,
             )
             .await
         }

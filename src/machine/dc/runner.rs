@@ -235,7 +235,7 @@ impl Bench<'_> {
     async fn run(&mut self, steps: &[PlanStep]) -> Result<Outcome, RecordError> {
         // The supply limits its current a little below the trip limit, so a
         // transient peak is held by the supply rather than ending the test.
-        let supply_limit = SUPPLY_LIMIT_FRACTION * self.cfg.limits.max_current;
+        let supply_limit = SUPPLY_LIMIT_FRACTION * self.cfg.common.limits.max_current;
         match self.stage.set_current_limit(supply_limit).await {
             Ok(()) => self.supply = SupplyLimitDetector::new(Some(supply_limit)),
             Err(DriverError::Unsupported { .. }) => {}
@@ -349,8 +349,11 @@ pub async fn run_test<'s>(
             return Err(e);
         }
     };
-    let monitor = match SafetyRules::dc(cfg).monitor(sensors.channels(), Some(counts_per_rev), 0.0)
-    {
+    let monitor = match SafetyRules::of(&cfg.common, None).monitor(
+        sensors.channels(),
+        Some(counts_per_rev),
+        0.0,
+    ) {
         Ok(m) => m,
         Err(e) => {
             let _ = stage.safe_state().await;
@@ -365,7 +368,7 @@ pub async fn run_test<'s>(
         stops.into(),
         monitor,
         speed,
-        cfg.sample_rate_hz,
+        cfg.common.sample_rate_hz,
     );
     let mut bench = Bench {
         cfg,

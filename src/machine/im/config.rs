@@ -21,8 +21,8 @@ use super::{ImModbusRig, ImSweepPlan, SimImRigConfig, StandardTestsPlan};
 use crate::bench::SafetyRules;
 use crate::bounds;
 use crate::config::{
-    bounded, invalid, syntax_error, validate_faults, ConfigError, FaultPlan, FaultRig, Limits,
-    RawFault, RawRetention, RawSupervisor, Retention, Supervision,
+    bounded, invalid, syntax_error, CommonConfig, ConfigError, FaultRig, Limits, RawCommon,
+    RawFault, RawMotor, RawRetention, RawSupervisor,
 };
 use crate::excerpt::quoted;
 use crate::identify::slip_grid;
@@ -31,36 +31,22 @@ use crate::model::{Connection, ImCircuit, ImModel, ImParam, ImSupply};
 /// A validated sweep configuration.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ImRunConfig {
-    /// Where it came from.
-    pub source: String,
-    /// The text as given (recorded in the MCAP metadata).
-    pub text: String,
-    /// Motor id.
-    pub motor_id: String,
-    /// Nameplate (JSON object).
-    pub nameplate: serde_json::Value,
+    /// What every test configuration holds: the file, the motor, the
+    /// sample rate (the poll rate behind Modbus), the limits the safety
+    /// supervisor enforces (line voltage, line current, shaft speed),
+    /// supervision, retention, faults.
+    pub common: CommonConfig,
     /// The simulated rig (with `backend = "simulated"`, or served behind
     /// the Modbus links).
     pub simulated: Option<SimImRigConfig>,
     /// The Modbus devices (with `backend = "modbus"`).
     pub modbus: Option<ImModbusRig>,
-    /// Sample rate of the sensors (poll rate behind Modbus), Hz.
-    pub sample_rate_hz: f64,
-    /// Limits the daemon's safety supervisor enforces: line voltage, line
-    /// current, shaft speed.
-    pub limits: Limits,
-    /// The daemon's safety supervisor beyond `limits` (`[supervisor]`).
-    pub supervision: Supervision,
-    /// How long the daemon keeps this rig's records (`[records]`).
-    pub retention: Retention,
     /// The test plan: the slip sweep (the load test of the standard set).
     pub plan: ImSweepPlan,
     /// The standard tests before the sweep (plan `im_standard_tests`).
     pub standard: Option<StandardTestsPlan>,
     /// The circuit identification fits.
     pub model: ImModel,
-    /// The faults injected on purpose (`[[fault]]`); empty on a real test.
-    pub faults: FaultPlan,
 }
 
 #[derive(Debug, Deserialize)]
@@ -76,13 +62,6 @@ struct Raw {
     records: RawRetention,
     #[serde(default)]
     fault: Vec<RawFault>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawMotor {
-    id: String,
-    nameplate: toml::Table,
 }
 
 #[derive(Debug, Deserialize)]
@@ -584,10 +563,6 @@ impl ImRunConfig {
             )?,
             encoder_counts_per_rev: 4.0 * f64::from(encoder_lines),
         };
-        let nameplate =
-            serde_json::to_value(plate).map_err(|e| bad("motor.nameplate", e.to_string()))?;
-        let supervision = raw.supervisor.validate(source, &limits, &nameplate)?;
-        let retention = raw.records.validate(source)?;
         let served: Vec<&str> = match &modbus {
             Some(m) if m.simulate.is_some() && simulated.is_some() => {
                 let mut d = vec!["supply", "dynamometer", "meter", "encoder"];
@@ -606,9 +581,17 @@ impl ImRunConfig {
         } else {
             &["supply", "dynamometer"]
         };
-        let faults = validate_faults(
+        let common = RawCommon {
+            motor: raw.motor,
+            supervisor: raw.supervisor,
+            records: raw.records,
+            fault: raw.fault,
+        }
+        .validate(
             source,
-            raw.fault,
+            text,
+            raw.rig.sample_rate_hz,
+            limits,
             FaultRig {
                 served: &served,
                 rtu,
@@ -619,31 +602,19 @@ impl ImRunConfig {
             },
         )?;
         Ok(ImRunConfig {
-            source: source.into(),
-            text: text.into(),
-            motor_id: raw.motor.id,
-            nameplate,
+            common,
             simulated,
             modbus,
-            sample_rate_hz: raw.rig.sample_rate_hz,
-            limits,
-            supervision,
-            retention,
             plan,
             standard,
             model,
-            faults,
         })
     }
 
     /// What the sweep's safety monitor enforces: `[limits]`, the
     /// `[supervisor]` section and the plan's heating budget.
     pub fn safety_rules(&self) -> SafetyRules {
-        SafetyRules {
-            limits: self.limits,
-            supervision: self.supervision.clone(),
-            heating: Some(self.plan.heating_budget()),
-        }
+        SafetyRules::of(&self.common, Some(self.plan.heating_budget()))
     }
 
     /// The rig, for a person.
@@ -670,10 +641,10 @@ mod tests {
         );
         assert!(c.modbus.is_none());
         // Defaults for the daemon's supervisor: the supply's and the dynamometer's ranges.
-        assert!((c.limits.max_voltage - 440.0).abs() < 1e-9);
-        assert!((c.limits.max_speed - 1.2 * std::f64::consts::PI * 50.0).abs() < 1e-9);
+        assert!((c.common.limits.max_voltage - 440.0).abs() < 1e-9);
+        assert!((c.common.limits.max_speed - 1.2 * std::f64::consts::PI * 50.0).abs() < 1e-9);
         assert_eq!(c.plan.pole_pairs, 2);
-        assert_eq!(c.nameplate["connection"], "star");
+        assert_eq!(c.common.nameplate["connection"], "star");
     }
 
     #[test]
@@ -746,7 +717,7 @@ mod tests {
             "{}",
             c.describe_rig()
         );
-        assert_eq!(c.supervision.max_power, 40000.0);
+        assert_eq!(c.common.supervision.max_power, 40000.0);
         assert_eq!(m.merge_window, std::time::Duration::from_millis(10));
         // Left out: the drivers' default window.
         let c = ImRunConfig::parse(

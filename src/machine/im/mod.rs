@@ -58,7 +58,7 @@ use super::{
     RigStage, Truth,
 };
 use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
-use crate::config::{recorded_im_model, Retention};
+use crate::config::{recorded_im_model, CommonConfig};
 use crate::identify::{identify_im, ImIdentification};
 use crate::model::{Connection, ImModel};
 use crate::record::{ChannelSpec, Record, SegmentKind};
@@ -123,28 +123,20 @@ impl Machine for ImRunConfig {
         SegmentKind::ImSlipSweep
     }
 
-    fn motor_id(&self) -> &str {
-        &self.motor_id
-    }
-
-    fn nameplate(&self) -> &serde_json::Value {
-        &self.nameplate
-    }
-
-    fn config_text(&self) -> &str {
-        &self.text
+    fn common(&self) -> &CommonConfig {
+        &self.common
     }
 
     fn describe(&self) -> String {
         format!(
             "{} {} on {} ({})",
-            self.motor_id,
+            self.common.motor_id,
             match self.standard {
                 Some(_) => "standard tests",
                 None => "slip sweep",
             },
             self.describe_rig(),
-            self.source
+            self.common.source
         )
     }
 
@@ -169,23 +161,11 @@ impl Machine for ImRunConfig {
         ImRunConfig::safety_rules(self)
     }
 
-    fn bus_loss_and_rate(&self) -> (f64, f64) {
-        (self.supervision.bus_loss_timeout, self.sample_rate_hz)
-    }
-
-    fn faults(&self) -> Option<&crate::config::FaultPlan> {
-        Some(&self.faults)
-    }
-
-    fn retention(&self) -> Retention {
-        self.retention
-    }
-
     fn durations(&self) -> PlanDurations {
         let p = &self.plan;
         // A point: two settle windows and the average; at most the settle
         // timeout plus the average and a cool-down.
-        let period = 1.0 / self.sample_rate_hz;
+        let period = 1.0 / self.common.sample_rate_hz;
         let point_guess = (2 * p.settle_window + p.average_samples) as f64 * period + 0.1;
         let point_max = p.max_point_s + p.average_samples as f64 * period + p.cooldown_s;
         let mut d = PlanDurations {
@@ -229,12 +209,12 @@ impl Machine for ImRunConfig {
                 RigStage {
                     name: "supply",
                     stage: rig.supply,
-                    max_setpoint: self.limits.max_voltage,
+                    max_setpoint: self.common.limits.max_voltage,
                 },
                 RigStage {
                     name: "dynamometer",
                     stage: rig.dynamometer,
-                    max_setpoint: self.limits.max_speed,
+                    max_setpoint: self.common.limits.max_speed,
                 },
             ]
             .into_iter()

@@ -90,7 +90,7 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
                 (ServedDevice::of(&m.meter), &m.meter_channels),
                 (ServedDevice::of(&m.encoder), &m.encoder_channels),
                 m.dc_source.as_ref().map(|d| ServedDevice::of(&d.device)),
-                &cfg.faults.protocol_faults(),
+                &cfg.common.faults.protocol_faults(),
             )
             .await?,
         ),
@@ -125,7 +125,7 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
         m.supply.unit_id,
         voltage,
         cfg.plan.frequency,
-        cfg.limits.max_voltage,
+        cfg.common.limits.max_voltage,
     );
     let dyno_drive = ModbusPowerStage::new(
         &format!("modbus:{} (dynamometer)", m.dynamometer.profile.name),
@@ -162,7 +162,7 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
         None => None,
     };
 
-    let rate = cfg.sample_rate_hz;
+    let rate = cfg.common.sample_rate_hz;
     // The devices polled, with their buses: those on one line (a real rig)
     // share one poller, the units read in turn.
     let mut groups: Vec<(&ModbusDeviceLink, _, Vec<PolledChannel>)> = Vec::new();
