@@ -18,6 +18,7 @@ mod retention;
 mod sensor_channels;
 mod supervision;
 mod test_config;
+mod test_override;
 
 pub use can::{CanLink, CanTransport};
 pub use common::CommonConfig;
@@ -35,6 +36,7 @@ pub use test_config::{recorded_im_model, PlanKind, TestConfig};
 pub(crate) use modbus::{call_policy, merge_window, simulated_transport, RawLink};
 pub(crate) use retention::RawRetention;
 pub(crate) use supervision::RawSupervisor;
+pub(crate) use test_override::merged_test;
 
 pub use crate::machine::dc::config::{
     Backend, Config, Plan, Settle, SimPowerStageConfig, SimSensorConfig, SimulatedRig,

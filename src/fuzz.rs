@@ -252,9 +252,9 @@ pub fn start_request(data: &[u8]) {
     let Some(test) = body.get("test").and_then(|t| t.as_object()) else {
         return;
     };
-    let dc = crate::config::Config::parse("sim-dc.toml", crate::config::DEFAULT_CONFIG)
+    let dc = crate::config::TestConfig::parse("sim-dc.toml", crate::config::DEFAULT_CONFIG)
         .expect("the embedded configuration parses");
-    if let Err(e) = crate::serve::test_override::with_test_override(&dc, test) {
+    if let Err(e) = dc.with_test(test) {
         assert_names(&e.to_string(), "sim-dc.toml");
     }
 }

@@ -18,7 +18,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use super::{invalid, syntax_error, CommonConfig, Config, ConfigError};
+use super::{invalid, merged_test, syntax_error, CommonConfig, Config, ConfigError};
 use crate::excerpt::quoted;
 use crate::machine::im::ImRunConfig;
 use crate::machine::Machine;
@@ -89,8 +89,7 @@ impl PlanKind {
                         .map(|p| format!("\"{}\"", p.name()))
                         .join(", ")
                 ),
-            )
-            .located(Some(text))),
+            )),
         }
     }
 }
@@ -126,14 +125,59 @@ impl TestConfig {
     /// Parse and validate `text`; `source` names it in errors (and its
     /// directory resolves relative device-profile paths).
     pub fn parse(source: &str, text: &str) -> Result<TestConfig, ConfigError> {
+        let dir = Path::new(source).parent().unwrap_or(Path::new("."));
+        TestConfig::parse_composed(source, dir, text).map_err(|e| e.located(Some(text)))
+    }
+
+    /// Parse and validate `text` the program composed: errors name the
+    /// key, not a line of the composed text; relative profile paths are
+    /// resolved in `dir`.
+    fn parse_composed(source: &str, dir: &Path, text: &str) -> Result<TestConfig, ConfigError> {
         match PlanKind::of(source, text)? {
-            Some(PlanKind::ImSlipSweep | PlanKind::ImStandardTests) => {
-                Ok(TestConfig::Im(Box::new(ImRunConfig::parse(source, text)?)))
-            }
-            Some(PlanKind::DcStep | PlanKind::DcCoastdown) | None => {
-                Ok(TestConfig::Dc(Box::new(Config::parse(source, text)?)))
-            }
+            Some(PlanKind::ImSlipSweep | PlanKind::ImStandardTests) => Ok(TestConfig::Im(
+                Box::new(ImRunConfig::parse_composed(source, dir, text)?),
+            )),
+            Some(PlanKind::DcStep | PlanKind::DcCoastdown) | None => Ok(TestConfig::Dc(Box::new(
+                Config::parse_composed(source, dir, text)?,
+            ))),
         }
+    }
+
+    /// This configuration with `test` (the keys of a `[test]` table, from
+    /// the daemon's start request) applied over its own `[test]`: the
+    /// text is composed again and validated like any configuration file,
+    /// so a bad key is refused by name, and the configuration text of the
+    /// result (recorded in the MCAP) is the resolved TOML. Device-profile
+    /// paths stay relative to the configuration's own directory; a plan
+    /// of another machine is refused.
+    pub fn with_test(
+        &self,
+        test: &serde_json::Map<String, serde_json::Value>,
+    ) -> Result<TestConfig, ConfigError> {
+        let common = self.common();
+        let source = format!("{} with the request's [test]", common.source);
+        let text = merged_test(&common.text, test, &source)?;
+        let machine = self.machine();
+        if let Some(plan) = PlanKind::of(&source, &text)?.filter(|p| p.machine() != machine) {
+            let own: Vec<String> = PlanKind::ALL
+                .iter()
+                .filter(|p| p.machine() == machine)
+                .map(|p| format!("\"{}\"", p.name()))
+                .collect();
+            return Err(invalid(
+                &source,
+                "test.plan",
+                format!(
+                    "\"{}\" is a plan for a {} machine; this rig's machine is {} (its plans: {})",
+                    plan.name(),
+                    plan.machine(),
+                    machine,
+                    own.join(", ")
+                ),
+            ));
+        }
+        let dir = Path::new(&common.source).parent().unwrap_or(Path::new("."));
+        TestConfig::parse_composed(&source, dir, &text)
     }
 
     /// The test as its machine runs it: the one place a plan is mapped

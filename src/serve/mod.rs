@@ -30,7 +30,6 @@ pub mod records_index;
 pub mod rig_config;
 pub mod state;
 pub mod systemd;
-pub mod test_override;
 
 use std::future::Future;
 use std::net::SocketAddr;

@@ -247,13 +247,19 @@ impl Config {
     /// Parse and validate `text`; `source` names it in errors, with the
     /// line and the key.
     pub fn parse(source: &str, text: &str) -> Result<Config, ConfigError> {
-        Config::parse_composed(source, text).map_err(|e| e.located(Some(text)))
+        let dir = Path::new(source).parent().unwrap_or(Path::new("."));
+        Config::parse_composed(source, dir, text).map_err(|e| e.located(Some(text)))
     }
 
     /// Parse and validate `text` the program composed (the daemon's
     /// configuration with a request's `[test]`): errors name the key, not
-    /// a line of the composed text.
-    pub(crate) fn parse_composed(source: &str, text: &str) -> Result<Config, ConfigError> {
+    /// a line of the composed text; relative profile paths are resolved
+    /// in `dir`.
+    pub(crate) fn parse_composed(
+        source: &str,
+        dir: &Path,
+        text: &str,
+    ) -> Result<Config, ConfigError> {
         let raw: RawConfig = toml::from_str(text).map_err(|e| syntax_error(source, text, &e))?;
         let invalid = |key: &str, reason: String| invalid(source, key, reason);
         let positive = |key: &str, v: f64| {
@@ -341,7 +347,6 @@ impl Config {
                 if let Some(sim) = &raw.rig.simulated {
                     check_simulated(sim)?;
                 }
-                let dir = Path::new(source).parent().unwrap_or(Path::new("."));
                 let rig = m
                     .validate(dir, raw.rig.simulated.is_some(), raw.rig.sample_rate_hz)
                     .map_err(|(key, reason)| invalid(&key, reason))?;

@@ -1,50 +1,22 @@
 //! A start request may override the rig configuration's `[test]` table
 //! (the plan, its levels, the settle rules): the request's keys replace
 //! the configuration's, and the result is validated like any
-//! configuration file, so a bad override is refused with the key named.
+//! configuration file ([`super::TestConfig::with_test`]), so a bad
+//! override is refused with the key named.
 
-use crate::config::{Config, ConfigError};
-use crate::machine::im::ImRunConfig;
+use super::ConfigError;
 
 /// Keys that describe one plan; a request naming a `plan` drops the
 /// configuration's ones so they cannot clash with the new plan.
 const PLAN_KEYS: [&str; 3] = ["levels_V", "coastdown", "coastdown_from_V"];
 
-/// `cfg` with `test` (a JSON object with the keys of `[test]`) applied.
-/// The configuration text of the result (recorded in the MCAP) is the
-/// resolved TOML.
-pub fn with_test_override(
-    cfg: &Config,
-    test: &serde_json::Map<String, serde_json::Value>,
-) -> Result<Config, ConfigError> {
-    let source = format!("{} with the request's [test]", cfg.common.source);
-    let text = merged_text(&cfg.common.text, test, &source, &PLAN_KEYS)?;
-    Config::parse_composed(&source, &text)
-}
-
-/// An induction-machine sweep configuration with `test` applied, as
-/// [`with_test_override`] does for a DC one (profile paths stay relative
-/// to the configuration's own directory).
-pub fn with_im_test_override(
-    cfg: &ImRunConfig,
-    test: &serde_json::Map<String, serde_json::Value>,
-) -> Result<ImRunConfig, ConfigError> {
-    let source = format!("{} with the request's [test]", cfg.common.source);
-    let text = merged_text(&cfg.common.text, test, &source, &[])?;
-    let dir = std::path::Path::new(&cfg.common.source)
-        .parent()
-        .unwrap_or(std::path::Path::new("."));
-    ImRunConfig::parse_composed(&source, dir, &text)
-}
-
 /// `text` (a configuration) with the keys of `test` merged into its
-/// `[test]` table (a request naming `plan` drops `plan_keys` first), as
-/// TOML text.
-fn merged_text(
+/// `[test]` table (a request naming `plan` drops the [`PLAN_KEYS`] first),
+/// as TOML text; `source` names the result in errors.
+pub(crate) fn merged_test(
     text: &str,
     test: &serde_json::Map<String, serde_json::Value>,
     source: &str,
-    plan_keys: &[&str],
 ) -> Result<String, ConfigError> {
     let invalid = |key: String, reason: String| ConfigError::Invalid {
         line: None,
@@ -65,8 +37,8 @@ fn merged_text(
         return Err(invalid("test".into(), "is not a table".into()));
     };
     if test.contains_key("plan") {
-        for k in plan_keys {
-            base.remove(*k);
+        for k in PLAN_KEYS {
+            base.remove(k);
         }
     }
     for (key, value) in test {
@@ -92,12 +64,23 @@ fn merged_text(
 
 #[cfg(test)]
 mod tests {
-    use super::*;
-    use crate::config::Plan;
+    use crate::config::{Config, ConfigError, Plan, TestConfig};
+    use crate::machine::im::ImRunConfig;
     use serde_json::json;
 
     fn apply(v: serde_json::Value) -> Result<Config, ConfigError> {
-        with_test_override(&Config::embedded_default(), v.as_object().unwrap())
+        let dc = TestConfig::Dc(Box::new(Config::embedded_default()));
+        match dc.with_test(v.as_object().unwrap())? {
+            TestConfig::Dc(c) => Ok(*c),
+            TestConfig::Im(_) => panic!("a DC rig's configuration became an IM one"),
+        }
+    }
+
+    fn apply_im(cfg: &TestConfig, v: serde_json::Value) -> Result<ImRunConfig, ConfigError> {
+        match cfg.with_test(v.as_object().unwrap())? {
+            TestConfig::Im(c) => Ok(*c),
+            TestConfig::Dc(_) => panic!("an IM rig's configuration became a DC one"),
+        }
     }
 
     #[test]
@@ -130,9 +113,9 @@ mod tests {
     #[test]
     fn an_im_sweep_takes_its_own_test_keys() {
         let path = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-modbus-im.toml");
-        let cfg = ImRunConfig::load(std::path::Path::new(path)).unwrap();
+        let cfg = TestConfig::load(std::path::Path::new(path)).unwrap();
         let t = json!({"points": 8, "voltages_V": [300], "settle": {"average_samples": 20}});
-        let c = with_im_test_override(&cfg, t.as_object().unwrap()).unwrap();
+        let c = apply_im(&cfg, t).unwrap();
         assert_eq!(c.plan.slips.len(), 8);
         assert_eq!(c.plan.voltages, vec![300.0]);
         assert_eq!(c.plan.average_samples, 20);
@@ -141,14 +124,31 @@ mod tests {
             c.modbus.is_some(),
             "profiles found beside the configuration"
         );
-        let e = with_im_test_override(&cfg, json!({"points": 2}).as_object().unwrap())
+        let e = apply_im(&cfg, json!({"points": 2}))
             .unwrap_err()
             .to_string();
         assert!(e.contains("test.points") && e.contains("request"), "{e}");
-        let e = with_im_test_override(&cfg, json!({"plan": "dc_step"}).as_object().unwrap())
+    }
+
+    #[test]
+    fn a_plan_of_another_machine_is_refused_by_key() {
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-im.toml");
+        let im = TestConfig::load(std::path::Path::new(path)).unwrap();
+        // The standard tests are the same machine's plan.
+        let c = apply_im(&im, json!({"plan": "im_standard_tests"})).unwrap();
+        assert!(c.standard.is_some());
+        let e = apply_im(&im, json!({"plan": "dc_step"}))
             .unwrap_err()
             .to_string();
-        assert!(e.contains("im_slip_sweep"), "{e}");
+        assert!(e.contains("test.plan") && e.contains("request"), "{e}");
+        assert!(
+            e.contains("im_slip_sweep") && e.contains("induction"),
+            "{e}"
+        );
+        let e = apply(json!({"plan": "im_slip_sweep"}))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("test.plan") && e.contains("dc_step"), "{e}");
     }
 
     #[test]
