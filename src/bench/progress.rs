@@ -12,6 +12,10 @@ pub trait Progress: Send + Sync {
     /// An operating point of a sweep was recorded (a live display plots
     /// it). Default: ignored.
     fn operating_point(&self, _point: &crate::record::OperatingPoint) {}
+    /// The plan recorded an event of `level` at test time `t_s` (a
+    /// warning a person should see while the test runs). Default:
+    /// ignored (it is in the record either way).
+    fn event(&self, _t_s: f64, _level: crate::record::EventLevel, _message: &str) {}
 }
 
 /// Progress that goes nowhere.

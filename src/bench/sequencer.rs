@@ -160,6 +160,7 @@ impl<'a> Sequencer<'a> {
     /// Record an event at the latest data time.
     pub async fn event(&mut self, level: EventLevel, message: String) -> Result<(), RecordError> {
         let t_ns = self.t_ns;
+        self.progress.event(t_ns as f64 * 1e-9, level, &message);
         self.push(Entry::Event {
             t_ns,
             event: Event { level, message },

@@ -1,20 +1,29 @@
-//! The progress bar `motorbench run` shows on stderr while a test runs.
+//! The progress bar `motorbench run` shows on stderr while a test runs,
+//! and the plan's warnings as they come (the record holds them all).
 
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::time::Duration;
 
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::bench::Progress;
+use crate::record::EventLevel;
 
-/// A progress bar on stderr (hidden when stderr is not a terminal).
+/// Warnings printed on stderr while a test runs; the rest are counted
+/// once (every one is in the record's `/bench/event`).
+const PRINTED_WARNINGS: usize = 20;
+
+/// A progress bar on stderr (hidden when stderr is not a terminal), and
+/// the plan's warnings printed as they come unless quiet.
 pub(crate) struct Bar {
     bar: ProgressBar,
     last_tick_ms: AtomicU64,
+    quiet: bool,
+    warnings: AtomicUsize,
 }
 
 impl Bar {
-    /// A bar, hidden when `quiet`.
+    /// A bar, hidden when `quiet` (and no warnings printed).
     pub(crate) fn new(quiet: bool) -> Bar {
         let bar = if quiet {
             ProgressBar::hidden()
@@ -31,6 +40,8 @@ impl Bar {
         Bar {
             bar,
             last_tick_ms: AtomicU64::new(0),
+            quiet,
+            warnings: AtomicUsize::new(0),
         }
     }
 }
@@ -48,6 +59,22 @@ impl Progress for Bar {
             self.last_tick_ms.store(ms, Ordering::Relaxed);
             self.bar.set_prefix(format!("{t_s:.1} s"));
         }
+    }
+
+    fn event(&self, t_s: f64, level: EventLevel, message: &str) {
+        if self.quiet || level != EventLevel::Warn {
+            return;
+        }
+        let n = self.warnings.fetch_add(1, Ordering::Relaxed);
+        self.bar.suspend(|| match n {
+            n if n < PRINTED_WARNINGS => {
+                eprintln!("motorbench: warning at test time {t_s:.3} s: {message}")
+            }
+            PRINTED_WARNINGS => eprintln!(
+                "motorbench: more warnings follow; the record's /bench/event holds every one"
+            ),
+            _ => {}
+        });
     }
 
     fn done(&self, message: &str) {

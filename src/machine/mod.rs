@@ -18,9 +18,11 @@
 //! simulated and protocol-served rigs, `identify/`, `diagnose/`, text,
 //! plot, blind-case simulator) and implementing this trait, plus a
 //! [`crate::config::TestConfig`] variant (with its
-//! [`crate::config::PlanKind`]s), the record's [`SegmentKind`]s and a
-//! branch in [`analyse_record`] (the one place a record is mapped to its
-//! machine, as `into_machine` is for a plan).
+//! [`crate::config::PlanKind`]s), the record's [`SegmentKind`]s (the
+//! compiler then lists the exhaustive matches on them, the diagnosis'
+//! dispatch [`crate::diagnose::diagnose`] among them) and a branch in
+//! [`analyse_record`] (the one place a record is mapped to its machine,
+//! as `into_machine` is for a plan).
 
 pub mod dc;
 pub mod im;

@@ -720,6 +720,35 @@ fn im_sim_run_clock_jump_aborts_safe() {
 }
 
 #[test]
+fn im_sim_run_encoder_losing_half_its_counts_warns_against_the_dynamometer() {
+    // The slips come from the encoder: reading half the speed, every
+    // point would have a slip past one half, with nothing else to show
+    // it; the dynamometer's speed does.
+    let r = run(
+        IM,
+        "[[fault]]\nkind = \"encoder_loses_counts\"\nat_s = 0\nvalue = 0.5\n",
+    );
+    r.assert_degraded("where the dynamometer holds");
+    let warned: Vec<&str> = r
+        .events(EventLevel::Warn)
+        .into_iter()
+        .filter(|w| w.contains("where the dynamometer holds"))
+        .collect();
+    assert_eq!(warned.len(), 1, "warned once a test: {warned:?}");
+    assert!(
+        warned[0].contains("0.50 times it") && warned[0].contains("16384 counts per revolution"),
+        "{warned:?}"
+    );
+    // And `run` says so while the test runs.
+    assert!(
+        r.stderr.contains("motorbench: warning at test time ")
+            && r.stderr.contains("where the dynamometer holds"),
+        "{}",
+        r.stderr
+    );
+}
+
+#[test]
 fn im_sim_run_supply_ignoring_the_safe_command_is_disabled() {
     let r = run(
         IM,

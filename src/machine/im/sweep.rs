@@ -261,7 +261,17 @@ pub(super) struct Sweep<'a> {
     /// The mean winding temperature over the last steady point's
     /// averaging window, °C, where the rig reads one.
     pub window_temperature: Option<f64>,
+    /// The encoder has been found to disagree with the dynamometer's
+    /// speed (warned once a test).
+    speed_disagrees: bool,
 }
+
+/// How far the encoder's speed at a steady load point may stray from the
+/// speed the dynamometer holds, as a share of the synchronous speed,
+/// before the sweep warns: a drive holds its speed to a few per cent; a
+/// wrong encoder resolution, or an encoder that loses counts, is off by
+/// a factor.
+const SPEED_DISAGREEMENT: f64 = 0.1;
 
 impl Sweep<'_> {
     pub fn t_ns(&self) -> u64 {
@@ -326,7 +336,47 @@ impl Sweep<'_> {
         let target = (1.0 - slip) * ws;
         self.dyno.set_setpoint(target).await?;
         self.seq.command(self.ix.dyno_rec, target).await?;
-        self.steady(segment, &format!("slip {slip:.4}")).await
+        let what = format!("slip {slip:.4}");
+        let point = self.steady(segment, &what).await?;
+        if let Some((p, _)) = &point {
+            self.check_speed(&what, p.speed, target).await?;
+        }
+        Ok(point)
+    }
+
+    /// Warn (once a test) when the encoder's speed at a steady point,
+    /// `speed`, is not the speed the dynamometer holds, `target`: the
+    /// slips of the test come from the encoder, so a wrong encoder
+    /// resolution in the configuration, or an encoder that loses counts,
+    /// would make every point's slip wrong without anything else showing
+    /// it.
+    async fn check_speed(&mut self, what: &str, speed: f64, target: f64) -> Result<(), Halt> {
+        let ws = self.plan.synchronous_speed();
+        if self.speed_disagrees
+            || !speed.is_finite()
+            || (speed - target).abs() <= SPEED_DISAGREEMENT * ws
+        {
+            return Ok(());
+        }
+        self.speed_disagrees = true;
+        let ratio = if target.abs() > 1e-9 {
+            format!(" ({:.2} times it)", speed / target)
+        } else {
+            String::new()
+        };
+        self.seq
+            .event(
+                EventLevel::Warn,
+                format!(
+                    "{what}: the encoder reads {speed:.1} rad/s where the dynamometer holds \
+                     {target:.1} rad/s{ratio}: check the encoder's lines per revolution \
+                     ({:.0} counts per revolution configured) and its wiring, or whether the \
+                     dynamometer holds its speed; every slip of this test comes from the encoder",
+                    self.plan.encoder_counts_per_rev
+                ),
+            )
+            .await?;
+        Ok(())
     }
 
     /// Wait until line current, input power and speed settle, then
@@ -627,6 +677,7 @@ pub(super) async fn run_im_plan(
         },
         first_segment: 0,
         window_temperature: None,
+        speed_disagrees: false,
     };
     let result = match standard {
         Some(tests) => sweep.run_standard(tests).await,
