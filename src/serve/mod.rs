@@ -21,6 +21,7 @@ pub mod cli;
 pub mod client;
 pub mod connections;
 pub mod ctl;
+pub mod heap;
 pub mod jobs;
 pub mod latch_file;
 pub mod link_tally;

@@ -357,6 +357,9 @@ impl Daemon {
         let latches = self.latches.clone();
         let handle = tokio::spawn(async move {
             let end = job.run().await;
+            // The analysis' memory is free now: hand it back, so that the
+            // daemon's resident size follows its live heap.
+            super::heap::release_freed_memory().await;
             let mut rt = rig.runtime.lock().await;
             rt.winding_rise_k = end.winding_rise_k;
             rt.winding_at = Instant::now();
