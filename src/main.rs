@@ -105,11 +105,16 @@ fn main() -> ExitCode {
         Command::Export(args) => Failure::exit(cli::export(args)),
         Command::Diagnose(args) => ExitCode::from(run_diagnose(args)),
         Command::Blind(args) => ExitCode::from(run_blind(args)),
-        Command::Serve(args) => block_on(async {
-            // Before anything is bound or announced.
-            let stop = cli::stop_signal();
-            run_serve(args, stop).await
-        }),
+        Command::Serve(args) => {
+            // A daemon runs test after test: few allocator arenas, so
+            // that the memory each test frees goes back to the system.
+            motorbench::serve::heap::limit_arenas();
+            block_on(async {
+                // Before anything is bound or announced.
+                let stop = cli::stop_signal();
+                run_serve(args, stop).await
+            })
+        }
         Command::Ctl(args) => block_on(run_ctl(args)),
         Command::Completions(args) => Failure::exit(cli::completions(args, Cli::command())),
         Command::Man(args) => Failure::exit(cli::man(args, Cli::command())),

@@ -11,9 +11,38 @@
 //! statuses), its peak at 15 MB, and 64 kB not freed at exit, while the
 //! anonymous resident memory grew from 11 to 44 MB.
 //!
-//! After each test the daemon asks glibc to return the free memory of
-//! every arena (`malloc_trim(0)`, which walks all arenas since glibc 2.8),
-//! off the reactor. With another C library it does nothing.
+//! So the daemon holds glibc to two arenas ([`limit_arenas`], before its
+//! runtime starts threads; by default glibc opens up to eight per core),
+//! and after each test asks it to return the free memory of every arena
+//! (`malloc_trim(0)`, which walks all arenas since glibc 2.8), off the
+//! reactor. Either alone did little: trimming eight arenas left most of
+//! their memory in place (30–35 MB), and two arenas without a trim still
+//! grew (see the soak's figures in `docs/reliability.md`). With another C
+//! library both do nothing.
+
+/// Glibc's malloc arenas the daemon allows.
+pub const MALLOC_ARENAS: i32 = 2;
+
+/// Hold the allocator to [`MALLOC_ARENAS`] arenas (glibc); call it before
+/// any thread is started. `MALLOC_ARENA_MAX` in the environment, where
+/// set, is left to rule.
+pub fn limit_arenas() {
+    if std::env::var_os("MALLOC_ARENA_MAX").is_none() {
+        set_arena_max(MALLOC_ARENAS);
+    }
+}
+
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+fn set_arena_max(arenas: i32) {
+    // SAFETY: `mallopt` takes two integers and sets an allocator
+    // parameter under the allocator's lock.
+    unsafe {
+        libc::mallopt(libc::M_ARENA_MAX, arenas);
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+fn set_arena_max(_arenas: i32) {}
 
 /// Return the memory freed by a finished test to the system, where the
 /// allocator can (glibc); `true` when some was returned.
