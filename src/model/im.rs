@@ -389,11 +389,20 @@ impl PerUnitBase {
 
 /// Admittance `s/(R + j·s·X)` of `R/s + jX`, finite at `s = 0`, and its
 /// derivatives with respect to `R` and `X`.
+#[inline(always)]
 fn branch_admittance(s: f64, r: f64, x: f64) -> (C64, C64, C64) {
     let d = C64::new(r, s * x);
     let y = C64::new(s, 0.0) / d;
+    let (dr, dx) = branch_derivatives(s, d);
+    (y, dr, dx)
+}
+
+/// The derivatives of [`branch_admittance`] with respect to `R` and `X`,
+/// from its denominator `d = R + j·s·X`.
+#[inline(always)]
+fn branch_derivatives(s: f64, d: C64) -> (C64, C64) {
     let d2 = d * d;
-    (y, -C64::new(s, 0.0) / d2, -J * (s * s) / d2)
+    (-C64::new(s, 0.0) / d2, -J * (s * s) / d2)
 }
 
 impl ImCircuit {
@@ -617,40 +626,33 @@ impl ImCircuit {
     /// [`ImCircuit::impedance_gradient`] without allocating: the
     /// derivatives go to `out` (at least `params.len()` long).
     pub fn impedance_gradient_into(&self, s: f64, params: &[ImParam], out: &mut [C64]) -> C64 {
-        let mut y_ag = self.magnetising_admittance();
         // dY_ag/dθ for the rotor elements.
-        let mut dy_rotor: [(ImParam, C64); 4] = [(ImParam::Rr, C64::new(0.0, 0.0)); 4];
-        match self.rotor {
+        let (y_rotor, dy_rotor) = match self.rotor {
             RotorCage::Single { rr, xr } => {
                 let (y, dr, dx) = branch_admittance(s, rr, xr);
-                y_ag += y;
-                dy_rotor[0] = (ImParam::Rr, dr);
-                dy_rotor[1] = (ImParam::Xr, dx);
+                // Two of the four entries (a repeat of Rr is never found).
+                let unused = (ImParam::Rr, C64::new(0.0, 0.0));
+                (y, [(ImParam::Rr, dr), (ImParam::Xr, dx), unused, unused])
             }
             RotorCage::Double { rr1, rr2, xr1, xr2 } => {
                 let (y1, dr1, dx1) = branch_admittance(s, rr1, xr1);
                 let (y2, dr2, dx2) = branch_admittance(s, rr2, xr2);
-                y_ag += y1 + y2;
-                dy_rotor = [
+                let dy = [
                     (ImParam::Rr1, dr1),
                     (ImParam::Xr1, dx1),
                     (ImParam::Rr2, dr2),
                     (ImParam::Xr2, dx2),
                 ];
+                (y1 + y2, dy)
             }
-        }
-        let z_ag = y_ag.inv();
-        let z = C64::new(self.rs, self.xs) + z_ag;
-        let minus_z_ag2 = -z_ag * z_ag;
+        };
+        let (z, minus_z_ag2) = self.impedance_and_minus_z_ag2(y_rotor);
         for (slot, &p) in out.iter_mut().zip(params) {
             *slot = match p {
                 ImParam::Rs => C64::new(1.0, 0.0),
                 ImParam::Xs => J,
-                ImParam::Xm => minus_z_ag2 * J / (self.xm * self.xm),
-                ImParam::Rfe => {
-                    let r = self.rfe.unwrap_or(f64::INFINITY);
-                    minus_z_ag2 * (-1.0 / (r * r))
-                }
+                ImParam::Xm => self.xm_derivative(minus_z_ag2),
+                ImParam::Rfe => self.rfe_derivative(minus_z_ag2),
                 other => dy_rotor
                     .iter()
                     .find(|(q, _)| *q == other)
@@ -658,6 +660,137 @@ impl ImCircuit {
             };
         }
         z
+    }
+
+    /// The input impedance from the rotor admittance `y_rotor`, and
+    /// `−Z_ag²` (`Z_ag` the air-gap impedance): `dZ/dθ = −Z_ag²·dY_ag/dθ`.
+    #[inline(always)]
+    fn impedance_and_minus_z_ag2(&self, y_rotor: C64) -> (C64, C64) {
+        let z_ag = self.air_gap_impedance(y_rotor);
+        (C64::new(self.rs, self.xs) + z_ag, -z_ag * z_ag)
+    }
+
+    /// The air-gap impedance `Z_ag = 1/(Y_m + Y_rotor)` from the rotor
+    /// admittance.
+    #[inline(always)]
+    fn air_gap_impedance(&self, y_rotor: C64) -> C64 {
+        let mut y_ag = self.magnetising_admittance();
+        y_ag += y_rotor;
+        y_ag.inv()
+    }
+
+    /// `dZ/dXm` from `−Z_ag²`.
+    #[inline(always)]
+    fn xm_derivative(&self, minus_z_ag2: C64) -> C64 {
+        minus_z_ag2 * J / (self.xm * self.xm)
+    }
+
+    /// `dZ/dRfe` from `−Z_ag²`.
+    #[inline(always)]
+    fn rfe_derivative(&self, minus_z_ag2: C64) -> C64 {
+        let r = self.rfe.unwrap_or(f64::INFINITY);
+        minus_z_ag2 * (-1.0 / (r * r))
+    }
+
+    /// The air-gap impedance, the input impedance and its inverse, the
+    /// input admittance `1/Z`, at every slip of `slips` (into `z_ag`, `z`
+    /// and `y`): [`ImCircuit::impedance`] and its inverse, to the bit, in
+    /// one loop per rotor that the compiler vectorises (two slips at a
+    /// time).
+    pub(crate) fn impedances_into(
+        &self,
+        slips: &[f64],
+        z_ag: &mut [C64],
+        z: &mut [C64],
+        y: &mut [C64],
+    ) {
+        let z_s = C64::new(self.rs, self.xs);
+        let points = z_ag
+            .iter_mut()
+            .zip(z.iter_mut())
+            .zip(y.iter_mut())
+            .zip(slips);
+        let put = |((z_ag, z), y): ((&mut C64, &mut C64), &mut C64), y_rotor: C64| {
+            *z_ag = self.air_gap_impedance(y_rotor);
+            *z = z_s + *z_ag;
+            *y = z.inv();
+        };
+        match self.rotor {
+            RotorCage::Single { rr, xr } => {
+                for (out, &s) in points {
+                    put(out, branch_admittance(s, rr, xr).0);
+                }
+            }
+            RotorCage::Double { rr1, rr2, xr1, xr2 } => {
+                for (out, &s) in points {
+                    put(
+                        out,
+                        branch_admittance(s, rr1, xr1).0 + branch_admittance(s, rr2, xr2).0,
+                    );
+                }
+            }
+        }
+    }
+
+    /// The derivatives of [`ImCircuit::impedance_gradient_into`] at every
+    /// slip of `slips` for the model's own elements
+    /// ([`ImModel::params`], in its order), to the bit, from the air-gap
+    /// impedances ([`ImCircuit::impedances_into`]), in loops that the
+    /// compiler vectorises: the derivative with respect to the `p`-th
+    /// element at slip `k` into `dz[p·slips.len() + k]`; `minus_z_ag2`
+    /// is working space (`−Z_ag²`).
+    pub(crate) fn impedance_derivatives_into(
+        &self,
+        slips: &[f64],
+        z_ag: &[C64],
+        minus_z_ag2: &mut [C64],
+        dz: &mut [C64],
+    ) {
+        let n = slips.len();
+        let params = self.model().params();
+        let column = |p: ImParam| params.iter().position(|&q| q == p).expect("own element");
+        for (m, z_ag) in minus_z_ag2.iter_mut().zip(z_ag) {
+            *m = -z_ag * z_ag;
+        }
+        // The rotor's derivatives dY_ag/dθ go to their columns first, and
+        // are multiplied by −Z_ag² below.
+        match self.rotor {
+            RotorCage::Single { rr, xr } => {
+                let (d_rr, rest) = dz[column(ImParam::Rr) * n..].split_at_mut(n);
+                let d_xr = &mut rest[(column(ImParam::Xr) - column(ImParam::Rr) - 1) * n..][..n];
+                for ((d_rr, d_xr), &s) in d_rr.iter_mut().zip(d_xr).zip(slips) {
+                    (*d_rr, *d_xr) = branch_derivatives(s, C64::new(rr, s * xr));
+                }
+            }
+            RotorCage::Double { rr1, rr2, xr1, xr2 } => {
+                let mut rotor = dz[column(ImParam::Rr1) * n..].chunks_exact_mut(n);
+                let mut next = || rotor.next().expect("four rotor columns");
+                // The double cage's rotor columns are Rr1, Rr2, Xr1, Xr2.
+                let (d_rr1, d_rr2, d_xr1, d_xr2) = (next(), next(), next(), next());
+                let cage_1 = d_rr1.iter_mut().zip(d_xr1.iter_mut());
+                let cage_2 = d_rr2.iter_mut().zip(d_xr2.iter_mut());
+                for (((d_rr1, d_xr1), (d_rr2, d_xr2)), &s) in cage_1.zip(cage_2).zip(slips) {
+                    (*d_rr1, *d_xr1) = branch_derivatives(s, C64::new(rr1, s * xr1));
+                    (*d_rr2, *d_xr2) = branch_derivatives(s, C64::new(rr2, s * xr2));
+                }
+            }
+        }
+        for (&p, d) in params.iter().zip(dz.chunks_exact_mut(n)) {
+            let m = minus_z_ag2.iter();
+            match p {
+                ImParam::Rs => d.fill(C64::new(1.0, 0.0)),
+                ImParam::Xs => d.fill(J),
+                ImParam::Xm => d
+                    .iter_mut()
+                    .zip(m)
+                    .for_each(|(d, &m)| *d = self.xm_derivative(m)),
+                ImParam::Rfe => d
+                    .iter_mut()
+                    .zip(m)
+                    .for_each(|(d, &m)| *d = self.rfe_derivative(m)),
+                _ => d.iter_mut().zip(m).for_each(|(d, &m)| *d = m * *d),
+            }
+        }
     }
 
     /// Phase current for a phase voltage `v_phase` at slip `s`, complex
@@ -862,6 +995,45 @@ mod tests {
                         "{p} at s={s}: analytic {} vs FD {fd}",
                         g[k]
                     );
+                }
+            }
+        }
+    }
+
+    /// Every model: single and double cage, with and without iron loss.
+    fn every_model() -> [ImCircuit; 4] {
+        let single = ImCircuit {
+            rfe: None,
+            ..single_fe()
+        };
+        let double_fe = ImCircuit {
+            rfe: Some(0.9 * double_paper().xm),
+            ..double_paper()
+        };
+        [single, single_fe(), double_paper(), double_fe]
+    }
+
+    #[test]
+    fn the_impedances_of_all_slips_are_those_of_each_slip_to_the_bit() {
+        let slips = [0.0, 1e-4, 0.003, 0.05, 0.4, 0.77, 1.0];
+        let n = slips.len();
+        let bits = |z: C64| (z.re.to_bits(), z.im.to_bits());
+        for c in every_model() {
+            let params = c.model().params();
+            let zero = C64::new(0.0, 0.0);
+            let (mut z_ag, mut z, mut y) = (vec![zero; n], vec![zero; n], vec![zero; n]);
+            c.impedances_into(&slips, &mut z_ag, &mut z, &mut y);
+            let mut m = vec![zero; n];
+            let mut dz = vec![zero; n * params.len()];
+            c.impedance_derivatives_into(&slips, &z_ag, &mut m, &mut dz);
+            for (k, &s) in slips.iter().enumerate() {
+                let mut one = vec![zero; params.len()];
+                let z_one = c.impedance_gradient_into(s, params, &mut one);
+                assert_eq!(bits(z[k]), bits(c.impedance(s)), "{c:?} at {s}");
+                assert_eq!(bits(z[k]), bits(z_one));
+                assert_eq!(bits(y[k]), bits(c.impedance(s).inv()));
+                for (p, d) in one.iter().enumerate() {
+                    assert_eq!(bits(dz[p * n + k]), bits(*d), "{:?} at {s}", params[p]);
                 }
             }
         }

@@ -20,6 +20,7 @@ mod error;
 mod identifiability;
 mod joint;
 mod lm;
+mod lm_solver;
 mod plausibility;
 mod recursive;
 mod standard_tests;

@@ -269,8 +269,25 @@ impl PhaseData {
 
 /// Model phase current and three-phase power at slip `s`, phase voltage `v`.
 pub fn predict(c: &ImCircuit, s: f64, v: f64) -> (f64, f64) {
-    let y = c.impedance(s).inv();
+    terminal(c.impedance(s).inv(), v)
+}
+
+/// Current and power at phase voltage `v` from the input admittance `y`.
+#[inline(always)]
+fn terminal(y: C64, v: f64) -> (f64, f64) {
     (v * y.norm(), 3.0 * v * v * y.re)
+}
+
+/// `dI/dθ` from the impedance `z`, its norm `zn` and `dz = dZ/dθ`.
+#[inline(always)]
+fn current_derivative(v: f64, z: C64, zn: f64, dz: C64) -> f64 {
+    -v * (z.conj() * dz).re / (zn * zn * zn)
+}
+
+/// `dP/dθ` from `z2inv = 1/Z²` and `dz = dZ/dθ`.
+#[inline(always)]
+fn power_derivative(v: f64, z2inv: C64, dz: C64) -> f64 {
+    -3.0 * v * v * (dz * z2inv).re
 }
 
 /// [`predict`] with the derivatives of current and power with respect to
@@ -308,10 +325,92 @@ pub fn predict_gradient_into(
     let y = z.inv();
     let z2inv = y * y;
     for k in 0..n {
-        di[k] = -v * (z.conj() * dz[k]).re / (zn * zn * zn);
-        dp[k] = -3.0 * v * v * (dz[k] * z2inv).re;
+        di[k] = current_derivative(v, z, zn, dz[k]);
+        dp[k] = power_derivative(v, z2inv, dz[k]);
     }
     (v / zn, 3.0 * v * v * y.re)
+}
+
+/// Buffers of [`predict_all`] and [`predict_gradients_all`], kept between
+/// calls: the impedances of the last call, per point, and working space.
+#[derive(Debug, Default)]
+pub(super) struct PredictScratch {
+    z_ag: Vec<C64>,
+    z: Vec<C64>,
+    y: Vec<C64>,
+    zn: Vec<f64>,
+    z2inv: Vec<C64>,
+    minus_z_ag2: Vec<C64>,
+    dz: Vec<C64>,
+}
+
+impl PredictScratch {
+    /// The impedances of `c` at every point of `data`.
+    fn impedances(&mut self, c: &ImCircuit, data: &PhaseData) {
+        let zero = C64::new(0.0, 0.0);
+        for v in [&mut self.z_ag, &mut self.z, &mut self.y] {
+            v.resize(data.len(), zero);
+        }
+        c.impedances_into(&data.slip, &mut self.z_ag, &mut self.z, &mut self.y);
+    }
+}
+
+/// [`predict`] at every point of `data` (the same values, to the bit):
+/// currents into `i`, powers into `p`. `scratch` keeps the circuit's
+/// impedances for [`predict_gradients_all`] at the same circuit.
+pub(super) fn predict_all(
+    c: &ImCircuit,
+    data: &PhaseData,
+    scratch: &mut PredictScratch,
+    i: &mut [f64],
+    p: &mut [f64],
+) {
+    scratch.impedances(c, data);
+    for (((y, &v), i), p) in scratch.y.iter().zip(&data.voltage).zip(i).zip(p) {
+        (*i, *p) = terminal(*y, v);
+    }
+}
+
+/// [`predict_gradient_into`] at every point of `data` with respect to
+/// every element of the model ([`ImModel::params`](crate::model::ImModel::params)),
+/// the same values to the bit: the derivative with respect to the `q`-th
+/// element at point `k` into `di[q·n + k]` and `dp[q·n + k]`, `n` points.
+/// `same_circuit`: the last [`predict_all`] with `scratch` was at `c`
+/// (its impedances are used again).
+pub(super) fn predict_gradients_all(
+    c: &ImCircuit,
+    data: &PhaseData,
+    scratch: &mut PredictScratch,
+    same_circuit: bool,
+    di: &mut [f64],
+    dp: &mut [f64],
+) {
+    let n = data.len();
+    let q = c.model().params().len();
+    let s = scratch;
+    if !same_circuit {
+        s.impedances(c, data);
+    }
+    s.minus_z_ag2.resize(n, C64::new(0.0, 0.0));
+    s.dz.resize(q * n, C64::new(0.0, 0.0));
+    c.impedance_derivatives_into(&data.slip, &s.z_ag, &mut s.minus_z_ag2, &mut s.dz);
+    s.zn.clear();
+    s.zn.extend(s.z.iter().map(|z| z.norm()));
+    // 1/Z² from the admittance, as predict_gradient_into forms it.
+    s.z2inv.clear();
+    s.z2inv.extend(s.y.iter().map(|y| y * y));
+    let per_element =
+        s.dz.chunks_exact(n)
+            .zip(di.chunks_exact_mut(n).zip(dp.chunks_exact_mut(n)));
+    for (dz, (di, dp)) in per_element {
+        let points = s.z.iter().zip(&s.zn).zip(&s.z2inv).zip(&data.voltage);
+        for ((((&z, &zn), &z2inv), &v), (dz, (di, dp))) in
+            points.zip(dz.iter().zip(di.iter_mut().zip(dp.iter_mut())))
+        {
+            *di = current_derivative(v, z, zn, *dz);
+            *dp = power_derivative(v, z2inv, *dz);
+        }
+    }
 }
 
 #[cfg(test)]
@@ -370,6 +469,49 @@ mod tests {
                 // Round-off of the difference is about 1e-16·I/h.
                 assert!(((ia - ib) / (2.0 * h) - di[k]).abs() < 1e-6 * di[k].abs() + 1e-8 * i / v);
                 assert!(((pa - pb) / (2.0 * h) - dp[k]).abs() < 1e-6 * dp[k].abs() + 1e-8 * p / v);
+            }
+        }
+    }
+
+    #[test]
+    fn the_predictions_of_all_points_are_those_of_each_point_to_the_bit() {
+        let single = single_cage(1.0, 2.0, 60.0, None, 1.2, 2.5);
+        let single_fe = single_cage(1.0, 2.0, 60.0, Some(800.0), 1.2, 2.5);
+        let double = crate::model::SEED_DOUBLE_CAGE_PU;
+        let double_fe = ImCircuit {
+            rfe: Some(40.0),
+            ..double
+        };
+        let data = PhaseData {
+            slip: vec![0.0, 0.002, 0.03, 0.2, 0.6, 1.0, 0.45],
+            voltage: vec![230.0, 231.0, 229.0, 1.0, 0.9, 400.0, 120.0],
+            current: vec![0.0; 7],
+            power: vec![0.0; 7],
+        };
+        let n = data.len();
+        let mut scratch = PredictScratch::default();
+        for c in [single, single_fe, double, double_fe] {
+            let params = c.model().params();
+            let q = params.len();
+            let (mut i, mut p) = (vec![0.0; n], vec![0.0; n]);
+            predict_all(&c, &data, &mut scratch, &mut i, &mut p);
+            // After predict_all at c, and with the impedances recomputed.
+            for same_circuit in [true, false] {
+                let (mut di, mut dp) = (vec![0.0; q * n], vec![0.0; q * n]);
+                predict_gradients_all(&c, &data, &mut scratch, same_circuit, &mut di, &mut dp);
+                for k in 0..n {
+                    let (s, v) = (data.slip[k], data.voltage[k]);
+                    let (i1, p1) = predict(&c, s, v);
+                    assert_eq!(
+                        (i[k].to_bits(), p[k].to_bits()),
+                        (i1.to_bits(), p1.to_bits())
+                    );
+                    let (_, _, di1, dp1) = predict_gradient(&c, s, v, params);
+                    for e in 0..q {
+                        assert_eq!(di[e * n + k].to_bits(), di1[e].to_bits(), "{c:?} {s}");
+                        assert_eq!(dp[e * n + k].to_bits(), dp1[e].to_bits(), "{c:?} {s}");
+                    }
+                }
             }
         }
     }
