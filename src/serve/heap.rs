@@ -15,7 +15,7 @@
 //! runtime starts threads; by default glibc opens up to eight per core),
 //! and after each test asks it to return the free memory of every arena
 //! (`malloc_trim(0)`, which walks all arenas since glibc 2.8), off the
-//! reactor. Either alone did little: trimming eight arenas left most of
+//! reactor. Either alone did little: trimming the eight arenas glibc had opened left most of
 //! their memory in place (30–35 MB), and two arenas without a trim still
 //! grew (see the soak's figures in `docs/reliability.md`). With another C
 //! library both do nothing.
