@@ -20,6 +20,15 @@
 //! After a `Link` or `Timeout` error the connection is dropped and opened
 //! afresh on the next attempt: a late answer to an abandoned request must
 //! not be taken for the answer to the next one.
+//!
+//! On an RTU line a frame ends with silence: the Modbus serial-line
+//! specification (V1.02, 2.5.1.1) has every frame preceded by at least
+//! 3.5 character times of idle line, fixed at 1.75 ms above 19 200 baud
+//! ([`rtu_frame_gap`]). Every device on a multi-drop line listens to every
+//! frame, and one that hears a reply and the next request with less
+//! silence between them takes both for one garbled frame. So an RTU client
+//! waits that long after the line last carried a frame (the previous
+//! answer, or the attempt that timed out) before it sends.
 
 use std::borrow::Cow;
 use std::net::SocketAddr;
@@ -100,6 +109,25 @@ pub fn is_idempotent(req: &Request<'_>) -> bool {
     )
 }
 
+/// The silence an RTU frame must be preceded by on a line of `serial`'s
+/// framing: 3.5 character times, or the specification's fixed 1.75 ms
+/// above 19 200 baud (where 3.5 characters would be too short for UARTs
+/// and operating systems to time).
+pub fn rtu_frame_gap(serial: &SerialSettings) -> Duration {
+    if serial.baud_rate > 19_200 {
+        RTU_FRAME_GAP_FAST
+    } else {
+        Duration::from_secs_f64(
+            3.5 * f64::from(serial.bits_per_byte()) / f64::from(serial.baud_rate.max(1)),
+        )
+    }
+}
+
+/// The specification's fixed inter-frame silence above 19 200 baud; also
+/// the gap of an attached RTU stream, whose baud rate the client does not
+/// know ([`ModbusClient::set_frame_gap`] changes it).
+pub const RTU_FRAME_GAP_FAST: Duration = Duration::from_micros(1750);
+
 enum Link {
     Tcp(SocketAddr),
     Rtu(SerialSettings),
@@ -118,6 +146,11 @@ pub struct ModbusClient {
     /// When the latest attempt of a call was sent: after a retry, the
     /// reply's values are from then, not from the first attempt.
     last_sent: Option<tokio::time::Instant>,
+    /// RTU: the silence to keep before each request.
+    frame_gap: Option<Duration>,
+    /// RTU: when the line last carried a frame (an answer's end, or the
+    /// deadline of an attempt that got none).
+    line_quiet_since: Option<tokio::time::Instant>,
 }
 
 impl std::fmt::Debug for ModbusClient {
@@ -141,6 +174,8 @@ impl ModbusClient {
             policy,
             stats: LinkStats::default(),
             last_sent: None,
+            frame_gap: None,
+            line_quiet_since: None,
         }
     }
 
@@ -152,7 +187,10 @@ impl ModbusClient {
     /// Modbus RTU on a serial port (opened on first use, reopened after a
     /// link failure).
     pub fn rtu(device: &str, serial: SerialSettings, unit: u8, policy: CallPolicy) -> ModbusClient {
-        ModbusClient::new(device, unit, Link::Rtu(serial), policy)
+        let gap = rtu_frame_gap(&serial);
+        let mut c = ModbusClient::new(device, unit, Link::Rtu(serial), policy);
+        c.frame_gap = Some(gap);
+        c
     }
 
     /// Modbus TCP framing (MBAP header) over a stream the caller opened.
@@ -166,13 +204,23 @@ impl ModbusClient {
     }
 
     /// Modbus RTU framing (CRC) over a stream the caller opened (a PTY, a
-    /// duplex). After a link failure it cannot be reopened.
+    /// duplex). After a link failure it cannot be reopened. Frames keep
+    /// [`RTU_FRAME_GAP_FAST`] of silence between them; a line at 19 200
+    /// baud or slower wants [`Self::set_frame_gap`] with [`rtu_frame_gap`].
     pub fn attach_rtu<T>(device: &str, io: T, unit: u8, policy: CallPolicy) -> ModbusClient
     where
         T: AsyncRead + AsyncWrite + std::fmt::Debug + Unpin + Send + 'static,
     {
         let ctx = tokio_modbus::client::rtu::attach_slave(io, Slave(unit));
-        ModbusClient::new(device, unit, Link::Attached(Some(ctx)), policy)
+        let mut c = ModbusClient::new(device, unit, Link::Attached(Some(ctx)), policy);
+        c.frame_gap = Some(RTU_FRAME_GAP_FAST);
+        c
+    }
+
+    /// Set the silence kept before each request (RTU; `None` sends at
+    /// once, as Modbus TCP does).
+    pub fn set_frame_gap(&mut self, gap: Option<Duration>) {
+        self.frame_gap = gap;
     }
 
     /// Address later calls to unit `unit` (several devices on one RTU
@@ -258,10 +306,23 @@ impl ModbusClient {
         Ok(())
     }
 
+    /// When the line will have been silent for the frame gap (RTU).
+    fn frame_gap_ends(&self) -> Option<tokio::time::Instant> {
+        self.frame_gap
+            .zip(self.line_quiet_since)
+            .map(|(g, q)| q + g)
+    }
+
     async fn attempt(&mut self, req: Request<'static>) -> Result<Response, DriverError> {
         self.connect().await?;
+        if let Some(at) = self.frame_gap_ends() {
+            tokio::time::sleep_until(at).await;
+        }
+        self.last_sent = Some(tokio::time::Instant::now());
         let ctx = self.ctx.as_mut().expect("connected above");
-        match tokio::time::timeout(self.policy.timeout, ctx.call(req)).await {
+        let answer = tokio::time::timeout(self.policy.timeout, ctx.call(req)).await;
+        self.line_quiet_since = Some(tokio::time::Instant::now());
+        match answer {
             Err(_) => {
                 self.stats.timeouts += 1;
                 Err(self.timeout_error())
@@ -307,7 +368,6 @@ impl ModbusClient {
                 self.stats.retries += 1;
                 tokio::time::sleep(self.policy.retry_delay).await;
             }
-            self.last_sent = Some(tokio::time::Instant::now());
             match self.attempt(req.clone()).await {
                 Ok(r) => return Ok(r),
                 Err(e) if e.is_link_failure() => {
@@ -472,6 +532,72 @@ mod tests {
         // The values are from the second attempt, sent a retry delay
         // after the first: a sample stamped at the first would be early.
         assert_eq!(c.last_sent(), Some(t0 + policy.retry_delay));
+    }
+
+    #[test]
+    fn the_rtu_frame_gap_is_three_and_a_half_characters_or_the_fixed_fast_value() {
+        let at = |baud, parity, stop_bits| {
+            rtu_frame_gap(&SerialSettings {
+                path: String::new(),
+                baud_rate: baud,
+                parity,
+                stop_bits,
+            })
+        };
+        use crate::serial::port::Parity;
+        // 9600 baud, even parity: 11 bits a character, 3.5 of them 4.01 ms.
+        let slow = at(9600, Parity::Even, 1).as_secs_f64();
+        assert!((slow - 3.5 * 11.0 / 9600.0).abs() < 1e-9, "{slow}");
+        // 19 200 baud 8N1: 10 bits, 1.82 ms; above it the fixed 1.75 ms.
+        let edge = at(19_200, Parity::None, 1).as_secs_f64();
+        assert!((edge - 3.5 * 10.0 / 19_200.0).abs() < 1e-9, "{edge}");
+        assert_eq!(at(115_200, Parity::None, 1), RTU_FRAME_GAP_FAST);
+        assert_eq!(at(38_400, Parity::Even, 1), Duration::from_micros(1750));
+    }
+
+    #[tokio::test(start_paused = true)]
+    async fn an_rtu_request_waits_for_the_frame_gap_after_the_last_answer() {
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        const MODBUS_CRC: crc::Crc<u16> = crc::Crc::<u16>::new(&crc::CRC_16_MODBUS);
+        // An RTU device on a duplex that answers every read of one input
+        // register at once, and notes when each request arrived and when
+        // each answer left.
+        let (ours, mut theirs) = tokio::io::duplex(256);
+        let device = tokio::spawn(async move {
+            let mut log = Vec::new();
+            for n in 0..3u16 {
+                let mut req = [0u8; 8];
+                theirs.read_exact(&mut req).await.unwrap();
+                let arrived = tokio::time::Instant::now();
+                let mut frame = vec![req[0], 0x04, 2, 0, n as u8];
+                let crc = MODBUS_CRC.checksum(&frame);
+                frame.extend_from_slice(&crc.to_le_bytes());
+                theirs.write_all(&frame).await.unwrap();
+                log.push((arrived, tokio::time::Instant::now()));
+            }
+            log
+        });
+        let mut c = ModbusClient::attach_rtu("daq", ours, 7, CallPolicy::default());
+        for n in 0..3 {
+            assert_eq!(c.read_input(0, 1).await.unwrap(), vec![n]);
+        }
+        let log = device.await.unwrap();
+        for pair in log.windows(2) {
+            let silence = pair[1].0 - pair[0].1;
+            assert!(
+                silence >= RTU_FRAME_GAP_FAST,
+                "{silence:?} of silence before a request"
+            );
+        }
+
+        // Modbus TCP keeps no gap: its frames are delimited by length.
+        let tcp = ModbusClient::tcp(
+            "psu",
+            "127.0.0.1:1".parse().unwrap(),
+            1,
+            CallPolicy::default(),
+        );
+        assert_eq!(tcp.frame_gap, None);
     }
 
     #[tokio::test(start_paused = true)]

@@ -16,7 +16,9 @@ mod stage;
 pub use bus::{
     read_registers, spawn_bus, spawn_bus_as, worst_case_latency, BusHandle, Priority, Reading,
 };
-pub use client::{is_idempotent, CallPolicy, LinkStats, ModbusClient};
+pub use client::{
+    is_idempotent, rtu_frame_gap, CallPolicy, LinkStats, ModbusClient, RTU_FRAME_GAP_FAST,
+};
 pub use profile::{DeviceProfile, ProfileError, SerialDefaults, StageMap};
 pub use register_map::{
     Access, ByteOrder, DataType, RangeError, Register, RegisterKind, WordOrder,
