@@ -14,7 +14,10 @@ pub use diagnosis::{
     reportable, Candidate, Diagnosis, Gap, GapRegion, LookAlike, NominalFit, ParamCorrection,
     RegionAxis, ResidualEvidence, Verdict,
 };
-pub use report::{unphysical_param, IdentificationReport, MethodReport, ParamEstimate, Provenance};
+pub use report::{
+    render_warnings, unphysical_param, IdentificationReport, MethodReport, ParamEstimate,
+    Provenance,
+};
 pub use standard_tests::{LockedRotorRow, NoLoadRow, StandardTestTables, XmCurve};
 
 /// The contract version this motorbench writes.

@@ -109,6 +109,14 @@ pub struct IdentificationReport {
     pub best: Option<String>,
     /// Things a user should know about the data or the fit.
     pub warnings: Vec<String>,
+    /// What the rig warned of while the test ran (the record's warning
+    /// events, each with its test time): a level that did not settle, an
+    /// encoder that disagrees with the dynamometer, a safe-state command
+    /// that failed. Read from the record, not computed by the analysis. An
+    /// additive extension of the contract; absent where there were none
+    /// (and on CSV data, which has no events).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub test_warnings: Vec<String>,
     /// The sim-to-real diagnosis, when one was run (`run`, `replay`; not
     /// `identify`). The contract's `/bench/result` is "the identification
     /// (and diagnosis) report".
@@ -164,6 +172,23 @@ impl Provenance {
     }
 }
 
+/// The warnings of `report` for a person: the analysis' own, then what the
+/// rig warned of during the test (nothing when it has neither).
+pub fn render_warnings(out: &mut String, report: &IdentificationReport) {
+    use std::fmt::Write;
+    for (title, list) in [
+        ("warnings", &report.warnings),
+        ("warnings during the test", &report.test_warnings),
+    ] {
+        if !list.is_empty() {
+            let _ = writeln!(out, "\n{title}:");
+            for w in list {
+                let _ = writeln!(out, "  - {w}");
+            }
+        }
+    }
+}
+
 impl IdentificationReport {
     /// An empty report of `kind`.
     pub fn new(kind: &str) -> IdentificationReport {
@@ -173,6 +198,7 @@ impl IdentificationReport {
             methods: BTreeMap::new(),
             best: None,
             warnings: Vec::new(),
+            test_warnings: Vec::new(),
             diagnosis: None,
             provenance: None,
             standard_tests: None,

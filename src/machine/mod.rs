@@ -39,7 +39,7 @@ use motorbench_drivers::{ChannelInfo, LinkHealth, PowerStage, SensorStream};
 use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
 use crate::config::CommonConfig;
 use crate::diagnose::{attach_diagnosis, ResidualPlot};
-use crate::record::{ChannelSpec, Record, SegmentKind};
+use crate::record::{ChannelSpec, Event, EventLevel, Record, SegmentKind};
 use crate::report::IdentificationReport;
 use crate::rig::ModbusProbe;
 use crate::rig::RigError;
@@ -186,6 +186,8 @@ impl Analysed {
             analysis: Box::new(identify(record)),
             residuals: None,
         };
+        analysed.analysis.report_mut().test_warnings =
+            test_warnings(record.events.iter().map(|(t, e)| (*t, e)));
         if diagnose {
             analysed.diagnose(record, kind);
         }
@@ -200,6 +202,31 @@ impl Analysed {
     pub fn diagnose(&mut self, record: &Record, kind: SegmentKind) {
         self.residuals = attach_diagnosis(self.analysis.report_mut(), record, kind);
     }
+}
+
+/// Most of a test's warning events a report lists; the rest are counted.
+const MAX_TEST_WARNINGS: usize = 20;
+
+/// The report's `test_warnings` of a record's events: each warning as
+/// "at test time T s: message", the first [`MAX_TEST_WARNINGS`] of them,
+/// then how many more the record holds.
+fn test_warnings<'a>(events: impl IntoIterator<Item = (u64, &'a Event)>) -> Vec<String> {
+    let warned: Vec<(u64, &Event)> = events
+        .into_iter()
+        .filter(|(_, e)| e.level == EventLevel::Warn)
+        .collect();
+    let mut out: Vec<String> = warned
+        .iter()
+        .take(MAX_TEST_WARNINGS)
+        .map(|(t, e)| format!("at test time {:.3} s: {}", *t as f64 * 1e-9, e.message))
+        .collect();
+    if warned.len() > MAX_TEST_WARNINGS {
+        out.push(format!(
+            "{} more warnings during the test (the record's /bench/events holds them all)",
+            warned.len() - MAX_TEST_WARNINGS
+        ));
+    }
+    out
 }
 
 /// Analyse a record of any machine (`replay`): an induction-machine
@@ -228,4 +255,48 @@ pub fn record_analysis_kind(record: &Record) -> SegmentKind {
 /// or standard-test readings).
 fn is_im_record(record: &Record) -> bool {
     !(record.operating_points.is_empty() && record.standard_tests.is_empty())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn event(level: EventLevel, message: &str) -> Event {
+        Event {
+            level,
+            message: message.into(),
+        }
+    }
+
+    #[test]
+    fn a_report_lists_the_tests_warnings_with_their_time_and_counts_the_rest() {
+        let events = [
+            (1_500_000_000, event(EventLevel::Info, "segment 1: 60 V")),
+            (
+                2_250_000_000,
+                event(EventLevel::Warn, "level 60 V did not settle"),
+            ),
+            (3_000_000_000, event(EventLevel::Abort, "stopped")),
+        ];
+        let listed = test_warnings(events.iter().map(|(t, e)| (*t, e)));
+        assert_eq!(listed, ["at test time 2.250 s: level 60 V did not settle"]);
+
+        let many: Vec<(u64, Event)> = (0..25)
+            .map(|n| {
+                (
+                    n * 1_000_000_000,
+                    event(EventLevel::Warn, &format!("point {n} skipped")),
+                )
+            })
+            .collect();
+        let listed = test_warnings(many.iter().map(|(t, e)| (*t, e)));
+        assert_eq!(listed.len(), MAX_TEST_WARNINGS + 1);
+        assert_eq!(listed[19], "at test time 19.000 s: point 19 skipped");
+        assert!(
+            listed[20].starts_with("5 more warnings during the test"),
+            "{}",
+            listed[20]
+        );
+        assert!(test_warnings(std::iter::empty()).is_empty());
+    }
 }

@@ -179,6 +179,22 @@ impl Ran {
             "no warning with `{warning}` in {warnings:?}"
         );
         assert!(self.events(EventLevel::Abort).is_empty());
+        // The report carries it too, for whoever reads it after the run.
+        let result = self
+            .record
+            .recorded_result
+            .as_ref()
+            .expect("a completed test records its result");
+        let listed: Vec<&str> = result["test_warnings"]
+            .as_array()
+            .map(|a| a.iter().filter_map(|w| w.as_str()).collect())
+            .unwrap_or_default();
+        assert!(
+            listed
+                .iter()
+                .any(|w| w.starts_with("at test time ") && w.contains(warning)),
+            "no test warning with `{warning}` in the report: {listed:?}"
+        );
     }
 }
 

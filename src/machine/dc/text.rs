@@ -106,12 +106,7 @@ pub fn render_text(id: &Identification, truth: Option<&DcParams>) -> String {
         "\nbest: {}",
         r.best.as_deref().unwrap_or("none (no method applies)")
     );
-    if !r.warnings.is_empty() {
-        let _ = writeln!(out, "\nwarnings:");
-        for w in &r.warnings {
-            let _ = writeln!(out, "  - {w}");
-        }
-    }
+    crate::contract::render_warnings(&mut out, r);
     out
 }
 

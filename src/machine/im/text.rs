@@ -181,11 +181,6 @@ pub fn render_im_text(id: &ImIdentification) -> String {
     if let Some(t) = &id.report.standard_tests {
         render_tables(&mut out, t);
     }
-    if !id.report.warnings.is_empty() {
-        let _ = writeln!(out, "\nwarnings:");
-        for w in &id.report.warnings {
-            let _ = writeln!(out, "  - {w}");
-        }
-    }
+    crate::contract::render_warnings(&mut out, &id.report);
     out
 }

@@ -385,6 +385,9 @@ async function showRecord(r) {
             el("th", {}, "95 % interval"), el("th", {}, "unit"))),
           el("tbody", {}, ...rows)));
       if (rep.warnings && rep.warnings.length) view.append(el("p", { class: "muted" }, rep.warnings.join("; ")));
+      if (rep.test_warnings && rep.test_warnings.length) {
+        view.append(el("p", { class: "muted test-warnings" }, `during the test: ${rep.test_warnings.join("; ")}`));
+      }
     } catch (e) {
       if (!(e instanceof Unauthorized)) view.append(el("p", { class: "error" }, `report: ${e.message}`));
     }
