@@ -15,7 +15,7 @@
 //! records (docs/diagnosis-dc.md, Status), so it is not the default.
 
 use super::fit::{
-    fit_masked, gauss_newton_step, refit_spec, runs_residuals, segment_rows, step_landed, FitSpec,
+    fit_fold, gauss_newton_step, refit_spec, runs_residuals, segment_rows, step_landed, FitSpec,
     Fitted, Weights,
 };
 use super::gap::HeldOutSeries;
@@ -58,7 +58,7 @@ fn fold_of(g: usize) -> usize {
 
 /// Per row of the record's residual vector ([`runs_residuals`] order):
 /// the fold that holds it out.
-fn row_folds(runs: &[SegmentRun]) -> Vec<usize> {
+pub(super) fn row_folds(runs: &[SegmentRun]) -> Vec<usize> {
     let mut out = Vec::with_capacity(runs.iter().map(segment_rows).sum());
     let mut g = 0usize;
     for run in runs {
@@ -91,17 +91,11 @@ fn refit_fold(
     let refit = refit_spec(spec, all);
     let at = &all.at;
     let np = refit.len();
-    if at.jac.ncols() == np && at.r.len() == rows.len() {
-        let mut normal = at.normal.clone();
-        let mut gradient = at.gradient.clone();
-        let mut sse0 = at.r.norm_squared();
-        for (row, _) in rows.iter().enumerate().filter(|(_, k)| **k == f) {
-            let j = at.jac.row(row);
-            let r = at.r[row];
-            normal -= j.transpose() * j;
-            gradient -= j.transpose() * r;
-            sse0 -= r * r;
-        }
+    if at.np == np && at.rows == rows.len() && f < at.by_fold.len() {
+        let held = &at.by_fold[f];
+        let normal = &at.whole.normal - &held.normal;
+        let gradient = &at.whole.gradient - &held.gradient;
+        let sse0 = at.whole.sse - held.sse;
         if let Some(step) = gauss_newton_step(&normal, &gradient) {
             let model = refit.model_at(&step);
             let mut r = Vec::new();
@@ -119,7 +113,7 @@ fn refit_fold(
         }
     }
     let mask: Vec<bool> = rows.iter().map(|k| *k == f).collect();
-    fit_masked(&refit, runs, w, patience, Some(&mask)).map(|m| m.model)
+    fit_fold(&refit, runs, w, patience, Some(&mask)).map(|m| m.model)
 }
 
 /// The cross-validated residual series of every run: each sample

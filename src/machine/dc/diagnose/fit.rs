@@ -17,7 +17,11 @@
 //! with the fit ([`AtOptimum`]): one Gauss–Newton step on its normal
 //! equations less the held-out rows ([`one_step_refit`]) where that step is
 //! short and the residuals are linear over it, which costs one segment's
-//! linearisation instead of an iterated fit of all the others.
+//! linearisation instead of an iterated fit of all the others. The fit
+//! keeps the normal equations of each segment's rows and of each
+//! interleaved fold's, not the tall Jacobian itself: a Jacobian is rows ×
+//! parameters (17 MB for a minute at 2 kHz with a three-parameter effect),
+//! and every candidate's fit lives until the verdict.
 
 use std::cell::RefCell;
 use std::sync::Arc;
@@ -285,17 +289,115 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for FitProblem<'_> {
     }
 }
 
-/// The weighted residuals and their Jacobian at a fit's optimum.
+/// Sums over a set of rows of a linearisation `(J, r)`.
+#[derive(Debug, Clone)]
+pub struct RowSums {
+    /// `JᵀJ` of the rows.
+    pub normal: DMatrix<f64>,
+    /// `Jᵀr` of the rows.
+    pub gradient: DVector<f64>,
+    /// `rᵀr` of the rows.
+    pub sse: f64,
+}
+
+impl RowSums {
+    /// Over the `rows` rows of `(jac, r)` from `from`, computed as the
+    /// one-step refit always took them (the same value to the last bit).
+    fn of_block(jac: &DMatrix<f64>, r: &DVector<f64>, from: usize, rows: usize) -> RowSums {
+        let j = jac.rows(from, rows);
+        let rr = r.rows(from, rows);
+        RowSums {
+            normal: j.tr_mul(&j),
+            gradient: j.tr_mul(&rr),
+            sse: rr.norm_squared(),
+        }
+    }
+
+    /// Over the rows `take` marks, a contiguous run of them at a time.
+    fn of_rows(jac: &DMatrix<f64>, r: &DVector<f64>, take: impl Fn(usize) -> bool) -> RowSums {
+        let np = jac.ncols();
+        let mut s = RowSums {
+            normal: DMatrix::zeros(np, np),
+            gradient: DVector::zeros(np),
+            sse: 0.0,
+        };
+        let mut row = 0;
+        while row < r.len() {
+            if !take(row) {
+                row += 1;
+                continue;
+            }
+            let from = row;
+            while row < r.len() && take(row) {
+                row += 1;
+            }
+            let b = RowSums::of_block(jac, r, from, row - from);
+            s.normal += b.normal;
+            s.gradient += b.gradient;
+            s.sse += b.sse;
+        }
+        s
+    }
+}
+
+/// The normal equations of a fit's linearisation at its optimum, whole
+/// and per block of rows: what a held-out refit steps from.
 #[derive(Debug)]
 pub struct AtOptimum {
-    /// Residuals, rows of every run in order ([`segment_rows`] each).
-    pub r: DVector<f64>,
-    /// Their Jacobian with respect to the transformed parameters.
-    pub jac: DMatrix<f64>,
-    /// `JᵀJ`.
-    pub normal: DMatrix<f64>,
-    /// `Jᵀr`.
-    pub gradient: DVector<f64>,
+    /// Residual rows, of every run in order ([`segment_rows`] each).
+    pub rows: usize,
+    /// Transformed parameters (the Jacobian's columns).
+    pub np: usize,
+    /// Over every row: `JᵀJ`, `Jᵀr`, `rᵀr`.
+    pub whole: RowSums,
+    /// Over each run's rows, in the runs' order (empty on a fold's own
+    /// fit, which no refit steps from).
+    pub by_run: Vec<RowSums>,
+    /// Over each interleaved fold's rows ([`super::cv`]); empty as
+    /// `by_run`.
+    pub by_fold: Vec<RowSums>,
+}
+
+impl AtOptimum {
+    /// The sums of `(jac, r)`, the linearisation of `runs`; per run and
+    /// per fold only when `blocks`.
+    fn new(jac: &DMatrix<f64>, r: &DVector<f64>, runs: &[SegmentRun], blocks: bool) -> AtOptimum {
+        let whole = RowSums {
+            normal: gram(jac),
+            gradient: jac.tr_mul(r),
+            sse: r.norm_squared(),
+        };
+        if !blocks {
+            return AtOptimum {
+                rows: r.len(),
+                np: jac.ncols(),
+                whole,
+                by_run: Vec::new(),
+                by_fold: Vec::new(),
+            };
+        }
+        let mut from = 0;
+        let by_run = runs
+            .iter()
+            .map(|run| {
+                let rows = segment_rows(run);
+                let s = RowSums::of_block(jac, r, from, rows);
+                from += rows;
+                s
+            })
+            .collect();
+        let folds = super::cv::row_folds(runs);
+        let by_fold = (0..super::cv::CV_FOLDS)
+            .map(|f| RowSums::of_rows(jac, r, |row| folds[row] == f))
+            .collect();
+        AtOptimum {
+            rows: r.len(),
+            np: jac.ncols(),
+            whole,
+            by_run,
+            by_fold,
+        }
+    }
 }
 
 /// A fitted model.
@@ -320,18 +422,31 @@ pub struct Fitted {
 }
 
 /// Fit `spec` to `runs` weighted by `w`, at most `patience` (×P)
-/// evaluations. `None` when the start itself is refused.
+/// evaluations, keeping what a held-out refit steps from. `None` when the
+/// start itself is refused.
 pub fn fit(spec: &FitSpec, runs: &[SegmentRun], w: &Weights, patience: usize) -> Option<Fitted> {
-    fit_masked(spec, runs, w, patience, None)
+    fit_masked(spec, runs, w, patience, None, true)
 }
 
-/// [`fit`] without the rows `mask` marks (a cross-validation fold's).
-pub fn fit_masked(
+/// A cross-validation fold's refit: [`fit`] without the rows `mask` marks,
+/// keeping no per-block sums (no refit steps from a fold's).
+pub fn fit_fold(
     spec: &FitSpec,
     runs: &[SegmentRun],
     w: &Weights,
     patience: usize,
     mask: Option<&[bool]>,
+) -> Option<Fitted> {
+    fit_masked(spec, runs, w, patience, mask, false)
+}
+
+fn fit_masked(
+    spec: &FitSpec,
+    runs: &[SegmentRun],
+    w: &Weights,
+    patience: usize,
+    mask: Option<&[bool]>,
+    blocks: bool,
 ) -> Option<Fitted> {
     let rows: usize = runs.iter().map(segment_rows).sum();
     let np = spec.len();
@@ -360,25 +475,23 @@ pub fn fit_masked(
     let s2 = sse / dof;
     let colour =
         rows as f64 / crate::diagnose::decision::effective_samples(last.r.as_slice()).max(1.0);
-    let normal = gram(&last.jac);
-    let gradient = last.jac.tr_mul(&last.r);
-    let covariance = normal
+    let at = AtOptimum::new(&last.jac, &last.r, runs, blocks);
+    let model = spec.model_at(&last.x);
+    drop(last);
+    let covariance = at
+        .whole
+        .normal
         .clone()
         .try_inverse()
         .map(|m| m * s2 * colour.max(1.0));
     Some(Fitted {
-        model: spec.model_at(&last.x),
+        model,
         sse,
         covariance,
         converged: report.termination.was_successful(),
         s2,
         colour: colour.max(1.0),
-        at: Arc::new(AtOptimum {
-            r: last.r,
-            jac: last.jac,
-            normal,
-            gradient,
-        }),
+        at: Arc::new(at),
     })
 }
 
@@ -417,28 +530,28 @@ pub fn one_step_refit(
     let refit = refit_spec(spec, all);
     let np = refit.len();
     let at = &all.at;
-    if at.jac.ncols() != np || at.r.len() != runs.iter().map(segment_rows).sum::<usize>() {
+    if at.np != np
+        || at.by_run.len() != runs.len()
+        || at.rows != runs.iter().map(segment_rows).sum::<usize>()
+    {
         return None;
     }
-    let first = runs[..h].iter().map(segment_rows).sum::<usize>();
-    let mut normal = at.normal.clone();
-    let mut gradient = at.gradient.clone();
-    let mut sse0 = at.r.norm_squared();
-    let mut add = |jac: &DMatrix<f64>, r: &DVector<f64>, from: usize, rows: usize, sign: f64| {
-        let j = jac.rows(from, rows);
-        let rr = r.rows(from, rows);
-        normal += j.tr_mul(&j) * sign;
-        gradient += j.tr_mul(&rr) * sign;
-        sse0 += rr.norm_squared() * sign;
+    let mut normal = at.whole.normal.clone();
+    let mut gradient = at.whole.gradient.clone();
+    let mut sse0 = at.whole.sse;
+    let mut add = |s: &RowSums, sign: f64| {
+        normal += &s.normal * sign;
+        gradient += &s.gradient * sign;
+        sse0 += s.sse * sign;
     };
-    add(&at.jac, &at.r, first, segment_rows(&runs[h]), -1.0);
+    add(&at.by_run[h], -1.0);
     let next = h + 1;
     let next_continues = next < runs.len()
         && runs[next].continues.is_some()
         && runs[next].seg.index == runs[h].seg.index + 1;
     if next_continues {
         let rows = segment_rows(&runs[next]);
-        add(&at.jac, &at.r, first + segment_rows(&runs[h]), rows, -1.0);
+        add(&at.by_run[next], -1.0);
         let alone = FitProblem {
             spec: &refit,
             runs: std::slice::from_ref(&runs[next]),
@@ -453,7 +566,7 @@ pub fn one_step_refit(
         if l.r.is_empty() {
             return None;
         }
-        add(&l.jac, &l.r, 0, rows, 1.0);
+        add(&RowSums::of_block(&l.jac, &l.r, 0, rows), 1.0);
     }
     let step = gauss_newton_step(&normal, &gradient)?;
     let model = refit.model_at(&step);
@@ -736,6 +849,28 @@ mod tests {
             // And not merely the all-segment model again.
             assert_ne!(one, all.model, "fold {h}");
         }
+
+        // What the fit keeps instead of its Jacobian: the segments' sums,
+        // and the interleaved folds', each add up to the whole.
+        let at = &all.at;
+        assert_eq!((at.by_run.len(), at.by_fold.len()), (runs.len(), 5));
+        for blocks in [&at.by_run, &at.by_fold] {
+            let normal = blocks
+                .iter()
+                .fold(DMatrix::zeros(at.np, at.np), |m, b| m + &b.normal);
+            let gradient = blocks
+                .iter()
+                .fold(DVector::zeros(at.np), |g, b| g + &b.gradient);
+            let sse: f64 = blocks.iter().map(|b| b.sse).sum();
+            assert!((normal - &at.whole.normal).norm() <= 1e-9 * at.whole.normal.norm());
+            assert!((gradient - &at.whole.gradient).norm() <= 1e-9 * at.whole.normal.norm());
+            assert!((sse / at.whole.sse - 1.0).abs() < 1e-12);
+        }
+        // A fold's own fit keeps no blocks: no refit steps from it.
+        let fold = fit_fold(&refit_spec(&spec, &all), &without(&runs, 0), &w, 40, None)
+            .expect("the fold's fit");
+        assert!(fold.at.by_run.is_empty() && fold.at.by_fold.is_empty());
+        assert!(one_step_refit(&spec, &fold, &runs, &without(&runs, 0), 0, &w).is_none());
     }
 
     /// The Gram matrix is `tr_mul`'s to the last bit, so the fits (and

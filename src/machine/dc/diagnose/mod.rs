@@ -33,7 +33,9 @@ use self::candidates::{
     candidates, effect_params, extra_params, physical, separating_plan, undetermined, CandidateDef,
     RecordScales,
 };
-use self::fit::{fit, one_step_refit, refit_spec, without, FitSpec, Fitted, Transform, Weights};
+use self::fit::{
+    fit, fit_fold, one_step_refit, refit_spec, without, FitSpec, Fitted, Transform, Weights,
+};
 use self::gap::{locate, spectral_peak, HeldOutSeries, Measured};
 use self::model::{AugModel, Continuation, SegmentRun, Start};
 use crate::contract::{
@@ -651,7 +653,7 @@ fn fold(
     let train = without(runs, h);
     let model = match one_step_refit(spec, all, runs, &train, h, w) {
         Some(m) => m,
-        None => fit(&refit_spec(spec, all), &train, w, PATIENCE_FOLD)?.model,
+        None => fit_fold(&refit_spec(spec, all), &train, w, PATIENCE_FOLD, None)?.model,
     };
     held_out(&model, &runs[..=h])
 }
