@@ -1,7 +1,9 @@
 //! Excerpts of user input for error messages: an offending value is
 //! quoted whole when short, and cut to its first characters and its size
 //! when long, so that a 10 MB field of a CSV file or a long line of a
-//! configuration does not flood the terminal or the log.
+//! configuration does not flood the terminal or the log; a long list in
+//! a message (the 36 parts a record was cut into) is shortened the same
+//! way.
 
 /// Characters of a long value shown before it is cut.
 pub const EXCERPT_CHARS: usize = 40;
@@ -24,9 +26,39 @@ pub fn cut(s: &str) -> String {
     }
 }
 
+/// Items a list shows whole; a longer one shows its first
+/// [`LIST_HEAD`] and last [`LIST_TAIL`].
+pub const LIST_ITEMS: usize = 8;
+/// Items shown before the cut of a long list.
+pub const LIST_HEAD: usize = 3;
+/// Items shown after the cut of a long list.
+pub const LIST_TAIL: usize = 2;
+
+/// `items` joined by commas when there are at most [`LIST_ITEMS`]; else
+/// the first and last few around `…`, and how many there are in all.
+pub fn listed(items: &[String]) -> String {
+    if items.len() <= LIST_ITEMS {
+        return items.join(", ");
+    }
+    format!(
+        "{}, …, {} ({} in all)",
+        items[..LIST_HEAD].join(", "),
+        items[items.len() - LIST_TAIL..].join(", "),
+        items.len()
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_long_list_shows_its_ends_and_its_count() {
+        let items: Vec<String> = (0..36).map(|n| n.to_string()).collect();
+        assert_eq!(listed(&items), "0, 1, 2, …, 34, 35 (36 in all)");
+        assert_eq!(listed(&items[..8]), "0, 1, 2, 3, 4, 5, 6, 7");
+        assert_eq!(listed(&[]), "");
+    }
 
     #[test]
     fn short_values_are_whole_and_long_ones_cut_with_their_size() {

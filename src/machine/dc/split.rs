@@ -73,11 +73,12 @@ pub fn split_single_segment(mut record: Record) -> Record {
         seg.index,
         seg.label,
         parts.len(),
-        parts
-            .iter()
-            .map(|p| format!("{:.3}–{:.3} s", p.time[0], p.time[p.time.len() - 1]))
-            .collect::<Vec<_>>()
-            .join(", ")
+        crate::excerpt::listed(
+            &parts
+                .iter()
+                .map(|p| format!("{:.3}–{:.3} s", p.time[0], p.time[p.time.len() - 1]))
+                .collect::<Vec<_>>()
+        )
     );
     record.segments.splice(only..=only, parts);
     for (k, s) in record.segments.iter_mut().enumerate() {

@@ -298,7 +298,7 @@ pub fn identify_dc(record: &Record) -> Identification {
     if !level_notes.is_empty() {
         report.warnings.push(format!(
             "steady_state: settled levels used: segment {}",
-            level_notes.join(", ")
+            crate::excerpt::listed(&level_notes)
         ));
     }
     if let Some(r) = &record.recovery {
