@@ -186,6 +186,9 @@ impl FitProblem<'_> {
                 return;
             }
         }
+        // The previous linearisation goes before the next is built: two
+        // tall Jacobians at once would double the fit's peak memory.
+        self.last.borrow_mut().take();
         let np = x.len();
         let mut buf = Vec::with_capacity(self.rows);
         let l = if self.residuals_into(x, &mut buf) {
