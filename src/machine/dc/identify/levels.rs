@@ -208,6 +208,12 @@ pub(crate) fn white_noise(y: &[f64]) -> f64 {
 /// over the readings after the first two (the boundary sample and the
 /// current sensor's response to the opening) at which the speed is still
 /// at least half its first reading, the mean current must be as small.
+///
+/// And with nothing driving it the rotor never speeds up: a driven
+/// segment of a lightly loaded motor (a no-load current a few percent of
+/// its step transients' peaks, the voltage near the back-EMF) passes every
+/// test above when its last level is its lowest, but its speed rises at
+/// every step up ([`speed_rises`]).
 pub fn is_coastdown(seg: &DcSegment) -> bool {
     let n = seg.time.len();
     if n < 2 * MIN_TAIL {
@@ -235,6 +241,28 @@ pub fn is_coastdown(seg: &DcSegment) -> bool {
         && head.abs() > 0.0
         && tail.abs() < 0.5 * head.abs()
         && holds_no_level
+        && !speed_rises(&seg.speed, head)
+}
+
+/// Blocks the speed is averaged over for [`speed_rises`].
+const RISE_BLOCKS: usize = 50;
+
+/// Whether `speed` (starting near `head`) rises anywhere by more than
+/// noise: the mean of some block of samples above the lowest mean of the
+/// blocks before it by more than six standard errors of a block mean and
+/// 5 % of `head`.
+fn speed_rises(speed: &[f64], head: f64) -> bool {
+    let m = (speed.len() / RISE_BLOCKS).max(1);
+    let tolerance = (6.0 * white_noise(speed) / (m as f64).sqrt()).max(0.05 * head.abs());
+    let mut lowest = f64::INFINITY;
+    for block in speed.chunks(m) {
+        let mean = block.iter().sum::<f64>() / block.len() as f64;
+        if (mean.abs() - lowest) > tolerance {
+            return true;
+        }
+        lowest = lowest.min(mean.abs());
+    }
+    false
 }
 
 #[cfg(test)]
@@ -333,5 +361,26 @@ mod tests {
         let mean_abs = short.current.iter().map(|v| v.abs()).sum::<f64>() / 1000.0;
         assert!(mean_abs < 0.05 * peak, "the current test alone is fooled");
         assert!(!is_coastdown(&short));
+        // A block of a long staircase on a lightly loaded motor, from its
+        // highest level to its lowest: a no-load current far under the
+        // steps' transient peaks, the voltage near the back-EMF and under
+        // half its early median at the end, the speed at the end under
+        // half the first; but the speed rises at every step up.
+        let levels = [140.0, 90.0, 40.0, 80.0, 120.0, 60.0, 100.0, 20.0];
+        let stairs = segment(
+            |t| {
+                let k = ((t / 0.25) as usize).min(levels.len() - 1);
+                let since = t - k as f64 * 0.25;
+                let (u, before) = (levels[k], if k == 0 { 140.0 } else { levels[k - 1] });
+                let w = (u + (before - u) * (-since / 0.05).exp()) / 0.9;
+                let i = 0.1 + 0.002 * u + (u - before) / 1.2 * (-since / 0.003).exp();
+                (u, i, w)
+            },
+            2000,
+        );
+        let peak = stairs.current.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let mean_abs = stairs.current.iter().map(|v| v.abs()).sum::<f64>() / 2000.0;
+        assert!(mean_abs < 0.05 * peak, "the current test alone is fooled");
+        assert!(!is_coastdown(&stairs));
     }
 }
