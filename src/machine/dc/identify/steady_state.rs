@@ -115,6 +115,25 @@ fn means(l: &SettledLevel) -> [f64; 3] {
     [l.voltage, l.current, l.speed]
 }
 
+/// The levels the mechanical equation `K·i = f·ω + Tst` is fitted to: the
+/// ones turning forward; where fewer than two do and two or more turn
+/// backward (a motor wired or tested in reverse), those, mirrored
+/// (`−U, −i, −ω`: the model is odd, friction opposing the motion).
+/// Returns their indices and the sign that mirrors them.
+fn mechanical_levels(levels: &[[f64; 3]]) -> (Vec<usize>, f64) {
+    let turning = |sign: f64| -> Vec<usize> {
+        (0..levels.len())
+            .filter(|&n| levels[n][2] * sign > 0.0)
+            .collect()
+    };
+    let (forward, backward) = (turning(1.0), turning(-1.0));
+    if forward.len() < 2 && backward.len() >= 2 {
+        (backward, -1.0)
+    } else {
+        (forward, 1.0)
+    }
+}
+
 /// The least-squares estimate from level means `[U, i, ω]`.
 fn solve(levels: &[[f64; 3]]) -> Result<SteadyStateEstimate, NotApplicable> {
     let n = levels.len();
@@ -127,11 +146,20 @@ fn solve(levels: &[[f64; 3]]) -> Result<SteadyStateEstimate, NotApplicable> {
     let b = DVector::from_fn(n, |r, _| levels[r][0]);
     let elec = least_squares(&a, &b).ok_or_else(|| NotApplicable::Unidentifiable("the levels do not separate Ra from K (every level has the same current-to-speed ratio)".into()))?;
     let (ra, k) = (elec.x[0], elec.x[1]);
-    let moving: Vec<&[f64; 3]> = levels.iter().filter(|l| l[2] > 0.0).collect();
+    let (used, sign) = mechanical_levels(levels);
+    let moving: Vec<[f64; 3]> = used.iter().map(|&n| levels[n].map(|v| sign * v)).collect();
     if moving.len() < 2 {
+        let turning = |forward: bool| {
+            levels
+                .iter()
+                .filter(|l| if forward { l[2] > 0.0 } else { l[2] < 0.0 })
+                .count()
+        };
         return Err(NotApplicable::Missing(format!(
-            "needs at least 2 levels turning forward for f and Tst, found {}",
-            moving.len()
+            "needs at least 2 levels turning the same way for f and Tst, found {} forward and {} \
+             backward",
+            turning(true),
+            turning(false)
         )));
     }
     let a = DMatrix::from_fn(
@@ -209,10 +237,8 @@ fn birge_ratios(
             (r, v)
         })
         .collect();
-    let mech = levels
-        .iter()
-        .zip(errors)
-        .filter(|(l, _)| l[2] > 0.0)
+    let mech = mechanical_pairs(levels, errors)
+        .into_iter()
         .map(|(l, s)| {
             let r = e.k * l[1] - e.f * l[2] - e.tst;
             let v = (e.k * s.current).powi(2) + (e.f * s.speed).powi(2);
@@ -220,6 +246,18 @@ fn birge_ratios(
         })
         .collect();
     [ratio(elec, 2), ratio(mech, 2)]
+}
+
+/// The mechanical equation's levels ([`mechanical_levels`], mirrored)
+/// with their standard errors (a mirrored level's are its own).
+fn mechanical_pairs<'a>(
+    levels: &[[f64; 3]],
+    errors: &'a [LevelError],
+) -> Vec<([f64; 3], &'a LevelError)> {
+    let (used, sign) = mechanical_levels(levels);
+    used.into_iter()
+        .map(|n| (levels[n].map(|v| sign * v), &errors[n]))
+        .collect()
 }
 
 /// Every pair's two-level solution and the range over the pairs.
@@ -276,7 +314,7 @@ pub fn fit_levels(
     let estimate = solve(&x)?;
     let std_error = propagate(&x, errors);
     let birge = birge_ratios(&x, errors, &estimate);
-    let moving = x.iter().filter(|l| l[2] > 0.0).count();
+    let moving = mechanical_levels(&x).0.len();
     let mut warnings = Vec::new();
     let values = as_array(&estimate);
     let ci95 = std::array::from_fn(|p| {
@@ -487,6 +525,39 @@ mod tests {
         assert!((k7 - 1.3186).abs() < 1e-4, "K = {k7}");
         assert!((ra9 - 42.18).abs() < 0.01, "Ra = {ra9}");
         assert!((f39 - 5.055e-4).abs() < 1e-7 && (tst44 - 0.1278).abs() < 1e-4);
+    }
+
+    #[test]
+    fn a_motor_turning_backward_gives_what_it_gives_turning_forward() {
+        let (levels, errors) = table2();
+        let forward = fit_levels(&levels, &errors).unwrap();
+        // The same levels with the supply's leads swapped.
+        let mirrored: Vec<SettledLevel> = levels
+            .iter()
+            .map(|l| SettledLevel {
+                voltage: -l.voltage,
+                current: -l.current,
+                speed: -l.speed,
+                ..l.clone()
+            })
+            .collect();
+        let backward = fit_levels(&mirrored, &errors).unwrap();
+        let (a, b) = (as_array(&forward.estimate), as_array(&backward.estimate));
+        for p in 0..4 {
+            assert!(
+                (a[p] - b[p]).abs() <= 1e-12 * a[p].abs(),
+                "{p}: {a:?} {b:?}"
+            );
+        }
+        assert_eq!(forward.std_error, backward.std_error);
+        // One level each way: f and Tst are not determined, and the
+        // reason counts both.
+        let one_each = [
+            [levels[0].voltage, levels[0].current, levels[0].speed],
+            [-levels[1].voltage, -levels[1].current, -levels[1].speed],
+        ];
+        let err = solve(&one_each).unwrap_err().to_string();
+        assert!(err.contains("found 1 forward and 1 backward"), "{err}");
     }
 
     #[test]
