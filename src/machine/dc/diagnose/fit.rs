@@ -370,29 +370,25 @@ impl AtOptimum {
             gradient: jac.tr_mul(r),
             sse: r.norm_squared(),
         };
-        if !blocks {
-            return AtOptimum {
-                rows: r.len(),
-                np: jac.ncols(),
-                whole,
-                by_run: Vec::new(),
-                by_fold: Vec::new(),
-            };
-        }
-        let mut from = 0;
-        let by_run = runs
-            .iter()
-            .map(|run| {
-                let rows = segment_rows(run);
-                let s = RowSums::of_block(jac, r, from, rows);
-                from += rows;
-                s
-            })
-            .collect();
-        let folds = super::cv::row_folds(runs);
-        let by_fold = (0..super::cv::CV_FOLDS)
-            .map(|f| RowSums::of_rows(jac, r, |row| folds[row] == f))
-            .collect();
+        let (by_run, by_fold) = if blocks {
+            let mut from = 0;
+            let by_run = runs
+                .iter()
+                .map(|run| {
+                    let rows = segment_rows(run);
+                    let s = RowSums::of_block(jac, r, from, rows);
+                    from += rows;
+                    s
+                })
+                .collect();
+            let folds = super::cv::row_folds(runs);
+            let by_fold = (0..super::cv::CV_FOLDS)
+                .map(|f| RowSums::of_rows(jac, r, |row| folds[row] == f))
+                .collect();
+            (by_run, by_fold)
+        } else {
+            (Vec::new(), Vec::new())
+        };
         AtOptimum {
             rows: r.len(),
             np: jac.ncols(),
