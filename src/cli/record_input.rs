@@ -10,7 +10,7 @@ use clap::{Args, ValueEnum};
 use super::output::warn_if_damaged;
 use super::Failure;
 use crate::identify::{check_input_power, check_plausible_files};
-use crate::machine::dc::split_single_segment;
+use crate::machine::dc::{cut_at_time_gaps, split_single_segment};
 use crate::model::Connection;
 use crate::record::{load_record_files, Record, SegmentKind};
 
@@ -49,8 +49,9 @@ impl RecordInput {
 
     /// Load the record; warn on stderr when it is damaged (recovered up to
     /// its last good chunk); refuse DC files whose values are not
-    /// plausible for their kind, and split a DC record that holds its test
-    /// in one segment ([`split_single_segment`]). Errors are bad input
+    /// plausible for their kind, split a DC record that holds its test
+    /// in one segment ([`split_single_segment`]), and cut its segments at
+    /// gaps in their time ([`cut_at_time_gaps`]). Errors are bad input
     /// (exit code 2).
     pub fn load(&self) -> Result<Record, Failure> {
         let kind = self.kind();
@@ -66,7 +67,7 @@ impl RecordInput {
             return Ok(record);
         }
         check_plausible_files(&record, kind, &self.files).map_err(Failure::bad_input)?;
-        Ok(split_single_segment(record))
+        Ok(cut_at_time_gaps(split_single_segment(record)))
     }
 }
 

@@ -18,6 +18,7 @@ pub(crate) mod blind_case;
 pub(crate) mod blind_plan;
 pub(crate) mod config;
 pub mod diagnose;
+mod gaps;
 pub mod identify;
 mod overlay;
 mod plan;
@@ -29,6 +30,7 @@ pub(crate) mod split;
 mod supply_limits;
 mod text;
 
+pub use gaps::cut_at_time_gaps;
 pub use overlay::segment_plots;
 pub use plan::{plan_steps, PlanStep};
 pub use rig::{build_rig, Rig, SERVED_PLANT_RATE_HZ};

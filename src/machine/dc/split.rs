@@ -239,7 +239,7 @@ fn level_within(
 }
 
 /// `seg` cut before each index of `cuts` (ascending, inside the segment).
-fn split_at(seg: &DcSegment, cuts: &[usize]) -> Vec<DcSegment> {
+pub(super) fn split_at(seg: &DcSegment, cuts: &[usize]) -> Vec<DcSegment> {
     let mut bounds = vec![0];
     bounds.extend(cuts);
     bounds.push(seg.time.len());
