@@ -808,7 +808,13 @@ fn prepare_runs<'a>(
             continue;
         }
         let coast = seg.kind == Some(SegmentKind::DcCoastdown) || is_coastdown(seg);
-        let prev = pos.checked_sub(1).map(|p| &segs[p]);
+        // The segment before, where this one follows it in time: after a
+        // gap (samples the logger dropped, `machine::dc::gaps`) it starts
+        // from its own first sample, as a record's first segment does.
+        let prev = pos
+            .checked_sub(1)
+            .map(|p| &segs[p])
+            .filter(|p| p.time.last().is_some_and(|&t| t >= seg.time[0] - 1.5 * dt));
         let prev_coast =
             prev.is_some_and(|p| p.kind == Some(SegmentKind::DcCoastdown) || is_coastdown(p));
         let speed_scale = seg
@@ -1234,6 +1240,38 @@ mod tests {
         record.segments.truncate(1);
         let err = diagnose_dc(&record, &DiagnoseOptions::default()).unwrap_err();
         assert!(matches!(err, DiagnoseError::NotEnoughData(_)), "{err}");
+    }
+
+    /// A segment after a gap in time (samples a logger dropped) starts
+    /// from its own first sample, not from the end of the one before it.
+    #[test]
+    fn a_segment_after_a_gap_starts_from_its_own_first_sample() {
+        let mut rng = StdRng::seed_from_u64(1);
+        let mut segs = simulate_dc_case(None, &mut rng).record.segments;
+        segs.truncate(3);
+        let mut warnings = Vec::new();
+        let joined = prepare_runs(&segs, &mut warnings).unwrap();
+        assert!(joined[1].continues.is_some());
+        assert!(
+            !matches!(joined[1].start, Start::State(..)),
+            "{:?}",
+            joined[1].start
+        );
+        // 20 ms of samples of segment 1 missing at its start.
+        let seg = &mut segs[1];
+        let dt = seg.time[1] - seg.time[0];
+        let drop = (0.02 / dt) as usize;
+        for ch in [
+            &mut seg.time,
+            &mut seg.voltage,
+            &mut seg.current,
+            &mut seg.speed,
+        ] {
+            ch.drain(..drop);
+        }
+        let runs = prepare_runs(&segs, &mut warnings).unwrap();
+        assert_eq!(runs[1].continues, None);
+        assert_eq!(runs[1].start, first_state(&segs[1]));
     }
 
     /// Interleaved blocks held out: a withheld armature reaction is named
