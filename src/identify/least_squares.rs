@@ -16,8 +16,9 @@ use levenberg_marquardt::LeastSquaresProblem;
 use nalgebra::storage::Owned;
 use nalgebra::{DMatrix, DVector, Dyn};
 
-/// The residual answered outside the valid region.
-const OUTSIDE: f64 = 1e100;
+/// The residual answered outside the valid region (also by the slip
+/// sweep's own solver, `machine::im::identify::lm_solver`).
+pub(crate) const OUTSIDE: f64 = 1e100;
 
 /// A least-squares fit: its residuals and their Jacobian at any parameter
 /// vector.

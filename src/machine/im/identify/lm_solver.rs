@@ -40,11 +40,11 @@ use levenberg_marquardt::TerminationReason;
 /// cage with iron loss, has eight elements).
 pub(super) const MAX_COLS: usize = 8;
 
-/// The residual answered outside the valid region (as
-/// `crate::identify::least_squares` answers it to the crate): large and
+/// The residual answered outside the valid region, as
+/// `crate::identify::least_squares` answers it to the crate: large and
 /// finite, so that the trial step is rejected and the trust region
 /// shrinks.
-pub(super) const OUTSIDE: f64 = 1e100;
+pub(super) use crate::identify::least_squares::OUTSIDE;
 
 /// A row of the Jacobian: one residual's derivatives, in its first `n`
 /// columns.
@@ -1218,9 +1218,9 @@ pub(super) fn minimize<P: Problem>(problem: P, x0: &[f64], settings: &Settings) 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::identify::least_squares::{AtParams, Residuals};
     use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-    use nalgebra::storage::Owned;
-    use nalgebra::{DMatrix, DVector, Dyn};
+    use nalgebra::{DMatrix, DVector};
 
     type Residual = fn(&[f64], &[f64]) -> Option<f64>;
     type Gradient = fn(&[f64], &[f64]) -> Vec<f64>;
@@ -1267,40 +1267,20 @@ mod tests {
         }
     }
 
-    /// The same problem as the crate sees it (as `AtParams` answers it).
-    struct ForCrate<'a> {
-        problem: &'a Samples,
-        x: DVector<f64>,
-    }
-
-    impl LeastSquaresProblem<f64, Dyn, Dyn> for ForCrate<'_> {
-        type ResidualStorage = Owned<f64, Dyn>;
-        type JacobianStorage = Owned<f64, Dyn, Dyn>;
-        type ParameterStorage = Owned<f64, Dyn>;
-
-        fn set_params(&mut self, x: &DVector<f64>) {
-            self.x.copy_from(x);
+    /// The same problem as the crate sees it, through the adapter every
+    /// other dynamic fit uses.
+    impl Residuals for &Samples {
+        fn rows(&self) -> usize {
+            self.t.len()
         }
 
-        fn params(&self) -> DVector<f64> {
-            self.x.clone()
+        fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
+            self.residuals(x.as_slice()).map(DVector::from_vec)
         }
 
-        fn residuals(&self) -> Option<DVector<f64>> {
-            let m = self.problem.t.len();
-            Some(
-                self.problem
-                    .residuals(self.x.as_slice())
-                    .filter(|r| r.iter().all(|v| v.is_finite()))
-                    .map_or_else(|| DVector::from_element(m, OUTSIDE), DVector::from_vec),
-            )
-        }
-
-        fn jacobian(&self) -> Option<DMatrix<f64>> {
-            let rows = self.problem.jacobian(self.x.as_slice())?;
-            Some(DMatrix::from_fn(rows.len(), self.x.len(), |i, j| {
-                rows[i][j]
-            }))
+        fn jacobian_at(&self, x: &DVector<f64>) -> Option<DMatrix<f64>> {
+            let rows = self.jacobian(x.as_slice())?;
+            Some(DMatrix::from_fn(rows.len(), x.len(), |i, j| rows[i][j]))
         }
     }
 
@@ -1311,7 +1291,7 @@ mod tests {
         let (theirs, report) = LevenbergMarquardt::new()
             .with_patience(patience)
             .with_tol(tol)
-            .minimize(ForCrate {
+            .minimize(AtParams {
                 problem,
                 x: DVector::from_column_slice(x0),
             });
