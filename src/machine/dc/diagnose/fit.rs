@@ -29,6 +29,7 @@ use std::sync::Arc;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Owned};
 
+use super::lanes;
 use super::model::{AugModel, SegmentRun};
 use crate::identify::square_root::square_root_problem;
 use crate::model::DcParams;
@@ -104,26 +105,51 @@ impl FitSpec {
 /// Weighted residuals of the segments `runs`, simulated in order (each
 /// continuing the one before where the record does): current then speed
 /// per sample (speed only for a coast-down, whose current is zero by
-/// construction).
+/// construction), appended to `out`.
 pub fn runs_residuals(
     model: &AugModel,
     runs: &[SegmentRun],
     w: &Weights,
     out: &mut Vec<f64>,
 ) -> bool {
-    let mut counts = vec![0usize; runs.len()];
-    let ok = model.simulate_runs(runs, &mut |n, i, s| {
+    let rows: usize = runs.iter().map(segment_rows).sum();
+    let from = out.len();
+    out.resize(from + rows, 0.0);
+    let col = &mut out[from..];
+    runs_residuals_lanes(std::slice::from_ref(model), &[true], runs, w, &mut [col])[0]
+}
+
+/// [`runs_residuals`] of each model of `models` whose `live` is set, the
+/// models simulated in lockstep ([`lanes::simulate_runs`]), lane `l`'s
+/// rows into `cols[l]` (as many as the runs have); whether each lane's
+/// rows are all there.
+fn runs_residuals_lanes(
+    models: &[AugModel],
+    live: &[bool],
+    runs: &[SegmentRun],
+    w: &Weights,
+    cols: &mut [&mut [f64]],
+) -> Vec<bool> {
+    let mut counts = vec![vec![0usize; runs.len()]; models.len()];
+    let mut at = vec![0usize; models.len()];
+    let ok = lanes::simulate_runs(models, live, runs, |l, n, i, s| {
         let run = &runs[n];
-        let k = counts[n];
+        let k = counts[l][n];
         if k < run.len() {
+            let (col, at) = (&mut cols[l], &mut at[l]);
             if !run.coast {
-                out.push((i - run.seg.current[k]) * w.current);
+                col[*at] = (i - run.seg.current[k]) * w.current;
+                *at += 1;
             }
-            out.push((s - run.seg.speed[k]) * w.speed);
+            col[*at] = (s - run.seg.speed[k]) * w.speed;
+            *at += 1;
         }
-        counts[n] += 1;
+        counts[l][n] += 1;
     });
-    ok && counts.iter().zip(runs).all(|(k, r)| *k == r.len())
+    ok.iter()
+        .zip(&counts)
+        .map(|(ok, counts)| *ok && counts.iter().zip(runs).all(|(k, r)| *k == r.len()))
+        .collect()
 }
 
 /// Rows of one segment's residuals.
@@ -161,23 +187,36 @@ struct FitProblem<'a> {
 }
 
 impl FitProblem<'_> {
+    /// The residuals at `x` into `r`; whether the model accepts `x` and
+    /// every residual is finite.
     fn residuals_into(&self, x: &DVector<f64>, r: &mut Vec<f64>) -> bool {
         r.clear();
-        if !x.iter().all(|v| v.is_finite() && v.abs() < 30.0) {
-            return false;
-        }
-        let m = self.spec.model_at(x);
-        if !runs_residuals(&m, self.runs, &self.w, r) {
-            return false;
-        }
-        if let Some(mask) = self.mask {
-            for (v, out) in r.iter_mut().zip(mask) {
-                if *out {
-                    *v = 0.0;
+        r.resize(self.rows, 0.0);
+        self.residuals_lanes(std::slice::from_ref(x), &mut [r.as_mut_slice()])[0]
+    }
+
+    /// [`Self::residuals_into`] at each of `xs` into the matching column of
+    /// `cols` (each of [`Self::rows`]), the models simulated in lockstep.
+    fn residuals_lanes(&self, xs: &[DVector<f64>], cols: &mut [&mut [f64]]) -> Vec<bool> {
+        let live: Vec<bool> = xs
+            .iter()
+            .map(|x| x.iter().all(|v| v.is_finite() && v.abs() < 30.0))
+            .collect();
+        let models: Vec<AugModel> = xs.iter().map(|x| self.spec.model_at(x)).collect();
+        let ok = runs_residuals_lanes(&models, &live, self.runs, &self.w, cols);
+        ok.into_iter()
+            .zip(cols.iter_mut())
+            .map(|(ok, col)| {
+                if let (true, Some(mask)) = (ok, self.mask) {
+                    for (v, out) in col.iter_mut().zip(mask) {
+                        if *out {
+                            *v = 0.0;
+                        }
+                    }
                 }
-            }
-        }
-        r.len() == self.rows && r.iter().all(|v| v.is_finite())
+                ok && col.iter().all(|v| v.is_finite())
+            })
+            .collect()
     }
 
     fn linearise(&self, x: &DVector<f64>) {
@@ -194,22 +233,39 @@ impl FitProblem<'_> {
         let l = if self.residuals_into(x, &mut buf) {
             let r = DVector::from_vec(buf.clone());
             let mut jac = DMatrix::<f64>::zeros(self.rows, np);
-            for n in 0..np {
-                let mut xp = x.clone();
-                let mut h = FD_STEP;
-                xp[n] += h;
-                if !self.residuals_into(&xp, &mut buf) {
-                    h = -FD_STEP;
-                    xp[n] = x[n] + h;
-                    if !self.residuals_into(&xp, &mut buf) {
+            // Forward steps, all columns in one lockstep simulation; a
+            // column whose step the model refuses steps backward alone,
+            // and stays zero where it refuses both.
+            let forward: Vec<DVector<f64>> = (0..np)
+                .map(|n| {
+                    let mut xp = x.clone();
+                    xp[n] += FD_STEP;
+                    xp
+                })
+                .collect();
+            let ok = {
+                let mut cols: Vec<&mut [f64]> =
+                    jac.as_mut_slice().chunks_mut(self.rows.max(1)).collect();
+                self.residuals_lanes(&forward, &mut cols)
+            };
+            for (n, ok) in ok.into_iter().enumerate() {
+                // Column-major storage: column n is one slice.
+                let col = &mut jac.as_mut_slice()[n * self.rows..(n + 1) * self.rows];
+                let h = if ok {
+                    FD_STEP
+                } else {
+                    let mut xp = x.clone();
+                    xp[n] += -FD_STEP;
+                    if !self.residuals_lanes(std::slice::from_ref(&xp), &mut [&mut *col])[0] {
+                        col.fill(0.0);
                         continue;
                     }
-                }
-                let col = &mut jac.as_mut_slice()[n * self.rows..(n + 1) * self.rows];
+                    -FD_STEP
+                };
                 // Slices, not the vector's strided iterator: this loop
                 // runs over every row of every column and vectorises.
-                for ((c, b), a) in col.iter_mut().zip(&buf).zip(r.as_slice()) {
-                    *c = (b - a) / h;
+                for (c, a) in col.iter_mut().zip(r.as_slice()) {
+                    *c = (*c - a) / h;
                 }
             }
             let (reduced_r, reduced_j) = reduce(&jac, &r);

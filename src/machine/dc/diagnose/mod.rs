@@ -21,6 +21,7 @@ mod candidates;
 mod cv;
 mod fit;
 mod gap;
+mod lanes;
 mod model;
 
 use std::collections::BTreeMap;

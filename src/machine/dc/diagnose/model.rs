@@ -80,11 +80,11 @@ pub enum Continuation {
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct EndState {
     /// Current (A), motor speed, load speed (rad/s), shaft twist (rad).
-    x: [f64; 4],
+    pub(super) x: [f64; 4],
     /// The last simulated readings (current, speed).
-    reading: (f64, f64),
+    pub(super) reading: (f64, f64),
     /// The lagged readings of a sensor-lag model (current, speed).
-    lag: Option<(f64, f64)>,
+    pub(super) lag: Option<(f64, f64)>,
 }
 
 /// One recorded segment ready to simulate.
@@ -126,14 +126,15 @@ pub struct AugModel {
 }
 
 /// Exact one-sample step of the rigid driven motor, in scalars.
-struct Rigid {
+pub(super) struct Rigid {
     a: [[f64; 2]; 3],
     b: [[f64; 2]; 3],
-    decay: f64,
+    /// `e^(−dt/τe)`: the circuit's decay while the rotor is held.
+    pub(super) decay: f64,
 }
 
 impl Rigid {
-    fn new(p: &DcParams, dt: f64) -> Option<Rigid> {
+    pub(super) fn new(p: &DcParams, dt: f64) -> Option<Rigid> {
         let motor = DcMotor::new(*p, dt).ok()?;
         let z = motor.driven_zoh();
         Some(Rigid {
@@ -143,8 +144,10 @@ impl Rigid {
         })
     }
 
+    /// `(i, ω, Δθ)` after one step from `(i, ω)` under the voltage `u`
+    /// and the load torque `t`.
     #[inline]
-    fn step(&self, i: f64, w: f64, u: f64, t: f64) -> (f64, f64, f64) {
+    pub(super) fn step(&self, i: f64, w: f64, u: f64, t: f64) -> (f64, f64, f64) {
         let (a, b) = (&self.a, &self.b);
         (
             a[0][0] * i + a[0][1] * w + b[0][0] * u + b[0][1] * t,
@@ -159,7 +162,7 @@ impl Rigid {
 /// the parameters and the step only, so they are computed once per
 /// simulated segment, not per sample (two `exp` per sample were a quarter
 /// of a diagnosis).
-struct CoastStep {
+pub(super) struct CoastStep {
     /// `e^−x`, `x = f·dt/J`.
     a: f64,
     /// `(1 − e^−x)·J/f`.
@@ -171,7 +174,7 @@ struct CoastStep {
 }
 
 impl CoastStep {
-    fn new(p: &DcParams, dt: f64) -> CoastStep {
+    pub(super) fn new(p: &DcParams, dt: f64) -> CoastStep {
         let x = p.f * dt / p.j;
         // (1 − e^−x)·J/f and (dt − that)/f, by series when x is small.
         let (g, h) = if x < 1e-6 {
@@ -193,7 +196,7 @@ impl CoastStep {
 
     /// `(ω, Δθ)` after one step from `ω` under the torque `t`.
     #[inline]
-    fn step(&self, w: f64, t: f64) -> (f64, f64) {
+    pub(super) fn step(&self, w: f64, t: f64) -> (f64, f64) {
         let nw = self.a * w - t * self.g / self.j;
         (nw, w * self.g - t * self.h)
     }
@@ -237,7 +240,7 @@ impl AugModel {
 
     /// `(ΔV, ΔT)` at a state; `ΔT` signed with the friction direction.
     #[inline]
-    fn perturb(&self, i: f64, w: f64, u: f64, heat: f64, dir: f64) -> (f64, f64) {
+    pub(super) fn perturb(&self, i: f64, w: f64, u: f64, heat: f64, dir: f64) -> (f64, f64) {
         let p = &self.p;
         match self.aug {
             Augment::CoulombFriction => (0.0, self.e[0] * exp_or_zero(-w.abs() / self.e[1]) * dir),
@@ -253,7 +256,7 @@ impl AugModel {
     }
 
     /// Friction that must be overcome to start from rest, N·m.
-    fn breakaway(&self) -> f64 {
+    pub(super) fn breakaway(&self) -> f64 {
         match self.aug {
             Augment::CoulombFriction => self.p.tst + self.e[0].max(0.0),
             _ => self.p.tst,
@@ -308,8 +311,29 @@ impl AugModel {
         (i, w)
     }
 
+    /// Whether the motor is one rigid mass read without lag: the models
+    /// [`super::lanes`] steps in lockstep.
+    pub(super) fn is_rigid(&self) -> bool {
+        !matches!(self.aug, Augment::SensorLag(_) | Augment::ShaftCompliance)
+    }
+
+    /// Whether the model is the paper's alone (no effect to evaluate).
+    #[inline]
+    pub(super) fn is_nominal(&self) -> bool {
+        self.aug == Augment::Nominal
+    }
+
+    /// The motor constant at the current `i`, V·s/rad.
+    #[inline]
+    pub(super) fn k_eff(&self, i: f64) -> f64 {
+        match self.aug {
+            Augment::ArmatureReaction => self.p.k * (1.0 - self.e[0] * i * i),
+            _ => self.p.k,
+        }
+    }
+
     /// Whether the parameters describe a motor the simulation accepts.
-    fn valid(&self) -> bool {
+    pub(super) fn valid(&self) -> bool {
         if self.p.validate().is_err() || !self.e.iter().all(|v| v.is_finite()) {
             return false;
         }
@@ -403,130 +427,16 @@ impl AugModel {
                 })
             }
             Augment::ShaftCompliance => self.simulate_shaft(run, from, out),
-            _ => self.simulate_rigid(run, from, out),
+            _ => super::lanes::simulate_rigid(
+                std::slice::from_ref(self),
+                &[true],
+                run,
+                &[from.copied()],
+                |_, i, w| out(i, w),
+            )
+            .pop()
+            .flatten(),
         }
-    }
-
-    fn simulate_rigid(
-        &self,
-        run: &SegmentRun,
-        from: Option<&EndState>,
-        out: &mut dyn FnMut(f64, f64),
-    ) -> Option<EndState> {
-        let p = &self.p;
-        let dt = run.dt;
-        let inv_dt = 1.0 / dt;
-        let u = &run.seg.voltage;
-        let plain = self.aug == Augment::Nominal;
-        let mut heat = run.heat_before;
-        let mut last = (0.0, 0.0);
-        let mut out = |i: f64, w: f64| {
-            last = (i, w);
-            out(i, w);
-        };
-        let (mut i, mut w, first) = if let Some(e) = from {
-            let i0 = if run.coast { 0.0 } else { e.x[0] };
-            if run.continues == Some(Continuation::Shared) {
-                out(if run.coast { 0.0 } else { e.reading.0 }, e.reading.1);
-                (i0, e.x[1], 1)
-            } else {
-                (i0, e.x[1], 0)
-            }
-        } else {
-            let (i, w) = match run.start {
-                Start::Rest => (0.0, 0.0),
-                Start::Settled(u0) => {
-                    let s = self.steady_state(u0, heat);
-                    out(if run.coast { 0.0 } else { s.0 }, s.1);
-                    s
-                }
-                Start::State(i0, w0) => {
-                    let i0 = if run.coast { 0.0 } else { i0 };
-                    out(i0, w0);
-                    (i0, w0)
-                }
-            };
-            let first = match run.start {
-                Start::Rest => 0,
-                Start::Settled(_) | Start::State(..) => 1,
-            };
-            (i, w, first)
-        };
-        let end = |i: f64, w: f64, last: (f64, f64)| EndState {
-            x: [i, w, w, 0.0],
-            reading: last,
-            lag: None,
-        };
-        if run.coast {
-            let coast = CoastStep::new(p, dt);
-            for _ in first..u.len() {
-                let (nw, dth) = if w == 0.0 {
-                    (0.0, 0.0)
-                } else {
-                    let dir = w.signum();
-                    let t0 = p.tst * dir + self.perturb(0.0, w, 0.0, heat, dir).1;
-                    let (pw, _) = coast.step(w, t0);
-                    let t = if plain {
-                        t0
-                    } else {
-                        let t1 = p.tst * dir + self.perturb(0.0, pw, 0.0, heat, dir).1;
-                        0.5 * (t0 + t1)
-                    };
-                    let (nw, dth) = coast.step(w, t);
-                    (if nw * dir < 0.0 { 0.0 } else { nw }, dth)
-                };
-                w = nw;
-                out(0.0, dth * inv_dt);
-            }
-            return w.is_finite().then(|| end(0.0, w, last));
-        }
-        let step = Rigid::new(p, dt)?;
-        let k_eff = |i: f64| match self.aug {
-            Augment::ArmatureReaction => p.k * (1.0 - self.e[0] * i * i),
-            _ => p.k,
-        };
-        for &uk in &u[first..] {
-            let friction = self.breakaway();
-            let dir = if w != 0.0 {
-                Some(w.signum())
-            } else if friction == 0.0 {
-                Some(1.0)
-            } else if (k_eff(i) * i).abs() > friction {
-                Some((k_eff(i) * i).signum())
-            } else {
-                None
-            };
-            let (ni, nw, dth) = match dir {
-                None => {
-                    let (dv, _) = self.perturb(i, 0.0, uk, heat, 1.0);
-                    let i_ss = (uk - dv) / p.ra;
-                    (i_ss + (i - i_ss) * step.decay, 0.0, 0.0)
-                }
-                Some(d) => {
-                    let t = p.tst * d;
-                    if plain {
-                        step.step(i, w, uk, t)
-                    } else {
-                        let (dv0, dt0) = self.perturb(i, w, uk, heat, d);
-                        let (pi, pw, _) = step.step(i, w, uk - dv0, t + dt0);
-                        let ph = heat + dt * i * i;
-                        let (dv1, dt1) = self.perturb(pi, pw, uk, ph, d);
-                        step.step(i, w, uk - 0.5 * (dv0 + dv1), t + 0.5 * (dt0 + dt1))
-                    }
-                }
-            };
-            heat += 0.5 * dt * (i * i + ni * ni);
-            let nw = match dir {
-                Some(d) if nw * d < 0.0 => 0.0,
-                _ => nw,
-            };
-            (i, w) = (ni, nw);
-            if !(i.is_finite() && w.is_finite()) {
-                return None;
-            }
-            out(i, dth * inv_dt);
-        }
-        Some(end(i, w, last))
     }
 
     /// Two-mass model: state `[i, ωm, ωl, φ, θm]`, inputs `[U, Tst·dir]`.
