@@ -187,16 +187,9 @@ struct FitProblem<'a> {
 }
 
 impl FitProblem<'_> {
-    /// The residuals at `x` into `r`; whether the model accepts `x` and
-    /// every residual is finite.
-    fn residuals_into(&self, x: &DVector<f64>, r: &mut Vec<f64>) -> bool {
-        r.clear();
-        r.resize(self.rows, 0.0);
-        self.residuals_lanes(std::slice::from_ref(x), &mut [r.as_mut_slice()])[0]
-    }
-
-    /// [`Self::residuals_into`] at each of `xs` into the matching column of
-    /// `cols` (each of [`Self::rows`]), the models simulated in lockstep.
+    /// The residuals at each of `xs` into the matching column of `cols`
+    /// (each of [`Self::rows`]), the models simulated in lockstep; whether
+    /// the model accepts each `x` and every residual of it is finite.
     fn residuals_lanes(&self, xs: &[DVector<f64>], cols: &mut [&mut [f64]]) -> Vec<bool> {
         let live: Vec<bool> = xs
             .iter()
@@ -229,26 +222,27 @@ impl FitProblem<'_> {
         // tall Jacobians at once would double the fit's peak memory.
         self.last.borrow_mut().take();
         let np = x.len();
-        let mut buf = Vec::with_capacity(self.rows);
-        let l = if self.residuals_into(x, &mut buf) {
-            let r = DVector::from_vec(buf.clone());
-            let mut jac = DMatrix::<f64>::zeros(self.rows, np);
-            // Forward steps, all columns in one lockstep simulation; a
-            // column whose step the model refuses steps backward alone,
-            // and stays zero where it refuses both.
-            let forward: Vec<DVector<f64>> = (0..np)
-                .map(|n| {
-                    let mut xp = x.clone();
-                    xp[n] += FD_STEP;
-                    xp
-                })
+        // The residuals at `x` and at a forward step in every parameter,
+        // all in one lockstep simulation; a column whose step the model
+        // refuses steps backward alone, and stays zero where it refuses
+        // both.
+        let lanes: Vec<DVector<f64>> = std::iter::once(x.clone())
+            .chain((0..np).map(|n| {
+                let mut xp = x.clone();
+                xp[n] += FD_STEP;
+                xp
+            }))
+            .collect();
+        let mut r = DVector::<f64>::zeros(self.rows);
+        let mut jac = DMatrix::<f64>::zeros(self.rows, np);
+        let ok = {
+            let mut cols: Vec<&mut [f64]> = std::iter::once(r.as_mut_slice())
+                .chain(jac.as_mut_slice().chunks_mut(self.rows.max(1)))
                 .collect();
-            let ok = {
-                let mut cols: Vec<&mut [f64]> =
-                    jac.as_mut_slice().chunks_mut(self.rows.max(1)).collect();
-                self.residuals_lanes(&forward, &mut cols)
-            };
-            for (n, ok) in ok.into_iter().enumerate() {
+            self.residuals_lanes(&lanes, &mut cols)
+        };
+        let l = if ok[0] {
+            for (n, ok) in ok.into_iter().skip(1).enumerate() {
                 // Column-major storage: column n is one slice.
                 let col = &mut jac.as_mut_slice()[n * self.rows..(n + 1) * self.rows];
                 let h = if ok {
