@@ -14,6 +14,8 @@
 
 use statrs::distribution::{ContinuousCDF, StudentsT};
 
+pub use crate::identify::stats::median;
+
 /// Family-wise false-alarm rate of one diagnosis: the probability of
 /// naming an effect on data that has none. A false alarm costs an
 /// engineer a day, so 1 %.
@@ -224,16 +226,6 @@ pub fn residual_noise_sigma(residuals: &[&[f64]], readings: &[&[f64]]) -> f64 {
         0.0
     };
     rms.max(quantisation)
-}
-
-/// The median of `values` (the upper one of an even count), reordering
-/// them; `None` when there are none.
-pub fn median(values: &mut [f64]) -> Option<f64> {
-    if values.is_empty() {
-        return None;
-    }
-    let mid = values.len() / 2;
-    Some(*values.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
 
 #[cfg(test)]

@@ -1,5 +1,5 @@
-//! Small statistics helpers: linear least squares with covariance, and
-//! Student-t quantiles for confidence intervals.
+//! Small statistics helpers: linear least squares with covariance,
+//! Student-t quantiles for confidence intervals, and the median.
 
 use nalgebra::{DMatrix, DVector};
 
@@ -13,6 +13,17 @@ pub fn t975(dof: usize) -> f64 {
         return f64::INFINITY;
     }
     StudentsT::new(0.0, 1.0, dof as f64).map_or(f64::INFINITY, |d| d.inverse_cdf(0.975))
+}
+
+/// The median of `values` (the upper one of an even count), reordering
+/// them (a selection, not a sort: linear time); `None` when there are
+/// none. The value a sort by `total_cmp` puts at `len/2`, bit for bit.
+pub fn median(values: &mut [f64]) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    let mid = values.len() / 2;
+    Some(*values.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
 
 /// A least-squares solution of `A·x ≈ b`.

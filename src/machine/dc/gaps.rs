@@ -61,11 +61,7 @@ pub fn cut_at_time_gaps(mut record: Record) -> Record {
 /// The median of the time steps of `time` (0 with fewer than 2 samples).
 fn median_step(time: &[f64]) -> f64 {
     let mut steps: Vec<f64> = time.windows(2).map(|w| w[1] - w[0]).collect();
-    if steps.is_empty() {
-        return 0.0;
-    }
-    steps.sort_by(f64::total_cmp);
-    steps[steps.len() / 2]
+    crate::identify::stats::median(&mut steps).unwrap_or(0.0)
 }
 
 /// Indices `k` where the step `time[k] − time[k−1]` is a gap.

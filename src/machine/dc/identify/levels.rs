@@ -1,5 +1,6 @@
 //! Settled levels: the steady state at the end of each step segment.
 
+use crate::identify::stats::median;
 use crate::record::DcSegment;
 
 /// Mean voltage, current and speed over the settled tail of a segment.
@@ -187,11 +188,7 @@ pub(crate) fn white_noise(y: &[f64]) -> f64 {
         .windows(3)
         .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
         .collect();
-    if d.is_empty() {
-        return 0.0;
-    }
-    d.sort_by(f64::total_cmp);
-    d[d.len() / 2] / (0.6745 * 6f64.sqrt())
+    median(&mut d).map_or(0.0, |m| m / (0.6745 * 6f64.sqrt()))
 }
 
 /// Recognise a coast-down in a segment not marked as one (the contract
@@ -224,8 +221,7 @@ pub fn is_coastdown(seg: &DcSegment) -> bool {
     let head = seg.speed[..MIN_TAIL].iter().sum::<f64>() / MIN_TAIL as f64;
     let tail = seg.speed[n - MIN_TAIL..].iter().sum::<f64>() / MIN_TAIL as f64;
     let mut early: Vec<f64> = seg.voltage[..n / 4].iter().map(|v| v.abs()).collect();
-    early.sort_by(f64::total_cmp);
-    let early = early[early.len() / 2];
+    let early = median(&mut early).unwrap_or(f64::NAN);
     let end = seg.voltage[n - MIN_TAIL..].iter().sum::<f64>().abs() / MIN_TAIL as f64;
     let largest = seg.voltage.iter().fold(0.0f64, |m, v| m.max(v.abs()));
     let holds_no_level = end < 0.5 * early || early <= 0.05 * largest;

@@ -452,9 +452,8 @@ fn physical<'a>(
 /// all too.
 fn difference_noise(d: &[f64]) -> f64 {
     let mut magnitudes: Vec<f64> = d.iter().map(|v| v.abs()).collect();
-    magnitudes.sort_by(f64::total_cmp);
-    let limit = match magnitudes.get(magnitudes.len() / 2) {
-        Some(&m) if m > 0.0 => JUMP * m,
+    let limit = match crate::identify::stats::median(&mut magnitudes) {
+        Some(m) if m > 0.0 => JUMP * m,
         _ => f64::INFINITY,
     };
     let (sum, count) = d

@@ -9,7 +9,8 @@
 //! sensitivities to relative changes, so they are comparable in size.
 //!
 //! The Jacobian is taken by forward differences of the simulation
-//! (6 extra simulations). Sensitivity equations would be exact, but for
+//! (6 extra simulations, stepped in lockstep with the one at the point
+//! itself: [`simulate_lanes`]). Sensitivity equations would be exact, but for
 //! this 2-state model they mean a 14-state recursion per sample (more
 //! arithmetic than the 6 simulations), and differences differentiate
 //! exactly what is simulated, stiction and friction direction included.
@@ -24,7 +25,7 @@ use std::rc::Rc;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
 use nalgebra::{DMatrix, DVector, Dyn, OMatrix, Owned, SMatrix, SVector, Vector6, U6, U7};
 
-use super::simulation::{simulate, SegmentInput, SpeedReading};
+use super::simulation::{simulate_lanes, DrivenStep, SegmentInput, SpeedReading};
 use crate::identify::square_root::square_root_problem;
 use crate::model::DcParams;
 
@@ -84,24 +85,45 @@ impl FitData<'_> {
     /// Weighted residuals of `params` into `r` (of length [`Self::len`]);
     /// `false` when the model refuses the parameters.
     pub fn residuals_into(&self, params: &DcParams, r: &mut [f64]) -> bool {
+        self.residuals_lanes(&[params], &mut [r])[0]
+    }
+
+    /// [`Self::residuals_into`] for several parameter sets at once, set
+    /// `l` into `cols[l]`, the sets simulated in lockstep
+    /// ([`simulate_lanes`]: the same values as one at a time).
+    pub fn residuals_lanes(&self, params: &[&DcParams], cols: &mut [&mut [f64]]) -> Vec<bool> {
         let (wi, ww) = (1.0 / self.sigma[0], 1.0 / self.sigma[1]);
+        let mut ok = vec![true; params.len()];
         let mut at = 0;
         for input in &self.segments {
-            let (y_i, y_w) = (&input.seg.current, &input.seg.speed);
-            let chunk = &mut r[at..at + 2 * input.len()];
-            let mut rows = chunk.chunks_exact_mut(2).zip(y_i.iter().zip(y_w));
-            let ok = simulate(params, input, self.reading, |i, w| {
-                if let Some((row, (yi, yw))) = rows.next() {
-                    row[0] = (i - yi) * wi;
-                    row[1] = (w - yw) * ww;
+            let n = input.len();
+            // The sets the model accepts at this segment's interval, and
+            // their rows of it.
+            let mut lanes = Vec::with_capacity(params.len());
+            let mut rows: Vec<&mut [f64]> = Vec::with_capacity(params.len());
+            for (l, (p, col)) in params.iter().zip(cols.iter_mut()).enumerate() {
+                if ok[l] {
+                    match DrivenStep::new(p, input.dt) {
+                        Ok(step) => {
+                            lanes.push((*p, step));
+                            rows.push(&mut col[at..at + 2 * n]);
+                        }
+                        Err(_) => ok[l] = false,
+                    }
                 }
-            });
-            if ok.is_err() {
-                return false;
             }
-            at += 2 * input.len();
+            let (y_i, y_w) = (&input.seg.current[..n], &input.seg.speed[..n]);
+            simulate_lanes(&lanes, input, self.reading, |j, k, i, w| {
+                let row = &mut rows[j][2 * k..2 * k + 2];
+                row[0] = (i - y_i[k]) * wi;
+                row[1] = (w - y_w[k]) * ww;
+            });
+            at += 2 * n;
         }
-        r.iter().all(|v| v.is_finite())
+        ok.iter()
+            .zip(cols.iter())
+            .map(|(ok, col)| *ok && col.iter().all(|v| v.is_finite()))
+            .collect()
     }
 }
 
@@ -184,26 +206,69 @@ impl<'d, 'a> OutputErrorProblem<'d, 'a> {
     #[cfg(test)]
     pub fn jacobian_from(&self, x: &Vector6<f64>, r: &DVector<f64>) -> OMatrix<f64, Dyn, U6> {
         let mut jac = OMatrix::<f64, Dyn, U6>::zeros(r.len());
-        self.jacobian_into(x, r, &mut jac);
+        self.linearise_into(x, &mut r.clone(), &mut jac);
         jac
     }
 
-    fn jacobian_into(&self, x: &Vector6<f64>, r: &DVector<f64>, jac: &mut OMatrix<f64, Dyn, U6>) {
+    /// The residuals at `x` into `r` and their Jacobian into `jac` by
+    /// forward differences (backward at the edge of what the model
+    /// accepts; a zero column where it accepts neither); `false`, with `r`
+    /// all [`REFUSED`], when the model refuses `x`. The point and its six
+    /// forward steps are simulated in one lockstep pass.
+    fn linearise_into(
+        &self,
+        x: &Vector6<f64>,
+        r: &mut DVector<f64>,
+        jac: &mut OMatrix<f64, Dyn, U6>,
+    ) -> bool {
         let m = r.len();
-        for n in 0..NP {
-            // Column-major storage: column n is one slice.
-            let column = &mut jac.as_mut_slice()[n * m..(n + 1) * m];
+        // Lane 0 is `x`, lane n + 1 its forward step in parameter n.
+        let points: [Vector6<f64>; NP + 1] = std::array::from_fn(|n| {
             let mut xp = *x;
-            let mut h = FD_STEP;
-            xp[n] += h;
-            if !self.compute_into(&xp, column) {
-                h = -FD_STEP;
-                xp[n] = x[n] + h;
+            if n > 0 {
+                xp[n - 1] += FD_STEP;
+            }
+            xp
+        });
+        let inside = |x: &Vector6<f64>| x.iter().all(|v| v.abs() <= MAX_LN);
+        let params: Vec<DcParams> = points.iter().map(|xp| self.params_at(xp)).collect();
+        let mut ok = [false; NP + 1];
+        {
+            let (mut lanes, mut refs, mut cols) = (Vec::new(), Vec::new(), Vec::new());
+            // Column-major storage: column n is one slice.
+            let columns =
+                std::iter::once(r.as_mut_slice()).chain(jac.as_mut_slice().chunks_mut(m.max(1)));
+            for (n, col) in columns.enumerate() {
+                if inside(&points[n]) {
+                    lanes.push(n);
+                    refs.push(&params[n]);
+                    cols.push(col);
+                }
+            }
+            for (&n, lane_ok) in lanes
+                .iter()
+                .zip(self.data.residuals_lanes(&refs, &mut cols))
+            {
+                ok[n] = lane_ok;
+            }
+        }
+        if !ok[0] {
+            r.fill(REFUSED);
+            return false;
+        }
+        for (n, ok) in ok.into_iter().skip(1).enumerate() {
+            let column = &mut jac.as_mut_slice()[n * m..(n + 1) * m];
+            let h = if ok {
+                FD_STEP
+            } else {
+                let mut xp = *x;
+                xp[n] = x[n] - FD_STEP;
                 if !self.compute_into(&xp, column) {
                     column.fill(0.0);
                     continue;
                 }
-            }
+                -FD_STEP
+            };
             let inv_h = 1.0 / h;
             // Slices, not the vector's strided iterator: this loop runs
             // over every row of every column and vectorises.
@@ -211,6 +276,7 @@ impl<'d, 'a> OutputErrorProblem<'d, 'a> {
                 *c = (*c - b) * inv_h;
             }
         }
+        true
     }
 
     /// The linearisation at `x`.
@@ -233,8 +299,7 @@ impl<'d, 'a> OutputErrorProblem<'d, 'a> {
             Some(old) => (old.r, old.jac),
             None => (DVector::zeros(m), OMatrix::<f64, Dyn, U6>::zeros(m)),
         };
-        let l = if self.compute_into(x, r.as_mut_slice()) {
-            self.jacobian_into(x, &r, &mut jac);
+        let l = if self.linearise_into(x, &mut r, &mut jac) {
             let (reduced_r, reduced_j) = reduce(&jac, &r);
             Linearisation {
                 x: *x,

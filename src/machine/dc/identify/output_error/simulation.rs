@@ -143,31 +143,52 @@ pub fn simulate(
     mut out: impl FnMut(f64, f64),
 ) -> Result<(), ParamError> {
     let step = DrivenStep::new(params, input.dt)?;
+    simulate_lanes(&[(params, step)], input, reading, |_, _, i, w| out(i, w));
+    Ok(())
+}
+
+/// [`simulate`] for several parameter sets at once, in lockstep: one pass
+/// over the samples steps every lane, so the core overlaps the lanes'
+/// serial recursions (a forward-difference Jacobian's simulations do not
+/// depend on one another). Each lane does the lone simulation's
+/// arithmetic in its order, so its readings are the lone simulation's to
+/// the last bit; `out(lane, sample, current, speed reading)`.
+pub fn simulate_lanes(
+    lanes: &[(&DcParams, DrivenStep)],
+    input: &SegmentInput,
+    reading: SpeedReading,
+    mut out: impl FnMut(usize, usize, f64, f64),
+) {
     let u = &input.seg.voltage;
     let inv_dt = 1.0 / input.dt;
     let interval = reading == SpeedReading::IntervalMean;
-    let (mut i, mut w) = match input.start {
-        SegmentStart::Settled(u0) => {
-            let s = params.steady_state(u0);
-            out(s.current, s.speed);
-            (s.current, s.speed)
+    let mut state: Vec<(f64, f64)> = lanes
+        .iter()
+        .enumerate()
+        .map(|(l, (params, step))| match input.start {
+            SegmentStart::Settled(u0) => {
+                let s = params.steady_state(u0);
+                out(l, 0, s.current, s.speed);
+                (s.current, s.speed)
+            }
+            SegmentStart::FromRest => {
+                let (i, w, dth) = step.step(0.0, 0.0, u[0]);
+                out(l, 0, i, if interval { dth * inv_dt } else { w });
+                (i, w)
+            }
+            SegmentStart::State { current, speed } => {
+                out(l, 0, current, speed);
+                (current, speed)
+            }
+        })
+        .collect();
+    for (k, &uk) in u.iter().enumerate().skip(1) {
+        for (l, ((_, step), (i, w))) in lanes.iter().zip(state.iter_mut()).enumerate() {
+            let (ni, nw, dth) = step.step(*i, *w, uk);
+            (*i, *w) = (ni, nw);
+            out(l, k, ni, if interval { dth * inv_dt } else { nw });
         }
-        SegmentStart::FromRest => {
-            let (i, w, dth) = step.step(0.0, 0.0, u[0]);
-            out(i, if interval { dth * inv_dt } else { w });
-            (i, w)
-        }
-        SegmentStart::State { current, speed } => {
-            out(current, speed);
-            (current, speed)
-        }
-    };
-    for &uk in &u[1..] {
-        let (ni, nw, dth) = step.step(i, w, uk);
-        (i, w) = (ni, nw);
-        out(i, if interval { dth * inv_dt } else { w });
     }
-    Ok(())
 }
 
 /// Output variance per unit variance of a white error in the voltage
@@ -299,6 +320,53 @@ mod tests {
         for k in 0..u.len() {
             assert!((i[k] - seg.current[k]).abs() < 1e-12, "current at {k}");
             assert!((wm[k] - mean_speed[k]).abs() < 1e-6, "mean speed at {k}");
+        }
+    }
+
+    /// Every lane of a lockstep simulation is its parameter set alone,
+    /// bit for bit, from each kind of start.
+    #[test]
+    fn every_lane_is_its_parameter_set_alone() {
+        let base = DcParams::SEED_TABLE4_MOMENTS;
+        let dt = 5e-4;
+        let u: Vec<f64> = (0..2000)
+            .map(|k| if k < 700 { 60.0 } else { 248.0 })
+            .collect();
+        let (seg, _) = reference(&base, true, &u, dt);
+        let sets: Vec<DcParams> = [1.0, 1.1, 0.9, 1.3]
+            .iter()
+            .enumerate()
+            .map(|(n, f)| DcParams {
+                ra: base.ra * f,
+                k: base.k * (1.0 + 0.05 * n as f64),
+                tst: base.tst / f,
+                ..base
+            })
+            .collect();
+        for start in [
+            SegmentStart::FromRest,
+            SegmentStart::Settled(60.0),
+            SegmentStart::State {
+                current: 2.0,
+                speed: 40.0,
+            },
+        ] {
+            let input = SegmentInput::new(&seg, start);
+            let lanes: Vec<(&DcParams, DrivenStep)> = sets
+                .iter()
+                .map(|p| (p, DrivenStep::new(p, input.dt).unwrap()))
+                .collect();
+            let mut got = vec![Vec::new(); sets.len()];
+            simulate_lanes(&lanes, &input, SpeedReading::IntervalMean, |l, k, i, w| {
+                got[l].push((k, i.to_bits(), w.to_bits()))
+            });
+            for (l, p) in sets.iter().enumerate() {
+                let (i, w) = simulate_series(p, &input, SpeedReading::IntervalMean).unwrap();
+                let alone: Vec<(usize, u64, u64)> = (0..i.len())
+                    .map(|k| (k, i[k].to_bits(), w[k].to_bits()))
+                    .collect();
+                assert_eq!(got[l], alone, "lane {l} from {start:?}");
+            }
         }
     }
 
