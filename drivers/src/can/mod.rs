@@ -24,7 +24,7 @@ pub use frame::{CanFrame, CanId, FrameError};
 pub use sensors::{CanChannel, CanSignalSensors, RESYNC_SILENCE_S};
 pub use slcan::{decode_line, encode_frame, SlcanBitrate, SlcanLine, SlcanOptions, SlcanStream};
 pub use socketcan::SocketCanStream;
-pub use stamp::{PeriodicStamp, Stamped};
+pub use stamp::{LagRun, PeriodicStamp, Stamped};
 
 use async_trait::async_trait;
 

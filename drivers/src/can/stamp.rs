@@ -58,6 +58,27 @@ pub struct Stamped {
     pub t_ns: u64,
     /// Frames taken as lost before this one.
     pub lost: u64,
+    /// Where the frame stands in a run of frames at a steady lag (the
+    /// frames after a loss, until [`LAG_FRAMES`] of them make it one).
+    pub run: LagRun,
+}
+
+/// A frame's place in a run of frames at a steady lag of more than
+/// [`LAG_PERIODS`] behind the grid. Until the run is long enough to be
+/// taken for a loss, its frames are stamped on the old grid, behind the
+/// message's true time; a consumer that can wait a few periods holds them
+/// and restamps them once the loss is known.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LagRun {
+    /// Not in such a run: any frames held for one keep their stamps.
+    None,
+    /// The `n`-th frame of a run not yet taken for a loss: the `n − 1`
+    /// frames before it are the run's, any held before those are not.
+    Open(u32),
+    /// The run is a loss: this frame is stamped on the grid after it, and
+    /// the run's `LAG_FRAMES − 1` frames before it were sent one, two, …
+    /// periods before it.
+    Loss,
 }
 
 impl PeriodicStamp {
@@ -94,12 +115,18 @@ impl PeriodicStamp {
             }
         };
         let mut t = self.phase_ns + n as f64 * p;
-        if self.lags_after_a_loss(a - t) {
-            let skipped = ((a - t) / p).round() as i64;
+        let lag = a - t;
+        let run = if self.lags_after_a_loss(lag) {
+            let skipped = (lag / p).round() as i64;
             n += skipped;
             lost += skipped as u64;
             t = self.phase_ns + n as f64 * p;
-        }
+            LagRun::Loss
+        } else if lag > LAG_PERIODS * p {
+            LagRun::Open(self.paced + 1)
+        } else {
+            LagRun::None
+        };
         if t > a {
             // Sent no later than it arrived: this frame is the least
             // delayed so far, and pins the phase.
@@ -113,7 +140,13 @@ impl PeriodicStamp {
         Stamped {
             t_ns: t.max(0.0).round() as u64,
             lost,
+            run,
         }
+    }
+
+    /// The message's period, ns.
+    pub fn period_ns(&self) -> f64 {
+        self.period_ns
     }
 
     /// Whether a frame lagging the grid by `lag` ns completes a run of
@@ -199,6 +232,28 @@ mod tests {
         for (&k, &t) in sent.iter().zip(&t).skip(100 + LAG_FRAMES as usize) {
             assert!(t.abs_diff(k * 2 * MS) <= MS, "slot {k}: {t} ns");
         }
+    }
+
+    /// The frames after a short loss form a run that ends in a loss: the
+    /// first open, the last taken for the loss; a healthy stream has none.
+    #[test]
+    fn the_frames_after_a_short_loss_are_a_run_ending_in_the_loss() {
+        let mut s = PeriodicStamp::new(500.0, 125.0);
+        let runs: Vec<LagRun> = (0..100)
+            .chain(150..155)
+            .map(|k| s.arrived(k * 2 * MS + 300_000).run)
+            .collect();
+        assert!(runs[..100].iter().all(|r| *r == LagRun::None));
+        assert_eq!(
+            runs[100..],
+            [
+                LagRun::Open(1),
+                LagRun::Open(2),
+                LagRun::Loss,
+                LagRun::None,
+                LagRun::None
+            ]
+        );
     }
 
     #[test]
