@@ -4,9 +4,21 @@
 //! (no libudev). A pseudo-terminal pair stands in for a cable in tests and
 //! for the simulated rig's serial devices: one end is kept here as a
 //! stream, the other is opened by path by whoever plays the device.
+//!
+//! An opened port is a [`SerialLink`]: tokio-serial's `flush` is the
+//! POSIX `tcdrain`, a blocking call that holds the runtime's worker thread
+//! until the UART has sent every queued byte (8 ms for an 8-byte request
+//! at 9 600 baud), and every task on that worker (the supervisor's among
+//! them) waits with it. Written bytes are already the kernel's to send, as
+//! a TCP stream's are, and every protocol here waits for its answer, not
+//! for the line to empty; so a link's flush returns at once.
 
+use std::io;
+use std::pin::Pin;
+use std::task::{Context, Poll};
 use std::time::Duration;
 
+use tokio::io::{AsyncRead, AsyncWrite, ReadBuf};
 pub use tokio_serial::SerialStream;
 use tokio_serial::{SerialPort, SerialPortBuilderExt};
 
@@ -55,8 +67,51 @@ impl SerialSettings {
     }
 }
 
+/// A serial port as an async byte stream whose `flush` does not wait for
+/// the line to empty (see the module docs); reads and writes are the
+/// port's.
+#[derive(Debug)]
+pub struct SerialLink<S = SerialStream>(S);
+
+impl<S> SerialLink<S> {
+    /// `port` behind a flush that returns at once.
+    pub fn new(port: S) -> SerialLink<S> {
+        SerialLink(port)
+    }
+}
+
+impl<S: AsyncRead + Unpin> AsyncRead for SerialLink<S> {
+    fn poll_read(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &mut ReadBuf<'_>,
+    ) -> Poll<io::Result<()>> {
+        Pin::new(&mut self.0).poll_read(cx, buf)
+    }
+}
+
+impl<S: AsyncWrite + Unpin> AsyncWrite for SerialLink<S> {
+    fn poll_write(
+        mut self: Pin<&mut Self>,
+        cx: &mut Context<'_>,
+        buf: &[u8],
+    ) -> Poll<io::Result<usize>> {
+        Pin::new(&mut self.0).poll_write(cx, buf)
+    }
+
+    fn poll_flush(self: Pin<&mut Self>, _cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        // Not the port's flush: that blocks the worker in `tcdrain`.
+        Poll::Ready(Ok(()))
+    }
+
+    fn poll_shutdown(self: Pin<&mut Self>, _cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+        // tokio-serial's shutdown is its flush; closing is the drop's.
+        Poll::Ready(Ok(()))
+    }
+}
+
 /// Open a serial port as an async byte stream.
-pub fn open_serial(s: &SerialSettings) -> Result<SerialStream, DriverError> {
+pub fn open_serial(s: &SerialSettings) -> Result<SerialLink, DriverError> {
     let parity = match s.parity {
         Parity::None => tokio_serial::Parity::None,
         Parity::Even => tokio_serial::Parity::Even,
@@ -73,6 +128,7 @@ pub fn open_serial(s: &SerialSettings) -> Result<SerialStream, DriverError> {
         .data_bits(tokio_serial::DataBits::Eight)
         .timeout(Duration::from_millis(100))
         .open_native_async()
+        .map(SerialLink::new)
         .map_err(|e| DriverError::Link {
             device: s.path.clone(),
             reason: format!("cannot open serial port: {e}"),
@@ -134,6 +190,43 @@ mod tests {
         let mut back = [0u8; 3];
         host.read_exact(&mut back).await.unwrap();
         assert_eq!(&back, b"ok\r");
+    }
+
+    /// A port whose flush would block the worker (a stand-in for
+    /// `tcdrain`): it panics if asked.
+    struct DrainingPort(Vec<u8>);
+
+    impl AsyncWrite for DrainingPort {
+        fn poll_write(
+            mut self: Pin<&mut Self>,
+            _cx: &mut Context<'_>,
+            buf: &[u8],
+        ) -> Poll<io::Result<usize>> {
+            self.0.extend_from_slice(buf);
+            Poll::Ready(Ok(buf.len()))
+        }
+
+        fn poll_flush(self: Pin<&mut Self>, _cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+            panic!("the port's flush was called: it would block the worker until the line empties")
+        }
+
+        fn poll_shutdown(self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
+            self.poll_flush(cx)
+        }
+    }
+
+    /// Writing a request and flushing it, as the Modbus RTU client and
+    /// the SLCAN driver do, hands the bytes to the port and never waits
+    /// in its flush.
+    #[tokio::test]
+    async fn a_links_flush_never_waits_for_the_line_to_empty() {
+        let mut link = SerialLink::new(DrainingPort(Vec::new()));
+        link.write_all(b"\x01\x03\x00\x00\x00\x06\xc5\xc8")
+            .await
+            .unwrap();
+        link.flush().await.unwrap();
+        link.shutdown().await.unwrap();
+        assert_eq!(link.0 .0, b"\x01\x03\x00\x00\x00\x06\xc5\xc8");
     }
 
     #[test]
