@@ -106,7 +106,8 @@ impl Lane<'_> {
                 (i0, w0)
             }
         };
-        (self.i, self.w) = (i, w);
+        // An open armature carries no current, whatever the start's.
+        (self.i, self.w) = (if run.coast { 0.0 } else { i }, w);
         match run.start {
             Start::Rest => 0,
             Start::Settled(_) | Start::State(..) => 1,
@@ -243,7 +244,7 @@ pub(super) fn simulate_rigid(
         }
         return lanes
             .iter()
-            .map(|lane| (lane.alive && lane.w.is_finite()).then(|| Lane { i: 0.0, ..*lane }.end()))
+            .map(|lane| (lane.alive && lane.w.is_finite()).then(|| lane.end()))
             .collect();
     }
     let steps: Vec<Option<Rigid>> = lanes
