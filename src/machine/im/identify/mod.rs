@@ -442,6 +442,18 @@ fn lm_method(
     }
     warnings.extend(fit.warnings.iter().map(|w| format!("lm: {w}")));
     warnings.extend(misfit_warning(&fit.circuit, sweep, model));
+    if values.is_empty() {
+        // Every element left out: no circuit to report, to validate or
+        // to diagnose against (the warnings above say why).
+        return (
+            MethodReport::not_applicable(format!(
+                "the fit of the {model} circuit determined none of its elements (see the \
+                 warnings): readings that do not follow slip as a machine's do, or more \
+                 elements than these data pin (fit a simpler circuit, or fix Rs from a DC test)"
+            )),
+            None,
+        );
+    }
 
     let segments: std::collections::BTreeSet<u32> =
         sweep.points.iter().map(|p| p.segment).collect();
@@ -676,6 +688,46 @@ mod tests {
             rfe: None,
             rotor: RotorCage::Single { rr: 1.6, xr: 3.0 },
         }
+    }
+
+    #[test]
+    fn a_fit_that_determines_no_element_does_not_apply() {
+        // Current and power that jump up and down from point to point,
+        // as no machine's do along slip: the single-fe circuit's fit
+        // leaves every element out.
+        let points = (0..16)
+            .map(|k| {
+                let slip = 0.004 + 0.996 * f64::from(k) / 15.0;
+                let jump = if k % 2 == 0 { 1.0 } else { -1.0 };
+                OperatingPoint {
+                    segment: 0,
+                    slip,
+                    line_voltage: 400.0,
+                    line_current: 10.0 + 5.0 * jump,
+                    input_power: 5000.0 - 2000.0 * jump,
+                    speed: (1.0 - slip) * std::f64::consts::PI * 50.0,
+                    frequency: 50.0,
+                    torque: None,
+                }
+            })
+            .collect();
+        let record = Record {
+            operating_points: points,
+            ..Record::default()
+        };
+        let id = identify_im(&record, Some(Connection::Star), ImModel::SingleFe);
+        let lm = &id.report.methods["lm"];
+        assert!(!lm.applies, "{lm:?}");
+        assert!(
+            lm.reason
+                .as_deref()
+                .unwrap()
+                .contains("none of its elements"),
+            "{lm:?}"
+        );
+        assert!(id.lm.is_none());
+        assert_ne!(id.report.best.as_deref(), Some("lm"));
+        assert!(!id.report.to_json_pretty().contains("NaN"));
     }
 
     #[test]
