@@ -447,35 +447,54 @@ fn huge_lengths_in_an_mcap_are_refused_or_recovered_by_every_command() {
     }
 }
 
+/// The lab's load curve (`tests/data/im_lab/load.csv`) with column `col`
+/// of every reading mapped by `f`, written to `dir/load.csv`.
+fn lab_load_with(dir: &Path, col: usize, f: impl Fn(f64) -> f64) -> String {
+    let load = std::fs::read_to_string("tests/data/im_lab/load.csv").unwrap();
+    let mut edited = String::new();
+    for line in load.lines() {
+        let mut cols: Vec<String> = line.split(',').map(String::from).collect();
+        if let Some(Ok(v)) = cols.get(col).map(|c| c.parse::<f64>()) {
+            cols[col] = format!("{}", f(v));
+        }
+        edited += &(cols.join(",") + "\n");
+    }
+    write(dir, "load.csv", &edited)
+}
+
+/// `identify` and `diagnose` both refuse `path` with an error holding
+/// every one of `words`.
+fn refused_by_both(path: &str, words: &[&str]) {
+    for command in ["identify", "diagnose"] {
+        let err = run_bad(&[command, "--kind", "im_slip_sweep", path]);
+        assert!(words.iter().all(|w| err.contains(w)), "{command}: {err}");
+    }
+}
+
 #[test]
 fn a_reversed_wattmeter_is_refused_naming_the_file_and_column() {
     let dir = tempfile::tempdir().unwrap();
-    let load = std::fs::read_to_string("tests/data/im_lab/load.csv").unwrap();
-    // The lab's load curve with the input power's sign flipped.
-    let mut flipped = String::new();
-    for line in load.lines() {
-        let cols: Vec<&str> = line.split(',').collect();
-        match cols[0].parse::<f64>() {
-            Ok(_) => {
-                let p: f64 = cols[3].parse().unwrap();
-                let neg = format!("{}", -p);
-                let mut row = cols.clone();
-                row[3] = &neg;
-                flipped += &(row.join(",") + "\n");
-            }
-            Err(_) => flipped += &(line.to_string() + "\n"),
-        }
-    }
-    let path = write(dir.path(), "load.csv", &flipped);
-    for command in ["identify", "diagnose"] {
-        let err = run_bad(&[command, "--kind", "im_slip_sweep", &path]);
-        assert!(
-            err.contains("load.csv")
-                && err.contains("column input_power_W")
-                && err.contains("polarity reversed"),
-            "{command}: {err}"
-        );
-    }
+    let path = lab_load_with(dir.path(), 3, |p| -p);
+    refused_by_both(
+        &path,
+        &["load.csv", "column input_power_W", "polarity reversed"],
+    );
+}
+
+#[test]
+fn a_phase_voltage_in_the_line_voltage_column_is_refused() {
+    // The lab's load curve reads power factors up to 0.81; with the line
+    // voltage divided by √3 they read up to 1.40.
+    let dir = tempfile::tempdir().unwrap();
+    let path = lab_load_with(dir.path(), 1, |v| v / 3f64.sqrt());
+    refused_by_both(&path, &["load.csv", "power factor", "phase voltage"]);
+}
+
+#[test]
+fn input_power_in_kilowatts_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = lab_load_with(dir.path(), 3, |p| p / 1000.0);
+    refused_by_both(&path, &["load.csv", "column input_power_W", "in kW"]);
 }
 
 #[test]
