@@ -78,22 +78,25 @@ pub fn load_record_files(
                 }
             }
         }
-        record.meta = plate.map(|nameplate| TestMeta {
-            schema_version: SCHEMA_VERSION.to_string(),
-            kind,
-            motor_id: String::new(),
-            started_at: String::new(),
-            nameplate,
-            config: String::new(),
-        });
-        return Ok(record);
+    } else {
+        for (n, path) in files.iter().enumerate() {
+            let seg = read_dc_csv(path, kind, n as u32)?;
+            claim(seg.index, n)?;
+            record.segments.push(seg);
+        }
+        record.segments.sort_by_key(|s| s.index);
     }
-    for (n, path) in files.iter().enumerate() {
-        let seg = read_dc_csv(path, kind, n as u32)?;
-        claim(seg.index, n)?;
-        record.segments.push(seg);
-    }
-    record.segments.sort_by_key(|s| s.index);
+    // The nameplate goes with the record either way: the IM reduction
+    // takes its rating from it, the DC identification checks its K
+    // against it.
+    record.meta = plate.map(|nameplate| TestMeta {
+        schema_version: SCHEMA_VERSION.to_string(),
+        kind,
+        motor_id: String::new(),
+        started_at: String::new(),
+        nameplate,
+        config: String::new(),
+    });
     Ok(record)
 }
 

@@ -14,30 +14,7 @@ async fn csv_files_identify_like_the_mcap_they_came_from() {
     let (dir, done) = common::dry_run::commission(&Config::embedded_default()).await;
     assert_eq!(done.outcome, Outcome::Completed);
 
-    // One CSV per segment, floats written in full (shortest round-trip)
-    // precision, each declaring its index, kind and label.
-    let mut files = Vec::new();
-    for seg in &done.record.segments {
-        let mut text = format!(
-            "# motorbench segment {} kind={} label={}\n",
-            seg.index,
-            seg.kind.unwrap().as_str(),
-            seg.label
-        );
-        text.push_str("time_s,armature_voltage_V,armature_current_A,speed_rad_s\n");
-        for k in 0..seg.time.len() {
-            writeln!(
-                text,
-                "{:?},{:?},{:?},{:?}",
-                seg.time[k], seg.voltage[k], seg.current[k], seg.speed[k]
-            )
-            .unwrap();
-        }
-        let path = dir.path().join(format!("segment-{}.csv", seg.index));
-        std::fs::write(&path, text).unwrap();
-        files.push(path.to_str().unwrap().to_string());
-    }
-
+    let files = write_segments(dir.path(), &done.record, 1.0);
     let mcap = done.mcap_path.to_str().unwrap();
     let from_mcap = common::motorbench(&["identify", "--kind", "dc_step", "--json", mcap]);
     let (mcap_json, stderr) = common::text(&from_mcap);
@@ -55,6 +32,69 @@ async fn csv_files_identify_like_the_mcap_they_came_from() {
         assert!(v["methods"].get(method).is_some(), "{method} missing");
     }
     assert_eq!(v["methods"]["moments"]["applies"], true);
+}
+
+/// One CSV per segment of `record` in `dir`, floats written in full
+/// (shortest round-trip) precision, each declaring its index, kind and
+/// label; the speed column, headed `speed_rad_s`, holds the speed times
+/// `speed_scale`.
+fn write_segments(
+    dir: &std::path::Path,
+    record: &motorbench::record::Record,
+    speed_scale: f64,
+) -> Vec<String> {
+    let mut files = Vec::new();
+    for seg in &record.segments {
+        let mut text = format!(
+            "# motorbench segment {} kind={} label={}\n",
+            seg.index,
+            seg.kind.unwrap().as_str(),
+            seg.label
+        );
+        text.push_str("time_s,armature_voltage_V,armature_current_A,speed_rad_s\n");
+        for k in 0..seg.time.len() {
+            writeln!(
+                text,
+                "{:?},{:?},{:?},{:?}",
+                seg.time[k],
+                seg.voltage[k],
+                seg.current[k],
+                seg.speed[k] * speed_scale
+            )
+            .unwrap();
+        }
+        let path = dir.join(format!("segment-{}.csv", seg.index));
+        std::fs::write(&path, text).unwrap();
+        files.push(path.to_str().unwrap().to_string());
+    }
+    files
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_speed_in_rpm_under_the_rad_s_header_is_named_against_the_nameplate() {
+    let (dir, done) = common::dry_run::commission(&Config::embedded_default()).await;
+    assert_eq!(done.outcome, Outcome::Completed);
+    let files = write_segments(dir.path(), &done.record, 30.0 / std::f64::consts::PI);
+    let plate = dir.path().join("nameplate.json");
+    let nameplate = &done.record.meta.as_ref().unwrap().nameplate;
+    std::fs::write(&plate, nameplate.to_string()).unwrap();
+    let warnings = |with_plate: bool| {
+        let mut args = vec!["identify", "--kind", "dc_step", "--json"];
+        if with_plate {
+            args.extend(["--nameplate", plate.to_str().unwrap()]);
+        }
+        args.extend(files.iter().map(String::as_str));
+        let out = common::motorbench(&args);
+        let (json, stderr) = common::text(&out);
+        assert!(out.status.success(), "{stderr}");
+        let v: serde_json::Value = serde_json::from_str(&json).unwrap();
+        v["warnings"].to_string()
+    };
+    // The fit is as good in r/min (K 9.55 times too small); the nameplate
+    // given with the files tells it apart.
+    let named = warnings(true);
+    assert!(named.contains("in r/min, not rad/s"), "{named}");
+    assert!(!warnings(false).contains("nameplate: K"));
 }
 
 #[test]

@@ -50,14 +50,37 @@ pub fn k_disagrees(nameplate: &serde_json::Value, report: &IdentificationReport)
     let rated = |key: &str| nameplate[key].as_f64().unwrap_or(f64::NAN);
     Some(format!(
         "nameplate: K = {k:.4} V·s/rad is {ratio:.2} times what the nameplate implies, \
-         ({} V − {ra:.3} Ω × {} A) / {} r/min = {implied:.4} V·s/rad: the speed reading is \
-         probably scaled wrong (the encoder's lines per revolution, counts it loses, a \
-         tachometer's gain), or the nameplate is not this motor's",
+         ({} V − {ra:.3} Ω × {} A) / {} r/min = {implied:.4} V·s/rad: {}",
         rated("voltage_V"),
         rated("current_A"),
         rated("speed_rpm"),
+        speed_scale_cause(ratio),
     ))
 }
+
+/// The likely cause of a `K` that is `ratio` times the nameplate's: a
+/// ratio near π/30 or 30/π (within [`UNIT_RATIO_TOLERANCE`]) is a speed in
+/// r/min read as rad/s or the other way round, whatever the bounds of
+/// the rated point allow.
+fn speed_scale_cause(ratio: f64) -> &'static str {
+    let rpm_per_rad_s = 30.0 / std::f64::consts::PI;
+    let near = |target: f64| (ratio / target - 1.0).abs() <= UNIT_RATIO_TOLERANCE;
+    if near(1.0 / rpm_per_rad_s) {
+        "the speed column is probably in r/min, not rad/s (9.55 times too large; label it \
+         speed_rpm), or the nameplate is not this motor's"
+    } else if near(rpm_per_rad_s) {
+        "the speed column is probably in rad/s, not r/min (9.55 times too small; label it \
+         speed_rad_s), or the nameplate is not this motor's"
+    } else {
+        "the speed reading is probably scaled wrong (the encoder's lines per revolution, \
+         counts it loses, a tachometer's gain), or the nameplate is not this motor's"
+    }
+}
+
+/// How close (relative) a `K` ratio must be to the r/min-to-rad/s factor
+/// to be named a unit error: the seed paper's motor itself reads 0.88 of
+/// its nameplate, so the band is as wide as the rated point's own spread.
+const UNIT_RATIO_TOLERANCE: f64 = 0.25;
 
 #[cfg(test)]
 mod tests {
@@ -109,6 +132,20 @@ mod tests {
         assert!(w.contains("lines per revolution"), "{w}");
         // And an encoder with more lines than configured: K comes out low.
         assert!(k_disagrees(&seed_nameplate(), &report_with(0.9, 30.9)).is_some());
+    }
+
+    #[test]
+    fn a_speed_in_the_wrong_unit_is_named() {
+        // r/min under speed_rad_s: the speed reads 9.55 times too large,
+        // K 9.55 times too small (1.323/9.55 = 0.1385).
+        let w = k_disagrees(&seed_nameplate(), &report_with(0.1385, 30.9)).expect("a warning");
+        assert!(w.contains("in r/min, not rad/s"), "{w}");
+        // rad/s under speed_rpm: K 9.55 times too large.
+        let w = k_disagrees(&seed_nameplate(), &report_with(12.63, 30.9)).expect("a warning");
+        assert!(w.contains("in rad/s, not r/min"), "{w}");
+        // A factor of 3 is a scale, not a unit.
+        let w = k_disagrees(&seed_nameplate(), &report_with(4.5, 30.9)).expect("a warning");
+        assert!(w.contains("lines per revolution"), "{w}");
     }
 
     #[test]
