@@ -211,12 +211,21 @@ impl IdentificationReport {
     /// that method's assumptions, and a negative resistance or friction is
     /// no answer. Call before choosing `best`.
     /// An interval with a bound that is not a finite number is dropped
-    /// (the parameter's interval is then undetermined, `ci95: null`).
+    /// (the parameter's interval is then undetermined, `ci95: null`); one
+    /// that reaches below 0 for a quantity that cannot (a resistance, an
+    /// inductance, a friction: a symmetric interval of a poorly
+    /// determined estimate) is cut at 0, the interval within the
+    /// physical range.
     pub fn refuse_unphysical(&mut self) {
         for method in self.methods.values_mut() {
             for p in method.params.iter_mut().flat_map(|ps| ps.values_mut()) {
                 if p.ci95.is_some_and(|ci| !ci.iter().all(|b| b.is_finite())) {
                     p.ci95 = None;
+                }
+                let signed = !(POSITIVE_UNITS.contains(&p.unit.as_str())
+                    || NON_NEGATIVE_UNITS.contains(&p.unit.as_str()));
+                if let Some(ci) = p.ci95.as_mut().filter(|_| !signed) {
+                    ci[0] = ci[0].max(0.0);
                 }
             }
             let Some(why) = method.params.as_ref().and_then(unphysical_param) else {
@@ -284,6 +293,30 @@ mod tests {
         assert!(r.methods["moments"].applies);
         let ra = &r.methods["moments"].params.as_ref().unwrap()["Ra"];
         assert_eq!(ra.ci95, None, "an unbounded interval is undetermined");
+    }
+
+    #[test]
+    fn an_interval_below_zero_is_cut_at_zero_where_the_quantity_cannot_go() {
+        let est = |value: f64, ci: [f64; 2], unit: &str| ParamEstimate {
+            value,
+            ci95: Some(ci),
+            unit: unit.into(),
+        };
+        let mut r = IdentificationReport::new("dc_step");
+        let params = BTreeMap::from([
+            ("Ra".to_string(), est(0.258, [-10.892, 11.408], "ohm")),
+            ("f".to_string(), est(1e-6, [-2e-6, 4e-6], "N*m*s/rad")),
+            ("dU".to_string(), est(0.5, [-1.0, 2.0], "V")),
+            ("K".to_string(), est(1.3, [1.2, 1.4], "V*s/rad")),
+        ]);
+        r.methods
+            .insert("steady_state".into(), MethodReport::fitted(params, None));
+        r.refuse_unphysical();
+        let p = r.methods["steady_state"].params.as_ref().unwrap();
+        assert_eq!(p["Ra"].ci95, Some([0.0, 11.408]));
+        assert_eq!(p["f"].ci95, Some([0.0, 4e-6]));
+        assert_eq!(p["dU"].ci95, Some([-1.0, 2.0]), "a voltage is signed");
+        assert_eq!(p["K"].ci95, Some([1.2, 1.4]));
     }
 
     #[test]

@@ -775,8 +775,8 @@ impl OutputErrorFit {
         let _ = writeln!(out);
         for (a, row) in u.correlation.iter().enumerate() {
             let _ = write!(out, "  {:>5}", PARAM_KEYS[a]);
-            for c in row {
-                let _ = write!(out, " {c:>+7.3}");
+            for &c in row {
+                let _ = write!(out, " {}", correlation_cell(c));
             }
             let _ = writeln!(out);
         }
@@ -799,6 +799,17 @@ impl OutputErrorFit {
             let _ = writeln!(out, "  held-out NRMSE by segment: {}", scores.join(", "));
         }
         out
+    }
+}
+
+/// One cell of the printed correlation matrix, 7 characters wide: a
+/// parameter held at its bound (Tst at 0) has no variance and no
+/// correlation (0/0), printed as a dash, never as NaN.
+fn correlation_cell(c: f64) -> String {
+    if c.is_finite() {
+        format!("{c:>+7.3}")
+    } else {
+        format!("{:>7}", "—")
     }
 }
 
@@ -913,6 +924,13 @@ mod tests {
         assert!(fit
             .render_details()
             .contains("correlation of the estimates"));
+    }
+
+    #[test]
+    fn a_correlation_without_variance_prints_as_a_dash_not_nan() {
+        assert_eq!(correlation_cell(-0.379), " -0.379");
+        assert_eq!(correlation_cell(f64::NAN), "      —");
+        assert_eq!(correlation_cell(f64::INFINITY), "      —");
     }
 
     #[test]
