@@ -29,6 +29,7 @@ mod plausibility;
 mod simulate;
 pub(crate) mod steady_state;
 mod step;
+mod time_constant;
 mod transient;
 
 use std::collections::BTreeMap;
@@ -461,6 +462,9 @@ pub fn identify_dc(record: &Record) -> Identification {
             .warnings
             .extend(nameplate::k_disagrees(&meta.nameplate, &report));
     }
+    report
+        .warnings
+        .extend(time_constant::time_constant_implausible(&report));
     Identification {
         report,
         levels,

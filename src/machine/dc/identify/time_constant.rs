@@ -1,0 +1,83 @@
+//! The identified armature time constant against the range of real
+//! armatures.
+//!
+//! A record's time column scaled wrong (milliseconds under `time_s`, a
+//! scope's time base misread) fits as well as a right one: the model is
+//! the same under `t → c·t` with `La → c·La`, `J → c·J` and the rest
+//! unchanged. Nothing in the fit tells them apart, but armatures do: the
+//! electrical time constant `La/Ra` of a DC machine's armature stays
+//! below some 100 ms (large machines with a compensating winding). A best
+//! method's `La/Ra` beyond [`MAX_ARMATURE_TIME_CONSTANT`], a decade above,
+//! is a warning naming the likely cause. There is no lower bound: small
+//! coreless motors reach a few µs, so a time column in a smaller unit
+//! cannot be told from them.
+
+use crate::contract::IdentificationReport;
+
+/// Longest armature time constant `La/Ra` not warned of, s.
+pub const MAX_ARMATURE_TIME_CONSTANT: f64 = 1.0;
+
+/// A warning when the best method's `La/Ra` lies above the range of
+/// real armatures; `None` within it, or where the best method has no
+/// `La`.
+pub fn time_constant_implausible(report: &IdentificationReport) -> Option<String> {
+    let params = report
+        .methods
+        .get(report.best.as_deref()?)?
+        .params
+        .as_ref()?;
+    let (la, ra) = (params.get("La")?.value, params.get("Ra")?.value);
+    let tau = la / ra;
+    if tau <= MAX_ARMATURE_TIME_CONSTANT {
+        return None;
+    }
+    Some(format!(
+        "time scale: the armature's electrical time constant La/Ra = {la:.4e} H / {ra:.4e} Ω = \
+         {tau:.3e} s, where real armatures have at most some 100 ms; La and J scale with the \
+         time column, so they are wrong by the same factor: is time_s in milliseconds (1000 \
+         times too large)?"
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use super::*;
+    use crate::contract::{MethodReport, ParamEstimate};
+
+    fn report_with(la: f64, ra: f64) -> IdentificationReport {
+        let p = |value: f64, unit: &str| ParamEstimate {
+            value,
+            ci95: None,
+            unit: unit.into(),
+        };
+        let params = BTreeMap::from([("La".into(), p(la, "H")), ("Ra".into(), p(ra, "ohm"))]);
+        let mut report = IdentificationReport::new("dc_step");
+        report.methods.insert(
+            "output_error".into(),
+            MethodReport::fitted(params, Some(0.01)),
+        );
+        report.best = Some("output_error".into());
+        report
+    }
+
+    #[test]
+    fn a_time_column_in_milliseconds_is_named() {
+        // The seed paper's motor: 0.803 H / 30.9 Ω = 26 ms, no warning.
+        assert_eq!(time_constant_implausible(&report_with(0.803, 30.9)), None);
+        // Its time in ms: La 1000 times too large.
+        let w = time_constant_implausible(&report_with(803.0, 30.9)).expect("a warning");
+        assert!(w.contains("= 2.599e1 s"), "{w}");
+        assert!(w.contains("milliseconds"), "{w}");
+        // A large machine's 0.2 s is not warned of.
+        assert_eq!(time_constant_implausible(&report_with(0.02, 0.1)), None);
+    }
+
+    #[test]
+    fn a_best_method_without_la_checks_nothing() {
+        let mut r = report_with(803.0, 30.9);
+        r.best = None;
+        assert_eq!(time_constant_implausible(&r), None);
+    }
+}
