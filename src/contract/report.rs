@@ -189,7 +189,39 @@ pub fn render_warnings(out: &mut String, report: &IdentificationReport) {
     }
 }
 
+#[cfg(test)]
 impl IdentificationReport {
+    /// A `dc_step` report whose best method, `output_error`, holds
+    /// `params` (key, value, unit) without intervals: what the checks of
+    /// a best method's values read.
+    pub(crate) fn with_best_params(params: &[(&str, f64, &str)]) -> IdentificationReport {
+        let params = params
+            .iter()
+            .map(|&(key, value, unit)| {
+                let estimate = ParamEstimate {
+                    value,
+                    ci95: None,
+                    unit: unit.into(),
+                };
+                (key.to_string(), estimate)
+            })
+            .collect();
+        let mut report = IdentificationReport::new("dc_step");
+        report.methods.insert(
+            "output_error".into(),
+            MethodReport::fitted(params, Some(0.01)),
+        );
+        report.best = Some("output_error".into());
+        report
+    }
+}
+
+impl IdentificationReport {
+    /// The parameters of the best method, where there is one.
+    pub fn best_params(&self) -> Option<&BTreeMap<String, ParamEstimate>> {
+        self.methods.get(self.best.as_deref()?)?.params.as_ref()
+    }
+
     /// An empty report of `kind`.
     pub fn new(kind: &str) -> IdentificationReport {
         IdentificationReport {

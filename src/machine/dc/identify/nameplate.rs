@@ -36,11 +36,7 @@ pub fn nameplate_k(nameplate: &serde_json::Value, ra: f64) -> Option<f64> {
 /// what `nameplate` implies with that method's `Ra`; `None` when they
 /// agree or either is missing.
 pub fn k_disagrees(nameplate: &serde_json::Value, report: &IdentificationReport) -> Option<String> {
-    let params = report
-        .methods
-        .get(report.best.as_deref()?)?
-        .params
-        .as_ref()?;
+    let params = report.best_params()?;
     let (k, ra) = (params.get("K")?.value, params.get("Ra")?.value);
     let implied = nameplate_k(nameplate, ra)?;
     let ratio = k / implied;
@@ -84,10 +80,7 @@ const UNIT_RATIO_TOLERANCE: f64 = 0.25;
 
 #[cfg(test)]
 mod tests {
-    use std::collections::BTreeMap;
-
     use super::*;
-    use crate::contract::{MethodReport, ParamEstimate};
 
     /// The seed paper's nameplate (Table 1).
     fn seed_nameplate() -> serde_json::Value {
@@ -95,19 +88,7 @@ mod tests {
     }
 
     fn report_with(k: f64, ra: f64) -> IdentificationReport {
-        let p = |value: f64, unit: &str| ParamEstimate {
-            value,
-            ci95: None,
-            unit: unit.into(),
-        };
-        let params = BTreeMap::from([("K".into(), p(k, "V*s/rad")), ("Ra".into(), p(ra, "ohm"))]);
-        let mut report = IdentificationReport::new("dc_step");
-        report.methods.insert(
-            "output_error".into(),
-            MethodReport::fitted(params, Some(0.01)),
-        );
-        report.best = Some("output_error".into());
-        report
+        IdentificationReport::with_best_params(&[("K", k, "V*s/rad"), ("Ra", ra, "ohm")])
     }
 
     #[test]

@@ -21,11 +21,7 @@ pub const MAX_ARMATURE_TIME_CONSTANT: f64 = 1.0;
 /// real armatures; `None` within it, or where the best method has no
 /// `La`.
 pub fn time_constant_implausible(report: &IdentificationReport) -> Option<String> {
-    let params = report
-        .methods
-        .get(report.best.as_deref()?)?
-        .params
-        .as_ref()?;
+    let params = report.best_params()?;
     let (la, ra) = (params.get("La")?.value, params.get("Ra")?.value);
     let tau = la / ra;
     if tau <= MAX_ARMATURE_TIME_CONSTANT {
@@ -41,25 +37,10 @@ pub fn time_constant_implausible(report: &IdentificationReport) -> Option<String
 
 #[cfg(test)]
 mod tests {
-    use std::collections::BTreeMap;
-
     use super::*;
-    use crate::contract::{MethodReport, ParamEstimate};
 
     fn report_with(la: f64, ra: f64) -> IdentificationReport {
-        let p = |value: f64, unit: &str| ParamEstimate {
-            value,
-            ci95: None,
-            unit: unit.into(),
-        };
-        let params = BTreeMap::from([("La".into(), p(la, "H")), ("Ra".into(), p(ra, "ohm"))]);
-        let mut report = IdentificationReport::new("dc_step");
-        report.methods.insert(
-            "output_error".into(),
-            MethodReport::fitted(params, Some(0.01)),
-        );
-        report.best = Some("output_error".into());
-        report
+        IdentificationReport::with_best_params(&[("La", la, "H"), ("Ra", ra, "ohm")])
     }
 
     #[test]
