@@ -163,6 +163,39 @@ fn data_that_cannot_be_diagnosed_gets_a_clear_error() {
     );
 }
 
+/// `tests/data/dc_gap_fold`: two segments of a blind case (seed 2024,
+/// case-12, a ramp staircase) whose second has a tenth of its samples cut
+/// out (`scripts/robustness_sweep.py --seed 1`, perturbation `dropout`).
+/// The gap cuts it in two, and the nominal model refitted without the
+/// short second part fails; the diagnosis leaves that part out with a
+/// warning and answers, where it once refused the whole record ("the
+/// nominal refit without segment 2 failed").
+#[test]
+fn a_segment_that_cannot_be_held_out_is_left_out_not_the_record() {
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/dc_gap_fold");
+    let files = [data.join("segment-1.csv"), data.join("segment-5.csv")];
+    let mut args = vec![
+        "diagnose".to_string(),
+        "--kind".into(),
+        "dc_step".into(),
+        "--json".into(),
+    ];
+    args.extend(args_of(&files, None));
+    let out = motorbench(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let d: Value = serde_json::from_str(&stdout).unwrap();
+    check_contract(&d);
+    let warnings = d["warnings"].to_string();
+    assert!(
+        warnings.contains(
+            "segment 2 (ramp to 31.6 V → 0 V short part 2/2) is left out of the diagnosis"
+        ),
+        "{warnings}"
+    );
+    assert!(!stdout.contains("NaN"));
+}
+
 #[test]
 fn records_of_every_shape_are_identified_and_diagnosed() {
     let false_verdicts = identify_and_diagnose_every_shape();

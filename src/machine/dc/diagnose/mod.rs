@@ -104,11 +104,69 @@ struct FamilyResult {
     validation: f64,
 }
 
-/// Diagnose a `dc_step` record.
+/// Most segments the diagnosis leaves out because the nominal model
+/// refitted without them fails.
+const MAX_LEFT_OUT: usize = 3;
+
+/// Why one pass of the diagnosis ended without a result.
+enum Attempt {
+    /// The record cannot be diagnosed.
+    Failed(DiagnoseError),
+    /// The nominal model refitted without this segment (its index) fails,
+    /// so the segment cannot be held out.
+    FoldFailed(u32),
+}
+
+impl From<DiagnoseError> for Attempt {
+    fn from(e: DiagnoseError) -> Attempt {
+        Attempt::Failed(e)
+    }
+}
+
+/// Diagnose a `dc_step` record. A segment that cannot be held out (the
+/// nominal model refitted without it fails: a short part of a segment
+/// cut at a gap in its time, say) is left out of the diagnosis with a
+/// warning and the diagnosis repeated, up to [`MAX_LEFT_OUT`] segments
+/// and while two remain, rather than refusing the record.
 pub fn diagnose_dc(
     record: &Record,
     options: &DiagnoseOptions,
 ) -> Result<DiagnosisRun, DiagnoseError> {
+    let mut trimmed: Option<Record> = None;
+    let mut left_out = Vec::new();
+    loop {
+        let current = trimmed.as_ref().unwrap_or(record);
+        let index = match diagnose_once(current, options) {
+            Ok(mut run) => {
+                left_out.append(&mut run.report.warnings);
+                run.report.warnings = left_out;
+                return Ok(run);
+            }
+            Err(Attempt::Failed(e)) => return Err(e),
+            Err(Attempt::FoldFailed(index)) => index,
+        };
+        let failed = || {
+            DiagnoseError::NominalFit(format!("the nominal refit without segment {index} failed"))
+        };
+        if left_out.len() >= MAX_LEFT_OUT || current.segments.len() <= 2 {
+            return Err(failed());
+        }
+        let mut next = current.clone();
+        let Some(at) = next.segments.iter().position(|s| s.index == index) else {
+            return Err(failed());
+        };
+        let seg = next.segments.remove(at);
+        left_out.push(format!(
+            "segment {index} ({}) is left out of the diagnosis: the nominal model refitted \
+             without it fails, so it cannot be held out",
+            seg.label
+        ));
+        trimmed = Some(next);
+    }
+}
+
+/// One pass of [`diagnose_dc`] over `record` as it is.
+fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<DiagnosisRun, Attempt> {
     let mut warnings = record.notes.clone();
     warnings.extend(crate::identify::clipped_channels(record));
     let held = held_levels(&record.segments);
@@ -209,12 +267,7 @@ pub fn diagnose_dc(
     for (n, o) in outs.into_iter().enumerate() {
         match o {
             Out::Fold(Some(s)) => nominal_folds.push(s),
-            Out::Fold(None) => {
-                return Err(DiagnoseError::NominalFit(format!(
-                    "the nominal refit without segment {} failed",
-                    runs[n].seg.index
-                )))
-            }
+            Out::Fold(None) => return Err(Attempt::FoldFailed(runs[n].seg.index)),
             Out::All(Some(f)) => cand_all.push((n - nominal_jobs, f)),
             Out::All(None) => warnings.push(format!(
                 "candidate {:?} could not be fitted",
