@@ -55,6 +55,15 @@ pub fn classical_single(
         .ok_or_else(|| ImFitError::Missing("the sweep has no points".into()))?;
     let lr =
         extreme(data, true).ok_or_else(|| ImFitError::Missing("the sweep has no points".into()))?;
+    if data.slip.iter().all(|&s| s == 0.0) {
+        return Err(ImFitError::Missing(
+            "every point's slip is 0: the slip was not measured (a no-load voltage sweep, say); \
+             a slip sweep needs each point's speed, and a no-load test without it is read as \
+             --kind im_no_load, reduced with locked-rotor and DC-resistance files (the standard \
+             tests)"
+                .into(),
+        ));
+    }
     if data.slip[lr] - data.slip[nl] < 0.2 {
         return Err(ImFitError::Missing(format!(
             "the sweep spans slip {:.3} to {:.3} only: it needs a point near no load and one near locked rotor",
@@ -166,6 +175,23 @@ mod tests {
     use super::*;
     use crate::identify::{slip_grid, SlipSweep, SweepNoise};
     use crate::model::im_fixtures::{single_cage, STAR_400V_50HZ};
+
+    #[test]
+    fn a_sweep_whose_slip_was_not_measured_says_so() {
+        let c = single_cage(0.5, 1.2, 40.0, Some(600.0), 0.6, 1.2);
+        let mut d = SlipSweep::simulate_seeded(
+            &c,
+            &STAR_400V_50HZ,
+            &slip_grid(10, 0.001),
+            &SweepNoise::default(),
+            5,
+        )
+        .phase_data();
+        d.slip.iter_mut().for_each(|s| *s = 0.0);
+        let e = classical_single(&d, LeakageSplit::DESIGN_A, true, None).unwrap_err();
+        assert!(e.to_string().contains("the slip was not measured"), "{e}");
+        assert!(e.to_string().contains("--kind im_no_load"), "{e}");
+    }
 
     #[test]
     fn classical_estimate_is_near_a_single_cage_machine() {
