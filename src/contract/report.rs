@@ -254,10 +254,11 @@ impl IdentificationReport {
                 if p.ci95.is_some_and(|ci| !ci.iter().all(|b| b.is_finite())) {
                     p.ci95 = None;
                 }
-                let signed = !(POSITIVE_UNITS.contains(&p.unit.as_str())
-                    || NON_NEGATIVE_UNITS.contains(&p.unit.as_str()));
-                if let Some(ci) = p.ci95.as_mut().filter(|_| !signed) {
-                    ci[0] = ci[0].max(0.0);
+                let unit = p.unit.as_str();
+                if POSITIVE_UNITS.contains(&unit) || NON_NEGATIVE_UNITS.contains(&unit) {
+                    if let Some(ci) = p.ci95.as_mut() {
+                        ci[0] = ci[0].max(0.0);
+                    }
                 }
             }
             let Some(why) = method.params.as_ref().and_then(unphysical_param) else {

@@ -192,8 +192,8 @@ fn check_current_reverses(record: &Record) -> Result<(), ImplausibleInput> {
     })
 }
 
-/// Share of the record's speed range (its 0.5th to 99.5th percentile)
-/// by which a glitch leaves both its neighbours and the range itself.
+/// Share of the record's speed range (its 2nd to 98th percentile) by
+/// which a glitch leaves both its neighbours and the range itself.
 const GLITCH_JUMP: f64 = 0.5;
 /// Share of the speed range within which a glitch's neighbours agree.
 const GLITCH_NEIGHBOURS: f64 = 0.1;
