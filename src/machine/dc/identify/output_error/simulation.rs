@@ -202,6 +202,19 @@ pub fn voltage_noise_gain(
 ) -> Result<[f64; 2], ParamError> {
     let step = DrivenStep::new(params, dt)?;
     let (a, b) = (&step.a, &step.b);
+    // The sum below runs until the impulse response has decayed, which
+    // takes about 12/(1 − ρ) samples for a spectral radius ρ: a model
+    // whose slowest mode outlasts 10⁵ samples (J driven towards infinity
+    // by a fit gone astray) would take seconds per call, so it gets no
+    // gain (the caller then leaves the noise-bias correction out).
+    if spectral_radius(a) >= 1.0 - MIN_DECAY_PER_SAMPLE {
+        return Err(ParamError {
+            name: "J",
+            value: params.j,
+            reason:
+                "gives a mode slower than 10⁵ samples, whose voltage-noise gain is not computed",
+        });
+    }
     // The response at sample 0 to a unit voltage error over that sample.
     let mut s = [b[0][0], b[1][0]];
     let mut sum = [s[0] * s[0], speed_of(reading, s[1], b[2][0], dt).powi(2)];
@@ -226,6 +239,22 @@ pub fn voltage_noise_gain(
         }
     }
     Ok(sum)
+}
+
+/// Smallest per-sample decay `1 − ρ` of the slowest mode for which
+/// [`voltage_noise_gain`] sums the impulse response.
+const MIN_DECAY_PER_SAMPLE: f64 = 1e-5;
+
+/// The spectral radius of the (current, speed) block of a state
+/// transition: the larger modulus of its two eigenvalues.
+fn spectral_radius(a: &[[f64; 2]; 3]) -> f64 {
+    let (tr, det) = (a[0][0] + a[1][1], a[0][0] * a[1][1] - a[0][1] * a[1][0]);
+    let disc = 0.25 * tr * tr - det;
+    if disc >= 0.0 {
+        0.5 * tr.abs() + disc.sqrt()
+    } else {
+        det.abs().sqrt()
+    }
 }
 
 #[inline]
@@ -256,6 +285,19 @@ mod tests {
     use super::*;
     use crate::model::{DcState, Terminal};
     use crate::record::SegmentKind;
+
+    #[test]
+    fn a_mode_slower_than_the_bound_gets_no_noise_gain() {
+        // The seed motor at 2 kHz: τm = 85 ms, 170 samples; a gain.
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let [gi, gw] = voltage_noise_gain(&p, 5e-4, SpeedReading::IntervalMean).unwrap();
+        assert!(gi > 0.0 && gw > 0.0 && gi.is_finite() && gw.is_finite());
+        // A fit gone astray to J = 10¹² kg·m² (a current read in mA): its
+        // mechanical mode would take some 10¹⁴ samples to sum.
+        let astray = DcParams { j: 1e12, ..p };
+        let e = voltage_noise_gain(&astray, 5e-4, SpeedReading::IntervalMean).unwrap_err();
+        assert_eq!(e.name, "J");
+    }
 
     /// A segment recorded from `DcMotor::step` itself, and the mean speed
     /// over each step (from the angle), for voltages `u`: settled at
