@@ -2,21 +2,23 @@
 """Perturb blind-suite records the way real records go wrong, run
 `motorbench identify` and `motorbench diagnose` on each, and count what no
 user should see: a panic, an exit code other than a result (0), bad input
-(2) or "nothing applies" (4), a NaN in the JSON, a run longer than the
-bound (identify 3 s, diagnose 30 s), a hang (120 s). Refusals are listed
-with their message, so that each can be read for whether a user can act
-on it.
+(2) or "nothing applies" (4), a report that `scripts/report_check.py`
+faults (a `null` where a number belongs, which is how a NaN reaches the
+JSON, or a value outside its physical range), a run longer than the bound
+(identify 3 s, diagnose 30 s), a hang (120 s). Refusals are listed with
+their message, so that each can be read for whether a user can act on
+it. `report_check.py` checks the suites' records as they are; this
+script, the same records gone wrong.
 
     scripts/robustness_sweep.py [--motorbench BIN] [--seed N] [--trials M]
                                 [--only KIND] SUITE...
 
 SUITE is a blind suite (`motorbench blind generate`, `scripts/blind-gem.sh`,
-`scripts/blind-motulator.sh`): DC cases (`segment-*.csv`) get DC
-perturbations, IM cases (`sweep-*.csv` with `nameplate.json`) IM ones.
+`scripts/blind-motulator.sh`), read through its `cases.json`: `dc_step`
+cases get DC perturbations, `im_slip_sweep` cases IM ones.
 Exit status 1 when any defect was found. Standard library only.
 """
 import argparse
-import glob
 import json
 import os
 import random
@@ -24,6 +26,9 @@ import subprocess
 import sys
 import tempfile
 import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from report_check import findings  # noqa: E402  (the checks of a report, shared)
 
 
 def read(path):
@@ -131,37 +136,35 @@ def main():
     rng = random.Random(a.seed)
     cases = []
     for suite in a.suites:
-        for d in sorted(glob.glob(os.path.join(suite, "cases", "*"))):
-            if glob.glob(d + "/segment-*.csv"):
-                cases.append((d, "dc"))
-            elif glob.glob(d + "/sweep-*.csv") and os.path.exists(d + "/nameplate.json"):
-                cases.append((d, "im"))
+        for case in json.load(open(os.path.join(suite, "cases.json")))["cases"]:
+            if case["kind"] in ("dc_step", "im_slip_sweep"):
+                cases.append((suite, case))
     if not cases:
-        sys.exit("no blind cases under " + ", ".join(a.suites))
+        sys.exit("no blind cases in " + ", ".join(a.suites))
     work = tempfile.mkdtemp(prefix="robustness-")
     defects = refusals = results = 0
     for t in range(a.trials):
-        case, machine = rng.choice(cases)
-        kinds = DC_KINDS if machine == "dc" else IM_KINDS
+        suite, case = rng.choice(cases)
+        dc = case["kind"] == "dc_step"
+        kinds = DC_KINDS if dc else IM_KINDS
         kind = a.only or rng.choice(kinds)
         if kind not in kinds:
             continue
-        pattern, perturb = ("segment-*.csv", dc_perturb) if machine == "dc" else ("sweep-*.csv", im_perturb)
+        perturb = dc_perturb if dc else im_perturb
         files = []
-        for segment, f in enumerate(sorted(glob.glob(os.path.join(case, pattern)))):
-            comments, header, rows = read(f)
+        for segment, f in enumerate(case["files"]):
+            comments, header, rows = read(os.path.join(suite, f))
             rows = perturb(kind, header, rows, segment, rng)
             out = os.path.join(work, f"{t}-{os.path.basename(f)}")
             with open(out, "w") as fh:
                 fh.write("\n".join(comments + [header] + [",".join(x) for x in rows]) + "\n")
             files.append(out)
-        extra = ["--nameplate", case + "/nameplate.json"] if machine == "im" else []
-        kind_arg = "dc_step" if machine == "dc" else "im_slip_sweep"
+        extra = ["--nameplate", os.path.join(suite, case["nameplate"])] if case.get("nameplate") else []
         for command, bound in (("identify", 3.0), ("diagnose", 30.0)):
             t0 = time.time()
-            name = f"{t} {kind} {os.path.relpath(case)} {command}"
+            name = f"{t} {kind} {suite} {case['id']} {command}"
             try:
-                p = subprocess.run([a.motorbench, command, "--kind", kind_arg, "--json", *extra, *files],
+                p = subprocess.run([a.motorbench, command, "--kind", case["kind"], "--json", *extra, *files],
                                    capture_output=True, text=True, timeout=120)
             except subprocess.TimeoutExpired:
                 print(f"DEFECT {name}: no answer in 120 s")
@@ -174,10 +177,8 @@ def main():
             if "panicked" in p.stderr:
                 bad.append("panic")
             if p.returncode == 0:
-                if "NaN" in p.stdout:
-                    bad.append("NaN in the JSON")
                 try:
-                    json.loads(p.stdout)
+                    bad += findings(json.loads(p.stdout), "report")
                 except ValueError:
                     bad.append("output is not JSON")
             if dt > bound:
