@@ -185,3 +185,44 @@ fn nothing_identifiable_exits_4_saying_what_the_record_lacks() {
     assert_eq!(out.status.code(), Some(4), "{stderr}");
     assert!(stderr.contains("the speed is constant"), "{stderr}");
 }
+
+/// `tests/data/dc_position_loop_coarse_encoder`: a blind case (seed 2024,
+/// case-08): a position loop drives the armature, the speed comes from a
+/// 119-line encoder (steps of 26 rad/s). Output error ran its friction
+/// coefficient out to 1.6e27 N*m*s/rad and reported it as applying; it now
+/// does not apply, naming the friction against the torque the current
+/// made, and every value that is reported stays within the motor's torque.
+#[test]
+fn a_friction_the_motor_could_not_overcome_is_not_an_answer() {
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/dc_position_loop_coarse_encoder");
+    let files: Vec<String> = (0..4)
+        .map(|n| data.join(format!("segment-{n}.csv")).display().to_string())
+        .collect();
+    let mut args = vec!["identify", "--kind", "dc_step", "--json"];
+    args.extend(files.iter().map(String::as_str));
+    let out = common::motorbench(&args);
+    let (stdout, stderr) = common::text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let oe = &v["methods"]["output_error"];
+    assert_eq!(oe["applies"], false, "{oe}");
+    let why = oe["reason"].as_str().unwrap();
+    assert!(why.contains("the rotor could not have turned"), "{why}");
+    // The methods that apply: friction at the top speed (132 rad/s) below
+    // ten times K times the largest current (3.43 A).
+    let mut applying = 0;
+    for (name, m) in v["methods"].as_object().unwrap() {
+        if m["applies"] != true {
+            continue;
+        }
+        let p = |k: &str| m["params"][k]["value"].as_f64();
+        if let (Some(k), Some(f)) = (p("K"), p("f")) {
+            let friction = p("Tst").unwrap_or(0.0) + f * 132.0;
+            assert!(friction < 10.0 * k * 3.43, "{name}: {friction} N*m");
+            applying += 1;
+        }
+    }
+    assert!(applying >= 1, "{stdout}");
+    assert_eq!(v["best"], "equation_error");
+}

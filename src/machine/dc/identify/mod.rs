@@ -19,6 +19,7 @@ mod abacus;
 mod coastdown;
 mod equation_error;
 mod error;
+mod friction_bound;
 mod level_error;
 mod levels;
 mod moments;
@@ -442,6 +443,7 @@ pub fn identify_dc(record: &Record) -> Identification {
         simulated.extend(fit.simulated.iter().cloned());
     }
 
+    friction_bound::refuse_friction_beyond_torque(record, &mut report);
     report.refuse_unphysical();
     report.best = best_method(&report);
     let equation_error_applies = report
