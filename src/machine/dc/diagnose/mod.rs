@@ -839,6 +839,7 @@ fn prepare_runs<'a>(
     segs: &'a [DcSegment],
     warnings: &mut Vec<String>,
 ) -> Result<Vec<SegmentRun<'a>>, DiagnoseError> {
+    let warnings_before = warnings.len();
     let mut runs: Vec<SegmentRun> = Vec::new();
     let mut heat = 0.0;
     for (pos, seg) in segs.iter().enumerate() {
@@ -923,11 +924,24 @@ fn prepare_runs<'a>(
         heat += seg_heat;
     }
     if runs.len() < 2 {
+        // Why the others were not used, from this pass's own warnings.
+        let why: Vec<&str> = warnings[warnings_before..]
+            .iter()
+            .filter(|w| w.ends_with("not used"))
+            .map(String::as_str)
+            .collect();
+        let why = if why.is_empty() {
+            String::new()
+        } else {
+            format!(" ({})", why.join("; "))
+        };
         return Err(DiagnoseError::NotEnoughData(format!(
-            "{} usable segment(s): leave-one-segment-out needs at least 2; record two or more \
-             segments (one CSV file each), or one segment of at least {} samples that holds \
-             voltage levels or a varied voltage to cut into parts",
+            "{} usable segment(s) of {}{why}: leave-one-segment-out needs at least 2; record \
+             two or more segments of at least {MIN_SAMPLES} samples (one CSV file each), or one \
+             segment of at least {} samples that holds voltage levels or a varied voltage to \
+             cut into parts",
             runs.len(),
+            segs.len(),
             2 * crate::machine::dc::split::MIN_PART
         )));
     }
@@ -1294,6 +1308,36 @@ mod tests {
         record.segments.truncate(1);
         let err = diagnose_dc(&record, &DiagnoseOptions::default()).unwrap_err();
         assert!(matches!(err, DiagnoseError::NotEnoughData(_)), "{err}");
+    }
+
+    /// A record whose segments are all too short (a record decimated ten
+    /// times, say) is refused saying so, segment by segment.
+    #[test]
+    fn segments_too_short_to_use_are_named_in_the_refusal() {
+        let mut rng = StdRng::seed_from_u64(1);
+        let mut record = simulate_dc_case(None, &mut rng).record;
+        record.segments.truncate(3);
+        for seg in &mut record.segments {
+            for v in [
+                &mut seg.time,
+                &mut seg.voltage,
+                &mut seg.current,
+                &mut seg.speed,
+            ] {
+                v.truncate(25);
+            }
+        }
+        let err = diagnose_dc(&record, &DiagnoseOptions::default()).unwrap_err();
+        let text = err.to_string();
+        assert!(text.contains("0 usable segment(s) of 3"), "{text}");
+        let first = &record.segments[0];
+        assert!(
+            text.contains(&format!(
+                "segment {} ({}) has 25 samples, fewer than 40: not used",
+                first.index, first.label
+            )),
+            "{text}"
+        );
     }
 
     /// A segment after a gap in time (samples a logger dropped) starts

@@ -25,6 +25,9 @@ const REVERSAL: f64 = 0.2;
 /// Share of samples the voltage must spend at each sign to count as
 /// reversing.
 const REVERSAL_SHARE: f64 = 0.05;
+/// Largest margin about zero, as a share of the current's peak, within
+/// which a current of the other sign counts as noise.
+const MAX_MARGIN: f64 = 0.1;
 
 /// A channel whose values no real DC motor produces.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -159,7 +162,12 @@ fn check_current_reverses(record: &Record) -> Result<(), ImplausibleInput> {
         .iter()
         .map(|s| super::levels::white_noise(&s.current))
         .fold(0.0f64, f64::max);
-    let margin = (3.0 * noise).max(1e-3 * i_peak);
+    // The noise estimate (second differences) reads a current that moves
+    // from sample to sample as noise: a closed loop's or a coarsely
+    // sampled record's. A margin that large would call any reversal noise,
+    // so it stops at a tenth of the peak; a rectified reading's noise
+    // below zero stays within that.
+    let margin = (3.0 * noise).max(1e-3 * i_peak).min(MAX_MARGIN * i_peak);
     let (lo, hi) = record
         .segments
         .iter()
@@ -478,6 +486,19 @@ mod tests {
         assert!(e.reason.contains("never changes sign"), "{}", e.reason);
         // One polarity only: a current of one sign is normal.
         assert!(check_plausible(&record(|_| 60.0, |_| 0.1)).is_ok());
+        // A current that moves from sample to sample (a closed loop read
+        // slowly) has a second-difference "noise" of its own size, yet it
+        // plainly reverses: -2.5 A to +1.8 A is no magnitude reading.
+        let swinging = record(u, |k| match k % 3 {
+            0 => 1.8 * u(k).signum(),
+            1 => -2.5 * u(k).signum(),
+            _ => 0.3,
+        });
+        assert!(check_plausible(&swinging).is_ok());
+        // A rectified reading with noise a few percent of its peak dipping
+        // below zero is still refused.
+        let rectified = record(u, |k| if k % 2 == 0 { 1.0 } else { -0.05 });
+        assert!(check_plausible(&rectified).is_err());
     }
 
     #[test]

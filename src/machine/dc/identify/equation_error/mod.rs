@@ -124,7 +124,16 @@ pub fn equation_error(
             format!("does not apply: {}", why_not.join("; "))
         }));
     }
-    let record_wide = excitation(&prepared)?;
+    // Said of the segments used only; those left out are why, often (a
+    // record sampled so slowly that its steps hold a few samples each).
+    let record_wide = excitation(&prepared).map_err(|e| match e {
+        NotApplicable::Missing(why) if !why_not.is_empty() => NotApplicable::Missing(format!(
+            "in the {} segment(s) long enough to use, {why}; not used: {}",
+            prepared.len(),
+            why_not.join("; ")
+        )),
+        e => e,
+    })?;
     for w in why_not {
         warnings.push(format!("equation_error: not used: {w}"));
     }
@@ -321,12 +330,78 @@ fn excitation(prepared: &[Prepared]) -> Result<String, NotApplicable> {
 /// fits the model's dynamics asks this first: a record without
 /// excitation leaves any optimum an artefact of its start.
 pub(crate) fn excites(segments: &[&DcSegment]) -> Result<(), NotApplicable> {
-    let changes = |f: fn(&DcSegment) -> &Vec<f64>| {
+    let voltage = Excitation::of(segments, |s| &s.voltage);
+    let current = Excitation::of(segments, |s| &s.current);
+    let speed = Excitation::of(segments, |s| &s.speed);
+    // A channel that moves from one sample to the next as much as over
+    // the record cannot be told from noise: the words below would be
+    // wrong for it (a fast loop logged slowly swings its voltage from
+    // rail to rail between samples).
+    for (name, unit, e) in [
+        ("voltage", "V", &voltage),
+        ("current", "A", &current),
+        ("speed", "rad/s", &speed),
+    ] {
+        if !e.changes && e.noise > NOISE_LIKE * e.peak {
+            return Err(NotApplicable::Missing(format!(
+                "the {name} moves from one sample to the next about as much as over the whole \
+                 record (a sample-to-sample scatter of {:.4} {unit} against a largest reading of \
+                 {:.4} {unit}), so its changes cannot be told from noise: the record is sampled \
+                 too slowly for the motor (record faster), or the channel reads noise",
+                e.noise, e.peak
+            )));
+        }
+    }
+    // A voltage held through the whole record still excites the model
+    // when the record starts away from that level's steady state (a step
+    // from rest just before the first sample): its current and speed
+    // then move.
+    let responds = current.changes && speed.changes;
+    if !voltage.changes && !responds {
+        return Err(NotApplicable::Missing(
+            "the voltage never changes (the record has no excitation: apply \
+             voltage steps, a ramp or a PRBS to the armature)"
+                .into(),
+        ));
+    }
+    if !speed.changes {
+        return Err(NotApplicable::Missing(
+            "the speed is constant (the rotor does not respond to the voltage: \
+             is it blocked, or is the speed sensor connected?)"
+                .into(),
+        ));
+    }
+    if !current.changes {
+        return Err(NotApplicable::Missing(
+            "the current never changes (is the current sensor connected?)".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Share of a channel's largest reading above which its sample-to-sample
+/// scatter is more than any sensor's noise.
+const NOISE_LIKE: f64 = 0.1;
+
+/// Whether one channel changes over the record beyond its noise.
+struct Excitation {
+    /// The block means span more than their noise.
+    changes: bool,
+    /// The largest white-noise level of a segment.
+    noise: f64,
+    /// The largest reading's magnitude.
+    peak: f64,
+}
+
+impl Excitation {
+    fn of(segments: &[&DcSegment], f: fn(&DcSegment) -> &Vec<f64>) -> Excitation {
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         let mut noise = 0.0f64;
+        let mut peak = 0.0f64;
         for seg in segments {
             let y = f(seg);
             noise = noise.max(white_noise(y));
+            peak = y.iter().fold(peak, |m, v| m.max(v.abs()));
             for block in y.chunks(BLOCK) {
                 let m = block.iter().sum::<f64>() / block.len() as f64;
                 lo = lo.min(m);
@@ -334,33 +409,12 @@ pub(crate) fn excites(segments: &[&DcSegment]) -> Result<(), NotApplicable> {
             }
         }
         let span = hi - lo;
-        span > 0.0 && span > 12.0 * noise / (BLOCK as f64).sqrt()
-    };
-    // A voltage held through the whole record still excites the model
-    // when the record starts away from that level's steady state (a step
-    // from rest just before the first sample): its current and speed
-    // then move.
-    let responds = changes(|s| &s.current) && changes(|s| &s.speed);
-    if !changes(|s| &s.voltage) && !responds {
-        return Err(NotApplicable::Missing(
-            "the voltage never changes (the record has no excitation: apply \
-             voltage steps, a ramp or a PRBS to the armature)"
-                .into(),
-        ));
+        Excitation {
+            changes: span > 0.0 && span > 12.0 * noise / (BLOCK as f64).sqrt(),
+            noise,
+            peak,
+        }
     }
-    if !changes(|s| &s.speed) {
-        return Err(NotApplicable::Missing(
-            "the speed is constant (the rotor does not respond to the voltage: \
-             is it blocked, or is the speed sensor connected?)"
-                .into(),
-        ));
-    }
-    if !changes(|s| &s.current) {
-        return Err(NotApplicable::Missing(
-            "the current never changes (is the current sensor connected?)".into(),
-        ));
-    }
-    Ok(())
 }
 
 /// An estimate with its uncertainty, in row order (La, Ra, K, J, f, Tst).
@@ -944,6 +998,45 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("the speed is constant"), "{err}");
+    }
+
+    #[test]
+    fn a_voltage_that_swings_between_samples_is_not_called_constant() {
+        // A fast loop logged slowly: the voltage swings 0–50 V from one
+        // sample to the next, and its block means barely differ.
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let swing = |k: usize| [0.0, 50.0, 10.0, 45.0, 5.0][k % 5];
+        let r = record(&p, 400, 400, swing);
+        let err = equation_error(&r, SpeedReading::IntervalMean)
+            .unwrap_err()
+            .to_string();
+        assert!(!err.contains("never changes"), "{err}");
+        assert!(
+            err.contains("the voltage moves from one sample to the next")
+                && err.contains("sampled too slowly"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn segments_too_short_to_use_are_named_with_what_the_rest_lacks() {
+        // Three ramps of six samples (a record decimated twenty times) and
+        // one held level long enough to use: the voltage changes, but not
+        // in the one segment used.
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let mut r = record(&p, 18, 6, |k| 50.0 + 5.0 * k as f64);
+        let mut held = DcSegment::held(25, 5e-4, 100.0, 1.0, 50.0);
+        held.index = 3;
+        held.label = "held".into();
+        r.segments.push(held);
+        let err = equation_error(&r, SpeedReading::IntervalMean)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("in the 1 segment(s) long enough to use, the voltage never changes"),
+            "{err}"
+        );
+        assert!(err.contains("fewer than 20 samples"), "{err}");
     }
 
     #[test]
