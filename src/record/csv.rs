@@ -237,7 +237,17 @@ impl<'a> CsvLines<'a> {
                 return Err(RecordError::csv(path, no, None, reason));
             }
         }
-        let names = line.split(',').map(unquote).collect();
+        let names: Vec<&str> = line.split(',').map(unquote).collect();
+        if names.iter().all(|n| n.trim().parse::<f64>().is_ok()) {
+            let reason = format!(
+                "no header row: the first line that is not a '#' comment holds numbers ({}); \
+                 the file's first row must name its columns (the data contract's names: \
+                 time_s,armature_voltage_V,armature_current_A,speed_rad_s for a DC segment, \
+                 slip,line_voltage_V,line_current_A,input_power_W for an induction machine's)",
+                cut(line)
+            );
+            return Err(RecordError::csv(path, no, None, reason));
+        }
         Ok((CsvHeader { no, names }, rows))
     }
 
@@ -564,6 +574,12 @@ mod tests {
             Some(COL_SPEED),
         );
         assert!(s.contains("speed_rpm"), "{s}");
+    }
+
+    #[test]
+    fn a_file_without_a_header_row_says_so() {
+        let s = error("# c\n0,1.5,2,3e2\n1,1.5,2,3e2\n", 2, None);
+        assert!(s.contains("no header row") && s.contains("0,1.5,2,3e2"), "{s}");
     }
 
     #[test]
