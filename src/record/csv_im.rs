@@ -9,8 +9,12 @@
 //! current that is not > 0, a row of the wrong width, a declaration of
 //! another kind, a file without rows.
 //!
-//! Speed is not a CSV column; it is computed from slip, frequency and the
-//! pole pairs where both are known, and NaN (unknown) otherwise.
+//! In place of `slip`, a file may give the measured shaft speed,
+//! `speed_rpm` or `speed_rad_s` (motorbench's addition: a lab measures
+//! speed); the slip is then `1 − ω·p/(2π·f)` with the nameplate's pole
+//! pairs and the supply frequency, and a file without them is refused
+//! saying so. Otherwise the speed is computed from slip, frequency and
+//! the pole pairs where both are known, and NaN (unknown) otherwise.
 
 use std::path::Path;
 
@@ -31,6 +35,19 @@ pub const COL_INPUT_POWER: &str = "input_power_W";
 pub const COL_TORQUE: &str = "torque_Nm";
 /// Optional supply-frequency column.
 pub const COL_FREQUENCY: &str = "frequency_Hz";
+/// Shaft speed in r/min, in place of `slip` (motorbench's addition).
+pub const COL_SPEED_RPM: &str = "speed_rpm";
+/// Shaft speed in rad/s, in place of `slip` (motorbench's addition).
+pub const COL_SPEED_RAD_S: &str = "speed_rad_s";
+
+/// Where a row's slip comes from.
+#[derive(Debug, Clone, Copy)]
+enum SlipSource {
+    /// The `slip` column.
+    Slip(usize),
+    /// A speed column, its name and its factor to rad/s.
+    Speed(usize, &'static str, f64),
+}
 
 /// One imported sweep segment.
 #[derive(Debug, Clone, PartialEq)]
@@ -81,7 +98,28 @@ pub fn read_im_csv(
             )
         })
     };
-    let slip_col = required(COL_SLIP)?;
+    // The slip, or the shaft speed it is computed from (a lab measures
+    // speed): s = 1 − ω·p/(2π·f).
+    let slip_source = match (
+        find(COL_SLIP)?,
+        find(COL_SPEED_RPM)?,
+        find(COL_SPEED_RAD_S)?,
+    ) {
+        (Some(c), _, _) => SlipSource::Slip(c),
+        (None, Some(c), _) => SlipSource::Speed(c, COL_SPEED_RPM, std::f64::consts::TAU / 60.0),
+        (None, None, Some(c)) => SlipSource::Speed(c, COL_SPEED_RAD_S, 1.0),
+        (None, None, None) => {
+            return Err(err(
+                header_no,
+                Some(COL_SLIP),
+                format!(
+                    "missing column (or {COL_SPEED_RPM} or {COL_SPEED_RAD_S}, with the nameplate's \
+                     poles; the header names: {})",
+                    cut(&header.join(", "))
+                ),
+            ))
+        }
+    };
     let v_col = required(COL_LINE_VOLTAGE)?;
     let i_col = required(COL_LINE_CURRENT)?;
     let p_col = required(COL_INPUT_POWER)?;
@@ -92,14 +130,6 @@ pub fn read_im_csv(
     for &(no, line) in lines {
         let row = CsvRow::split(path, header, no, line)?;
         let number = |col: usize| row.number(col);
-        let slip = number(slip_col)?;
-        if !(0.0..=1.0).contains(&slip) {
-            return Err(err(
-                no,
-                Some(COL_SLIP),
-                format!("slip {slip} is outside [0, 1]"),
-            ));
-        }
         let positive = |col: usize| -> Result<f64, RecordError> {
             let v = number(col)?;
             if v <= 0.0 {
@@ -107,14 +137,45 @@ pub fn read_im_csv(
             }
             Ok(v)
         };
-        let line_voltage = positive(v_col)?;
-        let line_current = positive(i_col)?;
-        let input_power = number(p_col)?;
-        let torque = t_col.map(number).transpose()?;
         let f = match f_col {
             Some(c) => positive(c)?,
             None => frequency.unwrap_or(f64::NAN),
         };
+        let (slip, slip_column, from_speed) = match slip_source {
+            SlipSource::Slip(c) => (number(c)?, COL_SLIP, String::new()),
+            SlipSource::Speed(c, name, to_rad_s) => {
+                let p =
+                    match pole_pairs {
+                        Some(p) if p > 0 && f.is_finite() => f64::from(p),
+                        _ => return Err(err(
+                            no,
+                            Some(name),
+                            "the slip is computed from the speed with the machine's poles and the \
+                             supply frequency: give --nameplate with poles and frequency_Hz (or a \
+                             frequency_Hz column)"
+                                .into(),
+                        )),
+                    };
+                let w = number(c)? * to_rad_s;
+                let s = 1.0 - w * p / (std::f64::consts::TAU * f);
+                (
+                    s,
+                    name,
+                    format!(" (computed from the speed {w:.4} rad/s, {p} pole pairs, {f} Hz)"),
+                )
+            }
+        };
+        if !(0.0..=1.0).contains(&slip) {
+            return Err(err(
+                no,
+                Some(slip_column),
+                format!("slip {slip} is outside [0, 1]{from_speed}"),
+            ));
+        }
+        let line_voltage = positive(v_col)?;
+        let line_current = positive(i_col)?;
+        let input_power = number(p_col)?;
+        let torque = t_col.map(number).transpose()?;
         let speed = match pole_pairs {
             Some(p) if p > 0 => (1.0 - slip) * std::f64::consts::TAU * f / f64::from(p),
             _ => f64::NAN,
@@ -176,6 +237,54 @@ mod tests {
         assert_eq!(p.frequency, 50.0);
         assert!((p.speed - 0.998 * std::f64::consts::PI * 50.0).abs() < 1e-9);
         assert_eq!(seg.points[1].segment, 1);
+    }
+
+    #[test]
+    fn a_measured_speed_gives_the_slip_with_the_poles_and_the_frequency() {
+        // 4 poles at 50 Hz: 1500 r/min synchronous; 1455 r/min is slip 0.03.
+        let seg = read(
+            "speed_rpm,line_voltage_V,line_current_A,input_power_W\n1455,400,10,6000\n1500,400,4,300\n",
+        )
+        .unwrap();
+        assert!(
+            (seg.points[0].slip - 0.03).abs() < 1e-12,
+            "{}",
+            seg.points[0].slip
+        );
+        assert!(seg.points[1].slip.abs() < 1e-12);
+        let w = 1455.0 * std::f64::consts::TAU / 60.0;
+        assert!((seg.points[0].speed - w).abs() < 1e-9);
+        // The same in rad/s, and the slip column winning over a speed.
+        let seg = read(&format!(
+            "speed_rad_s,line_voltage_V,line_current_A,input_power_W\n{w},400,10,6000\n"
+        ))
+        .unwrap();
+        assert!((seg.points[0].slip - 0.03).abs() < 1e-12);
+        let seg = read(
+            "slip,speed_rpm,line_voltage_V,line_current_A,input_power_W\n0.05,1455,400,10,6000\n",
+        )
+        .unwrap();
+        assert_eq!(seg.points[0].slip, 0.05);
+        // Without the poles the slip cannot be had: say what to give.
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("s.csv");
+        std::fs::write(
+            &p,
+            "speed_rpm,line_voltage_V,line_current_A,input_power_W\n1455,400,10,6000\n",
+        )
+        .unwrap();
+        let e = read_im_csv(&p, 0, Some(50.0), None)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("s.csv:2: column speed_rpm") && e.contains("poles"),
+            "{e}"
+        );
+        // A speed above synchronous (a generator, or the wrong poles).
+        let e = read("speed_rpm,line_voltage_V,line_current_A,input_power_W\n1600,400,10,6000\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("outside [0, 1] (computed from the speed"), "{e}");
     }
 
     #[test]

@@ -151,3 +151,73 @@ fn bad_sweep_csv_is_refused_with_file_line_and_column() {
         "{stderr}"
     );
 }
+
+/// A lab measures speed, not slip: the same sweeps with `speed_rpm` in
+/// place of `slip` (4 poles at 50 Hz, from the nameplate) identify the
+/// same circuit as with the slip.
+#[test]
+fn a_speed_column_with_the_nameplates_poles_identifies_like_the_slip() {
+    let dir = tempfile::tempdir().unwrap();
+    let files = write_sweeps(dir.path());
+    let plate = dir.path().join("nameplate.json");
+    std::fs::write(&plate, r#"{"poles": 4, "frequency_Hz": 50.0}"#).unwrap();
+    let mut speed_files = Vec::new();
+    for (k, f) in files.iter().enumerate() {
+        let text = std::fs::read_to_string(f).unwrap();
+        let mut out = String::new();
+        for line in text.lines() {
+            let converted = match line.split_once(',') {
+                Some(("slip", rest)) => format!("speed_rpm,{rest}"),
+                Some((s, rest)) if !line.starts_with('#') => {
+                    let slip: f64 = s.parse().unwrap();
+                    format!("{},{rest}", (1.0 - slip) * 1500.0)
+                }
+                _ => line.to_string(),
+            };
+            out.push_str(&converted);
+            out.push('\n');
+        }
+        let path = dir.path().join(format!("speed{k}.csv"));
+        std::fs::write(&path, out).unwrap();
+        speed_files.push(path);
+    }
+    let identify = |files: &[PathBuf]| {
+        let mut args = vec!["identify", "--kind", "im_slip_sweep", "--json"];
+        args.extend(["--connection", "delta", "--model", "double"]);
+        args.extend(["--nameplate", plate.to_str().unwrap()]);
+        args.extend(files.iter().map(|p| p.to_str().unwrap()));
+        let out = motorbench(&args);
+        let (stdout, stderr) = text(&out);
+        assert!(out.status.success(), "{stderr}");
+        serde_json::from_str::<serde_json::Value>(&stdout).unwrap()
+    };
+    let (by_slip, by_speed) = (identify(&files), identify(&speed_files));
+    assert_eq!(by_slip["best"], by_speed["best"]);
+    let lm = |v: &serde_json::Value| v["methods"]["lm"]["params"].clone();
+    let (a, b) = (lm(&by_slip), lm(&by_speed));
+    let a = a.as_object().unwrap();
+    assert!(!a.is_empty(), "{by_slip}");
+    for (key, p) in a {
+        let (x, y) = (
+            p["value"].as_f64().unwrap(),
+            b[key]["value"].as_f64().unwrap(),
+        );
+        assert!(
+            (x - y).abs() <= 1e-6 * x.abs(),
+            "{key}: {x} by slip, {y} by speed"
+        );
+    }
+    // Without the poles the file says what it needs.
+    let out = motorbench(&[
+        "identify",
+        "--kind",
+        "im_slip_sweep",
+        speed_files[0].to_str().unwrap(),
+    ]);
+    let (_, stderr) = text(&out);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("column speed_rpm") && stderr.contains("poles"),
+        "{stderr}"
+    );
+}
