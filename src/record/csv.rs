@@ -2,9 +2,10 @@
 //! segment, for data taken elsewhere (a scope, a spreadsheet).
 //!
 //! DC kinds (`dc_step`, `dc_coastdown`) need the columns `time_s`,
-//! `armature_voltage_V`, `armature_current_A` and `speed_rad_s` (or
-//! `speed_rpm`, converted with ×2π/60; if both are present `speed_rad_s` is
-//! used). The header row names the columns, in any order, optionally in
+//! `armature_voltage_V`, `armature_current_A` and `speed_rad_s`; in place
+//! of each but the voltage, one in another unit is converted to SI:
+//! `time_ms` (×10⁻³), `armature_current_mA` (×10⁻³), `speed_rpm` (×2π/60).
+//! Where both are present the SI column is used. The header row names the columns, in any order, optionally in
 //! quotes; unknown columns are ignored (and not parsed). Fields are plain
 //! comma-separated numbers with optional surrounding whitespace (and
 //! optional quotes). Blank lines and lines starting with `#` are skipped.
@@ -38,6 +39,12 @@ pub const COL_CURRENT: &str = "armature_current_A";
 pub const COL_SPEED: &str = "speed_rad_s";
 /// Speed column in rpm, accepted instead of [`COL_SPEED`].
 pub const COL_SPEED_RPM: &str = "speed_rpm";
+/// Time column in ms, accepted instead of [`COL_TIME`] (motorbench's
+/// addition: scopes and loggers often write milliseconds).
+pub const COL_TIME_MS: &str = "time_ms";
+/// Armature-current column in mA, accepted instead of [`COL_CURRENT`]
+/// (motorbench's addition, for small motors' shunt readings).
+pub const COL_CURRENT_MA: &str = "armature_current_mA";
 
 /// Prefix of the declaration comment, after `#` and blanks.
 const DECLARATION: &str = "motorbench segment";
@@ -88,14 +95,27 @@ pub fn read_dc_csv(
             ),
         )
     };
-    let time_col = find(COL_TIME)?.ok_or_else(|| missing(COL_TIME, ""))?;
-    let voltage_col = find(COL_VOLTAGE)?.ok_or_else(|| missing(COL_VOLTAGE, ""))?;
-    let current_col = find(COL_CURRENT)?.ok_or_else(|| missing(COL_CURRENT, ""))?;
-    let (speed_col, speed_scale) = match (find(COL_SPEED)?, find(COL_SPEED_RPM)?) {
-        (Some(c), _) => (c, None),
-        (None, Some(c)) => (c, Some(RPM_TO_RAD_S)),
-        (None, None) => return Err(missing(COL_SPEED, " (or speed_rpm)")),
-    };
+    // Each quantity from its SI column, else from the first of its other
+    // units the file has: (column, factor to SI, name).
+    let column =
+        |units: &[(&'static str, f64)]| -> Result<(usize, f64, &'static str), RecordError> {
+            for &(name, scale) in units {
+                if let Some(c) = find(name)? {
+                    return Ok((c, scale, name));
+                }
+            }
+            let others: Vec<&str> = units[1..].iter().map(|(n, _)| *n).collect();
+            let extra = if others.is_empty() {
+                String::new()
+            } else {
+                format!(" (or {})", others.join(" or "))
+            };
+            Err(missing(units[0].0, &extra))
+        };
+    let time = column(&[(COL_TIME, 1.0), (COL_TIME_MS, 1e-3)])?;
+    let voltage = column(&[(COL_VOLTAGE, 1.0)])?;
+    let current = column(&[(COL_CURRENT, 1.0), (COL_CURRENT_MA, 1e-3)])?;
+    let speed = column(&[(COL_SPEED, 1.0), (COL_SPEED_RPM, RPM_TO_RAD_S)])?;
 
     let mut seg = DcSegment {
         index: csv.decl.index.unwrap_or(default_index),
@@ -106,20 +126,17 @@ pub fn read_dc_csv(
     let mut previous_time: Option<(f64, usize)> = None;
     for &(no, line) in lines {
         let row = CsvRow::split(path, header, no, line)?;
-        let number = |col: usize| row.number(col);
-        let t = number(time_col)?;
-        check_time(t, previous_time).map_err(|why| err(no, Some(COL_TIME), why.to_string()))?;
+        // In SI: times the unit's factor (1 for an SI column).
+        let si = |(col, scale, _): (usize, f64, &str)| -> Result<f64, RecordError> {
+            Ok(row.number(col)? * scale)
+        };
+        let t = si(time)?;
+        check_time(t, previous_time).map_err(|why| err(no, Some(time.2), why.to_string()))?;
         previous_time = Some((t, no));
-        let voltage = number(voltage_col)?;
-        let current = number(current_col)?;
-        let speed = number(speed_col)?;
         seg.time.push(t);
-        seg.voltage.push(voltage);
-        seg.current.push(current);
-        seg.speed.push(match speed_scale {
-            Some(k) => speed * k,
-            None => speed,
-        });
+        seg.voltage.push(si(voltage)?);
+        seg.current.push(si(current)?);
+        seg.speed.push(si(speed)?);
     }
     if seg.time.is_empty() {
         return Err(err(header_no, None, "no data rows after the header".into()));
@@ -508,6 +525,35 @@ mod tests {
     }
 
     #[test]
+    fn milliseconds_and_milliamperes_are_read_in_si() {
+        let seg = read(
+            "time_ms,armature_voltage_V,armature_current_mA,speed_rad_s\n0,1,250,3\n0.5,1,500,4\n",
+        )
+        .unwrap();
+        assert_eq!(seg.time, vec![0.0, 0.5e-3]);
+        assert_eq!(seg.current, vec![0.25, 0.5]);
+        // The SI column wins where both are present.
+        let seg =
+            read("time_s,time_ms,armature_voltage_V,armature_current_A,speed_rad_s\n0,7,1,2,3\n")
+                .unwrap();
+        assert_eq!(seg.time, vec![0.0]);
+        // A time in ms checked as seconds: a step of 20 s is refused
+        // naming the column the file has.
+        let s = error(
+            "time_ms,armature_voltage_V,armature_current_A,speed_rad_s\n0,1,2,3\n20000,1,2,3\n",
+            3,
+            Some(COL_TIME_MS),
+        );
+        assert!(s.contains("step"), "{s}");
+        let s = error(
+            "armature_voltage_V,armature_current_A,speed_rad_s\n1,2,3\n",
+            1,
+            Some(COL_TIME),
+        );
+        assert!(s.contains("(or time_ms)"), "{s}");
+    }
+
+    #[test]
     fn rad_s_wins_over_rpm() {
         let seg = read(
             "time_s,armature_voltage_V,armature_current_A,speed_rpm,speed_rad_s\n0,1,2,60,7\n",
@@ -579,7 +625,10 @@ mod tests {
     #[test]
     fn a_file_without_a_header_row_says_so() {
         let s = error("# c\n0,1.5,2,3e2\n1,1.5,2,3e2\n", 2, None);
-        assert!(s.contains("no header row") && s.contains("0,1.5,2,3e2"), "{s}");
+        assert!(
+            s.contains("no header row") && s.contains("0,1.5,2,3e2"),
+            "{s}"
+        );
     }
 
     #[test]
