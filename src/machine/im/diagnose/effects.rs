@@ -95,6 +95,36 @@ pub struct ImAugmentation {
     pub effect: Option<Effect>,
     /// `Xs/Xr`, the leakage-split convention.
     pub split_ratio: f64,
+    /// Which flux main-flux saturation follows (read only for
+    /// [`Effect::MainFluxSaturation`]).
+    pub flux: SaturatingFlux,
+}
+
+/// The two usual forms of main-flux saturation. They are the same
+/// circuit when nothing saturates and differ in what saturates when it
+/// does; the diagnosis fits both and keeps the one that explains the
+/// fitting data better.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SaturatingFlux {
+    /// The T circuit's magnetising reactance `Xm` falls with the air-gap
+    /// voltage behind the stator leakage (the textbook form).
+    AirGap,
+    /// The Γ circuit's stator inductance falls with the stator flux, the
+    /// voltage behind `Rs` alone (the form of drive-control models, with
+    /// the whole leakage on the rotor side): `Ls = Xs + Xm`,
+    /// `γ = Ls/Xm`, rotor leakage `γ·Xs + γ²·Xr`, rotor resistance
+    /// `γ²·Rr`. Unsaturated it is the T circuit exactly.
+    Stator,
+}
+
+impl SaturatingFlux {
+    /// The name the report uses.
+    pub fn name(self) -> &'static str {
+        match self {
+            SaturatingFlux::AirGap => "the air-gap flux (T circuit's Xm)",
+            SaturatingFlux::Stator => "the stator flux (Γ circuit's stator inductance)",
+        }
+    }
 }
 
 /// The induction-machine effects in the order the diagnosis tries them.
@@ -214,6 +244,7 @@ impl ImAugmentation {
         ImAugmentation {
             effect: None,
             split_ratio,
+            flux: SaturatingFlux::AirGap,
         }
     }
 
@@ -222,6 +253,7 @@ impl ImAugmentation {
         ImAugmentation {
             effect: Some(effect),
             split_ratio,
+            flux: SaturatingFlux::AirGap,
         }
     }
 
@@ -375,7 +407,11 @@ impl ImAugmentation {
                 if !(es.is_finite() && es > 0.0) {
                     return None;
                 }
-                main_flux_terminal(&cage, s, v, |e| 1.0 + (e / es).powi(MAIN_FLUX_EXPONENT))?
+                let d = |e: f64| 1.0 + (e / es).powi(MAIN_FLUX_EXPONENT);
+                match self.flux {
+                    SaturatingFlux::AirGap => main_flux_terminal(&cage, s, v, d)?,
+                    SaturatingFlux::Stator => main_flux_terminal(&gamma_circuit(&cage), s, v, d)?,
+                }
             }
             Some(Effect::LeakageSaturation) => {
                 let knee = x[4].exp();
@@ -427,6 +463,21 @@ pub fn skin_effect(xi: f64) -> (f64, f64) {
         xi * (a.sinh() + a.sin()) / den,
         1.5 / xi * (a.sinh() - a.sin()) / den,
     )
+}
+
+/// The Γ circuit equivalent to the T circuit `c` when nothing saturates:
+/// no stator leakage, the stator inductance `Xs + Xm` as the magnetising
+/// branch, the rotor referred by `γ = (Xs + Xm)/Xm`.
+pub fn gamma_circuit(c: &Cage) -> Cage {
+    let ls = c.xs + c.xm;
+    let g = ls / c.xm;
+    Cage {
+        rs: c.rs,
+        xs: 0.0,
+        xm: ls,
+        rr: g * g * c.rr,
+        xr: g * c.xs + g * g * c.xr,
+    }
 }
 
 /// Terminal values with a magnetising reactance `xm0/d(E)` that depends on
@@ -545,6 +596,25 @@ mod tests {
             slip: s,
             voltage: 230.0,
             heat: 0.5,
+        }
+    }
+
+    #[test]
+    fn the_gamma_circuit_is_the_t_circuit_while_nothing_saturates() {
+        let c = Cage {
+            rs: 0.8,
+            xs: 2.0,
+            xm: 110.0,
+            rr: 0.9,
+            xr: 3.0,
+        };
+        let g = gamma_circuit(&c);
+        assert_eq!(g.xs, 0.0);
+        for s in [0.002, 0.05, 0.3, 1.0] {
+            let a = main_flux_terminal(&c, s, 230.0, |_| 1.0).unwrap();
+            let b = main_flux_terminal(&g, s, 230.0, |_| 1.0).unwrap();
+            assert!((a.current - b.current).abs() < 1e-9 * a.current, "{s}");
+            assert!((a.power - b.power).abs() < 1e-9 * a.power.abs(), "{s}");
         }
     }
 

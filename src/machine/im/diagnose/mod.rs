@@ -27,7 +27,7 @@ mod verdict;
 use std::collections::BTreeMap;
 
 use self::data::SweepSet;
-use self::effects::{effect_name, ImAugmentation, IM_EFFECTS, NOMINAL_KEYS};
+use self::effects::{effect_name, ImAugmentation, SaturatingFlux, IM_EFFECTS, NOMINAL_KEYS};
 use self::fit::{fit, held_out, intervals, starts_from, AugmentedFit, HeldOut};
 use self::gap::{evidence, shares, SlipRegions, CHANNELS};
 use self::verdict::separating_plan;
@@ -107,15 +107,41 @@ pub fn diagnose_im(
     // Candidates.
     let mut evaluated: Vec<Evaluated> = Vec::new();
     for &effect in &IM_EFFECTS {
-        let model = ImAugmentation::with(effect, split.ratio());
-        let starts = starts_from(&model, &nominal_full.x, &data, &[]);
-        let Some(full) = fit(model, &data, &all, &starts) else {
+        // Main-flux saturation in both its forms; the one that explains
+        // the fitting data better stands for the effect.
+        let forms: &[SaturatingFlux] = match effect {
+            Effect::MainFluxSaturation => &[SaturatingFlux::AirGap, SaturatingFlux::Stator],
+            _ => &[SaturatingFlux::AirGap],
+        };
+        let mut best: Option<(ImAugmentation, AugmentedFit)> = None;
+        for &flux in forms {
+            let model = ImAugmentation {
+                flux,
+                ..ImAugmentation::with(effect, split.ratio())
+            };
+            let starts = starts_from(&model, &nominal_full.x, &data, &[]);
+            if let Some(full) = fit(model, &data, &all, &starts) {
+                if best.as_ref().is_none_or(|(_, b)| full.cost < b.cost) {
+                    best = Some((model, full));
+                }
+            }
+        }
+        let Some((model, full)) = best else {
             warnings.push(format!(
                 "{}: the augmented model could not be fitted",
                 effect_name(Some(effect))
             ));
             continue;
         };
+        if forms.len() > 1 && model.flux != SaturatingFlux::AirGap {
+            warnings.push(format!(
+                "{}: fitted as saturation of {}, which explains the fitting data better than \
+                 saturation of {}",
+                effect_name(Some(effect)),
+                model.flux.name(),
+                SaturatingFlux::AirGap.name()
+            ));
+        }
         let Some(held) = held_out(model, &data, &folds, &full.x, &nominal_held.fold_x) else {
             warnings.push(format!(
                 "{}: a held-out fold could not be fitted",
@@ -614,6 +640,43 @@ mod tests {
         assert!((rs.corrected - 0.8).abs() < (rs.nominal - 0.8).abs());
         assert!(!run.plot.panels.is_empty() && run.plot.effect == "iron_loss");
         assert_eq!(d.gap.regions[0].label, "low_slip");
+    }
+
+    /// Saturation of the stator flux (the Γ circuit's stator inductance,
+    /// as drive-control models such as motulator's saturate it) is found
+    /// as main-flux saturation, fitted in that form and said so; the
+    /// air-gap form alone left it a `none` on motulator's records.
+    #[test]
+    fn saturation_of_the_stator_flux_is_found_in_its_own_form() {
+        let model = ImAugmentation {
+            flux: SaturatingFlux::Stator,
+            ..ImAugmentation::with(Effect::MainFluxSaturation, 1.0)
+        };
+        let mut x = nominal_x();
+        // Es 260 V: the stator inductance 25 % down at 400 V (231 V a phase).
+        x.push(260f64.ln());
+        let run = diagnose_im(&record(model, &x, &[400.0, 300.0, 220.0], 5), &star()).unwrap();
+        let d = &run.report;
+        assert_eq!(
+            d.verdict.effect, "main_flux_saturation",
+            "{:?}",
+            d.candidates
+        );
+        assert!(
+            d.warnings
+                .iter()
+                .any(|w| w.contains("fitted as saturation of the stator flux")),
+            "{:?}",
+            d.warnings
+        );
+        let es = &d
+            .candidates
+            .iter()
+            .find(|c| c.effect == "main_flux_saturation")
+            .unwrap()
+            .params["Es"];
+        let [lo, hi] = es.ci95.expect("interval");
+        assert!(lo <= 260.0 && 260.0 <= hi, "{es:?}");
     }
 
     #[test]
