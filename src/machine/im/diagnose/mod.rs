@@ -133,15 +133,6 @@ pub fn diagnose_im(
             ));
             continue;
         };
-        if forms.len() > 1 && model.flux != SaturatingFlux::AirGap {
-            warnings.push(format!(
-                "{}: fitted as saturation of {}, which explains the fitting data better than \
-                 saturation of {}",
-                effect_name(Some(effect)),
-                model.flux.name(),
-                SaturatingFlux::AirGap.name()
-            ));
-        }
         let Some(held) = held_out(model, &data, &folds, &full.x, &nominal_held.fold_x) else {
             warnings.push(format!(
                 "{}: a held-out fold could not be fitted",
@@ -193,6 +184,16 @@ pub fn diagnose_im(
             v[3].exp(),
         )
     };
+    // The form of a saturation verdict, where it is not the textbook one.
+    if let Some(w) = winner.filter(|w| w.model.flux != SaturatingFlux::AirGap) {
+        warnings.push(format!(
+            "{}: fitted as saturation of {}, which explains the fitting data better than \
+             saturation of {}",
+            effect_name(Some(w.effect)),
+            w.model.flux.name(),
+            SaturatingFlux::AirGap.name()
+        ));
+    }
     let verdict = verdict_of(
         winner,
         &evaluated,
