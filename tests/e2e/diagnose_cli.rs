@@ -187,6 +187,12 @@ fn a_segment_that_cannot_be_held_out_is_left_out_not_the_record() {
     let d: Value = serde_json::from_str(&stdout).unwrap();
     check_contract(&d);
     let warnings = d["warnings"].to_string();
+    // Interleaved blocks (the default) cannot be held out either: whole
+    // segments are, and the short part is left out.
+    assert!(
+        warnings.contains("whole segments are held out instead"),
+        "{warnings}"
+    );
     assert!(
         warnings.contains(
             "segment 2 (ramp to 31.6 V → 0 V short part 2/2) is left out of the diagnosis"

@@ -3,16 +3,19 @@
 //!
 //! 1. The paper's model is fitted by output error to every segment at
 //!    once (started from the identification's own output-error fit), then
-//!    refitted leave-one-segment-out: each segment held out in turn (the
-//!    coast-down too), its held-out simulation from the measured voltage
+//!    refitted without each fold of held-out data: by default interleaved
+//!    blocks of 128 samples across the record, five folds (`cv.rs`), so
+//!    that every fold sees every segment's operating range; with
+//!    `MOTORBENCH_DC_VALIDATION=segments` each segment in turn (the
+//!    coast-down too). The held-out simulation from the measured voltage
 //!    gives the nominal residual and `gap_before`.
 //! 2. The residual is localised (`gap.rs`).
 //! 3. Every candidate of the vocabulary (`candidates.rs`) is refitted with
-//!    the nominal parameters on all segments and then leave-one-segment-
-//!    out, each fold refitted in one Gauss–Newton step from the
-//!    candidate's all-segment optimum (`fit::one_step_refit`; iterated
-//!    from there when that step is long or the residuals are not linear
-//!    over it); the fits run on every core (`std::thread::scope`).
+//!    the nominal parameters on all segments and then on the same folds,
+//!    each fold refitted in one Gauss–Newton step from the candidate's
+//!    all-data optimum (`fit::one_step_refit`; iterated from there when
+//!    that step is long or the residuals are not linear over it); the fits
+//!    run on every core (`std::thread::scope`).
 //! 4. Candidates are ranked by the held-out penalised score and tested
 //!    with the paired held-out block test of `decision`; the verdict is the
 //!    best significant, physically signed candidate, else `none`.
@@ -115,6 +118,8 @@ enum Attempt {
     /// The nominal model refitted without this segment (its index) fails,
     /// so the segment cannot be held out.
     FoldFailed(u32),
+    /// The nominal model refitted without an interleaved fold fails.
+    InterleavedFailed,
 }
 
 impl From<DiagnoseError> for Attempt {
@@ -134,9 +139,10 @@ pub fn diagnose_dc(
 ) -> Result<DiagnosisRun, DiagnoseError> {
     let mut trimmed: Option<Record> = None;
     let mut left_out = Vec::new();
+    let mut options = *options;
     loop {
         let current = trimmed.as_ref().unwrap_or(record);
-        let index = match diagnose_once(current, options) {
+        let index = match diagnose_once(current, &options) {
             Ok(mut run) => {
                 left_out.append(&mut run.report.warnings);
                 run.report.warnings = left_out;
@@ -144,6 +150,19 @@ pub fn diagnose_dc(
             }
             Err(Attempt::Failed(e)) => return Err(e),
             Err(Attempt::FoldFailed(index)) => index,
+            // A fold of interleaved blocks the nominal model cannot be
+            // refitted without (a short part of a segment after a gap):
+            // hold out whole segments instead, which can leave one out
+            // (and cannot fail so).
+            Err(Attempt::InterleavedFailed) => {
+                left_out.push(
+                    "the nominal model refitted without a fold of interleaved blocks fails; \
+                     whole segments are held out instead"
+                        .into(),
+                );
+                options.dc_interleaved = Some(false);
+                continue;
+            }
         };
         let failed = || {
             DiagnoseError::NominalFit(format!("the nominal refit without segment {index} failed"))
@@ -236,8 +255,8 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
         NominalFold(usize),
         CandidateAll(&'d CandidateDef),
     }
-    // Held out: whole segments (the default), or interleaved time blocks
-    // where `MOTORBENCH_DC_VALIDATION=interleaved` asks for them (cv.rs).
+    // Held out: interleaved time blocks (the default, cv.rs), or whole
+    // segments where `MOTORBENCH_DC_VALIDATION=segments` asks for them.
     let cv = options
         .dc_interleaved
         .unwrap_or_else(|| cv::interleaved_requested(&mut warnings));
@@ -278,9 +297,7 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
     if cv {
         nominal_folds =
             cv::cross_validated(&nominal_spec, &nominal_all, &runs, &weights, PATIENCE_FOLD)
-                .ok_or_else(|| {
-                    DiagnoseError::NominalFit("a cross-validation refit failed".into())
-                })?;
+                .ok_or(Attempt::InterleavedFailed)?;
     }
     // An effect fitted more than once (sensor lag on either channel, shaft
     // compliance from each resonance start): keep the fit that explains
@@ -936,7 +953,7 @@ fn prepare_runs<'a>(
             format!(" ({})", why.join("; "))
         };
         return Err(DiagnoseError::NotEnoughData(format!(
-            "{} usable segment(s) of {}{why}: leave-one-segment-out needs at least 2; record \
+            "{} usable segment(s) of {}{why}: the diagnosis needs at least 2; record \
              two or more segments of at least {MIN_SAMPLES} samples (one CSV file each), or one \
              segment of at least {} samples that holds voltage levels or a varied voltage to \
              cut into parts",
