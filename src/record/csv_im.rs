@@ -206,10 +206,15 @@ mod tests {
     use super::*;
 
     fn read(text: &str) -> Result<ImCsvSegment, RecordError> {
+        read_with(text, Some(2))
+    }
+
+    /// `text` as `sweep.csv` at 50 Hz with `pole_pairs`.
+    fn read_with(text: &str, pole_pairs: Option<u32>) -> Result<ImCsvSegment, RecordError> {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("sweep.csv");
         std::fs::write(&p, text).unwrap();
-        read_im_csv(&p, 3, Some(50.0), Some(2))
+        read_im_csv(&p, 3, Some(50.0), pole_pairs)
     }
 
     #[test]
@@ -266,18 +271,14 @@ mod tests {
         .unwrap();
         assert_eq!(seg.points[0].slip, 0.05);
         // Without the poles the slip cannot be had: say what to give.
-        let dir = tempfile::tempdir().unwrap();
-        let p = dir.path().join("s.csv");
-        std::fs::write(
-            &p,
+        let e = read_with(
             "speed_rpm,line_voltage_V,line_current_A,input_power_W\n1455,400,10,6000\n",
+            None,
         )
-        .unwrap();
-        let e = read_im_csv(&p, 0, Some(50.0), None)
-            .unwrap_err()
-            .to_string();
+        .unwrap_err()
+        .to_string();
         assert!(
-            e.contains("s.csv:2: column speed_rpm") && e.contains("poles"),
+            e.contains("sweep.csv:2: column speed_rpm") && e.contains("poles"),
             "{e}"
         );
         // A speed above synchronous (a generator, or the wrong poles).
