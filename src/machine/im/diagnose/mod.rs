@@ -38,7 +38,7 @@ use crate::diagnose::decision::{
     held_out_sign_flip_test, noise_sigma, penalised_score, HeldOutTest,
 };
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
-use crate::identify::{fit_lm, nrmse, LmOptions, PhaseData, SplitPolicy};
+use crate::identify::{fit_lm, LmOptions, PhaseData, SplitPolicy};
 use crate::model::{Effect, ImModel, LeakageSplit};
 use crate::record::{Record, SCHEMA_VERSION};
 use crate::report::ParamEstimate;
@@ -284,19 +284,10 @@ fn blocks(h: &HeldOut) -> Vec<f64> {
 }
 
 /// Mean over current and power of the NRMSE of `pred` (phase values;
-/// the NRMSE is the same for line values).
+/// the NRMSE is the same for line values); NaN when neither channel has
+/// one.
 fn mean_nrmse(data: &SweepSet, pred: &[(f64, f64)]) -> f64 {
-    let i: Vec<f64> = pred.iter().map(|p| p.0).collect();
-    let p: Vec<f64> = pred.iter().map(|p| p.1).collect();
-    let parts: Vec<f64> = [nrmse(&data.current, &i), nrmse(&data.power, &p)]
-        .into_iter()
-        .flatten()
-        .collect();
-    if parts.is_empty() {
-        f64::NAN
-    } else {
-        parts.iter().sum::<f64>() / parts.len() as f64
-    }
+    crate::machine::im::identify::mean_nrmse(&data.current, &data.power, pred).unwrap_or(f64::NAN)
 }
 
 fn held_out_nrmse(data: &SweepSet, h: &HeldOut) -> f64 {

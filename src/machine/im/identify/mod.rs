@@ -271,9 +271,17 @@ fn misfit_warning(c: &ImCircuit, sweep: &SlipSweep, model: ImModel) -> Option<St
 /// Mean over current and power of the NRMSE of `pred` against `sweep`.
 fn pooled_nrmse(sweep: &SlipSweep, pred: &[(f64, f64)]) -> Option<f64> {
     let d = sweep.phase_data();
+    mean_nrmse(&d.current, &d.power, pred)
+}
+
+/// Mean over current and power of the NRMSE of `pred`, `(current,
+/// power)` per point, against the measured `current` and `power` (phase
+/// values; the NRMSE is the same for line values); `None` when neither
+/// channel has one.
+pub(crate) fn mean_nrmse(current: &[f64], power: &[f64], pred: &[(f64, f64)]) -> Option<f64> {
     let i: Vec<f64> = pred.iter().map(|p| p.0).collect();
     let p: Vec<f64> = pred.iter().map(|p| p.1).collect();
-    let parts: Vec<f64> = [nrmse(&d.current, &i), nrmse(&d.power, &p)]
+    let parts: Vec<f64> = [nrmse(current, &i), nrmse(power, &p)]
         .into_iter()
         .flatten()
         .collect();
