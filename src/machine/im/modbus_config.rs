@@ -192,6 +192,22 @@ fn channels(
     Ok(out)
 }
 
+/// `Ok` when `channels`, the validated channels of the device at `key`,
+/// read the quantity `q`; else the error on `{key}.channels` naming it,
+/// with `why` (what needs it).
+fn require_channel(
+    channels: &[(String, String)],
+    key: &str,
+    q: &str,
+    why: &str,
+) -> Result<(), Bad> {
+    if channels.iter().any(|(c, _)| c == q) {
+        Ok(())
+    } else {
+        Err((format!("{key}.channels"), format!("missing `{q}`: {why}")))
+    }
+}
+
 /// `[rig.modbus.dc_source]`, validated.
 fn dc_source(mut t: toml::Table, dir: &Path, simulated: bool) -> Result<ImDcSourceLink, Bad> {
     let key = "rig.modbus.dc_source";
@@ -232,12 +248,12 @@ fn dc_source(mut t: toml::Table, dir: &Path, simulated: bool) -> Result<ImDcSour
     }
     let channels = channels(map, key, &device)?;
     for q in ["dc_voltage", "dc_current"] {
-        if !channels.iter().any(|(c, _)| c == q) {
-            return Err((
-                format!("{key}.channels"),
-                format!("missing `{q}`: the winding-resistance test reads DC voltage and current"),
-            ));
-        }
+        require_channel(
+            &channels,
+            key,
+            q,
+            "the winding-resistance test reads DC voltage and current",
+        )?;
     }
     Ok(ImDcSourceLink {
         device,
@@ -349,12 +365,12 @@ impl ImModbusRig {
             } else {
                 &encoder_channels
             };
-            if !list.iter().any(|(c, _)| c == q) {
-                return Err((
-                    format!("rig.modbus.{device}.channels"),
-                    format!("missing `{q}`: a slip sweep needs line voltage, current, input power and the encoder count"),
-                ));
-            }
+            require_channel(
+                list,
+                &format!("rig.modbus.{device}"),
+                q,
+                "a slip sweep needs line voltage, current, input power and the encoder count",
+            )?;
         }
         Ok(ImModbusRig {
             simulate,
