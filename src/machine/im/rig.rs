@@ -4,8 +4,10 @@
 //! source over Modbus (with the simulated rig served behind those links
 //! when the configuration asks for it).
 
-use motorbench_drivers::modbus::{ModbusPowerStage, ModbusSensors, PolledChannel};
-use motorbench_drivers::{ChannelInfo, LinkHealth, MergedSensors, PowerStage, SensorStream};
+use motorbench_drivers::modbus::{BusHandle, ModbusPowerStage, ModbusSensors, PolledChannel};
+use motorbench_drivers::{
+    ChannelInfo, DriverError, LinkHealth, MergedSensors, PowerStage, SensorStream,
+};
 
 use super::served::{ServedDevice, ServedImRig};
 use super::{sim_im_rig, DcCurrentSource, ImModbusRig, ImRunConfig, VfdDyno, VfdSupply};
@@ -48,6 +50,21 @@ impl std::fmt::Debug for ImRig {
             .field("served", &self.served)
             .finish()
     }
+}
+
+/// The power stage of the Modbus device `link` on `bus`, named
+/// `modbus:<profile> (<role>)`.
+fn drive(
+    link: &ModbusDeviceLink,
+    role: &str,
+    bus: &BusHandle,
+) -> Result<ModbusPowerStage, DriverError> {
+    ModbusPowerStage::new(
+        &format!("modbus:{} ({role})", link.profile.name),
+        bus.clone(),
+        link.unit_id,
+        &link.profile,
+    )
 }
 
 fn polled(
@@ -107,12 +124,7 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
     let meter_bus = buses.bus("modbus-meter", &m.meter, s.map(|s| &s.meter_link));
     let encoder_bus = buses.bus("modbus-encoder", &m.encoder, s.map(|s| &s.encoder_link));
 
-    let supply_drive = ModbusPowerStage::new(
-        &format!("modbus:{} (supply)", m.supply.profile.name),
-        supply_bus.clone(),
-        m.supply.unit_id,
-        &m.supply.profile,
-    )?;
+    let supply_drive = drive(&m.supply, "supply", &supply_bus)?;
     let voltage = m
         .supply
         .profile
@@ -127,12 +139,7 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
         cfg.plan.frequency,
         cfg.common.limits.max_voltage,
     );
-    let dyno_drive = ModbusPowerStage::new(
-        &format!("modbus:{} (dynamometer)", m.dynamometer.profile.name),
-        dyno_bus.clone(),
-        m.dynamometer.unit_id,
-        &m.dynamometer.profile,
-    )?;
+    let dyno_drive = drive(&m.dynamometer, "dynamometer", &dyno_bus)?;
     let mut dynamometer = VfdDyno::new(dyno_drive, m.dyno_pole_pairs);
     let control = m.dynamometer.profile.power_stage.as_ref().and_then(|s| {
         let (name, ..) = s.enable.as_ref()?;
@@ -150,13 +157,8 @@ async fn modbus_im_rig(cfg: &ImRunConfig, m: &ImModbusRig) -> Result<ImRig, RigE
                 &d.device,
                 s.and_then(|s| s.dc_source_link.as_ref()),
             );
-            let drive = ModbusPowerStage::new(
-                &format!("modbus:{} (DC source)", d.device.profile.name),
-                bus.clone(),
-                d.device.unit_id,
-                &d.device.profile,
-            )?;
-            let stage = DcCurrentSource::new(drive, d.compliance_voltage, cfg.plan.rated_current);
+            let source = drive(&d.device, "DC source", &bus)?;
+            let stage = DcCurrentSource::new(source, d.compliance_voltage, cfg.plan.rated_current);
             Some((stage, &d.device, bus, &d.channels))
         }
         None => None,
