@@ -26,6 +26,7 @@
 
 pub mod dc;
 pub mod im;
+mod sim_parts;
 
 pub use dc::analyse_dc;
 pub use im::analyse_im;

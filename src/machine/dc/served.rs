@@ -28,6 +28,7 @@ use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
 use crate::config::{Fault, SimulatedRig, SimulatedTransport};
+use crate::machine::sim_parts::{lock_plant, power_stage_map};
 use crate::rig::fault::{FaultyLine, ProtocolFaults, StreamRecordFate};
 use crate::rig::{
     enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink,
@@ -92,8 +93,11 @@ impl RealtimePlant {
 
 type SharedPlant = Arc<Mutex<RealtimePlant>>;
 
-fn lock(p: &SharedPlant) -> MutexGuard<'_, RealtimePlant> {
-    p.lock().unwrap_or_else(|e| e.into_inner())
+/// The plant locked and advanced to now, as every request finds it.
+fn plant_now(p: &SharedPlant) -> MutexGuard<'_, RealtimePlant> {
+    let mut plant = lock_plant(p);
+    plant.catch_up();
+    plant
 }
 
 /// The simulated supply behind its profile's power-stage registers, with
@@ -108,8 +112,7 @@ struct SupplyDevice {
 
 impl SimulatedDevice for SupplyDevice {
     fn before_read(&self, bank: &mut RegisterBank) {
-        let mut p = lock(&self.plant);
-        p.catch_up();
+        let p = plant_now(&self.plant);
         self.readback.show(
             bank,
             p.reading(channel::VOLTAGE),
@@ -123,8 +126,7 @@ impl SimulatedDevice for SupplyDevice {
         _before: &RegisterBank,
         span: WriteSpan,
     ) -> Result<(), ExceptionCode> {
-        let mut p = lock(&self.plant);
-        p.catch_up();
+        let mut p = plant_now(&self.plant);
         if touches(&span, &self.setpoint) {
             ready_now(p.stage.set_setpoint(bank.get(&self.setpoint)))
                 .map_err(|_| ExceptionCode::IllegalDataValue)?;
@@ -155,8 +157,7 @@ struct DaqDevice {
 
 impl SimulatedDevice for DaqDevice {
     fn before_read(&self, bank: &mut RegisterBank) {
-        let mut p = lock(&self.plant);
-        p.catch_up();
+        let p = plant_now(&self.plant);
         bank.set(&self.voltage, p.reading(channel::VOLTAGE));
         bank.set(&self.current, p.reading(channel::CURRENT));
         bank.set(&self.count, p.reading(channel::ENCODER));
@@ -201,7 +202,7 @@ async fn stream_daq(
     loop {
         let slot = tick.tick().await.into_std();
         let (step, t_us, values) = {
-            let mut p = lock(&plant);
+            let mut p = lock_plant(&plant);
             let (step, readings) = p.readings_at(slot, &channels);
             let t_us = (step as f64 * p.clock.period_s() * 1e6).round() as u64;
             let values = readings
@@ -299,13 +300,7 @@ impl ServedRig {
             history: std::collections::VecDeque::with_capacity(HISTORY),
         }));
         let (sp, su) = supply;
-        let map = sp
-            .power_stage
-            .as_ref()
-            .ok_or_else(|| ServeError::MissingRegister {
-                profile: sp.name.clone(),
-                register: "[power_stage] section".into(),
-            })?;
+        let map = power_stage_map(sp)?;
         let supply_dev = SupplyDevice {
             plant: plant.clone(),
             setpoint: register(sp, &map.setpoint)?,
@@ -409,7 +404,7 @@ impl ServedRig {
                     Some(_) => continue,
                     None => {}
                 }
-                let count = lock(&plant).readings_at(slot, &[channel::ENCODER]).1[0];
+                let count = lock_plant(&plant).readings_at(slot, &[channel::ENCODER]).1[0];
                 let position = count.rem_euclid(4_294_967_296.0);
                 let Some(frame) = map.encode(id, &[("position", position)]) else {
                     return;

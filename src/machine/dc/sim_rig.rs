@@ -6,7 +6,7 @@
 //! sample period on a virtual clock, so a test runs as fast as the CPU
 //! allows; with `realtime` it also waits for the wall clock to catch up.
 
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use async_trait::async_trait;
@@ -18,6 +18,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use crate::config::SimulatedRig;
+use crate::machine::sim_parts::lock_plant;
 use crate::model::{DcMotor, DcState, ParamError, Terminal};
 use crate::rig::Pacing;
 
@@ -94,12 +95,6 @@ impl Plant {
             self.motor.params().k * self.state.speed
         }
     }
-}
-
-fn lock(plant: &Mutex<Plant>) -> MutexGuard<'_, Plant> {
-    // A panic while holding the lock cannot leave the plant half-updated in
-    // a way that matters more than stopping: keep going with its state.
-    plant.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// The simulated armature supply.
@@ -199,18 +194,18 @@ pub fn sim_rig(
 impl SimPowerStage {
     /// True when the output is enabled (for tests and diagnostics).
     pub fn output_enabled(&self) -> bool {
-        lock(&self.plant).enabled
+        lock_plant(&self.plant).enabled
     }
 
     /// The voltage set point (for tests and diagnostics).
     pub fn setpoint(&self) -> f64 {
-        lock(&self.plant).setpoint
+        lock_plant(&self.plant).setpoint
     }
 
     /// True when the heartbeat timed out and the supply made itself safe
     /// (cleared by the next heartbeat).
     pub fn heartbeat_lost(&self) -> bool {
-        lock(&self.plant).heartbeat_lost
+        lock_plant(&self.plant).heartbeat_lost
     }
 }
 
@@ -223,12 +218,12 @@ impl PowerStage for SimPowerStage {
     fn capabilities(&self) -> StageCapabilities {
         StageCapabilities {
             current_limit: true,
-            max_setpoint: lock(&self.plant).max_voltage,
+            max_setpoint: lock_plant(&self.plant).max_voltage,
         }
     }
 
     async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         if !value.is_finite() || value.abs() > p.max_voltage {
             return Err(DriverError::Device {
                 device: STAGE_ID.into(),
@@ -240,7 +235,7 @@ impl PowerStage for SimPowerStage {
     }
 
     async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         if enabled && p.heartbeat_lost {
             return Err(DriverError::Device {
                 device: STAGE_ID.into(),
@@ -255,7 +250,7 @@ impl PowerStage for SimPowerStage {
     }
 
     async fn safe_state(&mut self) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         p.setpoint = 0.0;
         p.output = 0.0;
         p.enabled = false;
@@ -263,7 +258,7 @@ impl PowerStage for SimPowerStage {
     }
 
     async fn read_output_enabled(&mut self) -> Result<Option<bool>, DriverError> {
-        Ok(Some(lock(&self.plant).enabled))
+        Ok(Some(lock_plant(&self.plant).enabled))
     }
 
     async fn set_current_limit(&mut self, amperes: f64) -> Result<(), DriverError> {
@@ -273,14 +268,14 @@ impl PowerStage for SimPowerStage {
                 reason: format!("current limit {amperes} A"),
             });
         }
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         // The supply cannot limit above its own rating.
         p.current_limit = amperes.min(p.current_rating);
         Ok(())
     }
 
     fn heartbeat_timeout(&self) -> Option<Duration> {
-        let p = lock(&self.plant);
+        let p = lock_plant(&self.plant);
         let dt = p.motor.dt();
         Some(Duration::from_secs_f64(
             p.heartbeat_timeout_steps as f64 * dt,
@@ -290,7 +285,7 @@ impl PowerStage for SimPowerStage {
     /// Arms the heartbeat (in plant time: the supply counts sample
     /// periods) and clears a lost heartbeat.
     async fn heartbeat(&mut self) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         p.last_heartbeat = Some(p.step);
         p.heartbeat_lost = false;
         Ok(())
@@ -325,7 +320,7 @@ impl SimSensors {
     /// simulated devices that run the plant on their own clock.
     pub fn sample(&mut self) -> SampleBatch {
         let (step, terminal_voltage, state) = {
-            let mut p = lock(&self.plant);
+            let mut p = lock_plant(&self.plant);
             let u = p.advance();
             (p.step, u, p.state)
         };

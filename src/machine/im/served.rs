@@ -43,6 +43,7 @@ use super::sim_rig::{
 };
 use crate::config::Fault;
 use crate::config::{ModbusDeviceLink, SimulatedTransport};
+use crate::machine::sim_parts::{lock_plant, missing, power_stage_map};
 use crate::model::Connection;
 use crate::rig::fault::ProtocolFaults;
 use crate::rig::{
@@ -87,8 +88,11 @@ impl Plant {
 
 type SharedPlant = Arc<Mutex<Plant>>;
 
-fn lock(p: &SharedPlant) -> MutexGuard<'_, Plant> {
-    p.lock().unwrap_or_else(|e| e.into_inner())
+/// The plant locked and advanced to now, as every request finds it.
+fn plant_now(p: &SharedPlant) -> MutexGuard<'_, Plant> {
+    let mut plant = lock_plant(p);
+    plant.catch_up();
+    plant
 }
 
 /// Control word bits of the drive (Optidrive E3 register 1).
@@ -109,21 +113,10 @@ struct VfdRegisters {
 
 impl VfdRegisters {
     fn of(profile: &DeviceProfile) -> Result<VfdRegisters, ServeError> {
-        let map = profile
-            .power_stage
-            .as_ref()
-            .ok_or_else(|| ServeError::MissingRegister {
-                profile: profile.name.clone(),
-                register: "[power_stage] section".into(),
-            })?;
+        let map = power_stage_map(profile)?;
         let control = match &map.enable {
             Some((n, _, _)) => register(profile, n)?,
-            None => {
-                return Err(ServeError::MissingRegister {
-                    profile: profile.name.clone(),
-                    register: "[power_stage] enable (the control word)".into(),
-                })
-            }
+            None => return Err(missing(profile, "[power_stage] enable (the control word)")),
         };
         Ok(VfdRegisters {
             control,
@@ -168,8 +161,7 @@ impl SupplyDevice {
 
 impl SimulatedDevice for SupplyDevice {
     fn before_read(&self, bank: &mut RegisterBank) {
-        let mut p = lock(&self.plant);
-        p.catch_up();
+        let p = plant_now(&self.plant);
         let running = self.running(bank);
         self.regs.show_state(bank, running, p.vfd.frequency());
         if let Some(r) = &self.regs.output_current {
@@ -183,8 +175,7 @@ impl SimulatedDevice for SupplyDevice {
         _before: &RegisterBank,
         span: WriteSpan,
     ) -> Result<(), ExceptionCode> {
-        let mut p = lock(&self.plant);
-        p.catch_up();
+        let mut p = plant_now(&self.plant);
         if touches(&span, &self.regs.frequency) {
             let f = bank.get(&self.regs.frequency);
             // Zero stops the drive; any other frequency up to the rated
@@ -211,7 +202,7 @@ struct DynoDevice {
 
 impl SimulatedDevice for DynoDevice {
     fn before_read(&self, bank: &mut RegisterBank) {
-        lock(&self.plant).catch_up();
+        lock_plant(&self.plant).catch_up();
         let (run, _) = self.regs.command(bank);
         let f = bank.get(&self.regs.frequency);
         self.regs.show_state(bank, run, f);
@@ -223,8 +214,7 @@ impl SimulatedDevice for DynoDevice {
         _before: &RegisterBank,
         _span: WriteSpan,
     ) -> Result<(), ExceptionCode> {
-        let mut p = lock(&self.plant);
-        p.catch_up();
+        let mut p = plant_now(&self.plant);
         let (run, coast) = self.regs.command(bank);
         let speed = bank.get(&self.regs.frequency) * self.rad_s_per_hz;
         let r = if coast {
@@ -281,8 +271,7 @@ impl MeterValue {
 
 impl SimulatedDevice for MeterDevice {
     fn before_read(&self, bank: &mut RegisterBank) {
-        let mut p = lock(&self.plant);
-        p.catch_up();
+        let p = plant_now(&self.plant);
         let v = p.reading(channel::LINE_VOLTAGE);
         let i = p.reading(channel::LINE_CURRENT);
         let w = p.reading(channel::INPUT_POWER);
@@ -317,8 +306,7 @@ struct EncoderDevice {
 
 impl SimulatedDevice for EncoderDevice {
     fn before_read(&self, bank: &mut RegisterBank) {
-        let mut p = lock(&self.plant);
-        p.catch_up();
+        let p = plant_now(&self.plant);
         bank.set(&self.count, p.count_now());
         if let Some((r, ch)) = &self.temperature {
             bank.set(r, p.reading(*ch));
@@ -343,8 +331,7 @@ struct DcSourceDevice {
 
 impl SimulatedDevice for DcSourceDevice {
     fn before_read(&self, bank: &mut RegisterBank) {
-        let mut p = lock(&self.plant);
-        p.catch_up();
+        let p = plant_now(&self.plant);
         let (v, i) = self.channels;
         self.readback.show(bank, p.reading(v), p.reading(i));
     }
@@ -355,8 +342,8 @@ impl SimulatedDevice for DcSourceDevice {
         _before: &RegisterBank,
         span: WriteSpan,
     ) -> Result<(), ExceptionCode> {
-        let mut p = lock(&self.plant);
-        p.catch_up();
+        // Held while the source is set: the other devices' requests wait.
+        let _plant = plant_now(&self.plant);
         let mut source = self.source.clone();
         if touches(&span, &self.compliance) {
             source
@@ -530,10 +517,6 @@ impl ServedImRig {
                 ),
             });
         }
-        let missing = |profile: &DeviceProfile, what: &str| ServeError::MissingRegister {
-            profile: profile.name.clone(),
-            register: what.into(),
-        };
         let count = named("encoder_count")?
             .ok_or_else(|| missing(ed.profile, "encoder_count (a channel of the counter)"))?;
         let temperature = match (named("winding_temperature")?, temperature_channel) {

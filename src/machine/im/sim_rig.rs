@@ -28,7 +28,7 @@
 //! period on a virtual clock, as fast as the CPU allows, or paced at the
 //! wall clock ([`SimImSensors::paced`]) as a real rig would be.
 
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 
 use async_trait::async_trait;
 use motorbench_drivers::{
@@ -38,6 +38,7 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal, StandardNormal};
 
+use crate::machine::sim_parts::lock_plant;
 use crate::model::{
     at_frequency, free_rotor_slip, terminal_resistance, ImCircuit, ImCircuitError, ImSupply,
 };
@@ -247,10 +248,6 @@ impl Plant {
     }
 }
 
-fn lock(plant: &Mutex<Plant>) -> MutexGuard<'_, Plant> {
-    plant.lock().unwrap_or_else(|e| e.into_inner())
-}
-
 /// The simulated supply: set point = RMS line voltage, V.
 #[derive(Debug, Clone)]
 pub struct SimVfd {
@@ -383,7 +380,7 @@ pub fn sim_im_rig(cfg: SimImRigConfig) -> Result<(SimVfd, SimDyno, SimImSensors)
 impl SimImSensors {
     /// Winding temperature now, °C (the simulator's truth, for tests).
     pub fn winding_temperature(&self) -> f64 {
-        lock(&self.plant).winding_c
+        lock_plant(&self.plant).winding_c
     }
 
     /// The channels of the DC source's voltage and current, when fitted.
@@ -409,7 +406,7 @@ impl SimImSensors {
     /// their own clock).
     pub fn sample(&mut self) -> SampleBatch {
         let (snap, t_ns) = {
-            let mut p = lock(&self.plant);
+            let mut p = lock_plant(&self.plant);
             let snap = p.advance();
             (snap, (p.step as f64 * p.dt * 1e9).round() as u64)
         };
@@ -435,7 +432,7 @@ impl SimImSensors {
                 value: (snap.angle * self.counts_per_rad).floor(),
             },
         ];
-        if lock(&self.plant).cfg.torque_sensor {
+        if lock_plant(&self.plant).cfg.torque_sensor {
             samples.push(Sample {
                 channel: channel::TORQUE,
                 value: read(snap.torque),
@@ -471,17 +468,17 @@ impl SimImSensors {
 impl SimVfd {
     /// Whether the supply's output is on (the simulator's truth, for tests).
     pub fn output_enabled(&self) -> bool {
-        lock(&self.plant).vfd_enabled
+        lock_plant(&self.plant).vfd_enabled
     }
 
     /// The supply's output frequency, Hz.
     pub fn frequency(&self) -> f64 {
-        lock(&self.plant).frequency
+        lock_plant(&self.plant).frequency
     }
 
     /// The rig's DC source, when the configuration fits one.
     pub fn dc_source(&self) -> Option<SimDcSource> {
-        lock(&self.plant)
+        lock_plant(&self.plant)
             .cfg
             .dc_source_max_current
             .map(|_| SimDcSource {
@@ -500,7 +497,7 @@ impl SimDcSource {
                 reason: format!("compliance voltage {volts} V must be ≥ 0"),
             });
         }
-        lock(&self.plant).dc_compliance = volts;
+        lock_plant(&self.plant).dc_compliance = volts;
         Ok(())
     }
 }
@@ -509,7 +506,7 @@ impl SimDyno {
     /// The speed set point, rad/s, and whether the dynamometer holds it
     /// (the simulator's truth, for tests).
     pub fn command(&self) -> (f64, bool) {
-        let p = lock(&self.plant);
+        let p = lock_plant(&self.plant);
         (p.dyno_setpoint, p.dyno_enabled)
     }
 }
@@ -523,12 +520,12 @@ impl PowerStage for SimVfd {
     fn capabilities(&self) -> StageCapabilities {
         StageCapabilities {
             current_limit: false,
-            max_setpoint: lock(&self.plant).cfg.supply.line_voltage,
+            max_setpoint: lock_plant(&self.plant).cfg.supply.line_voltage,
         }
     }
 
     async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         let max = p.cfg.supply.line_voltage;
         check_setpoint(VFD_ID, "voltage", "V", value, max, 1.0001)?;
         p.vfd_setpoint = value;
@@ -536,7 +533,7 @@ impl PowerStage for SimVfd {
     }
 
     async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         if enabled && p.dc_enabled {
             return Err(DriverError::Device {
                 device: VFD_ID.into(),
@@ -548,20 +545,20 @@ impl PowerStage for SimVfd {
     }
 
     async fn safe_state(&mut self) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         p.vfd_setpoint = 0.0;
         p.vfd_enabled = false;
         Ok(())
     }
 
     async fn read_output_enabled(&mut self) -> Result<Option<bool>, DriverError> {
-        Ok(Some(lock(&self.plant).vfd_enabled))
+        Ok(Some(lock_plant(&self.plant).vfd_enabled))
     }
 
     /// The output frequency, in (0, rated] Hz (the simulated machine runs
     /// at its rated frequency or below, its reactances in proportion).
     async fn set_frequency(&mut self, hz: f64) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         let rated = p.cfg.supply.frequency;
         check_frequency(VFD_ID, hz, rated, 1.0001)?;
         p.frequency = hz.min(rated);
@@ -576,7 +573,7 @@ impl PowerStage for SimDyno {
     }
 
     fn capabilities(&self) -> StageCapabilities {
-        let p = lock(&self.plant);
+        let p = lock_plant(&self.plant);
         StageCapabilities {
             current_limit: false,
             max_setpoint: 1.2 * p.synchronous_speed(),
@@ -584,7 +581,7 @@ impl PowerStage for SimDyno {
     }
 
     async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         let max = 1.2 * p.synchronous_speed();
         check_setpoint(DYNO_ID, "speed", "rad/s", value, max, 1.0)?;
         p.dyno_setpoint = value;
@@ -592,13 +589,13 @@ impl PowerStage for SimDyno {
     }
 
     async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
-        lock(&self.plant).dyno_enabled = enabled;
+        lock_plant(&self.plant).dyno_enabled = enabled;
         Ok(())
     }
 
     async fn safe_state(&mut self) -> Result<(), DriverError> {
         // A dynamometer's safe state brakes the shaft to rest.
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         p.dyno_setpoint = 0.0;
         p.dyno_enabled = true;
         Ok(())
@@ -614,12 +611,15 @@ impl PowerStage for SimDcSource {
     fn capabilities(&self) -> StageCapabilities {
         StageCapabilities {
             current_limit: false,
-            max_setpoint: lock(&self.plant).cfg.dc_source_max_current.unwrap_or(0.0),
+            max_setpoint: lock_plant(&self.plant)
+                .cfg
+                .dc_source_max_current
+                .unwrap_or(0.0),
         }
     }
 
     async fn set_setpoint(&mut self, value: f64) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         let max = p.cfg.dc_source_max_current.unwrap_or(0.0);
         check_setpoint(DC_SOURCE_ID, "DC current", "A", value, max, 1.0)?;
         p.dc_setpoint = value;
@@ -627,7 +627,7 @@ impl PowerStage for SimDcSource {
     }
 
     async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         if enabled && (p.vfd_enabled || p.vfd_output > 0.0) {
             return Err(DriverError::Device {
                 device: DC_SOURCE_ID.into(),
@@ -639,7 +639,7 @@ impl PowerStage for SimDcSource {
     }
 
     async fn safe_state(&mut self) -> Result<(), DriverError> {
-        let mut p = lock(&self.plant);
+        let mut p = lock_plant(&self.plant);
         p.dc_setpoint = 0.0;
         p.dc_enabled = false;
         Ok(())
@@ -659,7 +659,7 @@ impl SensorStream for SimImSensors {
     async fn next_batch(&mut self) -> Result<SampleBatch, DriverError> {
         self.pacing.start();
         let batch = self.sample();
-        let step = lock(&self.plant).step;
+        let step = lock_plant(&self.plant).step;
         self.pacing.wait(batch.t_ns, step).await;
         Ok(batch)
     }
@@ -743,7 +743,7 @@ mod tests {
             let b = last.unwrap();
             let counts = b.value(channel::ENCODER).unwrap();
             // The speed from the plant itself: the angle's growth per step.
-            let speed = lock(&sensors.plant).speed;
+            let speed = lock_plant(&sensors.plant).speed;
             assert!(counts > 0.0);
             // The torque sensor sees the shaft's torque: nothing is coupled.
             assert!(b.value(channel::TORQUE).unwrap().abs() < 0.05, "{b:?}");
