@@ -573,27 +573,24 @@ impl AugModel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::machine::dc::identify::recorded::recorded;
     use crate::model::{DcState, Terminal};
 
     fn staircase(p: &DcParams, dt: f64) -> DcSegment {
-        // 60 V → 200 V step from the settled 60 V level.
-        let motor = DcMotor::new(*p, dt).unwrap();
-        let mut x: DcState = p.steady_state(60.0);
-        let mut seg = DcSegment {
+        // 60 V → 200 V step from the settled 60 V level, the speed read
+        // as the mean over each interval.
+        let (seg, mean_speed) = recorded(p, dt, p.steady_state(60.0), 1500, |k| {
+            if k == 0 {
+                60.0
+            } else {
+                200.0
+            }
+        });
+        DcSegment {
             index: 1,
-            ..Default::default()
-        };
-        let push = |seg: &mut DcSegment, k: usize, x: &DcState, u: f64, w: f64| {
-            seg.push_sample(k as f64 * dt, u, x.current, w);
-        };
-        push(&mut seg, 0, &x, 60.0, x.speed);
-        for k in 1..1500 {
-            let n = motor.step(&x, Terminal::Driven(200.0));
-            let w = (n.angle - x.angle) / dt;
-            x = n;
-            push(&mut seg, k, &x, 200.0, w);
+            speed: mean_speed,
+            ..seg
         }
-        seg
     }
 
     fn run(seg: &DcSegment) -> SegmentRun<'_> {

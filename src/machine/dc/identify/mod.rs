@@ -27,6 +27,8 @@ mod nameplate;
 mod output_error;
 mod pasek;
 mod plausibility;
+#[cfg(test)]
+pub(crate) mod recorded;
 mod simulate;
 pub(crate) mod steady_state;
 mod step;

@@ -256,9 +256,9 @@ pub fn estimate(
 
 #[cfg(test)]
 mod tests {
+    use super::super::recorded::recorded;
     use super::*;
     use crate::identify::SettledLevel;
-    use crate::model::{DcMotor, Terminal};
 
     /// The paper's Table 3 (A0, A1, A2 of the speed and the current).
     const SPEED: Moments = [6.121818, 0.140349, -0.000940];
@@ -352,17 +352,9 @@ mod tests {
         // The seed motor (complex poles: Pasek does not apply, moments do),
         // 60 → 248 V through a 4 ms ramp, 2 kHz.
         let p = DcParams::SEED_TABLE4_MOMENTS;
-        let dt = 5e-4;
-        let motor = DcMotor::new(p, dt).unwrap();
-        let mut x = p.steady_state(60.0);
-        let mut seg = DcSegment::default();
-        for k in 0..1600 {
-            let u = (60.0 + 188.0 * k as f64 / 8.0).min(248.0);
-            if k > 0 {
-                x = motor.step(&x, Terminal::Driven(u));
-            }
-            seg.push_sample(k as f64 * dt, u, x.current, x.speed);
-        }
+        let (seg, _) = recorded(&p, 5e-4, p.steady_state(60.0), 1600, |k| {
+            (60.0 + 188.0 * k as f64 / 8.0).min(248.0)
+        });
         let lv = |u: f64, segment| SettledLevel::exact(&p, u, segment, 400);
         let step = super::super::step::voltage_step(&seg, &lv(60.0, 0), &lv(248.0, 1)).unwrap();
         let ss = SteadyStateEstimate::of(&p);

@@ -269,9 +269,10 @@ pub fn estimate(
 #[cfg(test)]
 mod tests {
     use super::super::abacus::{paper_delta, paper_t1_over_tau_e, CurrentStep};
+    use super::super::recorded::recorded;
     use super::*;
     use crate::identify::SettledLevel;
-    use crate::model::{DcMotor, DcParams, Terminal};
+    use crate::model::DcParams;
 
     /// The paper's Table 2 and Table 4 numbers.
     const RA: f64 = 30.9;
@@ -377,12 +378,14 @@ mod tests {
 
     /// A noisy step record of `p` from `u0` to `u1`, dt, `n` samples.
     fn step_segment(p: &DcParams, u0: f64, u1: f64, dt: f64, n: usize, noise: f64) -> DcSegment {
-        let motor = DcMotor::new(*p, dt).unwrap();
-        let mut x = p.steady_state(u0);
-        let mut seg = DcSegment {
-            index: 1,
-            ..Default::default()
-        };
+        let (mut seg, _) = recorded(
+            p,
+            dt,
+            p.steady_state(u0),
+            n,
+            |k| if k == 0 { u0 } else { u1 },
+        );
+        seg.index = 1;
         let mut seed = 0x2545f4914f6cdd1du64;
         let mut gauss = || {
             // Sum of 12 uniforms: close enough to normal for a test.
@@ -396,12 +399,8 @@ mod tests {
                 .sum::<f64>()
                 - 6.0
         };
-        for k in 0..n {
-            let u = if k == 0 { u0 } else { u1 };
-            if k > 0 {
-                x = motor.step(&x, Terminal::Driven(u));
-            }
-            seg.push_sample(k as f64 * dt, u, x.current + noise * gauss(), x.speed);
+        for current in &mut seg.current {
+            *current += noise * gauss();
         }
         seg
     }

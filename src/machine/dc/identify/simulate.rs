@@ -58,25 +58,26 @@ pub fn simulate_segment(
 
 #[cfg(test)]
 mod tests {
+    use super::super::recorded::recorded;
     use super::*;
+
+    /// A step segment recorded from the model itself.
+    fn step_segment(p: &DcParams, x0: DcState, n: usize, u: impl Fn(usize) -> f64) -> DcSegment {
+        let (mut seg, _) = recorded(p, 5e-4, x0, n, u);
+        seg.kind = Some(SegmentKind::DcStep);
+        seg
+    }
 
     #[test]
     fn reproduces_a_segment_simulated_with_the_same_model() {
         let p = DcParams::SEED_TABLE4_MOMENTS;
-        let dt = 5e-4;
-        let motor = DcMotor::new(p, dt).unwrap();
-        let mut x = p.steady_state(60.0);
-        let mut seg = DcSegment {
-            kind: Some(SegmentKind::DcStep),
-            ..Default::default()
-        };
-        for k in 0..2000 {
-            let u = if k == 0 { 60.0 } else { 248.0 };
-            if k > 0 {
-                x = motor.step(&x, Terminal::Driven(u));
+        let seg = step_segment(&p, p.steady_state(60.0), 2000, |k| {
+            if k == 0 {
+                60.0
+            } else {
+                248.0
             }
-            seg.push_sample(k as f64 * dt, u, x.current, x.speed);
-        }
+        });
         let (i, w) = simulate_segment(&p, &seg).unwrap();
         assert_eq!(i.len(), 2000);
         for k in 0..2000 {
@@ -90,20 +91,9 @@ mod tests {
         // slews to 60 V; the first voltage reading is 25 V. The model's
         // steady state at 25 V would start the rotor at about 17 rad/s.
         let p = DcParams::SEED_TABLE4_MOMENTS;
-        let dt = 5e-4;
-        let motor = DcMotor::new(p, dt).unwrap();
-        let mut x = DcState::default();
-        let mut seg = DcSegment {
-            kind: Some(SegmentKind::DcStep),
-            ..Default::default()
-        };
-        for k in 0..1000 {
-            let u = (25.0 + 17.5 * k as f64).min(60.0);
-            if k > 0 {
-                x = motor.step(&x, Terminal::Driven(u));
-            }
-            seg.push_sample(k as f64 * dt, u, x.current, x.speed);
-        }
+        let seg = step_segment(&p, DcState::default(), 1000, |k| {
+            (25.0 + 17.5 * k as f64).min(60.0)
+        });
         let (i, w) = simulate_segment(&p, &seg).unwrap();
         assert_eq!((i[0], w[0]), (0.0, 0.0));
         for k in 0..1000 {

@@ -174,33 +174,19 @@ pub fn moving(w: &[f64], threshold: f64, reading: SpeedReading) -> Vec<bool> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::{DcMotor, DcParams, DcState, Terminal};
+    use crate::machine::dc::identify::recorded::recorded;
+    use crate::model::{DcParams, DcState};
 
     #[test]
     fn exact_data_satisfies_the_filtered_rows() {
         let p = DcParams::SEED_TABLE4_MOMENTS;
         let dt = 5e-4;
-        let motor = DcMotor::new(p, dt).unwrap();
-        let mut x = DcState {
+        let x0 = DcState {
             current: 0.1,
             speed: 40.0,
             angle: 0.0,
         };
-        let mut seg = DcSegment::default();
-        let mut w_mean = Vec::new();
-        for k in 0..2000 {
-            let u = 100.0 + 80.0 * ((k / 150) % 2) as f64;
-            let before = x.angle;
-            if k > 0 {
-                x = motor.step(&x, Terminal::Driven(u));
-            }
-            seg.push_sample(k as f64 * dt, u, x.current, x.speed);
-            w_mean.push(if k == 0 {
-                x.speed
-            } else {
-                (x.angle - before) / dt
-            });
-        }
+        let (seg, w_mean) = recorded(&p, dt, x0, 2000, |k| 100.0 + 80.0 * ((k / 150) % 2) as f64);
         let theta = [p.la, p.ra, p.k, p.j, p.f, p.tst];
         let filter = LowPass::new(50.0, dt);
         let mov = moving(&w_mean, 1.0, SpeedReading::IntervalMean);
