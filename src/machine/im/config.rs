@@ -740,13 +740,30 @@ mod tests {
         );
     }
 
+    /// The error of `text` (the file `source`) with `from` replaced by
+    /// `to` (`from` must be in it).
+    fn edited_error(source: &str, text: &str, from: &str, to: &str) -> String {
+        assert!(text.contains(from), "{from}");
+        ImRunConfig::parse(source, &text.replace(from, to))
+            .unwrap_err()
+            .to_string()
+    }
+
+    /// Each edit `from` → `to` of `text` (the file `source`): its error
+    /// names all of `names`.
+    fn assert_edits_name(source: &str, text: &str, cases: &[(&str, &str, &[&str])]) {
+        for &(from, to, names) in cases {
+            let e = edited_error(source, text, from, to);
+            assert!(
+                names.iter().all(|n| e.contains(n)),
+                "{from:?} → {to:?}: {e}"
+            );
+        }
+    }
+
     #[test]
     fn modbus_errors_name_the_key() {
-        let bad = |from: &str, to: &str| {
-            ImRunConfig::parse(&modbus_source(), &SIM_MODBUS_IM.replace(from, to))
-                .unwrap_err()
-                .to_string()
-        };
+        let bad = |from: &str, to: &str| edited_error(&modbus_source(), SIM_MODBUS_IM, from, to);
         // Each edit `from` → `to`, and what its error must name.
         let cases: [(&str, &str, &[&str]); 12] = [
             (
@@ -811,13 +828,7 @@ mod tests {
                 &["rig.modbus.encoder"],
             ),
         ];
-        for (from, to, names) in cases {
-            let e = bad(from, to);
-            assert!(
-                names.iter().all(|n| e.contains(n)),
-                "{from:?} → {to:?}: {e}"
-            );
-        }
+        assert_edits_name(&modbus_source(), SIM_MODBUS_IM, &cases);
         // A real rig has no simulated section.
         let e = bad("simulate = \"tcp\"", "");
         assert!(
@@ -852,12 +863,6 @@ mod tests {
             c.describe_rig()
         );
 
-        let bad = |from: &str, to: &str| {
-            assert!(SIM_MODBUS_IM_STANDARD.contains(from), "{from}");
-            ImRunConfig::parse(source, &SIM_MODBUS_IM_STANDARD.replace(from, to))
-                .unwrap_err()
-                .to_string()
-        };
         let section = "[rig.modbus.dc_source]";
         let start = SIM_MODBUS_IM_STANDARD.find(section).unwrap();
         let end = start + SIM_MODBUS_IM_STANDARD[start..].find("\n\n").unwrap();
@@ -893,22 +898,12 @@ mod tests {
                 &["test.locked_rotor.reduced_frequency_Hz"],
             ),
         ];
-        for (from, to, names) in cases {
-            let e = bad(from, to);
-            assert!(
-                names.iter().all(|n| e.contains(n)),
-                "{from:?} → {to:?}: {e}"
-            );
-        }
+        assert_edits_name(source, SIM_MODBUS_IM_STANDARD, &cases);
     }
 
     #[test]
     fn errors_name_the_file_and_the_key_or_line() {
-        let bad = |from: &str, to: &str| {
-            ImRunConfig::parse("x.toml", &SIM_IM.replace(from, to))
-                .unwrap_err()
-                .to_string()
-        };
+        let bad = |from: &str, to: &str| edited_error("x.toml", SIM_IM, from, to);
         let e = bad("Rr2 =", "Rq2 =");
         assert!(e.contains("x.toml") && e.contains("Rq2"), "{e}");
         let e = bad("points = ", "pointz = ");
