@@ -270,3 +270,11 @@ impl Machine for ImRunConfig {
         Box::new(move |record, diagnose| analyse_im(record, None, model, diagnose))
     }
 }
+
+/// Assert that one of `warnings` contains `text` (the warnings shown when
+/// none does): for the tests of the induction machine's fits.
+#[cfg(test)]
+#[track_caller]
+pub(crate) fn assert_warned(warnings: &[String], text: &str) {
+    assert!(warnings.iter().any(|w| w.contains(text)), "{:?}", warnings);
+}

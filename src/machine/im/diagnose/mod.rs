@@ -494,6 +494,7 @@ fn residual_plot(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::machine::im::assert_warned;
     use crate::model::Connection;
     use crate::record::OperatingPoint;
     use rand::rngs::StdRng;
@@ -654,13 +655,7 @@ mod tests {
             "{:?}",
             d.candidates
         );
-        assert!(
-            d.warnings
-                .iter()
-                .any(|w| w.contains("fitted as saturation of the stator flux")),
-            "{:?}",
-            d.warnings
-        );
+        assert_warned(&d.warnings, "fitted as saturation of the stator flux");
         let es = &d
             .candidates
             .iter()

@@ -463,6 +463,7 @@ pub fn joint_method(
 mod tests {
     use super::*;
     use crate::identify::{slip_grid, SlipSweep, SweepNoise};
+    use crate::machine::im::assert_warned;
     use crate::machine::im::identify::reduce_standard_tests;
     use crate::machine::im::identify::StandardTestsOptions;
     use crate::model::im_fixtures::{single_cage, STAR_400V_50HZ};
@@ -576,11 +577,7 @@ mod tests {
             "{}",
             f.circuit.rs
         );
-        assert!(
-            f.warnings.iter().any(|w| w.contains("sits at its bound")),
-            "{:?}",
-            f.warnings
-        );
+        assert_warned(&f.warnings, "sits at its bound");
         // Every element stays in its physical range all the same; Rs,
         // held at its bound, has no interval, the others have theirs.
         assert!(f
@@ -626,13 +623,7 @@ mod tests {
             assert!((got / truth - 1.0).abs() < 1e-4, "{name}: {got} vs {truth}");
         }
         assert!(f.rms_relative < 1e-6, "{}", f.rms_relative);
-        assert!(
-            f.warnings
-                .iter()
-                .any(|w| w.contains("scaled to its own temperature")),
-            "{:?}",
-            f.warnings
-        );
+        assert_warned(&f.warnings, "scaled to its own temperature");
         // Without the no-load readings' temperatures they are fitted at
         // the locked-rotor test's and misfit (a little: the no-load
         // copper loss is small beside the core loss and the friction;

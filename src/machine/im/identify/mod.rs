@@ -648,6 +648,7 @@ pub fn identify_im(
 mod tests {
     use super::*;
     use crate::identify::{slip_grid, SweepNoise};
+    use crate::machine::im::assert_warned;
     use crate::model::{ImSupply, RotorCage};
     use crate::record::OperatingPoint;
     use rand::rngs::StdRng;
@@ -765,11 +766,7 @@ mod tests {
         assert!(lo <= 1.5 && 1.5 <= hi, "Rs interval [{lo}, {hi}]");
         assert!(lm["validation_nrmse"].as_f64().unwrap() < 0.05);
         assert!(json["methods"]["recursive"].is_object());
-        assert!(
-            id.report.warnings.iter().any(|w| w.contains("convention")),
-            "{:?}",
-            id.report.warnings
-        );
+        assert_warned(&id.report.warnings, "convention");
     }
 
     #[test]

@@ -9,7 +9,7 @@ use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 
 use super::*;
-use crate::machine::im::COPPER_ALPHA;
+use crate::machine::im::{assert_warned, COPPER_ALPHA};
 use crate::model::{locked_rotor_reading, no_load_reading, terminal_resistance};
 use crate::record::{DcResistanceReading, SupplyReading};
 
@@ -232,11 +232,7 @@ fn a_reduced_frequency_locked_rotor_test_scales_to_rated_frequency() {
         let v = value(&r, key).value;
         assert!((v - t).abs() < tolerance(key) * t, "{key}: {v} against {t}");
     }
-    assert!(
-        r.warnings.iter().any(|w| w.contains("12.5 Hz")),
-        "{:?}",
-        r.warnings
-    );
+    assert_warned(&r.warnings, "12.5 Hz");
     assert_eq!(r.tables.locked_rotor[0].frequency, Some(12.5));
 }
 
@@ -330,11 +326,7 @@ fn a_negative_friction_intercept_is_held_at_zero_with_a_reason() {
     let r = reduce(&t);
     let p = value(&r, "Pfw");
     assert_eq!(p.value, 0.0);
-    assert!(
-        r.warnings.iter().any(|w| w.contains("taken as 0 W")),
-        "{:?}",
-        r.warnings
-    );
+    assert_warned(&r.warnings, "taken as 0 W");
     for p in r.params.values() {
         assert!(p.value.is_finite() && p.value >= 0.0, "{p:?}");
     }
