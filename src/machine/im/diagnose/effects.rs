@@ -88,6 +88,17 @@ pub struct EffectParam {
     pub transform: Transform,
 }
 
+impl EffectParam {
+    /// The parameter `key` in `unit`, held in the vector as `transform`.
+    const fn new(key: &'static str, unit: &'static str, transform: Transform) -> EffectParam {
+        EffectParam {
+            key,
+            unit,
+            transform,
+        }
+    }
+}
+
 /// The nominal model (`None`) or the nominal model with one effect.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ImAugmentation {
@@ -259,56 +270,20 @@ impl ImAugmentation {
 
     /// The effect's own parameters.
     pub fn effect_params(&self) -> &'static [EffectParam] {
-        const RFE: [EffectParam; 1] = [EffectParam {
-            key: "Rfe",
-            unit: "ohm",
-            transform: Transform::Log,
-        }];
+        const RFE: [EffectParam; 1] = [EffectParam::new("Rfe", "ohm", Transform::Log)];
         const DEEP: [EffectParam; 2] = [
-            EffectParam {
-                key: "xi1",
-                unit: "1",
-                transform: Transform::Log,
-            },
-            EffectParam {
-                key: "bar_share",
-                unit: "1",
-                transform: Transform::Logistic,
-            },
+            EffectParam::new("xi1", "1", Transform::Log),
+            EffectParam::new("bar_share", "1", Transform::Logistic),
         ];
-        const ES: [EffectParam; 1] = [EffectParam {
-            key: "Es",
-            unit: "V",
-            transform: Transform::Log,
-        }];
+        const ES: [EffectParam; 1] = [EffectParam::new("Es", "V", Transform::Log)];
         const KNEE: [EffectParam; 2] = [
-            EffectParam {
-                key: "Iknee",
-                unit: "A",
-                transform: Transform::Log,
-            },
-            EffectParam {
-                key: "slope",
-                unit: "1",
-                transform: Transform::Logistic,
-            },
+            EffectParam::new("Iknee", "A", Transform::Log),
+            EffectParam::new("slope", "1", Transform::Logistic),
         ];
-        const RSLL: [EffectParam; 1] = [EffectParam {
-            key: "Rsll",
-            unit: "ohm",
-            transform: Transform::Log,
-        }];
+        const RSLL: [EffectParam; 1] = [EffectParam::new("Rsll", "ohm", Transform::Log)];
         const RISE: [EffectParam; 2] = [
-            EffectParam {
-                key: "rise_Rs",
-                unit: "1",
-                transform: Transform::Log,
-            },
-            EffectParam {
-                key: "rise_Rr",
-                unit: "1",
-                transform: Transform::Log,
-            },
+            EffectParam::new("rise_Rs", "1", Transform::Log),
+            EffectParam::new("rise_Rr", "1", Transform::Log),
         ];
         match self.effect {
             None => &[],
