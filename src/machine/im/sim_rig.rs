@@ -689,6 +689,23 @@ mod tests {
         SimImRigConfig::new(circuit, supply)
     }
 
+    /// Switch the supply on at `volts` and run the plant `steps` sample
+    /// periods: the last batch.
+    async fn supply_on(
+        vfd: &mut SimVfd,
+        sensors: &mut SimImSensors,
+        volts: f64,
+        steps: usize,
+    ) -> SampleBatch {
+        vfd.set_setpoint(volts).await.unwrap();
+        vfd.set_output_enabled(true).await.unwrap();
+        let mut last = None;
+        for _ in 0..steps {
+            last = Some(sensors.next_batch().await.unwrap());
+        }
+        last.unwrap()
+    }
+
     #[tokio::test]
     async fn the_dc_source_reads_the_terminal_resistance_and_is_interlocked_with_the_supply() {
         let mut cfg = rig();
@@ -734,13 +751,7 @@ mod tests {
             cfg.supply.line_voltage = 400.0;
             cfg.friction_windage_w = friction;
             let (mut vfd, _, mut sensors) = sim_im_rig(cfg).unwrap();
-            vfd.set_setpoint(400.0).await.unwrap();
-            vfd.set_output_enabled(true).await.unwrap();
-            let mut last = None;
-            for _ in 0..2500 {
-                last = Some(sensors.next_batch().await.unwrap());
-            }
-            let b = last.unwrap();
+            let b = supply_on(&mut vfd, &mut sensors, 400.0, 2500).await;
             let counts = b.value(channel::ENCODER).unwrap();
             // The speed from the plant itself: the angle's growth per step.
             let speed = lock_plant(&sensors.plant).speed;
@@ -771,13 +782,7 @@ mod tests {
         dyno.set_output_enabled(true).await.unwrap();
         vfd.set_frequency(12.5).await.unwrap();
         assert_eq!(vfd.frequency(), 12.5);
-        vfd.set_setpoint(40.0).await.unwrap();
-        vfd.set_output_enabled(true).await.unwrap();
-        let mut last = None;
-        for _ in 0..200 {
-            last = Some(sensors.next_batch().await.unwrap());
-        }
-        let b = last.unwrap();
+        let b = supply_on(&mut vfd, &mut sensors, 40.0, 200).await;
         let mut c = at_frequency(&cfg.circuit, 0.25);
         c.rs *= 1.0 + COPPER_ALPHA * (31.5 - 20.0);
         let supply = ImSupply {
