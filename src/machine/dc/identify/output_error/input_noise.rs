@@ -254,15 +254,29 @@ mod tests {
         }
     }
 
+    /// The problem of `d` about the reference `p` (step zero), and its
+    /// Jacobian there.
+    fn at_reference<'d, 'a>(
+        d: &'d FitData<'a>,
+        p: &DcParams,
+    ) -> (
+        OutputErrorProblem<'d, 'a>,
+        Vector6<f64>,
+        OMatrix<f64, Dyn, U6>,
+    ) {
+        let problem = OutputErrorProblem::new(d, p);
+        let x = Vector6::zeros();
+        let jac = problem.jacobian_from(&x, &problem.compute(&x));
+        (problem, x, jac)
+    }
+
     #[test]
     fn adjoint_scores_match_perturbed_simulations() {
         let p = DcParams::SEED_TABLE4_MOMENTS;
         let tail = 50;
         let segs = staircase(&p, tail);
         let d = data(&segs, tail);
-        let problem = OutputErrorProblem::new(&d, &p);
-        let x = Vector6::zeros();
-        let jac = problem.jacobian_from(&x, &problem.compute(&x));
+        let (_, _, jac) = at_reference(&d, &p);
         let m = voltage_score_matrix(&jac, &d, &p).unwrap();
 
         // Brute force: a_j = Jᵀ·(r(u + δ·e_j) − r(u))/δ for every reading,
@@ -337,9 +351,7 @@ mod tests {
         let tail = 50;
         let segs = staircase(&p, tail);
         let d = data(&segs, tail);
-        let problem = OutputErrorProblem::new(&d, &p);
-        let x = Vector6::zeros();
-        let jac = problem.jacobian_from(&x, &problem.compute(&x));
+        let (problem, x, jac) = at_reference(&d, &p);
         let inverse = jac.tr_mul(&jac).try_inverse().unwrap();
         let shift = bias_shift(&problem, &d, &x, &inverse, 0.5);
         assert!(shift[1] < 0.0, "{shift:?}");

@@ -820,17 +820,26 @@ mod tests {
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
 
+    /// The white noise of every reading of the test records, drawn from a
+    /// generator seeded with `seed`: the generator and the distributions
+    /// of the voltage (0.1 V), current (2 mA) and speed (0.3 rad/s) noise.
+    fn reading_noise(seed: u64) -> (StdRng, [Normal<f64>; 3]) {
+        (
+            StdRng::seed_from_u64(seed),
+            [
+                Normal::new(0.0, 0.1).unwrap(),
+                Normal::new(0.0, 0.002).unwrap(),
+                Normal::new(0.0, 0.3).unwrap(),
+            ],
+        )
+    }
+
     /// A staircase of `levels` (from rest), each held `seconds`, simulated
     /// exactly with `p` at 2 kHz, with white noise on every reading.
     fn record(p: &DcParams, levels: &[f64], seconds: f64, seed: u64) -> Record {
         let dt = 5e-4;
         let n = (seconds / dt) as usize;
-        let mut rng = StdRng::seed_from_u64(seed);
-        let (nu, ni, nw) = (
-            Normal::new(0.0, 0.1).unwrap(),
-            Normal::new(0.0, 0.002).unwrap(),
-            Normal::new(0.0, 0.3).unwrap(),
-        );
+        let (mut rng, [nu, ni, nw]) = reading_noise(seed);
         let mut segments = Vec::new();
         let mut t0 = 0.0;
         for (s, &level) in levels.iter().enumerate() {
@@ -959,12 +968,7 @@ mod tests {
         use crate::model::{DcMotor, DcState, Terminal};
         let dt = 5e-4;
         let motor = DcMotor::new(*p, dt).unwrap();
-        let mut rng = StdRng::seed_from_u64(seed);
-        let (nu, ni, nw) = (
-            Normal::new(0.0, 0.1).unwrap(),
-            Normal::new(0.0, 0.002).unwrap(),
-            Normal::new(0.0, 0.3).unwrap(),
-        );
+        let (mut rng, [nu, ni, nw]) = reading_noise(seed);
         let n = levels.len() * per + 1;
         let mut x = DcState::default();
         let mut all = Vec::new();
