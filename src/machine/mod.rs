@@ -83,6 +83,30 @@ pub struct OpenedRig {
     pub links: Vec<LinkHealth>,
 }
 
+impl OpenedRig {
+    /// A rig of `stages` measured by `sensors`, as a rig builder gives it:
+    /// `truth` the simulated machine, `served` the protocol servers to
+    /// keep alive, `links` the health of its buses; no Modbus probe.
+    pub fn new<T: Any + Send + Sync, S: Any + Send>(
+        stages: Vec<RigStage>,
+        sensors: Box<dyn SensorStream>,
+        counts_per_rev: f64,
+        truth: Option<T>,
+        served: Option<S>,
+        links: Vec<LinkHealth>,
+    ) -> OpenedRig {
+        OpenedRig {
+            stages,
+            sensors,
+            counts_per_rev,
+            truth: truth.map(|t| Box::new(t) as Truth),
+            keep_alive: served.map(|s| Box::new(s) as Box<dyn Any + Send>),
+            modbus_probe: None,
+            links,
+        }
+    }
+}
+
 /// The rig as a plan drives it: its stages in the order
 /// [`OpenedRig::stages`] gave them, and its sensors.
 pub struct PlanRig<'a> {

@@ -156,20 +156,21 @@ impl Machine for Config {
 
     async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, RigError> {
         let rig = build_rig(self, realtime).await?;
+        let stages = vec![RigStage {
+            name: "power stage",
+            stage: rig.stage,
+            max_setpoint: self.common.limits.max_voltage,
+        }];
         Ok(OpenedRig {
-            stages: vec![RigStage {
-                name: "power stage",
-                stage: rig.stage,
-                max_setpoint: self.common.limits.max_voltage,
-            }],
-            sensors: rig.sensors,
-            counts_per_rev: rig.counts_per_rev,
-            truth: rig.truth.map(|t| Box::new(t) as Truth),
-            keep_alive: rig
-                .served
-                .map(|s| Box::new(s) as Box<dyn std::any::Any + Send>),
             modbus_probe: rig.modbus_sensors,
-            links: rig.links,
+            ..OpenedRig::new(
+                stages,
+                rig.sensors,
+                rig.counts_per_rev,
+                rig.truth,
+                rig.served,
+                rig.links,
+            )
         })
     }
 

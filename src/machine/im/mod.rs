@@ -202,37 +202,35 @@ impl Machine for ImRunConfig {
 
     async fn open_rig(&self, realtime: bool) -> Result<OpenedRig, RigError> {
         let rig = build_im_rig(self, realtime).await?;
-        Ok(OpenedRig {
-            // The supply first: a stop takes the machine off the supply
-            // before the dynamometer lets go of the shaft.
-            stages: vec![
-                RigStage {
-                    name: "supply",
-                    stage: rig.supply,
-                    max_setpoint: self.common.limits.max_voltage,
-                },
-                RigStage {
-                    name: "dynamometer",
-                    stage: rig.dynamometer,
-                    max_setpoint: self.common.limits.max_speed,
-                },
-            ]
-            .into_iter()
-            .chain(rig.dc_source.map(|stage| RigStage {
-                name: "DC source",
-                max_setpoint: stage.capabilities().max_setpoint,
-                stage,
-            }))
-            .collect(),
-            sensors: rig.sensors,
-            counts_per_rev: rig.counts_per_rev,
-            truth: rig.truth.map(|t| Box::new(t) as Truth),
-            keep_alive: rig
-                .served
-                .map(|s| Box::new(s) as Box<dyn std::any::Any + Send>),
-            modbus_probe: None,
-            links: rig.links,
-        })
+        // The supply first: a stop takes the machine off the supply
+        // before the dynamometer lets go of the shaft.
+        let stages = vec![
+            RigStage {
+                name: "supply",
+                stage: rig.supply,
+                max_setpoint: self.common.limits.max_voltage,
+            },
+            RigStage {
+                name: "dynamometer",
+                stage: rig.dynamometer,
+                max_setpoint: self.common.limits.max_speed,
+            },
+        ]
+        .into_iter()
+        .chain(rig.dc_source.map(|stage| RigStage {
+            name: "DC source",
+            max_setpoint: stage.capabilities().max_setpoint,
+            stage,
+        }))
+        .collect();
+        Ok(OpenedRig::new(
+            stages,
+            rig.sensors,
+            rig.counts_per_rev,
+            rig.truth,
+            rig.served,
+            rig.links,
+        ))
     }
 
     async fn run_plan(
