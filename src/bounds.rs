@@ -310,34 +310,30 @@ mod tests {
 
     #[test]
     fn messages_are_the_reason_alone_and_the_case_is_matchable() {
-        assert_eq!(
-            wait_s(-1.0, true).unwrap_err().to_string(),
-            "-1 must be a finite number ≥ 0"
-        );
-        assert_eq!(
-            sample_rate(0.0).unwrap_err().to_string(),
-            "0 must be a finite number > 0"
-        );
-        assert_eq!(
-            sample_rate(1e6).unwrap_err().to_string(),
-            "1000000 Hz is outside 0.1 to 100000 Hz (the practical range of a rig's channels)"
-        );
-        assert_eq!(
-            wait_s(4000.0, false).unwrap_err().to_string(),
-            "4000 s is beyond 3600 s, the longest wait of one step"
-        );
-        assert_eq!(
-            test_length(3600.0, 100_000.0).unwrap_err().to_string(),
-            "the test could take 3.600e8 readings per channel (3600 s at 100000 Hz): at most 5e7, the memory one test's record may hold"
-        );
-        assert_eq!(
-            call_timeout_ms(0).unwrap_err().to_string(),
-            "0 ms: want 1 to 10000"
-        );
-        assert_eq!(
-            supervision_timeout_s(60.0).unwrap_err().to_string(),
-            "60 s is beyond 10 s: a fault would go unnoticed that long"
-        );
+        let cases = [
+            (wait_s(-1.0, true).unwrap_err(), "-1 must be a finite number ≥ 0"),
+            (sample_rate(0.0).unwrap_err(), "0 must be a finite number > 0"),
+            (
+                sample_rate(1e6).unwrap_err(),
+                "1000000 Hz is outside 0.1 to 100000 Hz (the practical range of a rig's channels)",
+            ),
+            (
+                wait_s(4000.0, false).unwrap_err(),
+                "4000 s is beyond 3600 s, the longest wait of one step",
+            ),
+            (
+                test_length(3600.0, 100_000.0).unwrap_err(),
+                "the test could take 3.600e8 readings per channel (3600 s at 100000 Hz): at most 5e7, the memory one test's record may hold",
+            ),
+            (call_timeout_ms(0).unwrap_err(), "0 ms: want 1 to 10000"),
+            (
+                supervision_timeout_s(60.0).unwrap_err(),
+                "60 s is beyond 10 s: a fault would go unnoticed that long",
+            ),
+        ];
+        for (error, message) in cases {
+            assert_eq!(error.to_string(), message);
+        }
         // A sign error and a range error are told apart without the text.
         assert!(matches!(
             wait_s(-1.0, false),

@@ -422,14 +422,21 @@ mod tests {
         assert_matches_analytic_step(p, 100.0, 1e-4, 5000);
     }
 
+    /// The state of `p` after `steps` steps of `dt` at the voltage `u`,
+    /// from rest.
+    fn driven_from_rest(p: DcParams, dt: f64, u: f64, steps: usize) -> DcState {
+        let motor = DcMotor::new(p, dt).unwrap();
+        let mut x = DcState::default();
+        for _ in 0..steps {
+            x = motor.step(&x, Terminal::Driven(u));
+        }
+        x
+    }
+
     #[test]
     fn settles_at_the_steady_state_with_static_torque() {
         let p = DcParams::SEED_TABLE4_MOMENTS;
-        let motor = DcMotor::new(p, 5e-4).unwrap();
-        let mut x = DcState::default();
-        for _ in 0..8000 {
-            x = motor.step(&x, Terminal::Driven(60.0));
-        }
+        let x = driven_from_rest(p, 5e-4, 60.0, 8000);
         let ss = p.steady_state(60.0);
         // The seed's Table 2, initial mode: 0.113 A, 400 r/min (≈ 41.9 rad/s).
         assert!((x.current - ss.current).abs() < 1e-9 && (ss.current - 0.113).abs() < 5e-4);
@@ -442,12 +449,8 @@ mod tests {
     #[test]
     fn static_torque_holds_the_rotor_below_breakaway() {
         let p = DcParams::SEED_TABLE4_MOMENTS;
-        let motor = DcMotor::new(p, 1e-3).unwrap();
         // K·i = K·U/Ra < Tst for U < 2.99 V.
-        let mut x = DcState::default();
-        for _ in 0..2000 {
-            x = motor.step(&x, Terminal::Driven(2.0));
-        }
+        let x = driven_from_rest(p, 1e-3, 2.0, 2000);
         assert_eq!(x.speed, 0.0);
         assert!((x.current - 2.0 / p.ra).abs() < 1e-9);
     }

@@ -573,6 +573,22 @@ mod tests {
         Config::parse("rig.toml", &DEFAULT_CONFIG.replacen(replace, by, 1))
     }
 
+    /// The error text of the default config with `replace` replaced by
+    /// `by`, which must be refused.
+    fn refused(replace: &str, by: &str) -> String {
+        with(replace, by).unwrap_err().to_string()
+    }
+
+    /// The number (from 1) of the default config's first line that starts
+    /// with `prefix`.
+    fn line_of(prefix: &str) -> usize {
+        DEFAULT_CONFIG
+            .lines()
+            .position(|l| l.starts_with(prefix))
+            .unwrap()
+            + 1
+    }
+
     #[test]
     fn embedded_default_is_the_seed_motor() {
         let c = Config::embedded_default();
@@ -600,59 +616,38 @@ mod tests {
 
     #[test]
     fn unknown_key_is_refused_by_name_and_line() {
-        let err = with("[limits]", "[limits]\nmax_torque_Nm = 3")
-            .unwrap_err()
-            .to_string();
+        let err = refused("[limits]", "[limits]\nmax_torque_Nm = 3");
         assert!(err.contains("rig.toml:"), "{err}");
         assert!(err.contains("max_torque_Nm"), "{err}");
         let line = err.split(':').nth(1).unwrap().parse::<usize>().unwrap();
-        let expected = DEFAULT_CONFIG
-            .lines()
-            .position(|l| l.starts_with("[limits]"))
-            .unwrap()
-            + 2;
-        assert_eq!(line, expected, "{err}");
+        assert_eq!(line, line_of("[limits]") + 1, "{err}");
         assert!(!err.contains('\n'), "one line: {err}");
     }
 
     #[test]
     fn wrong_type_names_the_line() {
-        let err = with("max_current_A = 6", "max_current_A = \"six\"")
-            .unwrap_err()
-            .to_string();
+        let err = refused("max_current_A = 6", "max_current_A = \"six\"");
         assert!(err.contains("max_current_A"), "{err}");
     }
 
     #[test]
     fn invalid_values_name_the_key() {
-        let err = with("max_current_A = 6", "max_current_A = -6")
-            .unwrap_err()
-            .to_string();
-        let line = DEFAULT_CONFIG
-            .lines()
-            .position(|l| l.starts_with("max_current_A"))
-            .unwrap()
-            + 1;
+        let err = refused("max_current_A = 6", "max_current_A = -6");
+        let line = line_of("max_current_A");
         assert!(
             err.starts_with(&format!("rig.toml:{line}: limits.max_current_A:")),
             "{err}"
         );
-        let err = with("La = 0.803", "La = 0").unwrap_err().to_string();
+        let err = refused("La = 0.803", "La = 0");
         assert!(err.contains("rig.simulated.motor.La"), "{err}");
-        let err = with("levels_V = [60,", "levels_V = [600,")
-            .unwrap_err()
-            .to_string();
+        let err = refused("levels_V = [60,", "levels_V = [600,");
         assert!(err.contains("test.levels_V[0]"), "{err}");
-        let err = with("plan = \"dc_step\"", "plan = \"im_slip_sweep\"")
-            .unwrap_err()
-            .to_string();
+        let err = refused("plan = \"dc_step\"", "plan = \"im_slip_sweep\"");
         assert!(
             err.contains("test.plan") && err.contains("unknown plan"),
             "{err}"
         );
-        let err = with("backend = \"simulated\"", "backend = \"canbus\"")
-            .unwrap_err()
-            .to_string();
+        let err = refused("backend = \"simulated\"", "backend = \"canbus\"");
         assert!(err.contains("rig.backend"), "{err}");
     }
 
@@ -664,12 +659,7 @@ mod tests {
         };
         let (key, line) = key_of(with("sample_rate_Hz = 2000", "sample_rate_Hz = 1e12"));
         assert_eq!(key, "rig.sample_rate_Hz");
-        let expected = DEFAULT_CONFIG
-            .lines()
-            .position(|l| l.starts_with("sample_rate_Hz"))
-            .unwrap()
-            + 1;
-        assert_eq!(line, Some(expected));
+        assert_eq!(line, Some(line_of("sample_rate_Hz")));
         for (from, to, key) in [
             (
                 "sample_rate_Hz = 2000",

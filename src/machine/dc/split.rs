@@ -299,6 +299,11 @@ mod tests {
         }
     }
 
+    /// Assert that the first note on `split` says `text`.
+    fn assert_first_note_says(split: &Record, text: &str) {
+        assert!(split.notes[0].contains(text), "{}", split.notes[0]);
+    }
+
     #[test]
     fn a_staircase_in_one_segment_is_cut_just_before_each_step() {
         let levels = [0.0, 60.0, 120.0, 248.0];
@@ -317,11 +322,7 @@ mod tests {
         }
         let total: usize = split.segments.iter().map(|s| s.time.len()).sum();
         assert_eq!(total, 2000);
-        assert!(
-            split.notes[0].contains("before each of its 3 voltage steps"),
-            "{}",
-            split.notes[0]
-        );
+        assert_first_note_says(&split, "before each of its 3 voltage steps");
     }
 
     #[test]
@@ -357,11 +358,7 @@ mod tests {
         let split = split_single_segment(r);
         assert_eq!(split.segments.len(), BLOCKS);
         assert!(split.segments.iter().all(|s| s.time.len() == 500));
-        assert!(
-            split.notes[0].contains("equal time blocks"),
-            "{}",
-            split.notes[0]
-        );
+        assert_first_note_says(&split, "equal time blocks");
     }
 
     #[test]
