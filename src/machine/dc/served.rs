@@ -12,7 +12,7 @@
 //! "now" in steps of its own sample period, so a set point written at
 //! time t acts from t on, and a read returns the sensors' latest sample.
 
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use motorbench_drivers::can::{FrameStream, SignalMap, SlcanOptions, SlcanStream};
@@ -28,7 +28,7 @@ use tokio::task::JoinHandle;
 
 use super::sim_rig::{channel, sim_rig, SimPowerStage, SimSensors};
 use crate::config::{Fault, SimulatedRig, SimulatedTransport};
-use crate::machine::sim_parts::{lock_plant, power_stage_map};
+use crate::machine::sim_parts::{lock_plant, plant_now, power_stage_map, ServedPlant};
 use crate::rig::fault::{FaultyLine, ProtocolFaults, StreamRecordFate};
 use crate::rig::{
     enable_written, ready_now, register, serve_device, touches, ServeError, ServedLink,
@@ -50,7 +50,7 @@ struct RealtimePlant {
 /// Plant steps kept for late senders (half a second at 2 kHz).
 const HISTORY: usize = 1024;
 
-impl RealtimePlant {
+impl ServedPlant for RealtimePlant {
     fn catch_up(&mut self) {
         let (sensors, history, last) = (&mut self.sensors, &mut self.history, &mut self.last);
         self.clock.catch_up(|step| {
@@ -63,6 +63,12 @@ impl RealtimePlant {
         });
     }
 
+    fn last(&self) -> Option<&SampleBatch> {
+        self.last.as_ref()
+    }
+}
+
+impl RealtimePlant {
     /// The readings at the plant instant `at`: the step taken there and
     /// its values of `channels` (the latest step not after `at`, as far
     /// back as the history goes).
@@ -85,20 +91,9 @@ impl RealtimePlant {
             None => (0, vec![0.0; channels.len()]),
         }
     }
-
-    fn reading(&self, ch: usize) -> f64 {
-        self.last.as_ref().and_then(|b| b.value(ch)).unwrap_or(0.0)
-    }
 }
 
 type SharedPlant = Arc<Mutex<RealtimePlant>>;
-
-/// The plant locked and advanced to now, as every request finds it.
-fn plant_now(p: &SharedPlant) -> MutexGuard<'_, RealtimePlant> {
-    let mut plant = lock_plant(p);
-    plant.catch_up();
-    plant
-}
 
 /// The simulated supply behind its profile's power-stage registers, with
 /// optional readback registers `voltage_out` / `current_out`.

@@ -28,7 +28,7 @@
 //! request first advances it to "now" in steps of its own period.
 
 use std::f64::consts::TAU;
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 
 use motorbench_drivers::modbus::server::{
     BankService, ExceptionCode, RegisterBank, SharedBank, SimulatedDevice, WriteSpan,
@@ -43,7 +43,7 @@ use super::sim_rig::{
 };
 use crate::config::Fault;
 use crate::config::{ModbusDeviceLink, SimulatedTransport};
-use crate::machine::sim_parts::{lock_plant, missing, power_stage_map};
+use crate::machine::sim_parts::{lock_plant, missing, plant_now, power_stage_map, ServedPlant};
 use crate::model::Connection;
 use crate::rig::fault::ProtocolFaults;
 use crate::rig::{
@@ -61,13 +61,19 @@ struct Plant {
     previous: Option<SampleBatch>,
 }
 
-impl Plant {
+impl ServedPlant for Plant {
     fn catch_up(&mut self) {
         let (sensors, last, previous) = (&mut self.sensors, &mut self.last, &mut self.previous);
         self.clock
             .catch_up(|_| *previous = last.replace(sensors.sample()));
     }
 
+    fn last(&self) -> Option<&SampleBatch> {
+        self.last.as_ref()
+    }
+}
+
+impl Plant {
     /// The encoder count now: the latest step's, carried on at the speed
     /// of the last step to the instant of the request, as a hardware
     /// counter would read it (without this, a reading would be up to one
@@ -80,20 +86,9 @@ impl Plant {
         let since = self.clock.since_steps();
         (c1 + (c1 - c0) * (since / self.clock.period_s()).clamp(0.0, 1.0)).floor()
     }
-
-    fn reading(&self, ch: usize) -> f64 {
-        self.last.as_ref().and_then(|b| b.value(ch)).unwrap_or(0.0)
-    }
 }
 
 type SharedPlant = Arc<Mutex<Plant>>;
-
-/// The plant locked and advanced to now, as every request finds it.
-fn plant_now(p: &SharedPlant) -> MutexGuard<'_, Plant> {
-    let mut plant = lock_plant(p);
-    plant.catch_up();
-    plant
-}
 
 /// Control word bits of the drive (Optidrive E3 register 1).
 const RUN: u16 = 1;
