@@ -53,15 +53,37 @@ const MEASURED_WIDTH: u32 = 5;
 const MODEL_WIDTH: u32 = 2;
 /// Colours of model traces, cycled when there are more models than colours.
 const MODEL_COLOURS: [RGBColor; 8] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(23, 190, 207),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
+    tab10::BLUE,
+    tab10::RED,
+    tab10::GREEN,
+    tab10::ORANGE,
+    tab10::PURPLE,
+    tab10::CYAN,
+    tab10::BROWN,
+    tab10::PINK,
 ];
+
+/// The plots' colours by name: those of matplotlib's `tab10` palette.
+pub(crate) mod tab10 {
+    use plotters::style::RGBColor;
+
+    /// Blue.
+    pub const BLUE: RGBColor = RGBColor(31, 119, 180);
+    /// Red.
+    pub const RED: RGBColor = RGBColor(214, 39, 40);
+    /// Green.
+    pub const GREEN: RGBColor = RGBColor(44, 160, 44);
+    /// Orange.
+    pub const ORANGE: RGBColor = RGBColor(255, 127, 14);
+    /// Purple.
+    pub const PURPLE: RGBColor = RGBColor(148, 103, 189);
+    /// Cyan.
+    pub const CYAN: RGBColor = RGBColor(23, 190, 207);
+    /// Brown.
+    pub const BROWN: RGBColor = RGBColor(140, 86, 75);
+    /// Pink.
+    pub const PINK: RGBColor = RGBColor(227, 119, 194);
+}
 
 /// One named curve.
 #[derive(Debug, Clone, PartialEq)]

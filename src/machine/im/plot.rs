@@ -12,16 +12,17 @@ use plotters::prelude::*;
 use crate::identify::{predict, ImIdentification, SweepPoint};
 use crate::model::ImCircuit;
 use crate::report::legend;
+use crate::report::plot::tab10;
 
 const FONT: &str = "sans-serif";
 /// One colour per supply voltage (segment), for its points and curves.
 const SEGMENT_COLOURS: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(148, 103, 189),
-    RGBColor(255, 127, 14),
-    RGBColor(140, 86, 75),
+    tab10::BLUE,
+    tab10::RED,
+    tab10::GREEN,
+    tab10::PURPLE,
+    tab10::ORANGE,
+    tab10::BROWN,
 ];
 
 /// The models worth drawing: LM, and the recursive estimate when it applies.
