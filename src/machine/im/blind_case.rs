@@ -40,12 +40,11 @@ use rand::RngExt;
 use rand_distr::{Distribution, Normal};
 
 use super::diagnose::effects::{increasing_root, leakage_factor, skin_effect as skin};
+use super::COPPER_ALPHA;
 use crate::diagnose::blind::{BlindRecord, CaseTruth};
 use crate::model::{Connection, Effect, C64};
 use crate::record::{OperatingPoint, Record, SegmentKind, TestMeta, SCHEMA_VERSION};
 
-/// Temperature coefficient of copper (stator), 1/K.
-const ALPHA_CU: f64 = 0.00393;
 /// Temperature coefficient of aluminium (cage), 1/K.
 const ALPHA_AL: f64 = 0.00403;
 
@@ -563,7 +562,7 @@ fn thermal_path(
         th_s *= cool;
         th_r *= cool;
         let heat = Heat {
-            rs: 1.0 + ALPHA_CU * th_s,
+            rs: 1.0 + COPPER_ALPHA * th_s,
             rr: 1.0 + ALPHA_AL * th_r,
         };
         out.push(heat);
