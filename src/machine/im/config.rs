@@ -719,25 +719,21 @@ mod tests {
         );
         assert_eq!(c.common.supervision.max_power, 40000.0);
         assert_eq!(m.merge_window, std::time::Duration::from_millis(10));
-        // Left out: the drivers' default window.
-        let c = ImRunConfig::parse(
-            &modbus_source(),
-            &SIM_MODBUS_IM.replace("merge_window_ms = 10 ", "# "),
-        )
-        .unwrap();
-        assert_eq!(
-            c.modbus.unwrap().merge_window,
-            motorbench_drivers::DEFAULT_REORDER
-        );
-        let c = ImRunConfig::parse(
-            &modbus_source(),
-            &SIM_MODBUS_IM.replace("merge_window_ms = 10 ", "merge_window_ms = 25 "),
-        )
-        .unwrap();
-        assert_eq!(
-            c.modbus.unwrap().merge_window,
-            std::time::Duration::from_millis(25)
-        );
+        for (to, window) in [
+            // Left out: the drivers' default window.
+            ("# ", motorbench_drivers::DEFAULT_REORDER),
+            (
+                "merge_window_ms = 25 ",
+                std::time::Duration::from_millis(25),
+            ),
+        ] {
+            let c = ImRunConfig::parse(
+                &modbus_source(),
+                &SIM_MODBUS_IM.replace("merge_window_ms = 10 ", to),
+            )
+            .unwrap();
+            assert_eq!(c.modbus.unwrap().merge_window, window, "{to}");
+        }
     }
 
     /// The error of `text` (the file `source`) with `from` replaced by
