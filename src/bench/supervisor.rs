@@ -246,8 +246,9 @@ impl std::fmt::Display for StopCause {
     }
 }
 
-/// The latest readings the supervisor saw, for progress displays.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+/// The latest readings the supervisor saw, for progress displays (and
+/// the API's `Readings` schema).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, utoipa::ToSchema)]
 pub struct Readings {
     /// Data time of the batch, s.
     pub t_s: f64,

@@ -134,7 +134,6 @@ pub struct TestStatus {
     /// Longest it can still take (every remaining step to its timeout), s.
     pub eta_max_s: Option<f64>,
     /// The latest readings the supervisor checked.
-    #[schema(value_type = crate::serve::api::openapi::ReadingsDoc)]
     pub values: Readings,
     /// How it ended, once finished.
     pub outcome: Option<RecordOutcome>,

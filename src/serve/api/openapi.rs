@@ -2,37 +2,17 @@
 //! come from the handlers' `#[utoipa::path]` attributes and the schemas
 //! from the body types themselves ([`super::bodies`], the status types of
 //! [`crate::serve::state`], [`crate::serve::jobs`] and
-//! [`crate::serve::records_index`]); routes are registered with their
+//! [`crate::serve::records_index`], the supervisor's
+//! [`crate::bench::Readings`]); routes are registered with their
 //! description ([`super::router`]), so the document cannot list a route
 //! that is not served nor leave one out.
 
 use std::sync::Arc;
 
 use axum::{Extension, Json};
-use serde::Serialize;
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
 use utoipa::openapi::OpenApi as Document;
-use utoipa::{Modify, OpenApi, ToSchema};
-
-/// The supervisor's latest readings (`crate::bench::Readings`), described
-/// here because that type lives in the domain, which knows nothing of
-/// the API; a unit test checks that the two list the same fields.
-#[derive(Debug, Serialize, ToSchema)]
-#[schema(as = Readings)]
-pub struct ReadingsDoc {
-    /// Data time of the batch, s.
-    pub t_s: f64,
-    /// Voltage, V.
-    pub voltage: Option<f64>,
-    /// Current, A.
-    pub current: Option<f64>,
-    /// Speed, rad/s.
-    pub speed: Option<f64>,
-    /// Electrical power, W.
-    pub power: Option<f64>,
-    /// Estimated winding temperature, °C.
-    pub winding_c: f64,
-}
+use utoipa::{Modify, OpenApi};
 
 /// Who may call the API: nobody needs a token on loopback or the Unix
 /// socket unless the daemon was given one; then every request carries
