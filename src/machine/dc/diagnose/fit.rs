@@ -489,6 +489,17 @@ pub fn fit_fold(
     fit_masked(spec, runs, w, patience, mask, false)
 }
 
+/// A fit stops when an iteration lowers the sum of squares by less than
+/// this fraction of one row's mean square (its relative tolerance is this
+/// over the rows, and never below 1e-8): far below any difference the
+/// held-out decision can see, where a candidate whose effect fits as
+/// nothing otherwise crawled along the flat valley of its shape
+/// parameters, 2e-3 of 53 558 an iteration, until the optimiser's
+/// patience ran out (108 simulations of the record, two thirds of the
+/// default record's diagnosis once the folds stepped; the blind suites'
+/// verdicts did not change but one gained, docs/diagnosis-dc.md).
+const NEGLIGIBLE_DECREASE: f64 = 0.01;
+
 fn fit_masked(
     spec: &FitSpec,
     runs: &[SegmentRun],
@@ -509,7 +520,7 @@ fn fit_masked(
         last: RefCell::new(None),
     };
     let lm = LevenbergMarquardt::new()
-        .with_ftol(1e-8)
+        .with_ftol((NEGLIGIBLE_DECREASE / rows as f64).max(1e-8))
         .with_xtol(1e-9)
         .with_gtol(1e-9)
         .with_patience(patience);
@@ -653,14 +664,47 @@ pub fn step_landed(
 /// the step, so that the step lands where an iterated refit converges.
 const ONE_STEP_AGREEMENT: (f64, f64) = (0.8, 1.25);
 
+/// Directions of the parameters whose curvature `JᵀJ` is below this
+/// fraction of the largest are ones the data do not determine: a
+/// candidate's shape parameters where its size fits as nothing (on the
+/// default record, eigenvalues of 1e-4 to 3 against 7e9; every determined
+/// direction there is above 2e-4 of the largest).
+const UNDETERMINED: f64 = 1e-6;
+
 /// The Gauss–Newton step `−(JᵀJ)⁻¹Jᵀr`, if every component is within
 /// [`ONE_STEP_LIMIT`]. A longer step is not shortened: a step cut short
 /// stays next to the all-segment optimum, which was fitted with the
 /// held-out segment, and would predict that segment with what it was
 /// fitted to (a misspecified nominal model then looks better held out than
 /// it is).
+///
+/// Directions the data do not determine ([`UNDETERMINED`]) are left where
+/// the all-segment optimum has them instead: the held-out rows carry no
+/// more information on them than the rest, so the fold's refit cannot
+/// learn them from the held-out data, and a step along them (tens of
+/// units of a log-transformed parameter) is the linearisation's artefact,
+/// not the fold's optimum. Without this, every fold of a candidate whose
+/// effect fits as nothing was refitted by iterating (two thirds of the
+/// default record's diagnosis).
 pub fn gauss_newton_step(normal: &DMatrix<f64>, gradient: &DVector<f64>) -> Option<DVector<f64>> {
-    let step = normal.clone().cholesky()?.solve(&(-gradient));
+    let eigen = normal.clone().symmetric_eigen();
+    let largest = eigen.eigenvalues.max();
+    if !(largest.is_finite() && largest > 0.0) {
+        return None;
+    }
+    let floor = UNDETERMINED * largest;
+    let step = if eigen.eigenvalues.iter().all(|&l| l > floor) {
+        normal.clone().cholesky()?.solve(&(-gradient))
+    } else {
+        let mut step = DVector::zeros(gradient.len());
+        for (k, &l) in eigen.eigenvalues.iter().enumerate() {
+            if l > floor {
+                let v = eigen.eigenvectors.column(k);
+                step -= v * (v.dot(gradient) / l);
+            }
+        }
+        step
+    };
     step.iter()
         .all(|v| v.is_finite() && v.abs() <= ONE_STEP_LIMIT)
         .then_some(step)
@@ -920,6 +964,29 @@ mod tests {
             .expect("the fold's fit");
         assert!(fold.at.by_run.is_empty() && fold.at.by_fold.is_empty());
         assert!(one_step_refit(&spec, &fold, &runs, &without(&runs, 0), 0, &w).is_none());
+    }
+
+    /// A direction the data do not determine is left where it is; the
+    /// determined ones take the Gauss–Newton step, and a full-rank problem
+    /// is solved as before (Cholesky).
+    #[test]
+    fn an_undetermined_direction_takes_no_step() {
+        // Curvature 4 and 9 along x and y; along z, 1e-9 of that (a
+        // candidate's shape where its size is nothing).
+        let normal = DMatrix::from_diagonal(&DVector::from_vec(vec![4.0, 9.0, 9e-9]));
+        let gradient = DVector::from_vec(vec![-0.04, 0.09, 0.5]);
+        let step = gauss_newton_step(&normal, &gradient).expect("a step");
+        assert!((step[0] - 0.01).abs() < 1e-15, "{step}");
+        assert!((step[1] + 0.01).abs() < 1e-15, "{step}");
+        assert_eq!(step[2], 0.0, "{step}");
+        // Determined in every direction: the Cholesky solution exactly.
+        let full = DMatrix::from_row_slice(3, 3, &[4.0, 1.0, 0.0, 1.0, 9.0, 0.5, 0.0, 0.5, 2.0]);
+        let g = DVector::from_vec(vec![0.01, -0.02, 0.03]);
+        let want = full.clone().cholesky().unwrap().solve(&(-&g));
+        assert_eq!(gauss_newton_step(&full, &g), Some(want));
+        // Too long a step along a determined direction is still refused.
+        let far = DVector::from_vec(vec![-4.0, 0.0, 0.0]);
+        assert_eq!(gauss_newton_step(&normal, &far), None);
     }
 
     /// The Gram matrix is `tr_mul`'s to the last bit, so the fits (and
