@@ -582,18 +582,6 @@ mod tests {
     }
 
     #[test]
-    fn bad_declaration() {
-        let s = error(
-            "# motorbench segment x kind=dc_step label=a\ntime_s\n",
-            1,
-            None,
-        );
-        assert!(s.contains("segment index"), "{s}");
-        let s = error("# motorbench segment 1 kind=ac\n", 1, None);
-        assert!(s.contains("\"ac\""), "{s}");
-    }
-
-    #[test]
     fn im_slip_sweep_is_not_a_dc_file() {
         let e = read("# motorbench segment 0 kind=im_slip_sweep label=sweep\nslip\n").unwrap_err();
         assert!(matches!(e, RecordError::Unsupported { .. }), "{e}");
@@ -606,107 +594,97 @@ mod tests {
         assert!(e.to_string().contains("s.csv"), "{e}");
     }
 
+    /// Every refusal of a bad DC CSV text: the line, the column where
+    /// there is one, and what the message says.
     #[test]
-    fn missing_column() {
-        let s = error(
-            "# c\ntime_s,armature_voltage_V,speed_rad_s\n0,1,2\n",
-            2,
-            Some(COL_CURRENT),
-        );
-        assert!(s.contains("missing column"), "{s}");
-        let s = error(
-            "time_s,armature_voltage_V,armature_current_A\n0,1,2\n",
-            1,
-            Some(COL_SPEED),
-        );
-        assert!(s.contains("speed_rpm"), "{s}");
-    }
-
-    #[test]
-    fn a_file_without_a_header_row_says_so() {
-        let s = error("# c\n0,1.5,2,3e2\n1,1.5,2,3e2\n", 2, None);
-        assert!(
-            s.contains("no header row") && s.contains("0,1.5,2,3e2"),
-            "{s}"
-        );
-    }
-
-    #[test]
-    fn duplicate_column() {
-        error(
-            "time_s,time_s,armature_voltage_V,armature_current_A,speed_rad_s\n",
-            1,
-            Some(COL_TIME),
-        );
-    }
-
-    #[test]
-    fn not_a_number() {
-        let s = error(
-            "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,1,2,3\n0.1,1,abc,3\n",
-            3,
-            Some(COL_CURRENT),
-        );
+    fn bad_files_name_line_column_and_cause() {
+        const HEAD: &str = "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n";
+        let with_head = |rows: &str| format!("{HEAD}{rows}");
+        let cases: Vec<(String, usize, Option<&str>, &str)> = vec![
+            // The declaration comment.
+            (
+                "# motorbench segment x kind=dc_step label=a\ntime_s\n".into(),
+                1,
+                None,
+                "segment index",
+            ),
+            ("# motorbench segment 1 kind=ac\n".into(), 1, None, "\"ac\""),
+            // The header row.
+            ("".into(), 1, None, "no header"),
+            ("# only a comment\n\n".into(), 2, None, "no header"),
+            (
+                "# c\n0,1.5,2,3e2\n1,1.5,2,3e2\n".into(),
+                2,
+                None,
+                "no header row",
+            ),
+            (
+                "# c\n0,1.5,2,3e2\n1,1.5,2,3e2\n".into(),
+                2,
+                None,
+                "0,1.5,2,3e2",
+            ),
+            (
+                "# c\ntime_s,armature_voltage_V,speed_rad_s\n0,1,2\n".into(),
+                2,
+                Some(COL_CURRENT),
+                "missing column",
+            ),
+            (
+                "time_s,armature_voltage_V,armature_current_A\n0,1,2\n".into(),
+                1,
+                Some(COL_SPEED),
+                "speed_rpm",
+            ),
+            (format!("time_s,{HEAD}"), 1, Some(COL_TIME), "time_s"),
+            (format!("# c\n{HEAD}# nothing\n"), 2, None, "no data rows"),
+            // The rows.
+            (
+                with_head("0,1,2,3\n0.1,1,abc,3\n"),
+                3,
+                Some(COL_CURRENT),
+                "\"abc\" is not a number",
+            ),
+            (
+                with_head("0,,2,3\n"),
+                2,
+                Some(COL_VOLTAGE),
+                "\"\" is not a number",
+            ),
+            (
+                with_head("0,1,2,3\n0.5,1,2,3\n0.5,1,2,3\n"),
+                4,
+                Some(COL_TIME),
+                "line 3",
+            ),
+            (
+                with_head("0,1,2,3\n# x\n-1,1,2,3\n"),
+                4,
+                Some(COL_TIME),
+                "data.csv:4",
+            ),
+            (
+                with_head("0,1,2\n"),
+                2,
+                Some(COL_SPEED),
+                "3 fields, the header has 4",
+            ),
+            (with_head("0,1,2,3,4\n"), 2, None, "5 fields"),
+        ];
+        for (text, line, column, says) in &cases {
+            let s = error(text, *line, *column);
+            assert!(s.contains(says), "{text:?}: {s}");
+        }
+        let s = error(&with_head("0,1,2,3\n0.1,1,abc,3\n"), 3, Some(COL_CURRENT));
         assert!(s.ends_with("\"abc\" is not a number"), "{s}");
-        let s = error(
-            "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,,2,3\n",
-            2,
-            Some(COL_VOLTAGE),
-        );
-        assert!(s.contains("\"\" is not a number"), "{s}");
-    }
-
-    #[test]
-    fn nan_and_inf() {
         for bad in ["NaN", "nan", "inf", "-infinity"] {
             let s = error(
-                &format!(
-                    "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,1,2,3\n1,1,2,{bad}\n"
-                ),
+                &with_head(&format!("0,1,2,3\n1,1,2,{bad}\n")),
                 3,
                 Some(COL_SPEED),
             );
             assert!(s.contains("not a finite number"), "{s}");
         }
-    }
-
-    #[test]
-    fn time_must_increase_strictly() {
-        let head = "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n";
-        let s = error(
-            &format!("{head}0,1,2,3\n0.5,1,2,3\n0.5,1,2,3\n"),
-            4,
-            Some(COL_TIME),
-        );
-        assert!(s.contains("line 3"), "{s}");
-        error(
-            &format!("{head}0,1,2,3\n# x\n-1,1,2,3\n"),
-            4,
-            Some(COL_TIME),
-        );
-    }
-
-    #[test]
-    fn wrong_number_of_fields() {
-        let head = "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n";
-        let s = error(&format!("{head}0,1,2\n"), 2, Some(COL_SPEED));
-        assert!(s.contains("3 fields, the header has 4"), "{s}");
-        let s = error(&format!("{head}0,1,2,3,4\n"), 2, None);
-        assert!(s.contains("5 fields"), "{s}");
-    }
-
-    #[test]
-    fn empty_file_and_no_rows() {
-        let s = error("", 1, None);
-        assert!(s.contains("no header"), "{s}");
-        let s = error("# only a comment\n\n", 2, None);
-        assert!(s.contains("no header"), "{s}");
-        let s = error(
-            "# c\ntime_s,armature_voltage_V,armature_current_A,speed_rad_s\n# nothing\n",
-            2,
-            None,
-        );
-        assert!(s.contains("no data rows"), "{s}");
     }
 
     #[test]
