@@ -91,12 +91,60 @@ pub fn held_out_sign_flip_test(
     candidate: &[f64],
     candidates_tried: usize,
 ) -> HeldOutTest {
-    use rand::{rngs::StdRng, RngExt, SeedableRng};
     let n = nominal.len().min(candidate.len());
     let gains: Vec<f64> = (0..n).map(|b| nominal[b] - candidate[b]).collect();
-    let sum: f64 = gains.iter().sum();
+    sign_flip(&gains, &gains, candidates_tried)
+}
+
+/// [`held_out_sign_flip_test`] on each block's gain relative to its size,
+/// `(nominal − candidate) / (nominal + candidate)`, in [−1, 1]: every
+/// block counts by the share of its squared residual the candidate
+/// removes (or adds), not by the size of that residual. Its false-alarm
+/// rate holds on the same terms (each block's relative gain is as likely
+/// negative as positive when the two models are equally wrong).
+///
+/// Why, for the DC diagnosis's blocks of a few tens of samples: the
+/// nominal model's largest misfits lie in a few transients, and there the
+/// absolute gains are large both ways; a candidate that removes a share of
+/// the misfit in most blocks can be outweighed by one transient block it
+/// predicts worse. On the blind DC suites (three seeds) it named three
+/// more withheld effects and lost one (own cases 60/75 either way,
+/// gym-electric-motor 41/45 → 43/45), no false alarm. Not for the IM
+/// sweep, whose blocks are operating points: there it lost six of 99 verdicts.
+/// Both forms with the smaller p-value doubled gave own cases 59/75,
+/// gym-electric-motor 43/45 (docs/diagnosis-dc.md).
+pub fn held_out_relative_sign_flip_test(
+    nominal: &[f64],
+    candidate: &[f64],
+    candidates_tried: usize,
+) -> HeldOutTest {
+    let n = nominal.len().min(candidate.len());
+    let gains: Vec<f64> = (0..n).map(|b| nominal[b] - candidate[b]).collect();
+    let relative: Vec<f64> = (0..n)
+        .map(|b| {
+            let size = nominal[b] + candidate[b];
+            if size > 0.0 {
+                gains[b] / size
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    sign_flip(&gains, &relative, candidates_tried)
+}
+
+/// The sign-flip test of `tested` (one value per block), reporting the
+/// mean of `gains` (the absolute gain per block).
+fn sign_flip(gains: &[f64], tested: &[f64], candidates_tried: usize) -> HeldOutTest {
+    use rand::{rngs::StdRng, RngExt, SeedableRng};
+    let n = tested.len();
+    let sum: f64 = tested.iter().sum();
     let mut test = HeldOutTest {
-        mean_gain: if n > 0 { sum / n as f64 } else { 0.0 },
+        mean_gain: if n > 0 {
+            gains.iter().sum::<f64>() / n as f64
+        } else {
+            0.0
+        },
         blocks: n,
         p_value: 1.0,
     };
@@ -106,7 +154,7 @@ pub fn held_out_sign_flip_test(
     let mut rng = StdRng::seed_from_u64(0x5eed);
     let mut exceed = 0usize;
     for _ in 0..SIGN_FLIPS {
-        let flipped: f64 = gains
+        let flipped: f64 = tested
             .iter()
             .map(|g| if rng.random::<bool>() { *g } else { -*g })
             .sum();
@@ -298,6 +346,35 @@ pub(crate) mod tests {
         assert!(held_out_sign_flip_test(&nominal, &candidate, 6).significant());
         assert_eq!(
             held_out_sign_flip_test(&candidate, &candidate, 1).p_value,
+            1.0
+        );
+    }
+
+    #[test]
+    fn relative_sign_flip_test_holds_its_rate_and_is_not_outweighed_by_one_block() {
+        let trials = 200;
+        let alarms = false_alarms(trials, |a, b| {
+            held_out_relative_sign_flip_test(a, b, 1).significant()
+        });
+        // 1 % nominal: 2 of 200 expected; 8 would be p < 0.001 binomially.
+        assert!(alarms <= 8, "{alarms} false alarms in {trials}");
+        // Half of 60 blocks carry a misfit the candidate removes; one
+        // block (a transient it extrapolates badly) it predicts far worse.
+        let nominal: Vec<f64> = noise(13, 60)
+            .iter()
+            .enumerate()
+            .map(|(k, x)| x * x + if k < 30 { 4.0 } else { 0.0 })
+            .collect();
+        let mut candidate: Vec<f64> = noise(14, 60).iter().map(|x| x * x).collect();
+        candidate[59] += 400.0;
+        assert!(!held_out_sign_flip_test(&nominal, &candidate, 6).significant());
+        let relative = held_out_relative_sign_flip_test(&nominal, &candidate, 6);
+        assert!(relative.significant(), "{relative:?}");
+        // The mean gain it reports is the absolute one.
+        let absolute = held_out_sign_flip_test(&nominal, &candidate, 6);
+        assert_eq!(relative.mean_gain, absolute.mean_gain);
+        assert_eq!(
+            held_out_relative_sign_flip_test(&candidate, &candidate, 1).p_value,
             1.0
         );
     }

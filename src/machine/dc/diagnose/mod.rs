@@ -46,8 +46,8 @@ use crate::contract::{
     reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
 };
 use crate::diagnose::decision::{
-    block_sums, effective_samples, held_out_sign_flip_test, held_out_test, median, penalised_score,
-    residual_noise_sigma, HeldOutTest,
+    block_sums, effective_samples, held_out_relative_sign_flip_test, held_out_test, median,
+    penalised_score, residual_noise_sigma, HeldOutTest,
 };
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{
@@ -428,8 +428,11 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
             // brush drop near zero current, a coast-down's tail) gains
             // much there, which the t-test counts as variance rather than
             // evidence. On the three blind seeds' DC cases it named 4 more
-            // withheld effects than the t-test and no false alarm.
-            let mut test = held_out_sign_flip_test(&nominal.blocks, &fam.blocks, tried);
+            // withheld effects than the t-test and no false alarm. Each
+            // block counts by the share of its misfit the candidate
+            // removes (`held_out_relative_sign_flip_test`), so that one
+            // transient predicted worse does not outweigh the rest.
+            let mut test = held_out_relative_sign_flip_test(&nominal.blocks, &fam.blocks, tried);
             // In sample: the likelihood-ratio test of the effect's
             // parameters on all segments. Blocks of one held-out segment
             // share that fold's parameter estimates, so a candidate's
