@@ -883,6 +883,26 @@ fn prepare_runs<'a>(
             continue;
         }
         let coast = seg.kind == Some(SegmentKind::DcCoastdown) || is_coastdown(seg);
+        // A reading that never changes (a part of a record at rest, whose
+        // encoder reads 0 throughout) has no spread to measure a misfit
+        // against: the segment can be neither held out nor scored.
+        let still = |y: &[f64]| y.iter().all(|v| *v == y[0]);
+        let constant = if still(&seg.speed) {
+            Some("speed")
+        } else if !coast && still(&seg.current) {
+            Some("current")
+        } else {
+            None
+        };
+        if let Some(what) = constant {
+            warnings.push(format!(
+                "segment {} ({}) reads the same {what} throughout: nothing to fit or hold out; \
+                 not used",
+                seg.index, seg.label
+            ));
+            heat += seg_heat;
+            continue;
+        }
         // The segment before, where this one follows it in time: after a
         // gap (samples the logger dropped, `machine::dc::gaps`) it starts
         // from its own first sample, as a record's first segment does.
