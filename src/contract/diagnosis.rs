@@ -116,9 +116,9 @@ pub struct Candidate {
 
 impl Candidate {
     /// The first of its numbers that is not finite (a parameter, a bound
-    /// of an interval, a score), named: JSON has no NaN or infinity, so
-    /// such a candidate cannot be reported.
-    pub fn non_finite(&self) -> Option<String> {
+    /// of an interval, a score), named, with the number: JSON has no NaN
+    /// or infinity, so such a candidate cannot be reported.
+    pub fn non_finite(&self) -> Option<(&str, f64)> {
         let params = self
             .params
             .iter()
@@ -133,10 +133,7 @@ impl Candidate {
             ("score", self.score),
             ("p_value", self.p_value),
         ];
-        params
-            .chain(scores)
-            .find(|(_, v)| !v.is_finite())
-            .map(|(k, v)| format!("{k} = {v}"))
+        params.chain(scores).find(|(_, v)| !v.is_finite())
     }
 }
 
@@ -152,7 +149,15 @@ pub fn reportable(
         .filter(|c| {
             let why = c
                 .non_finite()
-                .map(|what| format!("its {what} is not a finite number"))
+                .map(|(key, v)| match c.params.get(key) {
+                    // A scale at infinity (a saturation current, a time
+                    // constant) is the effect fitted away: the nominal
+                    // model again.
+                    Some(p) if p.value.is_infinite() => format!(
+                        "its fit takes the effect away ({key} = {v}): the record shows none of it"
+                    ),
+                    _ => format!("its {key} = {v} is not a finite number"),
+                })
                 .or_else(|| {
                     crate::report::unphysical_param(&c.params)
                         .map(|what| format!("it needs {what}, outside its physical range"))
@@ -267,7 +272,9 @@ mod tests {
     }
 
     /// A saturation fit with `s ≤ 0` has no saturation current: it once
-    /// reached the report as `"Isat": {"value": null}`.
+    /// reached the report as `"Isat": {"value": null}`. An infinite scale
+    /// is said to be the effect fitted away; any other non-finite number
+    /// is named as such.
     #[test]
     fn a_candidate_with_a_non_finite_number_is_left_out_with_a_warning() {
         let mut warnings = Vec::new();
@@ -275,15 +282,20 @@ mod tests {
             [
                 candidate("inductance_saturation", f64::INFINITY),
                 candidate("brush_drop", 3.0),
+                candidate("armature_reaction", f64::NAN),
             ],
             &mut warnings,
         );
         assert_eq!(kept.len(), 1);
         assert_eq!(kept[0].effect, "brush_drop");
-        assert_eq!(warnings.len(), 1);
-        assert!(
-            warnings[0].contains("inductance_saturation") && warnings[0].contains("Isat = inf"),
-            "{warnings:?}"
+        assert_eq!(
+            warnings,
+            [
+                "candidate inductance_saturation left out of the report: its fit takes the \
+                 effect away (Isat = inf): the record shows none of it",
+                "candidate armature_reaction left out of the report: its Isat = NaN is not a \
+                 finite number",
+            ]
         );
         let json = serde_json::to_string(&kept).unwrap();
         assert!(!json.contains("\"value\":null"), "{json}");

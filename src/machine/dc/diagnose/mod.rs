@@ -188,23 +188,33 @@ pub fn diagnose_dc(
 fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<DiagnosisRun, Attempt> {
     let mut warnings = record.notes.clone();
     warnings.extend(crate::identify::clipped_channels(record));
+    // Nominal: start from the identification's output-error fit, whose
+    // parameters also say where a record's first segment starts when it
+    // is not plainly at rest (fitted only once a segment needs it, so
+    // that the record's own refusals come first).
+    let oe = std::cell::OnceCell::new();
+    let nominal_oe = || {
+        oe.get_or_init(|| {
+            output_error(
+                record,
+                None,
+                &OutputErrorOptions {
+                    validate: false,
+                    correct_input_noise: false,
+                    ..Default::default()
+                },
+            )
+            .map(|fit| fit.params)
+            .map_err(|e| e.to_string())
+        })
+        .clone()
+    };
     let held = held_levels(&record.segments);
-    let runs = prepare_runs(&held, &mut warnings)?;
+    let runs = prepare_runs(&held, &|| nominal_oe().ok(), &mut warnings)?;
     let weights = channel_weights(&runs, &mut warnings);
     let scales0 = scales(&runs);
-
-    // Nominal: start from the identification's output-error fit.
-    let oe = output_error(
-        record,
-        None,
-        &OutputErrorOptions {
-            validate: false,
-            correct_input_noise: false,
-            ..Default::default()
-        },
-    )
-    .map_err(|e| DiagnoseError::NominalFit(e.to_string()))?;
-    let nominal_start = AugModel::nominal(oe.params);
+    let oe_params = nominal_oe().map_err(DiagnoseError::NominalFit)?;
+    let nominal_start = AugModel::nominal(oe_params);
     let nominal_spec = FitSpec {
         start: nominal_start,
         effect: Vec::new(),
@@ -857,6 +867,7 @@ fn floored(m: &AugModel, dt: f64, i_max: f64) -> AugModel {
 /// The segments that take part, each with how it starts.
 fn prepare_runs<'a>(
     segs: &'a [DcSegment],
+    estimate: &dyn Fn() -> Option<DcParams>,
     warnings: &mut Vec<String>,
 ) -> Result<Vec<SegmentRun<'a>>, DiagnoseError> {
     let warnings_before = warnings.len();
@@ -944,7 +955,7 @@ fn prepare_runs<'a>(
                 heat += seg_heat;
                 continue;
             }
-            None if !at_rest => first_state(seg),
+            None if !at_rest => first_state(seg, dt, coast, estimate()),
             _ => Start::Rest,
         };
         let continues = match (prev, runs.last()) {
@@ -993,37 +1004,48 @@ fn prepare_runs<'a>(
     Ok(runs)
 }
 
-/// The start of a record's first segment, not at rest: settled at its
-/// first voltage when the speed holds still over its first samples (a
-/// record that begins on a held level), else the measured state at its
-/// first sample (a record whose first sample is already inside a
-/// transient: a closed loop's first command, a file cut after the step).
-/// Assuming a settled start there would begin the simulation at the
-/// first command's steady speed, however far from the measured one.
-fn first_state(seg: &DcSegment) -> Start {
-    let n = seg.speed.len();
-    let m = (n / 20).clamp(4, 32).min(n);
-    let head = &seg.speed[..m];
-    let half = m / 2;
-    let mean = |y: &[f64]| y.iter().sum::<f64>() / y.len().max(1) as f64;
-    let drift = (mean(&head[half..]) - mean(&head[..half])).abs();
-    // Noise from the whole segment's sample-to-sample changes (robust to
-    // its steps); a quantised reading whose changes are mostly zero still
-    // has its step as the resolution.
-    let sigma = crate::diagnose::decision::noise_sigma(&seg.speed);
-    let step = seg
-        .speed
-        .windows(2)
-        .map(|w| (w[1] - w[0]).abs())
-        .filter(|d| *d > 0.0)
-        .fold(f64::INFINITY, f64::min);
-    let resolution = if step.is_finite() { step } else { 0.0 };
-    let tolerance = (4.0 * sigma / (half.max(1) as f64).sqrt()).max(2.0 * resolution);
-    if drift <= tolerance {
-        Start::Settled(seg.voltage[0])
-    } else {
-        Start::State(seg.current[0], seg.speed[0])
-    }
+/// The start of a record's first segment (or of one after a gap in
+/// time) whose first speed reading is not at rest, which no level before
+/// it gives: settled at its first voltage (a record that begins on a
+/// held level), in the measured state of its first sample (a closed
+/// loop's first command, a file cut after a step), or at rest after all
+/// (a start from rest whose first speed reading is noise, or has already
+/// moved). Whichever of the three the motor `estimate` (the
+/// identification's output-error fit) simulates closest to the
+/// segment's readings: a rule on the first readings alone (does the
+/// speed drift over them) takes a start from rest read through a noisy
+/// tachometer for a settled level, and a wrong start leaves a misfit over
+/// the whole first transient that the nominal parameters then bend to
+/// absorb. Without an estimate (no output-error fit: the diagnosis stops
+/// at its nominal fit anyway) the measured first state.
+fn first_state(seg: &DcSegment, dt: f64, coast: bool, estimate: Option<DcParams>) -> Start {
+    let Some(estimate) = estimate else {
+        return Start::State(seg.current[0], seg.speed[0]);
+    };
+    let model = AugModel::nominal(estimate);
+    let misfit = |start: Start| {
+        let run = SegmentRun {
+            seg,
+            dt,
+            start,
+            coast,
+            heat_before: 0.0,
+            continues: None,
+        };
+        all_series(&model, &[run])
+            .and_then(|s| s.first().map(|s| s.nrmse))
+            .filter(|v| v.is_finite())
+            .unwrap_or(f64::INFINITY)
+    };
+    [
+        Start::Rest,
+        Start::Settled(seg.voltage[0]),
+        Start::State(seg.current[0], seg.speed[0]),
+    ]
+    .into_iter()
+    .map(|start| (misfit(start), start))
+    .min_by(|a, b| a.0.total_cmp(&b.0))
+    .map_or(Start::Rest, |(_, start)| start)
 }
 
 /// How a segment whose first sample is at `first` (s) follows one whose
@@ -1293,6 +1315,19 @@ mod tests {
     use crate::diagnose::blind::simulate_dc_case;
     use rand::{rngs::StdRng, SeedableRng};
 
+    /// The nominal parameters a simulated case was made with.
+    fn truth_params(case: &crate::diagnose::blind::BlindRecord) -> DcParams {
+        let n = &case.truth.nominal;
+        DcParams {
+            ra: n["Ra"],
+            la: n["La"],
+            k: n["K"],
+            j: n["J"],
+            f: n["f"],
+            tst: n["Tst"],
+        }
+    }
+
     /// The generator and the diagnosis' nominal model agree: on cases
     /// without an effect, the model at the true parameters misses the
     /// readings by the noise alone (segment starts, encoder reading,
@@ -1302,17 +1337,9 @@ mod tests {
         let mut rng = StdRng::seed_from_u64(5);
         for _ in 0..4 {
             let case = simulate_dc_case(None, &mut rng);
-            let n = &case.truth.nominal;
-            let p = DcParams {
-                ra: n["Ra"],
-                la: n["La"],
-                k: n["K"],
-                j: n["J"],
-                f: n["f"],
-                tst: n["Tst"],
-            };
+            let p = truth_params(&case);
             let held = held_levels(&case.record.segments);
-            let runs = prepare_runs(&held, &mut Vec::new()).unwrap();
+            let runs = prepare_runs(&held, &|| Some(p), &mut Vec::new()).unwrap();
             assert_eq!(runs.len(), 6);
             assert_eq!(runs[0].start, Start::Rest);
             assert!(runs[5].coast);
@@ -1427,10 +1454,12 @@ mod tests {
     #[test]
     fn a_segment_after_a_gap_starts_from_its_own_first_sample() {
         let mut rng = StdRng::seed_from_u64(1);
-        let mut segs = simulate_dc_case(None, &mut rng).record.segments;
+        let case = simulate_dc_case(None, &mut rng);
+        let p = truth_params(&case);
+        let mut segs = case.record.segments;
         segs.truncate(3);
         let mut warnings = Vec::new();
-        let joined = prepare_runs(&segs, &mut warnings).unwrap();
+        let joined = prepare_runs(&segs, &|| Some(p), &mut warnings).unwrap();
         assert!(joined[1].continues.is_some());
         assert!(
             !matches!(joined[1].start, Start::State(..)),
@@ -1449,9 +1478,36 @@ mod tests {
         ] {
             ch.drain(..drop);
         }
-        let runs = prepare_runs(&segs, &mut warnings).unwrap();
+        let runs = prepare_runs(&segs, &|| Some(p), &mut warnings).unwrap();
         assert_eq!(runs[1].continues, None);
-        assert_eq!(runs[1].start, first_state(&segs[1]));
+        assert_eq!(
+            runs[1].start,
+            first_state(&segs[1], runs[1].dt, false, Some(p))
+        );
+    }
+
+    /// A record that starts from rest read through a noisy tachometer:
+    /// its first speed reading is well off zero and its first readings
+    /// barely drift against the noise. The start is chosen by how the
+    /// motor simulates from it, so the first segment still starts from
+    /// rest, not settled at its first voltage or in its noisy first state.
+    #[test]
+    fn a_noisy_start_from_rest_is_taken_from_rest() {
+        use rand_distr::{Distribution, Normal};
+        let mut rng = StdRng::seed_from_u64(2);
+        let case = simulate_dc_case(None, &mut rng);
+        let p = truth_params(&case);
+        let mut segs = case.record.segments;
+        segs.truncate(3);
+        let seg = &mut segs[0];
+        let top = seg.speed.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let noise = Normal::new(0.0, 0.03 * top).unwrap();
+        for w in &mut seg.speed {
+            *w += noise.sample(&mut rng);
+        }
+        seg.speed[0] = 0.05 * top;
+        let runs = prepare_runs(&segs, &|| Some(p), &mut Vec::new()).unwrap();
+        assert_eq!(runs[0].start, Start::Rest);
     }
 
     /// Interleaved blocks held out: a withheld armature reaction is named
