@@ -1,8 +1,11 @@
 //! Interleaved time-block cross-validation of a DC fit.
 //!
-//! The record's samples are cut into blocks of [`CV_BLOCK`] samples,
-//! numbered across the whole record, and block `b` belongs to fold
-//! `b mod CV_FOLDS`. Each fold refits the model without its blocks' rows
+//! Each segment's samples are cut into blocks of [`CV_BLOCK`] samples
+//! from its start, and block `b` of the segment at position `s` belongs
+//! to fold `(b + s) mod CV_FOLDS`: the transient after each step (its
+//! first block) goes to a different fold from one segment to the next,
+//! so no fold holds out every transient and leaves the parameters only
+//! transients determine (La, J) to the settled rest. Each fold refits the model without its blocks' rows
 //! and simulates the whole record with the refit; each sample's held-out
 //! residual is the one of the fold that left it out. Every fold sees every
 //! segment's operating range, so an effect that shows only at the largest
@@ -56,24 +59,23 @@ pub fn interleaved_requested(warnings: &mut Vec<String>) -> bool {
     }
 }
 
-/// The fold of the sample numbered `g` across the record.
-fn fold_of(g: usize) -> usize {
-    (g / CV_BLOCK) % CV_FOLDS
+/// The fold of sample `k` of the segment at position `s` of the record:
+/// blocks counted from the segment's start, the first in fold `s`.
+fn fold_of(s: usize, k: usize) -> usize {
+    (k / CV_BLOCK + s) % CV_FOLDS
 }
 
 /// Per row of the record's residual vector ([`runs_residuals`] order):
 /// the fold that holds it out.
 pub(super) fn row_folds(runs: &[SegmentRun]) -> Vec<usize> {
     let mut out = Vec::with_capacity(runs.iter().map(segment_rows).sum());
-    let mut g = 0usize;
-    for run in runs {
-        for _ in 0..run.len() {
-            let f = fold_of(g);
+    for (s, run) in runs.iter().enumerate() {
+        for k in 0..run.len() {
+            let f = fold_of(s, k);
             out.push(f);
             if !run.coast {
                 out.push(f);
             }
-            g += 1;
         }
     }
     out
@@ -136,20 +138,12 @@ pub fn cross_validated(
         .iter()
         .map(|r| (vec![0.0; r.len()], vec![0.0; r.len()]))
         .collect();
-    let offsets: Vec<usize> = runs
-        .iter()
-        .scan(0usize, |g, r| {
-            let o = *g;
-            *g += r.len();
-            Some(o)
-        })
-        .collect();
     for f in 0..CV_FOLDS {
         let model = refit_fold(spec, all, runs, &rows, f, w, patience)?;
         let mut counts = vec![0usize; runs.len()];
         let ok = model.simulate_runs(runs, &mut |n, i, s| {
             let k = counts[n];
-            if k < runs[n].len() && fold_of(offsets[n] + k) == f {
+            if k < runs[n].len() && fold_of(n, k) == f {
                 sims[n].0[k] = i;
                 sims[n].1[k] = s;
             }
@@ -171,13 +165,28 @@ mod tests {
 
     #[test]
     fn every_fold_holds_out_a_fifth_of_the_blocks_in_turn() {
-        let folds: Vec<usize> = (0..CV_BLOCK * CV_FOLDS * 2).map(fold_of).collect();
+        let folds: Vec<usize> = (0..CV_BLOCK * CV_FOLDS * 2)
+            .map(|k| fold_of(0, k))
+            .collect();
         for f in 0..CV_FOLDS {
             let n = folds.iter().filter(|k| **k == f).count();
             assert_eq!(n, 2 * CV_BLOCK, "fold {f}");
         }
-        assert_eq!(fold_of(CV_BLOCK - 1), 0);
-        assert_eq!(fold_of(CV_BLOCK), 1);
-        assert_eq!(fold_of(CV_BLOCK * CV_FOLDS), 0);
+        assert_eq!(fold_of(0, CV_BLOCK - 1), 0);
+        assert_eq!(fold_of(0, CV_BLOCK), 1);
+        assert_eq!(fold_of(0, CV_BLOCK * CV_FOLDS), 0);
+    }
+
+    /// Segments of one length (a staircase's equal holds): their first
+    /// blocks, the transients after the steps, fall in every fold in
+    /// turn, not all in one.
+    #[test]
+    fn the_steps_transients_are_spread_over_the_folds() {
+        let len = CV_BLOCK * CV_FOLDS;
+        let first: Vec<usize> = (0..CV_FOLDS).map(|s| fold_of(s, 0)).collect();
+        assert_eq!(first, [0, 1, 2, 3, 4]);
+        for s in 0..CV_FOLDS {
+            assert_eq!(fold_of(s, len), fold_of(s, 0), "segment {s}");
+        }
     }
 }

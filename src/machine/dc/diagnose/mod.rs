@@ -4,7 +4,7 @@
 //! 1. The paper's model is fitted by output error to every segment at
 //!    once (started from the identification's own output-error fit), then
 //!    refitted without each fold of held-out data: by default interleaved
-//!    blocks of 128 samples across the record, five folds (`cv.rs`), so
+//!    blocks of 128 samples in every segment, five folds (`cv.rs`), so
 //!    that every fold sees every segment's operating range; with
 //!    `MOTORBENCH_DC_VALIDATION=segments` each segment in turn (the
 //!    coast-down too). The held-out simulation from the measured voltage
