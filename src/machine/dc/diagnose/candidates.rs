@@ -64,6 +64,14 @@ const BRUSH_KNEES: [f64; 3] = [0.03, 0.3, 1.0];
 /// La or Ra and the gradient points elsewhere.
 const LAG_SAMPLES: [f64; 2] = [1.0, 20.0];
 
+/// Dead times a sensor-lag fit is tried with, in whole samples, before
+/// its lag (not fitted: the fit with each is kept if it explains the
+/// fitting data best). A reading converted, filtered or sent one sample
+/// late is common on a rig (an ADC's pipeline, a fieldbus poll), and a
+/// lag alone takes it up only in part: the delayed step's first sample
+/// is missed by the whole step.
+const DELAY_SAMPLES: [f64; 2] = [0.0, 1.0];
+
 /// Decay speeds a breakaway fit starts from, as shares of the record's
 /// largest speed: the breakaway excess of dry friction fades over a speed
 /// band anywhere from a few percent of rated speed to a third of it, and
@@ -115,13 +123,15 @@ pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
             ),
         ])
         .chain(LAG_SAMPLES.iter().flat_map(|n| {
-            [LagChannel::Current, LagChannel::Speed].map(|ch| {
-                def(
-                    Effect::SensorLag,
-                    Augment::SensorLag(ch),
-                    [n * s.dt, 0.0, 0.0],
-                    vec![lin(n * s.dt)],
-                )
+            DELAY_SAMPLES.iter().flat_map(move |d| {
+                [LagChannel::Current, LagChannel::Speed].map(|ch| {
+                    def(
+                        Effect::SensorLag,
+                        Augment::SensorLag(ch),
+                        [n * s.dt, d * s.dt, 0.0],
+                        vec![lin(n * s.dt)],
+                    )
+                })
             })
         }))
         .chain(BRUSH_KNEES.iter().map(|share| {
@@ -227,11 +237,11 @@ pub fn undetermined(m: &AugModel, s: &RecordScales) -> Option<String> {
             "its resonance fr = {:.1} Hz has a period shorter than four samples",
             e[0]
         )),
-        Augment::SensorLag(_) if e[0].abs() < MIN_LAG_SAMPLES * s.dt => Some(format!(
+        Augment::SensorLag(_) if e[0].abs() + e[1].abs() < MIN_LAG_SAMPLES * s.dt => Some(format!(
             "its time constant tau = {:.2e} s is under half the sample interval: a lag \
-             that small is the sampling's own timing (a reading that is a mean over its \
-             interval, an encoder's speed or an averaged current, stands half an interval \
-             back; channels read one after the other), not a sensor",
+                 that small is the sampling's own timing (a reading that is a mean over its \
+                 interval, an encoder's speed or an averaged current, stands half an interval \
+                 back; channels read one after the other), not a sensor",
             e[0].abs()
         )),
         _ => None,
@@ -353,6 +363,10 @@ pub fn effect_params(
                 ci(0).map(|c| [c[0].max(0.0), c[1].abs()]),
                 "s",
             );
+            if m.e[1] > 0.0 {
+                // Chosen from whole samples, not fitted: no interval.
+                put("delay_s", m.e[1], None, "s");
+            }
         }
         Augment::ShaftCompliance => {
             put("fr", m.e[0], ci(0), "Hz");

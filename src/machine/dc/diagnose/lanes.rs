@@ -189,7 +189,7 @@ impl Lane<'_> {
         EndState {
             x: [self.i, self.w, self.w, 0.0],
             reading: self.last,
-            lag: None,
+            ..EndState::default()
         }
     }
 }

@@ -85,7 +85,13 @@ pub struct EndState {
     pub(super) reading: (f64, f64),
     /// The lagged readings of a sensor-lag model (current, speed).
     pub(super) lag: Option<(f64, f64)>,
+    /// A sensor-lag model's last readings before its delay and lag
+    /// (current, speed), the latest first.
+    pub(super) raw: [(f64, f64); MAX_DELAY],
 }
+
+/// Longest dead time of a sensor-lag model, in samples.
+pub const MAX_DELAY: usize = 2;
 
 /// One recorded segment ready to simulate.
 #[derive(Debug, Clone, Copy)]
@@ -401,27 +407,47 @@ impl AugModel {
                 } else {
                     0.0
                 };
+                // A dead time of whole samples before the lag (`e[1]`, s):
+                // a reading taken, converted or sent a sample late.
+                let delay = ((self.e[1].abs() / run.dt).round() as usize).min(MAX_DELAY);
                 let nominal = AugModel::nominal(self.p);
                 let inner = from.map(|e| EndState { lag: None, ..*e });
                 // A shared boundary sample is the previous segment's last
                 // reading, lagged already.
                 let mut skip = from.is_some() && run.continues == Some(Continuation::Shared);
                 let mut y: Option<(f64, f64)> = from.and_then(|e| e.lag);
+                // The readings before the dead time, the latest first;
+                // before the record's first sample, that sample.
+                let mut raw: Option<[(f64, f64); MAX_DELAY]> =
+                    from.filter(|e| e.lag.is_some()).map(|e| e.raw);
                 let end = nominal.simulate_from(run, inner.as_ref(), &mut |i, w| {
+                    if skip {
+                        skip = false;
+                        if let Some(prev) = y {
+                            out(prev.0, prev.1);
+                            return;
+                        }
+                    }
+                    let past = raw.get_or_insert([(i, w); MAX_DELAY]);
+                    let (di, dw) = if delay == 0 { (i, w) } else { past[delay - 1] };
+                    past.rotate_right(1);
+                    past[0] = (i, w);
                     let (fi, fw) = match y {
-                        Some(prev) if skip => prev,
-                        None => (i, w),
+                        None => match ch {
+                            LagChannel::Current => (di, w),
+                            LagChannel::Speed => (i, dw),
+                        },
                         Some((pi, pw)) => match ch {
-                            LagChannel::Current => (a * pi + (1.0 - a) * i, w),
-                            LagChannel::Speed => (i, a * pw + (1.0 - a) * w),
+                            LagChannel::Current => (a * pi + (1.0 - a) * di, w),
+                            LagChannel::Speed => (i, a * pw + (1.0 - a) * dw),
                         },
                     };
-                    skip = false;
                     y = Some((fi, fw));
                     out(fi, fw);
                 })?;
                 Some(EndState {
                     lag: y,
+                    raw: raw.unwrap_or_default(),
                     reading: y.unwrap_or(end.reading),
                     ..end
                 })
@@ -565,7 +591,7 @@ impl AugModel {
         Some(EndState {
             x: [x[0], x[1], x[2], x[3]],
             reading: last,
-            lag: None,
+            ..EndState::default()
         })
     }
 }
@@ -765,6 +791,26 @@ mod tests {
     /// sample right after) is simulated as if it were one segment, for the
     /// rigid, the two-mass and the lagged model alike; a segment that does
     /// not continue starts from its own start.
+    /// A sensor lag's dead time: with no lag, the reading is the motor's
+    /// one sample late (the first sample standing for the one before it);
+    /// the other channel is read on time.
+    #[test]
+    fn a_dead_time_reads_the_channel_a_sample_late() {
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let seg = staircase(&p, 5e-4);
+        let r = run(&seg);
+        let (i0, w0) = sim(&AugModel::nominal(p), &r);
+        let late = AugModel {
+            aug: Augment::SensorLag(LagChannel::Current),
+            e: [0.0, 5e-4, 0.0],
+            ..AugModel::nominal(p)
+        };
+        let (i1, w1) = sim(&late, &r);
+        assert_eq!(i1[0], i0[0]);
+        assert_eq!(&i1[1..], &i0[..i0.len() - 1]);
+        assert_eq!(w1, w0);
+    }
+
     #[test]
     fn continued_segments_are_one_simulation() {
         let p = DcParams::SEED_TABLE4_MOMENTS;
@@ -807,23 +853,18 @@ mod tests {
             run(&segs[1], Start::State(1.0, 1.0), Some(Continuation::Shared)),
             run(&segs[2], Start::State(1.0, 1.0), Some(Continuation::Next)),
         ];
-        for aug in [
-            Augment::Nominal,
-            Augment::ShaftCompliance,
-            Augment::SensorLag(LagChannel::Current),
+        for (aug, e) in [
+            (Augment::Nominal, [40.0, 0.5, 0.1]),
+            (Augment::ShaftCompliance, [40.0, 0.5, 0.1]),
+            (Augment::SensorLag(LagChannel::Current), [2e-3, 0.0, 0.0]),
+            // A dead time of one and of two samples before the lag.
+            (Augment::SensorLag(LagChannel::Current), [2e-3, 5e-4, 0.0]),
+            (Augment::SensorLag(LagChannel::Speed), [2e-3, 1e-3, 0.0]),
         ] {
             let m = AugModel {
                 aug,
-                e: [40.0, 0.5, 0.1],
+                e,
                 ..AugModel::nominal(p)
-            };
-            let m = if aug == Augment::SensorLag(LagChannel::Current) {
-                AugModel {
-                    e: [2e-3, 0.0, 0.0],
-                    ..m
-                }
-            } else {
-                m
             };
             let (wi, ww) = sim(&m, &whole_run);
             let (mut ci, mut cw): (Vec<f64>, Vec<f64>) = (Vec::new(), Vec::new());
