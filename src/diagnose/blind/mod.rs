@@ -23,7 +23,7 @@ pub use error::SuiteError;
 pub use files::write_case_files;
 pub use score::{score_suite, CaseScore, SuiteScore, Tally};
 pub use suite::{
-    case_plan, generate_suite, CaseEntry, Manifest, SuitePlans, TruthFile, DEFAULT_SEED,
+    case_plan, generate_suite, suite_case, CaseEntry, Manifest, SuitePlans, TruthFile, DEFAULT_SEED,
 };
 
 use std::collections::BTreeMap;

@@ -18,7 +18,7 @@ use serde::{Deserialize, Serialize};
 
 use super::files::write_case_files;
 use super::SuiteError;
-use super::{simulate_dc_case_with, simulate_im_case, CaseTruth};
+use super::{simulate_dc_case_with, simulate_im_case, BlindRecord, CaseTruth};
 use super::{DcSetup, PlanKind};
 use crate::model::{Effect, Machine};
 use crate::record::SegmentKind;
@@ -107,9 +107,7 @@ pub fn generate_suite(
     if dir.exists() {
         return Err(SuiteError::Exists(dir.to_path_buf()));
     }
-    let mut rng = StdRng::seed_from_u64(seed);
-    let plan = case_plan(&mut rng);
-    let mut dc_cases = 0usize;
+    let plan = case_plan(&mut StdRng::seed_from_u64(seed));
     let mut manifest = Manifest {
         seed,
         cases: Vec::new(),
@@ -118,35 +116,12 @@ pub fn generate_suite(
         seed,
         cases: Vec::new(),
     };
+    let mut dc_cases = 0usize;
     for (n, (machine, effect)) in plan.iter().enumerate() {
-        // Each case draws from its own stream, so a case does not change
-        // when another machine's simulator draws differently.
-        let mut case_rng =
-            StdRng::seed_from_u64(seed ^ (0x9e37_79b9_7f4a_7c15_u64.wrapping_mul(n as u64 + 1)));
-        let (blind, kind) = match machine {
-            Machine::Dc => {
-                // Plans in turn, so every plan meets a mix of effects; the
-                // setup from a stream of its own, so the motor and the
-                // effect are those of the case's classic twin.
-                let kind = PlanKind::ALL[dc_cases % PlanKind::ALL.len()];
-                dc_cases += 1;
-                let mut setup_rng = StdRng::seed_from_u64(
-                    seed ^ (0x2545_f491_4f6c_dd1d_u64.wrapping_mul(n as u64 + 1)),
-                );
-                let setup = match plans {
-                    SuitePlans::Classic => DcSetup::classic(),
-                    SuitePlans::Wide => DcSetup::draw(kind, &mut setup_rng),
-                };
-                (
-                    simulate_dc_case_with(*effect, &setup, &mut case_rng),
-                    SegmentKind::DcStep,
-                )
-            }
-            Machine::Induction => (
-                simulate_im_case(*effect, &mut case_rng),
-                SegmentKind::ImSlipSweep,
-            ),
-        };
+        let (blind, kind) = simulate_case(seed, n, *machine, *effect, dc_cases, plans);
+        if *machine == Machine::Dc {
+            dc_cases += 1;
+        }
         let id = format!("case-{:02}", n + 1);
         let rel = PathBuf::from("cases").join(&id);
         let (files, nameplate) = write_case_files(&blind.record, &dir.join(&rel))?;
@@ -163,6 +138,56 @@ pub fn generate_suite(
     write_json(&dir.join("cases.json"), &manifest)?;
     write_json(&dir.join("truth.json"), &truth)?;
     Ok(manifest)
+}
+
+/// Case `n` (from 0) of the suite of `seed`: `machine` and `effect` from
+/// its plan, `dc_index` the number of DC cases before it.
+fn simulate_case(
+    seed: u64,
+    n: usize,
+    machine: Machine,
+    effect: Option<Effect>,
+    dc_index: usize,
+    plans: SuitePlans,
+) -> (BlindRecord, SegmentKind) {
+    // Each case draws from its own stream, so a case does not change
+    // when another machine's simulator draws differently.
+    let mut case_rng =
+        StdRng::seed_from_u64(seed ^ (0x9e37_79b9_7f4a_7c15_u64.wrapping_mul(n as u64 + 1)));
+    match machine {
+        Machine::Dc => {
+            // Plans in turn, so every plan meets a mix of effects; the
+            // setup from a stream of its own, so the motor and the effect
+            // are those of the case's classic twin.
+            let kind = PlanKind::ALL[dc_index % PlanKind::ALL.len()];
+            let mut setup_rng = StdRng::seed_from_u64(
+                seed ^ (0x2545_f491_4f6c_dd1d_u64.wrapping_mul(n as u64 + 1)),
+            );
+            let setup = match plans {
+                SuitePlans::Classic => DcSetup::classic(),
+                SuitePlans::Wide => DcSetup::draw(kind, &mut setup_rng),
+            };
+            (
+                simulate_dc_case_with(effect, &setup, &mut case_rng),
+                SegmentKind::DcStep,
+            )
+        }
+        Machine::Induction => (
+            simulate_im_case(effect, &mut case_rng),
+            SegmentKind::ImSlipSweep,
+        ),
+    }
+}
+
+/// The record and truth of one case of a suite (`case-NN`, `number` = NN)
+/// as [`generate_suite`] writes it, without writing anything: a test can
+/// diagnose one case of a suite that once exposed a defect.
+pub fn suite_case(seed: u64, number: usize, plans: SuitePlans) -> Option<BlindRecord> {
+    let plan = case_plan(&mut StdRng::seed_from_u64(seed));
+    let n = number.checked_sub(1)?;
+    let (machine, effect) = *plan.get(n)?;
+    let dc_index = plan[..n].iter().filter(|(m, _)| *m == Machine::Dc).count();
+    Some(simulate_case(seed, n, machine, effect, dc_index, plans).0)
 }
 
 fn write_json(path: &Path, value: &impl Serialize) -> Result<(), SuiteError> {
