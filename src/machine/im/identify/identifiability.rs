@@ -18,6 +18,10 @@ use crate::model::ImParam;
 /// sits at round-off, ~1e-15).
 pub const STRUCTURAL_LIMIT: f64 = 1e-8;
 
+/// Largest standard error of a weak direction (log scale) stated as a
+/// number; beyond it the direction is said to be undetermined.
+const LARGEST_STATED_STD: f64 = 10.0;
+
 /// One poorly determined direction in log-parameter space.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WeakDirection {
@@ -50,6 +54,13 @@ impl WeakDirection {
             .collect();
         let kind = if self.structural {
             "a family of equivalent circuits: no terminal data pin it".to_string()
+        } else if self.relative_std.is_nan() || self.relative_std > LARGEST_STATED_STD {
+            // A log-scale error beyond this is a factor of e¹⁰ either way:
+            // its digits say nothing a person can use.
+            format!(
+                "relative standard error above {:.0} %: the data do not determine it",
+                100.0 * LARGEST_STATED_STD
+            )
         } else {
             format!("relative standard error {:.0} %", 100.0 * self.relative_std)
         };
@@ -113,4 +124,32 @@ pub fn weak_directions(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A direction the data do not see at all is said to be undetermined,
+    /// not given an error of 90 digits (a record whose input power reads
+    /// half of what the machine took did that).
+    #[test]
+    fn an_unbounded_error_is_not_printed_as_a_number() {
+        let weak = |relative_std: f64| WeakDirection {
+            components: vec![(ImParam::Rs, 1.0)],
+            relative_singular_value: 1e-30,
+            relative_std,
+            structural: false,
+        };
+        assert_eq!(
+            weak(0.8).describe(),
+            "Rs +1.00 (relative standard error 80 %)"
+        );
+        for huge in [1.4e88, f64::INFINITY, f64::NAN] {
+            assert_eq!(
+                weak(huge).describe(),
+                "Rs +1.00 (relative standard error above 1000 %: the data do not determine it)"
+            );
+        }
+    }
 }
