@@ -177,12 +177,12 @@ fn shaft_starts(s: &RecordScales) -> Vec<f64> {
 /// frequency: the armature circuit acts on the motor's side of the shaft
 /// as a further spring (`K²/La`, where its inductance dominates) or
 /// damper (`K²/Ra`), which moves the ringing the current shows away from
-/// the mechanical mode, and from a
-/// start at the peak the fit can settle on a rigid-like optimum instead
-/// (own seed 2024 case-26: ringing at 74 Hz in the current of a 46 Hz
-/// shaft with a 167-line encoder; started at the peak the fit shrank
-/// nothing, at 0.71 of it, or at half, it found 45.8 Hz). 1/√2 is the
-/// load-locked frequency's share of the two-mass one at equal inertias.
+/// the mechanical mode, and from a start at the peak the fit can settle
+/// on a rigid-like optimum instead (own seed 2024 case-26: ringing at
+/// 74 Hz in the current of a 46 Hz shaft with a 167-line encoder; from
+/// the peak the fit went to 380 Hz and shrank nothing, from 0.71 of it,
+/// or from half, it found 45.8 Hz). 1/√2 is the load-locked frequency's
+/// share of the two-mass one at equal inertias.
 const SHAFT_BELOW_PEAK: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
 /// Extra parameters of a candidate (the sensor-lag channel counts as one).
