@@ -268,6 +268,18 @@ fn misfit_warning(c: &ImCircuit, sweep: &SlipSweep, model: ImModel) -> Option<St
     })
 }
 
+/// Whether the circuit `c` predicts almost none of the measured current
+/// or power (an rms relative residual of 90 % or more): relative residuals
+/// give every prediction of zero a cost of one per point, so a fit to
+/// readings that no circuit of its kind follows (an input power of half
+/// the machine's, current and power that jump from point to point) can
+/// end there.
+fn collapsed(c: &ImCircuit, sweep: &SlipSweep) -> bool {
+    let (ri, rp) = relative_residuals(c, sweep);
+    let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
+    rms(&rp) >= 0.9 || rms(&ri) >= 0.9
+}
+
 /// Mean over current and power of the NRMSE of `pred` against `sweep`.
 fn pooled_nrmse(sweep: &SlipSweep, pred: &[(f64, f64)]) -> Option<f64> {
     let d = sweep.phase_data();
@@ -454,11 +466,24 @@ fn lm_method(
         // Every element left out: no circuit to report, to validate or
         // to diagnose against (the warnings above say why).
         return (
-            MethodReport::not_applicable(format!(
-                "the fit of the {model} circuit determined none of its elements (see the \
-                 warnings): readings that do not follow slip as a machine's do, or more \
-                 elements than these data pin (fit a simpler circuit, or fix Rs from a DC test)"
-            )),
+            MethodReport::not_applicable(if collapsed(&fit.circuit, sweep) {
+                format!(
+                    "the fit of the {model} circuit collapsed to elements of zero, predicting \
+                     almost none of the measured current and power: no {model} circuit follows \
+                     these readings. Check that the columns belong together: the line current \
+                     in A and the three-phase total input power in W at the same instants, with \
+                     the slip measured there (one phase's power, or one of two wattmeters, is a \
+                     fraction of the total; a scaled sensor reads a multiple); readings that jump \
+                     from point to point do not follow slip as a machine's do"
+                )
+            } else {
+                format!(
+                    "the fit of the {model} circuit determined none of its elements (see the \
+                     warnings): readings that do not follow slip as a machine's do, or more \
+                     elements than these data pin (fit a simpler circuit, or fix Rs from a DC \
+                     test)"
+                )
+            }),
             None,
         );
     }
@@ -731,7 +756,7 @@ mod tests {
             lm.reason
                 .as_deref()
                 .unwrap()
-                .contains("none of its elements"),
+                .contains("collapsed to elements of zero"),
             "{lm:?}"
         );
         assert!(id.lm.is_none());
@@ -743,6 +768,32 @@ mod tests {
                 assert!(p.value.is_finite(), "{name} {key}: {p:?}");
             }
         }
+    }
+
+    /// An input power of half what the machine took (one wattmeter of
+    /// two read as the total): the single circuit's fit collapses to
+    /// zero elements, and the reason says which columns to check.
+    #[test]
+    fn a_collapsed_fit_names_the_channel_to_check() {
+        let mut r = record(&machine(), &[400.0], 0.002);
+        for p in &mut r.operating_points {
+            p.input_power *= 0.5;
+        }
+        let id = identify_im(&r, Some(Connection::Delta), ImModel::Single);
+        let lm = &id.report.methods["lm"];
+        assert!(!lm.applies, "{lm:?}");
+        let reason = lm.reason.as_deref().unwrap();
+        assert!(
+            reason.contains("collapsed to elements of zero")
+                && reason.contains("three-phase total input power in W"),
+            "{reason}"
+        );
+        let sound = identify_im(
+            &record(&machine(), &[400.0], 0.002),
+            Some(Connection::Delta),
+            ImModel::Single,
+        );
+        assert!(sound.report.methods["lm"].applies);
     }
 
     #[test]
