@@ -247,7 +247,6 @@ fn relative_residuals(c: &ImCircuit, sweep: &SlipSweep) -> (Vec<f64>, Vec<f64>) 
 /// A warning when `c` misfits `sweep` well beyond its noise.
 fn misfit_warning(c: &ImCircuit, sweep: &SlipSweep, model: ImModel) -> Option<String> {
     let (ri, rp) = relative_residuals(c, sweep);
-    let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
     // A floor of 0.01 % (below any meter) keeps noise-free data from
     // calling round-off a misfit.
     let noise = |r: &[f64]| neighbour_noise(sweep, r).map(|s| s.max(1e-4));
@@ -276,8 +275,12 @@ fn misfit_warning(c: &ImCircuit, sweep: &SlipSweep, model: ImModel) -> Option<St
 /// end there.
 fn collapsed(c: &ImCircuit, sweep: &SlipSweep) -> bool {
     let (ri, rp) = relative_residuals(c, sweep);
-    let rms = |r: &[f64]| (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt();
     rms(&rp) >= 0.9 || rms(&ri) >= 0.9
+}
+
+/// Root mean square of `r` (0 when empty).
+fn rms(r: &[f64]) -> f64 {
+    (r.iter().map(|v| v * v).sum::<f64>() / r.len().max(1) as f64).sqrt()
 }
 
 /// Mean over current and power of the NRMSE of `pred` against `sweep`.
