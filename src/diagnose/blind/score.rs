@@ -5,6 +5,7 @@
 use std::collections::BTreeMap;
 use std::fmt;
 use std::path::Path;
+use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
@@ -49,7 +50,14 @@ pub struct CaseScore {
     /// values, the nominal fit's for `none`) against the truth's nominal.
     #[serde(default)]
     pub param_error: BTreeMap<String, f64>,
+    /// Wall time to read the case's files and diagnose them, in seconds
+    /// (the diagnosis' worker threads as `MOTORBENCH_THREADS` sets them).
+    #[serde(default)]
+    pub seconds: f64,
 }
+
+/// A case's diagnosis should take at most this long (seconds).
+pub const CASE_TIME_BOUND_S: f64 = 2.0;
 
 /// Bounds of the parameter check: K within 1 %, Ra within 3 % of the truth.
 pub const PARAM_BOUNDS: [(&str, f64); 2] = [("K", 0.01), ("Ra", 0.03)];
@@ -141,6 +149,13 @@ impl SuiteScore {
         )
     }
 
+    /// The case that took longest to read and diagnose.
+    pub fn slowest(&self) -> Option<&CaseScore> {
+        self.cases
+            .iter()
+            .max_by(|a, b| a.seconds.total_cmp(&b.seconds))
+    }
+
     /// Cases whose largest region agrees with the truth, of cases compared.
     pub fn region_agreement(&self) -> (usize, usize) {
         let compared: Vec<_> = self.cases.iter().filter_map(|c| c.region_agrees).collect();
@@ -219,6 +234,20 @@ impl fmt::Display for SuiteScore {
             "gap_after ≤ 2×noise floor: {floor}/{right} right verdicts ({:.1} %)",
             pct(floor, right)
         )?;
+        if let Some(slow) = self.slowest() {
+            writeln!(
+                f,
+                "slowest case:             {} ({} {}) {:.2} s; over {CASE_TIME_BOUND_S} s: {}/{n}",
+                slow.id,
+                slow.source,
+                slow.plan,
+                slow.seconds,
+                self.cases
+                    .iter()
+                    .filter(|c| c.seconds > CASE_TIME_BOUND_S)
+                    .count()
+            )?;
+        }
         writeln!(
             f,
             "\n{:<20} {:<18} {:>5} {:>5} {:>11} {:>11} {:>7} {:>11}",
@@ -301,14 +330,16 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
         })?;
         let files: Vec<_> = case.files.iter().map(|p| dir.join(p)).collect();
         let nameplate = case.nameplate.as_ref().map(|p| dir.join(p));
+        let started = Instant::now();
         let record = load_record_files(kind, &files, nameplate.as_deref(), None)?;
-        verdicts.push(diagnose(&record, kind, &DiagnoseOptions::default()).map(|run| run.report));
+        let report = diagnose(&record, kind, &DiagnoseOptions::default()).map(|run| run.report);
+        verdicts.push((report, started.elapsed().as_secs_f64()));
         progress(n + 1, total);
     }
     // Then the truth.
     let truth: TruthFile = read_json(&dir.join("truth.json"))?;
     let mut cases = Vec::with_capacity(total);
-    for (case, verdict) in manifest.cases.iter().zip(verdicts) {
+    for (case, (verdict, seconds)) in manifest.cases.iter().zip(verdicts) {
         let (_, t) = truth
             .cases
             .iter()
@@ -340,6 +371,7 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
                     source: t.source.clone(),
                     plan: t.plan.clone(),
                     param_error: param_error(&d, t),
+                    seconds,
                 }
             }
             Err(e) => CaseScore {
@@ -356,6 +388,7 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
                 source: t.source.clone(),
                 plan: t.plan.clone(),
                 param_error: BTreeMap::new(),
+                seconds,
             },
         });
     }
@@ -389,6 +422,7 @@ mod tests {
             } else {
                 BTreeMap::from([("K".to_string(), 0.005), ("Ra".to_string(), 0.05)])
             },
+            seconds: if refused { 0.1 } else { 2.5 },
         }
     }
 
@@ -421,5 +455,6 @@ mod tests {
         let text = score.to_string();
         assert!(text.contains("gym-electric-motor   DC prbs"), "{text}");
         assert!(text.contains("refused records:          1/5"), "{text}");
+        assert!(text.contains("2.50 s; over 2 s: 4/5"), "{text}");
     }
 }

@@ -31,6 +31,7 @@ use nalgebra::{DMatrix, DVector, Dyn, Owned};
 
 use super::lanes;
 use super::model::{AugModel, SegmentRun};
+use crate::diagnose::decision::negligible_ftol;
 use crate::identify::square_root::square_root_problem;
 use crate::model::DcParams;
 
@@ -489,17 +490,6 @@ pub fn fit_fold(
     fit_masked(spec, runs, w, patience, mask, false)
 }
 
-/// A fit stops when an iteration lowers the sum of squares by less than
-/// this fraction of one row's mean square (its relative tolerance is this
-/// over the rows, and never below 1e-8): far below any difference the
-/// held-out decision can see, where a candidate whose effect fits as
-/// nothing otherwise crawled along the flat valley of its shape
-/// parameters, 2e-3 of 53 558 an iteration, until the optimiser's
-/// patience ran out (108 simulations of the record, two thirds of the
-/// default record's diagnosis once the folds stepped; the blind suites'
-/// verdicts did not change but one gained, docs/diagnosis-dc.md).
-const NEGLIGIBLE_DECREASE: f64 = 0.01;
-
 fn fit_masked(
     spec: &FitSpec,
     runs: &[SegmentRun],
@@ -520,7 +510,7 @@ fn fit_masked(
         last: RefCell::new(None),
     };
     let lm = LevenbergMarquardt::new()
-        .with_ftol((NEGLIGIBLE_DECREASE / rows as f64).max(1e-8))
+        .with_ftol(negligible_ftol(rows))
         .with_xtol(1e-9)
         .with_gtol(1e-9)
         .with_patience(patience);

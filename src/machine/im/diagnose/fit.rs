@@ -8,6 +8,7 @@ use nalgebra::{DMatrix, DVector};
 
 use super::data::SweepSet;
 use super::effects::ImAugmentation;
+use crate::diagnose::decision::negligible_ftol;
 use crate::identify::least_squares::{AtParams, Residuals};
 use crate::identify::PRACTICAL_LIMIT;
 
@@ -18,6 +19,8 @@ pub struct AugmentedFit {
     pub x: Vec<f64>,
     /// Sum of squared weighted residuals on the fitted points.
     pub cost: f64,
+    /// Residual evaluations the solver took, over all starts.
+    pub evaluations: usize,
 }
 
 /// Weighted residuals of `model` at point `k`: current and power, each
@@ -100,6 +103,7 @@ pub fn fit(
     starts: &[Vec<f64>],
 ) -> Option<AugmentedFit> {
     let mut best: Option<AugmentedFit> = None;
+    let mut evaluations = 0;
     for s in starts {
         if s.len() != model.len() {
             continue;
@@ -114,18 +118,28 @@ pub fn fit(
         {
             continue;
         }
-        let lm = LevenbergMarquardt::new().with_patience(100).with_tol(1e-10);
-        let (p, _report) = lm.minimize(problem);
+        // The statistical stopping rule: a candidate whose effect fits as
+        // nothing stops where it starts to crawl.
+        let lm = LevenbergMarquardt::new()
+            .with_patience(100)
+            .with_tol(1e-10)
+            .with_ftol(negligible_ftol(2 * idx.len()));
+        let (p, report) = lm.minimize(problem);
+        evaluations += report.number_of_evaluations;
         let x: Vec<f64> = p.x.iter().copied().collect();
         let Some(r) = p.residuals_of(&x) else {
             continue;
         };
         let cost = r.norm_squared();
         if cost.is_finite() && best.as_ref().is_none_or(|b| cost < b.cost) {
-            best = Some(AugmentedFit { x, cost });
+            best = Some(AugmentedFit {
+                x,
+                cost,
+                evaluations: 0,
+            });
         }
     }
-    best
+    best.map(|b| AugmentedFit { evaluations, ..b })
 }
 
 /// Starting vectors of `model` from a fitted nominal vector: the nominal
