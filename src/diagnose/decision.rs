@@ -21,6 +21,40 @@ pub use crate::identify::stats::median;
 /// engineer a day, so 1 %.
 pub const FALSE_ALARM_RATE: f64 = 0.01;
 
+/// Largest held-out NRMSE, in noise floors, of a model that explains the
+/// record: at twice the floor three quarters of the residual's power is
+/// already structure the model misses.
+pub const EXPLAINED: f64 = 2.0;
+
+/// Share of the nominal model's excess over the noise floor (`gap² −
+/// floor²`, the residual power that is not noise) that a model with the
+/// held-out NRMSE `gap_after` removes.
+pub fn explained_share(gap_before: f64, gap_after: f64, noise_floor: f64) -> f64 {
+    let excess = |g: f64| g * g - noise_floor * noise_floor;
+    1.0 - excess(gap_after) / excess(gap_before)
+}
+
+/// The warning for a verdict that leaves more than [`EXPLAINED`] noise
+/// floors of held-out NRMSE: what it removed, and that the rest is
+/// something else. `None` when it leaves less.
+pub fn partial_verdict_warning(
+    effect: &str,
+    gap_before: f64,
+    gap_after: f64,
+    noise_floor: f64,
+) -> Option<String> {
+    (gap_after > EXPLAINED * noise_floor).then(|| {
+        format!(
+            "{effect}: named as the verdict, though it leaves a held-out NRMSE of {gap_after:.4}, \
+             {:.1} times the noise floor {noise_floor:.4}: it removes {:.0} % of the gap's excess \
+             over the floor, and the rest is something else (a second effect, or the plant's \
+             form of this one differing from the candidate's)",
+            gap_after / noise_floor,
+            100.0 * explained_share(gap_before, gap_after, noise_floor)
+        )
+    })
+}
+
 /// A diagnosis fit stops when an iteration lowers its sum of squared,
 /// noise-weighted residuals by less than this fraction of one row's mean
 /// square: far below any difference the held-out decision can see.
@@ -296,6 +330,16 @@ pub(crate) mod tests {
     use super::*;
     use rand::{rngs::StdRng, SeedableRng};
     use rand_distr::{Distribution, Normal};
+
+    #[test]
+    fn a_verdict_that_leaves_the_gap_says_what_it_removed() {
+        // Gap 0.05 → 0.03 against a floor of 0.01: 2/3 of the excess.
+        let w = partial_verdict_warning("iron_loss", 0.05, 0.03, 0.01).unwrap();
+        assert!(w.starts_with("iron_loss: named as the verdict"), "{w}");
+        assert!(w.contains("3.0 times the noise floor 0.0100"), "{w}");
+        assert!(w.contains("removes 67 %"), "{w}");
+        assert_eq!(partial_verdict_warning("iron_loss", 0.05, 0.02, 0.01), None);
+    }
 
     /// `n` draws of unit Gaussian noise from a generator seeded `seed`.
     pub(crate) fn noise(seed: u64, n: usize) -> Vec<f64> {

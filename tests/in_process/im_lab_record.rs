@@ -181,3 +181,38 @@ fn diagnosis_gives_physical_answers_only() {
     assert_ne!(d.verdict.effect, "thermal_drift", "{:?}", d.candidates);
     assert!((0.0..=1.0).contains(&d.verdict.confidence));
 }
+
+/// The machine has both core loss and main-flux saturation; neither
+/// candidate alone explains the gap, and the report says so: the verdict
+/// leaves most of it, and the candidate that took more of it alone is
+/// named with the test that separates the two.
+#[test]
+fn a_verdict_that_leaves_most_of_the_gap_says_so() {
+    let run = diagnose_im(
+        &lab_record(),
+        &DiagnoseOptions {
+            connection: Some(Connection::Star),
+            ..Default::default()
+        },
+    )
+    .expect("the record is diagnosed");
+    let d = &run.report;
+    let v = &d.verdict;
+    assert!(v.gap_after > 2.0 * d.gap.noise_floor, "{v:?}");
+    let named = format!("{}: named as the verdict, though it leaves", v.effect);
+    assert!(d.warnings.iter().any(|w| w.starts_with(&named)), "{:?}", d.warnings);
+    let better = d
+        .candidates
+        .iter()
+        .filter(|c| c.validation_nrmse < v.gap_after)
+        .min_by(|a, b| a.validation_nrmse.total_cmp(&b.validation_nrmse))
+        .expect("a candidate took more of the gap");
+    let alone = format!("{}: alone takes the held-out gap", better.effect);
+    assert!(
+        d.warnings
+            .iter()
+            .any(|w| w.starts_with(&alone) && w.contains("separates them")),
+        "{:?}",
+        d.warnings
+    );
+}

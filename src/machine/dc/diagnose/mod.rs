@@ -46,8 +46,9 @@ use crate::contract::{
     reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
 };
 use crate::diagnose::decision::{
-    block_sums, effective_samples, held_out_relative_sign_flip_test, held_out_test, median,
-    penalised_score, residual_noise_sigma, HeldOutTest,
+    block_sums, effective_samples, explained_share, held_out_relative_sign_flip_test,
+    held_out_test, median, partial_verdict_warning, penalised_score, residual_noise_sigma,
+    HeldOutTest, EXPLAINED,
 };
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{
@@ -63,12 +64,6 @@ const MIN_SAMPLES: usize = 40;
 /// Samples per block of the held-out test: 16 ms at 2 kHz, long against
 /// the encoder noise's one-sample correlation.
 const BLOCK: usize = 32;
-
-/// Largest held-out NRMSE, in noise floors, of a model that explains the
-/// record: at twice the floor three quarters of the residual's power is
-/// already structure the model misses. A candidate that leaves more has
-/// shrunk the gap without explaining it, and naming it would be a guess.
-const EXPLAINED: f64 = 2.0;
 
 /// Smallest share of the nominal model's excess over the noise floor
 /// (`gap² − floor²`, the residual power that is not noise) an effect must
@@ -470,9 +465,8 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
     // parameters are determined and physical, and if it explains the gap:
     // its held-out NRMSE within `EXPLAINED` times the noise floor, or
     // `DOMINANT_SHARE` of the excess over the floor removed.
-    let excess = |g: f64| g * g - noise_floor * noise_floor;
     let explained_share =
-        |fam: &FamilyResult| 1.0 - excess(fam.validation) / excess(nominal.validation);
+        |fam: &FamilyResult| explained_share(nominal.validation, fam.validation, noise_floor);
     let refusal = |fam: &FamilyResult| -> Option<String> {
         if nominal.validation <= noise_floor {
             return Some(format!(
@@ -529,19 +523,12 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
 
     if let Some(wi) = winner {
         let (e, fam, _, _) = &scored[wi];
-        if fam.validation > EXPLAINED * noise_floor {
-            warnings.push(format!(
-                "{}: named as the verdict, though it leaves a held-out NRMSE of {:.4}, {:.1} \
-                 times the noise floor {:.4}: it removes {:.0} % of the gap's excess over the \
-                 floor, and the rest is something else (a second effect, or the plant's form \
-                 of this one differing from the candidate's)",
-                effect_name(*e),
-                fam.validation,
-                fam.validation / noise_floor,
-                noise_floor,
-                100.0 * explained_share(fam)
-            ));
-        }
+        warnings.extend(partial_verdict_warning(
+            &effect_name(*e),
+            nominal.validation,
+            fam.validation,
+            noise_floor,
+        ));
     }
 
     let gap_before = nominal.validation;

@@ -35,7 +35,8 @@ use crate::contract::{
     reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
 };
 use crate::diagnose::decision::{
-    held_out_sign_flip_test, noise_sigma, penalised_score, HeldOutTest,
+    explained_share, held_out_sign_flip_test, noise_sigma, partial_verdict_warning,
+    penalised_score, HeldOutTest,
 };
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{fit_lm, LmOptions, PhaseData, SplitPolicy};
@@ -202,6 +203,41 @@ pub fn diagnose_im(
         gap_before,
         split.ratio(),
     );
+    // A verdict that leaves most of the gap says so (as on DC records), and
+    // names the candidate that alone took more of it, where one did.
+    let floor = noise_floor(&data);
+    if let Some(w) = winner {
+        let partial = partial_verdict_warning(
+            &effect_name(Some(w.effect)),
+            gap_before,
+            w.validation_nrmse,
+            floor,
+        );
+        if let Some(text) = partial {
+            warnings.push(text);
+            if let Some(other) = evaluated
+                .iter()
+                .filter(|e| physical(e) && e.validation_nrmse < w.validation_nrmse)
+                .min_by(|a, b| a.validation_nrmse.total_cmp(&b.validation_nrmse))
+            {
+                let why = if other.test.significant() {
+                    "ranked below it by the penalised score"
+                } else {
+                    "not beyond what noise gives"
+                };
+                warnings.push(format!(
+                    "{}: alone takes the held-out gap from {gap_before:.4} to {:.4} ({:.0} % of \
+                     its excess over the floor), more than the verdict, but {why} (p = {:.3}); \
+                     the record may hold both: {} separates them",
+                    effect_name(Some(other.effect)),
+                    other.validation_nrmse,
+                    100.0 * explained_share(gap_before, other.validation_nrmse, floor),
+                    other.test.p_value,
+                    separating_plan(w.effect, other.effect)
+                ));
+            }
+        }
+    }
     if !data.several_voltages() {
         warnings.push(
             "one supply voltage: main-flux saturation (Xm falling with the air-gap voltage) is \
@@ -227,7 +263,7 @@ pub fn diagnose_im(
         channels,
         segments,
         evidence: evidence(&data, &nominal_held.weighted, &e_nominal),
-        noise_floor: noise_floor(&data),
+        noise_floor: floor,
     };
     let plot = residual_plot(&data, &nominal_held, winner, &gap_regions, &regions);
 
