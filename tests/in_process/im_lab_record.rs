@@ -151,20 +151,25 @@ fn a_misfitting_circuit_is_named_as_such() {
     );
 }
 
-/// Every candidate the diagnosis reports has its effect's parameters in
-/// their physical range (a resistance rise ≥ 0, a loss ≥ 0, a share in
-/// [0, 1], saturation that lowers a reactance); the machine has no
-/// heating, so thermal drift is not the verdict.
-#[test]
-fn diagnosis_gives_physical_answers_only() {
-    let run = diagnose_im(
+/// The lab record's diagnosis (star, as the nameplate's motor).
+fn diagnosed() -> motorbench::diagnose::DiagnosisRun {
+    diagnose_im(
         &lab_record(),
         &DiagnoseOptions {
             connection: Some(Connection::Star),
             ..Default::default()
         },
     )
-    .expect("the record is diagnosed");
+    .expect("the record is diagnosed")
+}
+
+/// Every candidate the diagnosis reports has its effect's parameters in
+/// their physical range (a resistance rise ≥ 0, a loss ≥ 0, a share in
+/// [0, 1], saturation that lowers a reactance); the machine has no
+/// heating, so thermal drift is not the verdict.
+#[test]
+fn diagnosis_gives_physical_answers_only() {
+    let run = diagnosed();
     let d = &run.report;
     for c in &d.candidates {
         for (key, p) in &c.params {
@@ -188,19 +193,16 @@ fn diagnosis_gives_physical_answers_only() {
 /// named with the test that separates the two.
 #[test]
 fn a_verdict_that_leaves_most_of_the_gap_says_so() {
-    let run = diagnose_im(
-        &lab_record(),
-        &DiagnoseOptions {
-            connection: Some(Connection::Star),
-            ..Default::default()
-        },
-    )
-    .expect("the record is diagnosed");
+    let run = diagnosed();
     let d = &run.report;
     let v = &d.verdict;
     assert!(v.gap_after > 2.0 * d.gap.noise_floor, "{v:?}");
     let named = format!("{}: named as the verdict, though it leaves", v.effect);
-    assert!(d.warnings.iter().any(|w| w.starts_with(&named)), "{:?}", d.warnings);
+    assert!(
+        d.warnings.iter().any(|w| w.starts_with(&named)),
+        "{:?}",
+        d.warnings
+    );
     let better = d
         .candidates
         .iter()
