@@ -10,7 +10,7 @@ use clap::{Args, ValueEnum};
 use super::output::warn_if_damaged;
 use super::Failure;
 use crate::identify::{check_input_power, check_plausible_files};
-use crate::machine::dc::{cut_at_time_gaps, split_single_segment};
+use crate::machine::dc::prepare_dc_record;
 use crate::model::Connection;
 use crate::record::{load_record_files, Record, SegmentKind};
 
@@ -34,6 +34,12 @@ pub struct RecordInput {
     /// have no frequency_Hz column (overrides the nameplate's).
     #[arg(long)]
     pub frequency: Option<f64>,
+    /// DC: the voltage column holds the command as the logger issued it
+    /// at each instant (applied until the next sample); move it one
+    /// sample later, to the reading of the voltage applied up to that
+    /// instant that motorbench's models take.
+    #[arg(long)]
+    pub voltage_as_issued: bool,
 }
 
 impl RecordInput {
@@ -49,10 +55,10 @@ impl RecordInput {
 
     /// Load the record; warn on stderr when it is damaged (recovered up to
     /// its last good chunk); refuse DC files whose values are not
-    /// plausible for their kind, split a DC record that holds its test
-    /// in one segment ([`split_single_segment`]), and cut its segments at
-    /// gaps in their time ([`cut_at_time_gaps`]). Errors are bad input
-    /// (exit code 2).
+    /// plausible for their kind, and make a DC record ready for the DC
+    /// methods ([`prepare_dc_record`]: one segment split, gaps cut, the
+    /// voltage's timing checked or moved). Errors are bad input (exit
+    /// code 2).
     pub fn load(&self) -> Result<Record, Failure> {
         let kind = self.kind();
         let record =
@@ -67,7 +73,7 @@ impl RecordInput {
             return Ok(record);
         }
         check_plausible_files(&record, kind, &self.files).map_err(Failure::bad_input)?;
-        Ok(cut_at_time_gaps(split_single_segment(record)))
+        Ok(prepare_dc_record(record, self.voltage_as_issued))
     }
 }
 

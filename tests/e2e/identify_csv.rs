@@ -226,3 +226,67 @@ fn a_friction_the_motor_could_not_overcome_is_not_an_answer() {
     assert!(applying >= 1, "{stdout}");
     assert_eq!(v["best"], "equation_error");
 }
+
+/// The position-loop record above with its voltage column one sample
+/// early, as a controller that logs the command it issues writes it: the
+/// report says the column leads the current and how to align it, and
+/// `--voltage-as-issued` moves it back (then nothing leads).
+#[test]
+fn a_voltage_logged_as_issued_is_named_and_moved_on_request() {
+    let data = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/dc_position_loop_coarse_encoder");
+    let dir = tempfile::tempdir().unwrap();
+    let files: Vec<String> = (0..4)
+        .map(|n| {
+            let name = format!("segment-{n}.csv");
+            let text = std::fs::read_to_string(data.join(&name)).unwrap();
+            let path = dir.path().join(&name);
+            std::fs::write(&path, voltage_one_sample_early(&text)).unwrap();
+            path.display().to_string()
+        })
+        .collect();
+    let report = |extra: &[&str]| {
+        let mut args = vec!["identify", "--kind", "dc_step", "--json"];
+        args.extend(extra);
+        args.extend(files.iter().map(String::as_str));
+        let out = common::motorbench(&args);
+        let (stdout, stderr) = common::text(&out);
+        assert!(out.status.success(), "{stderr}");
+        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        v["warnings"].to_string()
+    };
+    let noted = report(&[]);
+    assert!(
+        noted.contains("the voltage column leads the current by one sample"),
+        "{noted}"
+    );
+    assert!(noted.contains("--voltage-as-issued"), "{noted}");
+    let moved = report(&["--voltage-as-issued"]);
+    assert!(
+        moved.contains("the voltage column was moved one sample later"),
+        "{moved}"
+    );
+    assert!(!moved.contains("leads the current"), "{moved}");
+}
+
+/// A segment CSV with its voltage column moved one row earlier (the last
+/// row keeps its own).
+fn voltage_one_sample_early(csv: &str) -> String {
+    let (comments, rows): (Vec<&str>, Vec<&str>) = csv.lines().partition(|l| l.starts_with('#'));
+    let column = rows[0]
+        .split(',')
+        .position(|c| c == "armature_voltage_V")
+        .unwrap();
+    let cells: Vec<Vec<String>> = rows[1..]
+        .iter()
+        .map(|r| r.split(',').map(str::to_string).collect())
+        .collect();
+    let mut out: Vec<String> = comments.iter().map(|l| l.to_string()).collect();
+    out.push(rows[0].to_string());
+    for (k, row) in cells.iter().enumerate() {
+        let mut row = row.clone();
+        row[column] = cells[(k + 1).min(cells.len() - 1)][column].clone();
+        out.push(row.join(","));
+    }
+    out.join("\n") + "\n"
+}

@@ -29,6 +29,7 @@ mod sim_rig;
 pub(crate) mod split;
 mod supply_limits;
 mod text;
+mod timing;
 
 pub use gaps::cut_at_time_gaps;
 pub use overlay::segment_plots;
@@ -40,6 +41,9 @@ pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};
 pub use split::split_single_segment;
 pub use supply_limits::SupplyLimitDetector;
 pub use text::render_text;
+pub use timing::{
+    prepare_dc_record, shift_voltage_one_sample_later, voltage_timing, VoltageTiming,
+};
 
 use std::path::Path;
 
