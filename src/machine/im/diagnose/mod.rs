@@ -66,6 +66,18 @@ pub fn diagnose_im(
 ) -> Result<DiagnosisRun, DiagnoseError> {
     let mut data = SweepSet::from_record(record, options)?;
     let mut warnings = std::mem::take(&mut data.warnings);
+    let tests = &record.standard_tests;
+    if !tests.is_empty() {
+        warnings.push(format!(
+            "the record's standard tests ({} no-load, {} locked-rotor and {} DC-resistance \
+             readings) are not part of the diagnosis, which compares the circuit with the load \
+             test's operating points only; `identify` uses them (the classical reduction and \
+             the joint fit)",
+            tests.no_load.len(),
+            tests.locked_rotor.len(),
+            tests.dc_resistance.len()
+        ));
+    }
     let split = LeakageSplit::default();
     let nominal = ImAugmentation::nominal(split.ratio());
     let all: Vec<usize> = (0..data.len()).collect();
@@ -669,6 +681,27 @@ mod tests {
         assert!((rs.corrected - 0.8).abs() < (rs.nominal - 0.8).abs());
         assert!(!run.plot.panels.is_empty() && run.plot.effect == "iron_loss");
         assert_eq!(d.gap.regions[0].label, "low_slip");
+    }
+
+    /// Standard tests in the record are not silently passed over.
+    #[test]
+    fn standard_tests_the_diagnosis_does_not_use_are_named() {
+        let mut r = record(ImAugmentation::nominal(1.0), &nominal_x(), &[400.0], 4);
+        let reading = crate::record::SupplyReading {
+            segment: 1,
+            line_voltage: 400.0,
+            line_current: 3.0,
+            input_power: 250.0,
+            frequency: 50.0,
+            winding_temperature: None,
+        };
+        r.standard_tests.no_load = vec![reading; 3];
+        r.standard_tests.locked_rotor = vec![reading];
+        let d = diagnose_im(&r, &star()).unwrap().report;
+        assert_warned(
+            &d.warnings,
+            "standard tests (3 no-load, 1 locked-rotor and 0 DC-resistance readings) are not part",
+        );
     }
 
     /// A candidate whose effect is not in the record stops where its fit
