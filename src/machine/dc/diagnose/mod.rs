@@ -464,8 +464,10 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
     // A candidate that passes the tests is the verdict only if its
     // parameters are determined and physical, and if it explains the gap:
     // its held-out NRMSE within `EXPLAINED` times the noise floor, or
-    // `DOMINANT_SHARE` of the excess over the floor removed.
-    let explained_share =
+    // `DOMINANT_SHARE` of the excess over the floor removed. One that leaves
+    // more has shrunk the gap without explaining it, and naming it would be
+    // a guess.
+    let share_of =
         |fam: &FamilyResult| explained_share(nominal.validation, fam.validation, noise_floor);
     let refusal = |fam: &FamilyResult| -> Option<String> {
         if nominal.validation <= noise_floor {
@@ -483,7 +485,7 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
                 "with a parameter the record does not determine: {why}"
             ));
         }
-        let explained = explained_share(fam);
+        let explained = share_of(fam);
         if explained < EXPLAINED_SHARE {
             return Some(format!(
                 "by {:.0} % only of its excess over the noise floor (held-out NRMSE {:.4} \

@@ -215,40 +215,10 @@ pub fn diagnose_im(
         gap_before,
         split.ratio(),
     );
-    // A verdict that leaves most of the gap says so (as on DC records), and
-    // names the candidate that alone took more of it, where one did.
     let floor = noise_floor(&data);
     if let Some(w) = winner {
-        let partial = partial_verdict_warning(
-            &effect_name(Some(w.effect)),
-            gap_before,
-            w.validation_nrmse,
-            floor,
-        );
-        if let Some(text) = partial {
-            warnings.push(text);
-            if let Some(other) = evaluated
-                .iter()
-                .filter(|e| physical(e) && e.validation_nrmse < w.validation_nrmse)
-                .min_by(|a, b| a.validation_nrmse.total_cmp(&b.validation_nrmse))
-            {
-                let why = if other.test.significant() {
-                    "ranked below it by the penalised score"
-                } else {
-                    "not beyond what noise gives"
-                };
-                warnings.push(format!(
-                    "{}: alone takes the held-out gap from {gap_before:.4} to {:.4} ({:.0} % of \
-                     its excess over the floor), more than the verdict, but {why} (p = {:.3}); \
-                     the record may hold both: {} separates them",
-                    effect_name(Some(other.effect)),
-                    other.validation_nrmse,
-                    100.0 * explained_share(gap_before, other.validation_nrmse, floor),
-                    other.test.p_value,
-                    separating_plan(w.effect, other.effect)
-                ));
-            }
-        }
+        let others: Vec<&Evaluated> = evaluated.iter().filter(|e| physical(e)).collect();
+        warnings.extend(gap_left_warnings(w, &others, gap_before, floor));
     }
     if !data.several_voltages() {
         warnings.push(
@@ -304,6 +274,45 @@ pub fn diagnose_im(
         warnings,
     };
     Ok(DiagnosisRun { report, plot })
+}
+
+/// A verdict `w` that leaves more than twice the noise floor says so (as
+/// on DC records), and names the candidate of `others` that alone took the
+/// gap further, where one did, with the test that separates the two.
+fn gap_left_warnings(
+    w: &Evaluated,
+    others: &[&Evaluated],
+    gap_before: f64,
+    floor: f64,
+) -> Vec<String> {
+    let name = |e: &Evaluated| effect_name(Some(e.effect));
+    let Some(partial) = partial_verdict_warning(&name(w), gap_before, w.validation_nrmse, floor)
+    else {
+        return Vec::new();
+    };
+    let mut out = vec![partial];
+    if let Some(other) = others
+        .iter()
+        .filter(|e| e.validation_nrmse < w.validation_nrmse)
+        .min_by(|a, b| a.validation_nrmse.total_cmp(&b.validation_nrmse))
+    {
+        let why = if other.test.significant() {
+            "ranked below it by the penalised score"
+        } else {
+            "not beyond what noise gives"
+        };
+        out.push(format!(
+            "{}: alone takes the held-out gap from {gap_before:.4} to {:.4} ({:.0} % of its \
+             excess over the floor), more than the verdict, but {why} (p = {:.3}); the record \
+             may hold both: {} separates them",
+            name(other),
+            other.validation_nrmse,
+            100.0 * explained_share(gap_before, other.validation_nrmse, floor),
+            other.test.p_value,
+            separating_plan(w.effect, other.effect)
+        ));
+    }
+    out
 }
 
 /// Relative noise per channel from the first differences of the relative
