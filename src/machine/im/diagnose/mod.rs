@@ -22,6 +22,7 @@ mod data;
 pub(crate) mod effects;
 mod fit;
 mod gap;
+mod standard_points;
 mod verdict;
 
 use std::collections::BTreeMap;
@@ -30,6 +31,7 @@ use self::data::SweepSet;
 use self::effects::{effect_name, ImAugmentation, SaturatingFlux, IM_EFFECTS, NOMINAL_KEYS};
 use self::fit::{fit, held_out, intervals, starts_from, AugmentedFit, HeldOut};
 use self::gap::{evidence, shares, SlipRegions, CHANNELS};
+use self::standard_points::with_locked_rotor_points;
 use self::verdict::separating_plan;
 use crate::contract::{
     reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
@@ -64,20 +66,10 @@ pub fn diagnose_im(
     record: &Record,
     options: &DiagnoseOptions,
 ) -> Result<DiagnosisRun, DiagnoseError> {
-    let mut data = SweepSet::from_record(record, options)?;
+    let (record, standard_tests) = with_locked_rotor_points(record);
+    let mut data = SweepSet::from_record(&record, options)?;
     let mut warnings = std::mem::take(&mut data.warnings);
-    let tests = &record.standard_tests;
-    if !tests.is_empty() {
-        warnings.push(format!(
-            "the record's standard tests ({} no-load, {} locked-rotor and {} DC-resistance \
-             readings) are not part of the diagnosis, which compares the circuit with the load \
-             test's operating points only; `identify` uses them (the classical reduction and \
-             the joint fit)",
-            tests.no_load.len(),
-            tests.locked_rotor.len(),
-            tests.dc_resistance.len()
-        ));
-    }
+    warnings.extend(standard_tests);
     let split = LeakageSplit::default();
     let nominal = ImAugmentation::nominal(split.ratio());
     let all: Vec<usize> = (0..data.len()).collect();
@@ -692,25 +684,46 @@ mod tests {
         assert_eq!(d.gap.regions[0].label, "low_slip");
     }
 
-    /// Standard tests in the record are not silently passed over.
+    /// A locked-rotor test at the sweep's frequency is diagnosed with it
+    /// (points at slip 1); the rest of the standard tests is named as left
+    /// out, not passed over in silence.
     #[test]
-    fn standard_tests_the_diagnosis_does_not_use_are_named() {
-        let mut r = record(ImAugmentation::nominal(1.0), &nominal_x(), &[400.0], 4);
-        let reading = crate::record::SupplyReading {
-            segment: 1,
-            line_voltage: 400.0,
-            line_current: 3.0,
-            input_power: 250.0,
-            frequency: 50.0,
-            winding_temperature: None,
+    fn locked_rotor_readings_join_the_sweep_and_the_rest_is_named() {
+        let x = nominal_x();
+        let mut r = record(ImAugmentation::nominal(1.0), &x, &[400.0], 4);
+        let lr = |v: f64| {
+            let p = super::effects::PointInput {
+                slip: 1.0,
+                voltage: v / 3f64.sqrt(),
+                heat: 0.0,
+            };
+            let (i, pw) = ImAugmentation::nominal(1.0).predict(&x, &p).unwrap();
+            crate::record::SupplyReading {
+                segment: 1,
+                line_voltage: v,
+                line_current: i,
+                input_power: pw,
+                frequency: 50.0,
+                winding_temperature: None,
+            }
         };
-        r.standard_tests.no_load = vec![reading; 3];
-        r.standard_tests.locked_rotor = vec![reading];
+        r.standard_tests.locked_rotor = vec![lr(60.0), lr(80.0), lr(100.0)];
+        r.standard_tests.no_load = vec![lr(400.0); 3];
+        let points = r.operating_points.len();
         let d = diagnose_im(&r, &star()).unwrap().report;
+        assert_eq!(d.verdict.effect, "none", "{:?}", d.candidates);
         assert_warned(
             &d.warnings,
-            "standard tests (3 no-load, 1 locked-rotor and 0 DC-resistance readings) are not part",
+            "3 locked-rotor reading(s) at the load test's frequency are diagnosed with it",
         );
+        assert_warned(&d.warnings, "its 3 no-load reading(s) are not part");
+        // The locked-rotor points are a voltage group of their own.
+        assert!(
+            d.validation.contains("2 supply voltages"),
+            "{}",
+            d.validation
+        );
+        assert!(points == 30, "{points}");
     }
 
     /// A candidate whose effect is not in the record stops where its fit
