@@ -79,16 +79,8 @@ async fn a_speed_in_rpm_under_the_rad_s_header_is_named_against_the_nameplate() 
     let nameplate = &done.record.meta.as_ref().unwrap().nameplate;
     std::fs::write(&plate, nameplate.to_string()).unwrap();
     let warnings = |with_plate: bool| {
-        let mut args = vec!["identify", "--kind", "dc_step", "--json"];
-        if with_plate {
-            args.extend(["--nameplate", plate.to_str().unwrap()]);
-        }
-        args.extend(files.iter().map(String::as_str));
-        let out = common::motorbench(&args);
-        let (json, stderr) = common::text(&out);
-        assert!(out.status.success(), "{stderr}");
-        let v: serde_json::Value = serde_json::from_str(&json).unwrap();
-        v["warnings"].to_string()
+        let plate_args = ["--nameplate", plate.to_str().unwrap()];
+        identify_warnings(if with_plate { &plate_args } else { &[] }, &files)
     };
     // The fit is as good in r/min (K 9.55 times too small); the nameplate
     // given with the files tells it apart.
@@ -245,28 +237,31 @@ fn a_voltage_logged_as_issued_is_named_and_moved_on_request() {
             path.display().to_string()
         })
         .collect();
-    let report = |extra: &[&str]| {
-        let mut args = vec!["identify", "--kind", "dc_step", "--json"];
-        args.extend(extra);
-        args.extend(files.iter().map(String::as_str));
-        let out = common::motorbench(&args);
-        let (stdout, stderr) = common::text(&out);
-        assert!(out.status.success(), "{stderr}");
-        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
-        v["warnings"].to_string()
-    };
-    let noted = report(&[]);
+    let noted = identify_warnings(&[], &files);
     assert!(
         noted.contains("the voltage column leads the current by one sample"),
         "{noted}"
     );
     assert!(noted.contains("--voltage-as-issued"), "{noted}");
-    let moved = report(&["--voltage-as-issued"]);
+    let moved = identify_warnings(&["--voltage-as-issued"], &files);
     assert!(
         moved.contains("the voltage column was moved one sample later"),
         "{moved}"
     );
     assert!(!moved.contains("leads the current"), "{moved}");
+}
+
+/// `motorbench identify --kind dc_step --json EXTRA… FILES…`: the report's
+/// warnings, as JSON text.
+fn identify_warnings(extra: &[&str], files: &[String]) -> String {
+    let mut args = vec!["identify", "--kind", "dc_step", "--json"];
+    args.extend(extra);
+    args.extend(files.iter().map(String::as_str));
+    let out = common::motorbench(&args);
+    let (stdout, stderr) = common::text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    v["warnings"].to_string()
 }
 
 /// A segment CSV with its voltage column moved one row earlier (the last
