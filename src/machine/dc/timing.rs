@@ -9,7 +9,7 @@
 //! Where the voltage changes at every sample (a closed loop, a PRBS) that
 //! one sample is a large share of each increment of the current, and the
 //! fits bend the inductance and the friction to it (on a
-//! gym-electric-motor speed loop shifted so: La 39 % low, Tst twice the
+//! gym-electric-motor speed loop shifted so: La 35 % low, Tst twice the
 //! truth, the held-out NRMSE four times its own).
 //!
 //! The test: regress the current's increment `i[k] − i[k−1]` on
