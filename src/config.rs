@@ -22,7 +22,7 @@ mod test_override;
 
 pub use can::{CanLink, CanTransport};
 pub use common::CommonConfig;
-pub(crate) use common::{RawCommon, RawMotor};
+pub(crate) use common::{RawCommon, RawFile};
 pub use error::ConfigError;
 pub(crate) use error::{bounded, invalid, syntax_error};
 pub(crate) use fault::{validate_faults, FaultRig, RawFault};

@@ -53,6 +53,48 @@ pub(crate) struct RawMotor {
     pub nameplate: toml::Table,
 }
 
+/// A test configuration file as read, for either machine: the shared
+/// tables and the machine's own (`S` the rig's `[rig.simulated]`, `M` its
+/// `[rig.modbus]`, `L` the `[limits]`, `T` the `[test]`). One layout, so
+/// that the machines' files cannot drift apart.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawFile<S, M, L, T> {
+    /// `[motor]`.
+    pub motor: RawMotor,
+    /// `[rig]`.
+    pub rig: RawRig<S, M>,
+    /// `[limits]`.
+    pub limits: L,
+    /// `[test]`.
+    pub test: T,
+    /// `[supervisor]`.
+    #[serde(default)]
+    pub supervisor: RawSupervisor,
+    /// `[records]`.
+    #[serde(default)]
+    pub records: RawRetention,
+    /// `[[fault]]`.
+    #[serde(default)]
+    pub fault: Vec<RawFault>,
+}
+
+/// `[rig]` as read: the backend, the sample rate, and the machine's
+/// simulated and Modbus tables.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct RawRig<S, M> {
+    /// `rig.backend`.
+    pub backend: String,
+    /// `rig.sample_rate_Hz`.
+    #[serde(rename = "sample_rate_Hz")]
+    pub sample_rate_hz: f64,
+    /// `[rig.simulated]`.
+    pub simulated: Option<S>,
+    /// `[rig.modbus]`.
+    pub modbus: Option<M>,
+}
+
 /// The shared tables of a file, as read.
 pub(crate) struct RawCommon {
     /// `[motor]`.

@@ -11,37 +11,14 @@ use serde::Deserialize;
 use crate::bounds;
 use crate::config::{
     bounded, invalid, modbus, syntax_error, CanLink, CanTransport, CommonConfig, ConfigError,
-    FaultRig, Limits, ModbusRig, RawCommon, RawFault, RawMotor, RawRetention, RawSupervisor,
-    SensorLink, SimulatedTransport, DEFAULT_CONFIG, DEFAULT_CONFIG_NAME,
+    FaultRig, Limits, ModbusRig, RawCommon, RawFile, SensorLink, SimulatedTransport,
+    DEFAULT_CONFIG, DEFAULT_CONFIG_NAME,
 };
 use crate::excerpt::quoted;
 use crate::model::DcParams;
 
 /// Raw file layout; see `config/sim-dc.toml` for a documented example.
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawConfig {
-    motor: RawMotor,
-    rig: RawRig,
-    limits: Limits,
-    test: RawTest,
-    #[serde(default)]
-    supervisor: RawSupervisor,
-    #[serde(default)]
-    records: RawRetention,
-    #[serde(default)]
-    fault: Vec<RawFault>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawRig {
-    backend: String,
-    #[serde(rename = "sample_rate_Hz")]
-    sample_rate_hz: f64,
-    simulated: Option<SimulatedRig>,
-    modbus: Option<modbus::RawModbusRig>,
-}
+type RawConfig = RawFile<SimulatedRig, modbus::RawModbusRig, Limits, RawTest>;
 
 /// The simulated rig: the motor it simulates and its imperfections.
 #[derive(Debug, Clone, Deserialize, PartialEq)]

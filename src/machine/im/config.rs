@@ -21,8 +21,7 @@ use super::{ImModbusRig, ImSweepPlan, SimImRigConfig, StandardTestsPlan};
 use crate::bench::SafetyRules;
 use crate::bounds;
 use crate::config::{
-    bounded, invalid, syntax_error, CommonConfig, ConfigError, FaultRig, Limits, RawCommon,
-    RawFault, RawMotor, RawRetention, RawSupervisor,
+    bounded, invalid, syntax_error, CommonConfig, ConfigError, FaultRig, Limits, RawCommon, RawFile,
 };
 use crate::excerpt::quoted;
 use crate::identify::slip_grid;
@@ -49,30 +48,8 @@ pub struct ImRunConfig {
     pub model: ImModel,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Raw {
-    motor: RawMotor,
-    rig: RawRig,
-    limits: RawLimits,
-    test: RawTest,
-    #[serde(default)]
-    supervisor: RawSupervisor,
-    #[serde(default)]
-    records: RawRetention,
-    #[serde(default)]
-    fault: Vec<RawFault>,
-}
-
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RawRig {
-    backend: String,
-    #[serde(rename = "sample_rate_Hz")]
-    sample_rate_hz: f64,
-    simulated: Option<RawSim>,
-    modbus: Option<toml::Table>,
-}
+/// Raw file layout; see `config/sim-im.toml` for a documented example.
+type Raw = RawFile<RawSim, toml::Table, RawLimits, RawTest>;
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
