@@ -6,7 +6,7 @@ use super::effects::PointInput;
 use crate::diagnose::{DiagnoseError, DiagnoseOptions};
 use crate::identify::sweep_of;
 use crate::model::Connection;
-use crate::record::Record;
+use crate::record::{OperatingPoint, Record};
 
 /// Segments whose mean line voltages differ by less than this fraction
 /// are one supply voltage.
@@ -133,11 +133,13 @@ impl SweepSet {
                 h / total
             })
             .collect();
+        let ratios = frequency_ratios(&record.operating_points);
         let inputs = (0..n)
             .map(|k| PointInput {
                 slip: d.slip[k],
                 voltage: d.voltage[k],
                 heat: heat[k],
+                freq_ratio: ratios[k],
             })
             .collect();
         let floor = |v: &[f64]| DIGIT_FLOOR * v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
@@ -220,4 +222,29 @@ impl SweepSet {
             ),
         )
     }
+}
+
+/// Each point's supply frequency over the reference, the frequency most
+/// points share (the load test's: a reduced-frequency locked-rotor test
+/// has a few points); 1 where a point or every point has none.
+fn frequency_ratios(points: &[OperatingPoint]) -> Vec<f64> {
+    let same = |a: f64, b: f64| (a - b).abs() <= 0.01 * a.abs().max(b.abs());
+    let finite: Vec<f64> = points
+        .iter()
+        .map(|p| p.frequency)
+        .filter(|f| f.is_finite() && *f > 0.0)
+        .collect();
+    let reference = finite
+        .iter()
+        .copied()
+        .max_by_key(|&f| finite.iter().filter(|&&g| same(f, g)).count());
+    points
+        .iter()
+        .map(|p| match reference {
+            Some(f0) if p.frequency.is_finite() && p.frequency > 0.0 && !same(p.frequency, f0) => {
+                p.frequency / f0
+            }
+            _ => 1.0,
+        })
+        .collect()
 }

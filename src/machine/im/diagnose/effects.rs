@@ -51,6 +51,11 @@ pub struct PointInput {
     pub voltage: f64,
     /// Heat index, 0 at the start of the record, 1 at its end.
     pub heat: f64,
+    /// Supply frequency over the record's reference (the load test's):
+    /// the reactances, deep bar's rotor frequency and the flux that
+    /// saturates scale with it (1 for every point of a sweep; below 1 for
+    /// a locked-rotor test at reduced frequency).
+    pub freq_ratio: f64,
 }
 
 /// How an effect parameter is carried in the fitted vector.
@@ -352,7 +357,18 @@ impl ImAugmentation {
         if !finite {
             return None;
         }
-        let cage = Cage { rs, xs, xm, rr, xr };
+        // Reactances at the point's supply frequency.
+        let r = p.freq_ratio;
+        if !(r.is_finite() && r > 0.0) {
+            return None;
+        }
+        let cage = Cage {
+            rs,
+            xs: r * xs,
+            xm: r * xm,
+            rr,
+            xr: r * xr,
+        };
         let t = match self.effect {
             None => linear_terminal(&cage, None, s, v),
             Some(Effect::IronLoss) => {
@@ -367,12 +383,13 @@ impl ImAugmentation {
                 if !xi1.is_finite() {
                     return None;
                 }
-                let (kr, kx) = skin_effect(xi1 * s.sqrt());
+                // The bar's reduced height follows the rotor frequency s·f.
+                let (kr, kx) = skin_effect(xi1 * (s * r).sqrt());
                 let fr = 1.0 - b + b * kr;
                 let fx = 1.0 - b + b * kx;
                 let deep = Cage {
-                    rr: rr * fr,
-                    xr: xr * fx,
+                    rr: cage.rr * fr,
+                    xr: cage.xr * fx,
                     ..cage
                 };
                 linear_terminal(&deep, None, s, v)
@@ -382,7 +399,8 @@ impl ImAugmentation {
                 if !(es.is_finite() && es > 0.0) {
                     return None;
                 }
-                let d = |e: f64| 1.0 + (e / es).powi(MAIN_FLUX_EXPONENT);
+                // The flux is the voltage over the frequency.
+                let d = |e: f64| 1.0 + (e / (r * es)).powi(MAIN_FLUX_EXPONENT);
                 match self.flux {
                     SaturatingFlux::AirGap => main_flux_terminal(&cage, s, v, d)?,
                     SaturatingFlux::Stator => main_flux_terminal(&gamma_circuit(&cage), s, v, d)?,
@@ -411,8 +429,8 @@ impl ImAugmentation {
                     return None;
                 }
                 let hot = Cage {
-                    rs: rs * fs,
-                    rr: rr * fr,
+                    rs: cage.rs * fs,
+                    rr: cage.rr * fr,
                     ..cage
                 };
                 linear_terminal(&hot, None, s, v)
@@ -571,6 +589,7 @@ mod tests {
             slip: s,
             voltage: 230.0,
             heat: 0.5,
+            freq_ratio: 1.0,
         }
     }
 
@@ -591,6 +610,34 @@ mod tests {
             assert!((a.current - b.current).abs() < 1e-9 * a.current, "{s}");
             assert!((a.power - b.power).abs() < 1e-9 * a.power.abs(), "{s}");
         }
+    }
+
+    /// At a quarter of the frequency the nominal model is the circuit with
+    /// a quarter of each reactance, and a deep bar at locked rotor has
+    /// half its reduced height (the rotor frequency's square root).
+    #[test]
+    fn a_reduced_frequency_scales_the_reactances_and_the_bars_height() {
+        let quarter = PointInput {
+            freq_ratio: 0.25,
+            ..point(1.0)
+        };
+        let close = |(i, p): (f64, f64), (i0, p0): (f64, f64)| {
+            (i - i0).abs() < 1e-9 * i0 && (p - p0).abs() < 1e-9 * p0
+        };
+        let nominal = ImAugmentation::nominal(1.0)
+            .predict(&x0(), &quarter)
+            .unwrap();
+        let c = single_cage(1.0, 0.5, 15.0, None, 1.2, 0.5);
+        assert!(close(nominal, predict(&c, 1.0, 230.0)), "{nominal:?}");
+        // xi1 = 2, all of the rotor in the bar: at a quarter of the
+        // frequency the skin factors of a reduced height of 1.
+        let deep = ImAugmentation::with(Effect::DeepBar, 1.0);
+        let mut x = x0();
+        x.extend([2f64.ln(), 30.0]);
+        let (kr, kx) = skin_effect(1.0);
+        let c = single_cage(1.0, 0.5, 15.0, None, 1.2 * kr, 0.5 * kx);
+        let got = deep.predict(&x, &quarter).unwrap();
+        assert!(close(got, predict(&c, 1.0, 230.0)), "{got:?}");
     }
 
     #[test]

@@ -571,6 +571,7 @@ mod tests {
                     slip: s,
                     voltage: v / 3f64.sqrt(),
                     heat: 0.0,
+                    freq_ratio: 1.0,
                 };
                 ImAugmentation::nominal(1.0).predict(&x[..4], &p).unwrap().0
             })
@@ -587,6 +588,7 @@ mod tests {
                     slip: s,
                     voltage: v / 3f64.sqrt(),
                     heat,
+                    freq_ratio: 1.0,
                 };
                 let (i, pw) = model.predict(x, &p).unwrap();
                 OperatingPoint {
@@ -696,6 +698,7 @@ mod tests {
                 slip: 1.0,
                 voltage: v / 3f64.sqrt(),
                 heat: 0.0,
+                freq_ratio: 1.0,
             };
             let (i, pw) = ImAugmentation::nominal(1.0).predict(&x, &p).unwrap();
             crate::record::SupplyReading {
@@ -714,7 +717,7 @@ mod tests {
         assert_eq!(d.verdict.effect, "none", "{:?}", d.candidates);
         assert_warned(
             &d.warnings,
-            "3 locked-rotor reading(s) at the load test's frequency are diagnosed with it",
+            "3 locked-rotor reading(s) are diagnosed with the load test",
         );
         assert_warned(&d.warnings, "its 3 no-load reading(s) are not part");
         // The locked-rotor points are a voltage group of their own.
@@ -724,6 +727,50 @@ mod tests {
             d.validation
         );
         assert!(points == 30, "{points}");
+    }
+
+    /// A deep-bar machine with a locked-rotor test at 50 Hz and at
+    /// 12.5 Hz beside its sweep: the reduced-frequency readings are
+    /// diagnosed at their own frequency, and the verdict is deep bar.
+    #[test]
+    fn locked_rotor_at_two_frequencies_is_diagnosed_at_each() {
+        let model = ImAugmentation::with(Effect::DeepBar, 1.0);
+        let mut x = nominal_x();
+        x.extend([2f64.ln(), 0.0]);
+        let mut r = record(model, &x, &[400.0], 6);
+        let lr = |v: f64, f: f64| {
+            let p = super::effects::PointInput {
+                slip: 1.0,
+                voltage: v / 3f64.sqrt(),
+                heat: 0.5,
+                freq_ratio: f / 50.0,
+            };
+            let (i, pw) = model.predict(&x, &p).unwrap();
+            crate::record::SupplyReading {
+                segment: 1,
+                line_voltage: v,
+                line_current: i,
+                input_power: pw,
+                frequency: f,
+                winding_temperature: None,
+            }
+        };
+        r.standard_tests.locked_rotor = [(60.0, 50.0), (80.0, 50.0), (100.0, 50.0)]
+            .into_iter()
+            .chain([(20.0, 12.5), (25.0, 12.5), (30.0, 12.5)])
+            .map(|(v, f)| lr(v, f))
+            .collect();
+        let d = diagnose_im(&r, &star()).unwrap().report;
+        assert_warned(&d.warnings, "(3 at another frequency");
+        assert_eq!(d.verdict.effect, "deep_bar", "{:?}", d.candidates);
+        // The readings fit as well as the sweep's own points: nothing at
+        // 12.5 Hz is left for the gap.
+        assert!(
+            d.verdict.gap_after < 2.0 * d.gap.noise_floor,
+            "{:?} floor {}",
+            d.verdict,
+            d.gap.noise_floor
+        );
     }
 
     /// A candidate whose effect is not in the record stops where its fit

@@ -1,18 +1,19 @@
 //! A record's standard tests in the diagnosis: which of them are operating
 //! points of the load test's circuit, and which are not.
 //!
-//! A locked-rotor reading at the load test's supply frequency is an
-//! operating point at slip 1, exactly what the last point of a slip sweep
-//! is (a motor lab's locked-rotor segment imported as `im_slip_sweep` was
-//! always diagnosed so); it joins the points in recording (segment)
-//! order, so that the heat index keeps its meaning. A locked-rotor
-//! reading at another frequency needs the reactances at that frequency
-//! and deep bar's rotor frequency, the no-load readings their unmeasured
+//! A locked-rotor reading is an operating point at slip 1, exactly what
+//! the last point of a slip sweep is (a motor lab's locked-rotor segment
+//! imported as `im_slip_sweep` was always diagnosed so); it joins the
+//! points in recording (segment) order, so that the heat index keeps its
+//! meaning. At a reduced frequency the models take the reactances, deep
+//! bar's rotor frequency and the saturating flux at that frequency
+//! (`PointInput::freq_ratio`): two frequencies are what separates deep bar
+//! from leakage saturation. The no-load readings need their unmeasured
 //! slip and the friction and windage in the power balance, and the DC
 //! resistance is no operating point: those are left out, and the report
-//! says which.
+//! says so.
 
-use crate::record::{OperatingPoint, Record, SupplyReading};
+use crate::record::{OperatingPoint, Record};
 
 /// Relative difference of two supply frequencies that are the same.
 const SAME_FREQUENCY: f64 = 0.01;
@@ -31,13 +32,12 @@ pub fn with_locked_rotor_points(record: &Record) -> (Record, Option<String>) {
         .iter()
         .map(|p| p.frequency)
         .find(|f| f.is_finite());
-    let same = |f: f64| match (sweep_frequency, f.is_finite()) {
-        (Some(s), true) => (f - s).abs() <= SAME_FREQUENCY * s,
+    let reduced = |f: f64| match sweep_frequency {
+        Some(s) if f.is_finite() => (f - s).abs() > SAME_FREQUENCY * s,
         // Where either is not given, both are the supply's.
-        _ => true,
+        _ => false,
     };
-    let (used, other_frequency): (Vec<&SupplyReading>, Vec<&SupplyReading>) =
-        tests.locked_rotor.iter().partition(|r| same(r.frequency));
+    let used = &tests.locked_rotor;
     let mut out = record.clone();
     out.operating_points
         .extend(used.iter().map(|r| OperatingPoint {
@@ -63,17 +63,22 @@ pub fn with_locked_rotor_points(record: &Record) -> (Record, Option<String>) {
         }
     };
     count(tests.no_load.len(), "no-load");
-    count(
-        other_frequency.len(),
-        "locked-rotor (at another frequency than the load test's)",
-    );
     count(tests.dc_resistance.len(), "DC-resistance");
     let mut warning = String::new();
     if !used.is_empty() {
+        let at_reduced = used.iter().filter(|r| reduced(r.frequency)).count();
         warning.push_str(&format!(
-            "the record's {} locked-rotor reading(s) at the load test's frequency are \
-             diagnosed with it, as operating points at slip 1",
-            used.len()
+            "the record's {} locked-rotor reading(s) are diagnosed with the load test, as \
+             operating points at slip 1{}",
+            used.len(),
+            if at_reduced > 0 {
+                format!(
+                    " ({at_reduced} at another frequency, with the reactances, the bar's \
+                     rotor frequency and the saturating flux at theirs)"
+                )
+            } else {
+                String::new()
+            }
         ));
     }
     if !left_out.is_empty() {
@@ -84,8 +89,8 @@ pub fn with_locked_rotor_points(record: &Record) -> (Record, Option<String>) {
         }
         warning.push_str(&format!(
             "{} reading(s) are not part of the diagnosis, which compares the circuit with \
-             operating points of known slip at the load test's frequency only; `identify` uses \
-             them (the classical reduction and the joint fit)",
+             operating points of known slip only; `identify` uses them (the classical \
+             reduction and the joint fit)",
             crate::excerpt::listed(&left_out)
         ));
     }
@@ -95,7 +100,7 @@ pub fn with_locked_rotor_points(record: &Record) -> (Record, Option<String>) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::record::DcResistanceReading;
+    use crate::record::{DcResistanceReading, SupplyReading};
 
     fn point(segment: u32, slip: f64) -> OperatingPoint {
         OperatingPoint {
@@ -141,17 +146,17 @@ mod tests {
             .iter()
             .map(|p| (p.segment, p.slip))
             .collect();
-        assert_eq!(slips, [(1, 1.0), (2, 0.01), (2, 0.5)]);
+        assert_eq!(slips, [(1, 1.0), (1, 1.0), (2, 0.01), (2, 0.5)]);
         let w = warning.unwrap();
         assert!(
-            w.contains("1 locked-rotor reading(s) at the load test's frequency"),
+            w.contains("2 locked-rotor reading(s) are diagnosed with the load test"),
             "{w}"
         );
+        assert!(w.contains("(1 at another frequency"), "{w}");
         assert!(
-            w.contains("4 no-load, 1 locked-rotor (at another frequency than the load test's)"),
+            w.contains("its 4 no-load, 1 DC-resistance reading(s) are not part"),
             "{w}"
         );
-        assert!(w.contains("1 DC-resistance reading(s) are not part"), "{w}");
     }
 
     #[test]
