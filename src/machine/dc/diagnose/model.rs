@@ -787,10 +787,6 @@ mod tests {
         assert!(di < 0.02 && dw < 0.5, "{di} {dw}");
     }
 
-    /// A record cut into segments (the boundary sample shared, or the next
-    /// sample right after) is simulated as if it were one segment, for the
-    /// rigid, the two-mass and the lagged model alike; a segment that does
-    /// not continue starts from its own start.
     /// A sensor lag's dead time: with no lag, the reading is the motor's
     /// one sample late (the first sample standing for the one before it);
     /// the other channel is read on time.
@@ -811,6 +807,10 @@ mod tests {
         assert_eq!(w1, w0);
     }
 
+    /// A record cut into segments (the boundary sample shared, or the next
+    /// sample right after) is simulated as if it were one segment, for the
+    /// rigid, the two-mass and the lagged model alike; a segment that does
+    /// not continue starts from its own start.
     #[test]
     fn continued_segments_are_one_simulation() {
         let p = DcParams::SEED_TABLE4_MOMENTS;

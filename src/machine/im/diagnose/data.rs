@@ -3,6 +3,7 @@
 //! heat index, the noise weights and the held-out folds.
 
 use super::effects::PointInput;
+use super::standard_points::SAME_FREQUENCY;
 use crate::diagnose::{DiagnoseError, DiagnoseOptions};
 use crate::identify::sweep_of;
 use crate::model::Connection;
@@ -228,7 +229,7 @@ impl SweepSet {
 /// points share (the load test's: a reduced-frequency locked-rotor test
 /// has a few points); 1 where a point or every point has none.
 fn frequency_ratios(points: &[OperatingPoint]) -> Vec<f64> {
-    let same = |a: f64, b: f64| (a - b).abs() <= 0.01 * a.abs().max(b.abs());
+    let same = |a: f64, b: f64| (a - b).abs() <= SAME_FREQUENCY * a.abs().max(b.abs());
     let finite: Vec<f64> = points
         .iter()
         .map(|p| p.frequency)

@@ -16,7 +16,7 @@
 use crate::record::{OperatingPoint, Record};
 
 /// Relative difference of two supply frequencies that are the same.
-const SAME_FREQUENCY: f64 = 0.01;
+pub(super) const SAME_FREQUENCY: f64 = 0.01;
 
 /// The record's operating points with its locked-rotor readings at the
 /// load test's frequency added (in segment order), and a warning naming
