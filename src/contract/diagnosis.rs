@@ -29,6 +29,8 @@ pub enum RegionAxis {
     Time,
     /// Slip, 0 synchronous to 1 locked rotor (IM).
     Slip,
+    /// Line voltage, V (IM: the free-running points of a no-load test).
+    Voltage,
 }
 
 /// One region of the gap: where a share of the squared residual lies.

@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use super::Diagnosis;
+use super::{Diagnosis, RegionAxis};
 
 /// Render `d` as a short text report: where the gap lies, the verdict and
 /// how far it shrinks, the candidates, corrected parameters, look-alikes.
@@ -25,15 +25,16 @@ pub fn render_diagnosis_text(d: &Diagnosis) -> String {
                 (None, Some(v)) => format!(" at {v:.0} V"),
                 _ => String::new(),
             };
+            let span = match r.axis {
+                RegionAxis::Voltage => format!("{:.0}–{:.0} V", r.from, r.to),
+                _ => format!("{:?} {:.4}–{:.4}", r.axis, r.from, r.to),
+            };
             let _ = writeln!(
                 s,
-                "    {:>5.1} %  {:<18} {:<12}{place}, {:?} {:.4}–{:.4}",
+                "    {:>5.1} %  {:<18} {:<12}{place}, {span}",
                 100.0 * r.share,
                 r.channel,
                 r.label,
-                r.axis,
-                r.from,
-                r.to
             );
         }
     }

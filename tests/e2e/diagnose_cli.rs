@@ -34,7 +34,8 @@ fn check_contract(d: &Value) {
         for key in ["channel", "axis", "from", "to", "label", "share"] {
             assert!(r.get(key).is_some(), "region.{key} missing in {r}");
         }
-        assert!(["time", "slip"].contains(&r["axis"].as_str().unwrap()));
+        // `voltage`: an additive extension, a no-load test's points.
+        assert!(["time", "slip", "voltage"].contains(&r["axis"].as_str().unwrap()));
         let share = num(&r["share"]);
         assert!((0.0..=1.0 + 1e-9).contains(&share), "share of {r}");
         // The regions of one segment each partition the gap; a region

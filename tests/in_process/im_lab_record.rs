@@ -151,16 +151,24 @@ fn a_misfitting_circuit_is_named_as_such() {
     );
 }
 
-/// The lab record's diagnosis (star, as the nameplate's motor).
-fn diagnosed() -> motorbench::diagnose::DiagnosisRun {
+/// The diagnosis of the lab record's `files` (star, as the nameplate's
+/// motor).
+fn diagnosed_files(files: &[PathBuf]) -> motorbench::diagnose::DiagnosisRun {
+    let record =
+        load_record_files(SegmentKind::ImSlipSweep, files, None, None).expect("the CSV set loads");
     diagnose_im(
-        &lab_record(),
+        &record,
         &DiagnoseOptions {
             connection: Some(Connection::Star),
             ..Default::default()
         },
     )
     .expect("the record is diagnosed")
+}
+
+/// The whole lab record's diagnosis.
+fn diagnosed() -> motorbench::diagnose::DiagnosisRun {
+    diagnosed_files(&files())
 }
 
 /// Every candidate the diagnosis reports has its effect's parameters in
@@ -187,13 +195,14 @@ fn diagnosis_gives_physical_answers_only() {
     assert!((0.0..=1.0).contains(&d.verdict.confidence));
 }
 
-/// The machine has both core loss and main-flux saturation; neither
-/// candidate alone explains the gap, and the report says so: the verdict
-/// leaves most of it, and the candidate that took more of it alone is
-/// named with the test that separates the two.
+/// The machine has both core loss and main-flux saturation. Without its
+/// no-load test the record cannot tell them apart: neither candidate alone
+/// explains the gap, and the report says so: the verdict leaves most of
+/// it, and the candidate that took more of it alone is named with the test
+/// that separates the two.
 #[test]
 fn a_verdict_that_leaves_most_of_the_gap_says_so() {
-    let run = diagnosed();
+    let run = diagnosed_files(&files()[1..]);
     let d = &run.report;
     let v = &d.verdict;
     assert!(v.gap_after > 2.0 * d.gap.noise_floor, "{v:?}");
@@ -217,4 +226,31 @@ fn a_verdict_that_leaves_most_of_the_gap_says_so() {
         "{:?}",
         d.warnings
     );
+}
+
+/// With its no-load test (imported as a sweep at zero slip: the slip was
+/// not measured), the record shows its main-flux saturation where it is
+/// plainest, the no-load current growing faster than the voltage: the
+/// no-load points run free (friction and windage from their own losses),
+/// hold most of the gap, and the verdict is main-flux saturation, which
+/// takes most of the gap; the core loss it leaves is said.
+#[test]
+fn the_no_load_test_shows_the_saturation() {
+    let run = diagnosed();
+    let d = &run.report;
+    let v = &d.verdict;
+    assert_eq!(v.effect, "main_flux_saturation", "{:?}", d.candidates);
+    assert!(v.shrink > 0.5, "{v:?}");
+    assert_eq!(d.gap.regions[0].label, "no_load", "{:?}", d.gap.regions);
+    for expected in [
+        "segment(s) 0 are at zero slip throughout",
+        "10 no-load reading(s) are diagnosed as free-running points",
+        "main_flux_saturation: named as the verdict, though it leaves",
+    ] {
+        assert!(
+            d.warnings.iter().any(|w| w.contains(expected)),
+            "{expected}: {:?}",
+            d.warnings
+        );
+    }
 }

@@ -1,6 +1,7 @@
 //! A record's slip sweeps as the IM diagnosis reads them: per-phase
-//! operating points in recording order, their supply-voltage groups, the
-//! heat index, the noise weights and the held-out folds.
+//! operating points in recording order, which of them run free (no-load
+//! readings), their supply-voltage groups, the heat index, the noise
+//! weights and the held-out folds.
 
 use super::effects::PointInput;
 use super::standard_points::SAME_FREQUENCY;
@@ -34,6 +35,9 @@ pub struct SweepSet {
     pub power: Vec<f64>,
     /// Segment of each point.
     pub segment: Vec<u32>,
+    /// Whether each point runs free (a no-load reading: slip not
+    /// measured; [`PointInput::free_running`]).
+    pub free_running: Vec<bool>,
     /// Supply-voltage group of each point (index into `group_voltage`).
     pub group: Vec<usize>,
     /// Mean line voltage of each group, V.
@@ -53,9 +57,11 @@ pub struct SweepSet {
 }
 
 impl SweepSet {
-    /// Read the record's operating points.
+    /// Read the record's operating points; those of the segments
+    /// `free_running` run free.
     pub fn from_record(
         record: &Record,
+        free_running: &[u32],
         options: &DiagnoseOptions,
     ) -> Result<SweepSet, DiagnoseError> {
         let mut warnings = Vec::new();
@@ -95,6 +101,9 @@ impl SweepSet {
         segs.dedup();
         let mut group_voltage: Vec<f64> = Vec::new();
         let mut seg_group = Vec::new();
+        // The sweeps' segments first; a no-load test spans voltages and is
+        // a group of its own (at its mean), after them.
+        segs.sort_by_key(|s| free_running.contains(s));
         for &s in &segs {
             let vs: Vec<f64> = sweep
                 .points
@@ -105,7 +114,8 @@ impl SweepSet {
             let mean = vs.iter().sum::<f64>() / vs.len() as f64;
             let g = group_voltage
                 .iter()
-                .position(|&gv| (gv - mean).abs() <= SAME_VOLTAGE * gv.max(mean));
+                .position(|&gv| (gv - mean).abs() <= SAME_VOLTAGE * gv.max(mean))
+                .filter(|_| !free_running.contains(&s));
             let g = g.unwrap_or_else(|| {
                 group_voltage.push(mean);
                 group_voltage.len() - 1
@@ -135,18 +145,30 @@ impl SweepSet {
             })
             .collect();
         let ratios = frequency_ratios(&record.operating_points);
+        let free: Vec<bool> = sweep
+            .points
+            .iter()
+            .map(|p| free_running.contains(&p.segment))
+            .collect();
         let inputs = (0..n)
             .map(|k| PointInput {
-                slip: d.slip[k],
-                voltage: d.voltage[k],
                 heat: heat[k],
                 freq_ratio: ratios[k],
+                free_running: free[k],
+                ..PointInput::at(d.slip[k], d.voltage[k])
             })
             .collect();
         let floor = |v: &[f64]| DIGIT_FLOOR * v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let (fi, fp) = (floor(&d.current), floor(&d.power));
-        let has_low = d.slip.iter().any(|&s| s < 0.05);
-        let has_high = d.slip.iter().any(|&s| s > 0.5);
+        let known = || {
+            d.slip
+                .iter()
+                .zip(&free)
+                .filter(|(_, f)| !**f)
+                .map(|(s, _)| *s)
+        };
+        let has_low = known().any(|s| s < 0.05);
+        let has_high = known().any(|s| s > 0.5);
         if !(has_low && has_high) {
             warnings.push(
                 "the sweep does not reach both near-synchronous speed (slip < 0.05) and high slip (> 0.5): \
@@ -162,6 +184,7 @@ impl SweepSet {
             current: d.current,
             power: d.power,
             segment: sweep.points.iter().map(|p| p.segment).collect(),
+            free_running: free,
             group,
             group_voltage,
             sigma_i: 1.0,
@@ -183,9 +206,36 @@ impl SweepSet {
         (v, i)
     }
 
-    /// Whether the record holds sweeps at two or more supply voltages.
+    /// Whether the record holds sweeps at two or more supply voltages, or
+    /// a no-load test over a range of voltages.
     pub fn several_voltages(&self) -> bool {
-        self.group_voltage.len() >= 2
+        let (lo, hi) = self
+            .inputs
+            .iter()
+            .zip(&self.free_running)
+            .filter(|(_, f)| **f)
+            .fold((f64::INFINITY, 0.0f64), |(lo, hi), (p, _)| {
+                (lo.min(p.voltage), hi.max(p.voltage))
+            });
+        self.sweep_voltages() >= 2 || hi > lo * (1.0 + SAME_VOLTAGE)
+    }
+
+    /// How many supply voltages the points of known slip have.
+    fn sweep_voltages(&self) -> usize {
+        let mut g: Vec<usize> = self.known_slip().iter().map(|&k| self.group[k]).collect();
+        g.sort_unstable();
+        g.dedup();
+        g.len()
+    }
+
+    /// The points of known slip (every point but the free-running ones).
+    pub fn known_slip(&self) -> Vec<usize> {
+        (0..self.len()).filter(|&k| !self.free_running[k]).collect()
+    }
+
+    /// Whether any point runs free (the record has a no-load test).
+    pub fn has_free_running(&self) -> bool {
+        self.free_running.iter().any(|f| *f)
     }
 
     /// Held-out folds: the points each fold leaves out, and a description.
@@ -214,12 +264,20 @@ impl SweepSet {
         for f in &mut folds {
             f.sort_unstable();
         }
+        let voltages = self.sweep_voltages();
+        let no_load = self.group_voltage.len() - voltages;
         (
             folds,
             format!(
-                "interleaved points ({k} folds by slip rank within each sweep, {} supply voltage{})",
-                self.group_voltage.len(),
-                if self.group_voltage.len() == 1 { "" } else { "s" }
+                "interleaved points ({k} folds by slip rank within each sweep, {} supply \
+                 voltage{}{})",
+                voltages,
+                if voltages == 1 { "" } else { "s" },
+                match no_load {
+                    0 => String::new(),
+                    1 => " and a no-load test".into(),
+                    n => format!(" and {n} no-load tests"),
+                }
             ),
         )
     }

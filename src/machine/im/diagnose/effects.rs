@@ -24,6 +24,13 @@
 //! fit can then only approach the neutral value (no rise, no loss) and
 //! never ask for a falling resistance or a negative loss.
 //!
+//! A record with a no-load test adds `ln Pfw` at the end of every vector
+//! (nominal and augmented alike): the friction and windage its
+//! free-running points draw. Each such point is taken at the slip where
+//! the rotor delivers `Pfw` (`PointInput::free_running`), found in two
+//! fixed-point steps from zero slip. Friction trades with `Rs` in the
+//! no-load power, so each model fits its own.
+//!
 //! The heat index `h` of a point is the measured `I²` accumulated in
 //! recording order up to it, normalised to 1 at the end of the record: a
 //! winding heated by its copper loss without cooling. `rise_Rs` and
@@ -56,6 +63,25 @@ pub struct PointInput {
     /// saturates scale with it (1 for every point of a sweep; below 1 for
     /// a locked-rotor test at reduced frequency).
     pub freq_ratio: f64,
+    /// Whether the point runs free (a no-load reading, whose slip is not
+    /// measured): the model takes it at the slip where the rotor delivers
+    /// the friction and windage (the vector's last entry, `ln Pfw`, where
+    /// the model carries it; zero slip where not), and `slip` is not read.
+    pub free_running: bool,
+}
+
+impl PointInput {
+    /// A point at `slip` and phase voltage `voltage`: at the start of the
+    /// record (heat index 0), at the reference frequency, of known slip.
+    pub fn at(slip: f64, voltage: f64) -> PointInput {
+        PointInput {
+            slip,
+            voltage,
+            heat: 0.0,
+            freq_ratio: 1.0,
+            free_running: false,
+        }
+    }
 }
 
 /// How an effect parameter is carried in the fitted vector.
@@ -114,6 +140,11 @@ pub struct ImAugmentation {
     /// Which flux main-flux saturation follows (read only for
     /// [`Effect::MainFluxSaturation`]).
     pub flux: SaturatingFlux,
+    /// Whether the vector ends with `ln Pfw`, the friction and windage (W)
+    /// of the free-running points (a record with a no-load test): a
+    /// parameter of every model, since it trades with the stator
+    /// resistance that each model fits differently.
+    pub friction: bool,
 }
 
 /// The two usual forms of main-flux saturation. They are the same
@@ -261,6 +292,7 @@ impl ImAugmentation {
             effect: None,
             split_ratio,
             flux: SaturatingFlux::AirGap,
+            friction: false,
         }
     }
 
@@ -270,6 +302,7 @@ impl ImAugmentation {
             effect: Some(effect),
             split_ratio,
             flux: SaturatingFlux::AirGap,
+            friction: false,
         }
     }
 
@@ -304,7 +337,17 @@ impl ImAugmentation {
 
     /// Length of the parameter vector.
     pub fn len(&self) -> usize {
-        NOMINAL_KEYS.len() + self.effect_params().len()
+        NOMINAL_KEYS.len() + self.effect_params().len() + usize::from(self.friction)
+    }
+
+    /// The friction and windage of the free-running points in `x`, W (0
+    /// where the model carries none).
+    pub fn friction_power(&self, x: &[f64]) -> f64 {
+        if self.friction {
+            x[self.len() - 1].exp()
+        } else {
+            0.0
+        }
     }
 
     /// Starting values of the effect's parameters, several where the fit
@@ -348,8 +391,46 @@ impl ImAugmentation {
         self.terminal(x, p).map(|t| (t.current, t.power))
     }
 
-    /// Terminal values at one point.
+    /// Terminal values at one point; a free-running point at the slip
+    /// where the shaft delivers its loss.
     pub fn terminal(&self, x: &[f64], p: &PointInput) -> Option<Terminal> {
+        let loss = self.friction_power(x);
+        if !p.free_running {
+            return self.terminal_at_slip(x, p);
+        }
+        if !(loss.is_finite() && loss > 0.0) {
+            return self.terminal_at_slip(x, &PointInput { slip: 0.0, ..*p });
+        }
+        // Near zero slip the rotor branch is `Rr/s` at the air-gap voltage
+        // `E`, whose shaft power is `3·E²·s·(1 − s)/Rr`. `E` from zero
+        // slip, then from that slip: the rotor current's drop moves `E` by
+        // about a part in 10³, the second step leaves a part in 10⁶.
+        let free = |slip: f64| PointInput { slip, ..*p };
+        let rr = self.zero_slip_rr(x, p);
+        let slip_at = |e: f64| {
+            let q = loss * rr / (3.0 * e * e);
+            let slip = q * (1.0 + q);
+            (slip.is_finite() && slip < 1.0).then_some(slip)
+        };
+        let mut t = self.terminal_at_slip(x, &free(0.0))?;
+        for _ in 0..2 {
+            t = self.terminal_at_slip(x, &free(slip_at(t.air_gap_voltage)?))?;
+        }
+        Some(t)
+    }
+
+    /// The rotor resistance near zero slip (deep bar's is the DC value
+    /// there; only a thermal rise changes it), Ω.
+    fn zero_slip_rr(&self, x: &[f64], p: &PointInput) -> f64 {
+        let rr = x[2].exp();
+        match self.effect {
+            Some(Effect::ThermalDrift) => rr * (1.0 + x[5].exp() * p.heat),
+            _ => rr,
+        }
+    }
+
+    /// Terminal values at one point at its slip.
+    fn terminal_at_slip(&self, x: &[f64], p: &PointInput) -> Option<Terminal> {
         let (rs, xm, rr, xr) = (x[0].exp(), x[1].exp(), x[2].exp(), x[3].exp());
         let xs = self.split_ratio * xr;
         let (s, v) = (p.slip, p.voltage);
@@ -586,10 +667,8 @@ mod tests {
 
     fn point(s: f64) -> PointInput {
         PointInput {
-            slip: s,
-            voltage: 230.0,
             heat: 0.5,
-            freq_ratio: 1.0,
+            ..PointInput::at(s, 230.0)
         }
     }
 
@@ -610,6 +689,48 @@ mod tests {
             assert!((a.current - b.current).abs() < 1e-9 * a.current, "{s}");
             assert!((a.power - b.power).abs() < 1e-9 * a.power.abs(), "{s}");
         }
+    }
+
+    /// A machine running free, at the slip where its rotor delivers the
+    /// friction and windage, against the model's free-running point: the
+    /// same current and power to a part in 10⁴, where zero slip misses the
+    /// power by a third.
+    #[test]
+    fn a_free_running_point_is_zero_slip_with_its_shaft_loss_in_phase() {
+        let nominal = ImAugmentation::nominal(1.0);
+        let x = x0();
+        let friction = 150.0;
+        // The slip where the shaft's power 3·Ir²·Rr·(1 − s)/s is the friction.
+        let shaft = |s: f64| {
+            let t = nominal.terminal(&x, &PointInput::at(s, 230.0)).unwrap();
+            3.0 * t.rotor_current.powi(2) * 1.2 * (1.0 - s) / s - friction
+        };
+        let s = increasing_root(shaft, 1e-7, 0.05).unwrap();
+        assert!(s > 1e-4 && s < 0.01, "{s}");
+        let free = nominal.terminal(&x, &PointInput::at(s, 230.0)).unwrap();
+        let with_friction = ImAugmentation {
+            friction: true,
+            ..nominal
+        };
+        let mut xf = x.clone();
+        xf.push(friction.ln());
+        let model = with_friction
+            .terminal(
+                &xf,
+                &PointInput {
+                    free_running: true,
+                    ..PointInput::at(0.3, 230.0)
+                },
+            )
+            .unwrap();
+        let bare = nominal.terminal(&x, &PointInput::at(0.0, 230.0)).unwrap();
+        let rel = |a: f64, b: f64| (a - b).abs() / b;
+        assert!(rel(model.power, free.power) < 1e-4, "{model:?} {free:?}");
+        assert!(
+            rel(model.current, free.current) < 1e-4,
+            "{model:?} {free:?}"
+        );
+        assert!(rel(bare.power, free.power) > 0.3, "{bare:?} {free:?}");
     }
 
     /// At a quarter of the frequency the nominal model is the circuit with

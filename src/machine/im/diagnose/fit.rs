@@ -151,10 +151,19 @@ pub fn starts_from(
     extra: &[Vec<f64>],
 ) -> Vec<Vec<f64>> {
     let (v, i) = data.maxima();
+    // The friction, where the model carries it, as the nominal fit has it.
+    let friction = nominal.get(4).filter(|_| model.friction).copied();
     let mut out: Vec<Vec<f64>> = model
         .effect_starts(nominal, v, i)
         .into_iter()
-        .map(|e| nominal[..4].iter().copied().chain(e).collect())
+        .map(|e| {
+            nominal[..4]
+                .iter()
+                .copied()
+                .chain(e)
+                .chain(friction)
+                .collect()
+        })
         .collect();
     out.extend(extra.iter().filter(|x| x.len() == model.len()).cloned());
     out
@@ -304,5 +313,8 @@ pub fn log_mask(model: &ImAugmentation) -> Vec<bool> {
             .iter()
             .map(|p| p.transform == super::effects::Transform::Log),
     );
+    if model.friction {
+        m.push(true);
+    }
     m
 }

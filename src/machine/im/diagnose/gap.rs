@@ -1,6 +1,7 @@
 //! Where the IM gap lies: the nominal model's held-out residual split by
 //! channel, supply voltage and region along slip (`low_slip`,
-//! `breakdown`, `high_slip`), and residual statistics as evidence.
+//! `breakdown`, `high_slip`), a no-load test's points by themselves
+//! (`no_load`, along line voltage), and residual statistics as evidence.
 //!
 //! Regions follow from the nominal fit's slip of maximum torque `s_bd`
 //! (Thevenin form, `Rr/√(Rth² + (Xth + Xr)²)`): `low_slip` below `s_bd/2`
@@ -61,6 +62,16 @@ impl SlipRegions {
     }
 }
 
+/// The segments of a no-load test (free-running points), in order.
+fn no_load_segments(data: &SweepSet) -> Vec<u32> {
+    let mut segs: Vec<u32> = (0..data.len())
+        .filter(|&k| data.free_running[k])
+        .map(|k| data.segment[k])
+        .collect();
+    segs.dedup();
+    segs
+}
+
 /// Shares of the squared weighted residual: regions (largest first), per
 /// channel, per supply voltage.
 pub fn shares(
@@ -89,7 +100,11 @@ pub fn shares(
         for (g, &v) in data.group_voltage.iter().enumerate() {
             for (label, from, to) in regions.bounds() {
                 let idx: Vec<usize> = (0..data.len())
-                    .filter(|&k| data.group[k] == g && regions.label(data.inputs[k].slip) == label)
+                    .filter(|&k| {
+                        data.group[k] == g
+                            && !data.free_running[k]
+                            && regions.label(data.inputs[k].slip) == label
+                    })
                     .collect();
                 if idx.is_empty() {
                     continue;
@@ -105,6 +120,34 @@ pub fn shares(
                     voltage: Some(v),
                 });
             }
+        }
+    }
+    for seg in no_load_segments(data) {
+        let idx: Vec<usize> = (0..data.len())
+            .filter(|&k| data.free_running[k] && data.segment[k] == seg)
+            .collect();
+        let line = |k: &usize| data.connection.line_voltage(data.inputs[*k].voltage);
+        let from = idx.iter().map(line).fold(f64::INFINITY, f64::min);
+        let to = idx.iter().map(line).fold(0.0, f64::max);
+        for (c, name) in CHANNELS.iter().enumerate() {
+            let sq = |k: &usize| {
+                if c == 0 {
+                    weighted[*k].0
+                } else {
+                    weighted[*k].1
+                }
+                .powi(2)
+            };
+            out.push(GapRegion {
+                channel: name.to_string(),
+                axis: RegionAxis::Voltage,
+                from,
+                to,
+                label: "no_load".into(),
+                share: idx.iter().map(sq).sum::<f64>() / total,
+                segment: Some(seg),
+                voltage: None,
+            });
         }
     }
     for (g, &v) in data.group_voltage.iter().enumerate() {

@@ -1,5 +1,5 @@
 //! A record's standard tests in the diagnosis: which of them are operating
-//! points of the load test's circuit, and which are not.
+//! points of the load test's circuit, and how.
 //!
 //! A locked-rotor reading is an operating point at slip 1, exactly what
 //! the last point of a slip sweep is (a motor lab's locked-rotor segment
@@ -8,28 +8,83 @@
 //! meaning. At a reduced frequency the models take the reactances, deep
 //! bar's rotor frequency and the saturating flux at that frequency
 //! (`PointInput::freq_ratio`): two frequencies are what separates deep bar
-//! from leakage saturation. The no-load readings need their unmeasured
-//! slip and the friction and windage in the power balance, and the DC
-//! resistance is no operating point: those are left out, and the report
-//! says so.
+//! from leakage saturation.
+//!
+//! A no-load reading is a free-running point: its slip is not measured,
+//! and the rotor delivers the friction and windage. It joins the points
+//! too, at the slip where the rotor delivers that loss, which every model
+//! of the diagnosis fits (`PointInput::free_running`); a no-load sweep
+//! over several voltages is where main-flux saturation and core loss show
+//! most clearly. An `im_slip_sweep` segment at zero slip throughout is
+//! such a test whose slip was not measured (a lab's no-load CSV imported
+//! as a sweep), and is read so, with a warning. The DC resistance is no
+//! operating point: it sets the stator resistance of the friction's start
+//! value.
 
-use crate::record::{OperatingPoint, Record};
+use std::collections::BTreeSet;
+
+use crate::record::{OperatingPoint, Record, SupplyReading};
 
 /// Relative difference of two supply frequencies that are the same.
 pub(super) const SAME_FREQUENCY: f64 = 0.01;
 
-/// The record's operating points with its locked-rotor readings at the
-/// load test's frequency added (in segment order), and a warning naming
-/// what of the standard tests the diagnosis does not use; the record as it
-/// is, and no warning, when it has no standard tests.
-pub fn with_locked_rotor_points(record: &Record) -> (Record, Option<String>) {
+/// A record's points as the IM diagnosis reads them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StandardPoints {
+    /// The record with its locked-rotor and no-load readings added to its
+    /// operating points, in segment order.
+    pub record: Record,
+    /// The segments whose points run free (no-load: slip not measured).
+    pub free_running: Vec<u32>,
+    /// The free-running points as no-load readings, for the friction.
+    pub no_load: Vec<SupplyReading>,
+    /// What the diagnosis makes of the standard tests, where there are any.
+    pub warning: Option<String>,
+}
+
+impl StandardPoints {
+    /// The record without its free-running points.
+    pub fn without_free_running(&self) -> Record {
+        let mut out = self.record.clone();
+        out.operating_points
+            .retain(|p| !self.free_running.contains(&p.segment));
+        out
+    }
+}
+
+/// The segments of `points` at exactly zero slip throughout.
+fn zero_slip_segments(points: &[OperatingPoint]) -> BTreeSet<u32> {
+    let all: BTreeSet<u32> = points.iter().map(|p| p.segment).collect();
+    all.into_iter()
+        .filter(|&s| {
+            points
+                .iter()
+                .filter(|p| p.segment == s)
+                .all(|p| p.slip == 0.0)
+        })
+        .collect()
+}
+
+/// The record's operating points with its locked-rotor and no-load
+/// readings added (in segment order), which segments run free, and a
+/// warning saying what the diagnosis makes of the standard tests; the
+/// record as it is, and no warning, when it has none.
+pub fn with_standard_points(record: &Record) -> StandardPoints {
     let tests = &record.standard_tests;
-    if tests.is_empty() {
-        return (record.clone(), None);
+    let zero_slip = zero_slip_segments(&record.operating_points);
+    let mut notes: Vec<String> = Vec::new();
+    if !zero_slip.is_empty() {
+        let list: Vec<String> = zero_slip.iter().map(u32::to_string).collect();
+        notes.push(format!(
+            "im_slip_sweep segment(s) {} are at zero slip throughout: read as a no-load test \
+             whose slip was not measured (record them as im_no_load to say so)",
+            list.join(", ")
+        ));
     }
     let sweep_frequency = record
         .operating_points
         .iter()
+        .filter(|p| !zero_slip.contains(&p.segment))
         .map(|p| p.frequency)
         .find(|f| f.is_finite());
     let reduced = |f: f64| match sweep_frequency {
@@ -37,40 +92,60 @@ pub fn with_locked_rotor_points(record: &Record) -> (Record, Option<String>) {
         // Where either is not given, both are the supply's.
         _ => false,
     };
-    let used = &tests.locked_rotor;
-    let mut out = record.clone();
-    out.operating_points
-        .extend(used.iter().map(|r| OperatingPoint {
-            segment: r.segment,
-            slip: 1.0,
-            line_voltage: r.line_voltage,
-            line_current: r.line_current,
-            input_power: r.input_power,
-            speed: 0.0,
-            frequency: if r.frequency.is_finite() {
-                r.frequency
-            } else {
-                sweep_frequency.unwrap_or(f64::NAN)
-            },
-            torque: None,
-        }));
-    // Stable: the sweep's own order within a segment stays.
-    out.operating_points.sort_by_key(|p| p.segment);
-    let mut left_out = Vec::new();
-    let mut count = |n: usize, what: &str| {
-        if n > 0 {
-            left_out.push(format!("{n} {what}"));
+    let frequency = |f: f64| {
+        if f.is_finite() {
+            f
+        } else {
+            sweep_frequency.unwrap_or(f64::NAN)
         }
     };
-    count(tests.no_load.len(), "no-load");
-    count(tests.dc_resistance.len(), "DC-resistance");
-    let mut warning = String::new();
-    if !used.is_empty() {
-        let at_reduced = used.iter().filter(|r| reduced(r.frequency)).count();
-        warning.push_str(&format!(
+    let point = |r: &SupplyReading, slip: f64| OperatingPoint {
+        segment: r.segment,
+        slip,
+        line_voltage: r.line_voltage,
+        line_current: r.line_current,
+        input_power: r.input_power,
+        speed: if slip == 1.0 { 0.0 } else { f64::NAN },
+        frequency: frequency(r.frequency),
+        torque: None,
+    };
+    let mut out = record.clone();
+    out.operating_points
+        .extend(tests.locked_rotor.iter().map(|r| point(r, 1.0)));
+    out.operating_points
+        .extend(tests.no_load.iter().map(|r| point(r, 0.0)));
+    // Stable: the sweep's own order within a segment stays.
+    out.operating_points.sort_by_key(|p| p.segment);
+    let mut no_load = tests.no_load.clone();
+    no_load.extend(
+        record
+            .operating_points
+            .iter()
+            .filter(|p| zero_slip.contains(&p.segment))
+            .map(|p| SupplyReading {
+                segment: p.segment,
+                line_voltage: p.line_voltage,
+                line_current: p.line_current,
+                input_power: p.input_power,
+                frequency: p.frequency,
+                winding_temperature: None,
+            }),
+    );
+    let free_running: Vec<u32> = tests
+        .no_load
+        .iter()
+        .map(|r| r.segment)
+        .chain(zero_slip)
+        .collect::<BTreeSet<u32>>()
+        .into_iter()
+        .collect();
+    let lr = &tests.locked_rotor;
+    if !lr.is_empty() {
+        let at_reduced = lr.iter().filter(|r| reduced(r.frequency)).count();
+        notes.push(format!(
             "the record's {} locked-rotor reading(s) are diagnosed with the load test, as \
              operating points at slip 1{}",
-            used.len(),
+            lr.len(),
             if at_reduced > 0 {
                 format!(
                     " ({at_reduced} at another frequency, with the reactances, the bar's \
@@ -81,20 +156,27 @@ pub fn with_locked_rotor_points(record: &Record) -> (Record, Option<String>) {
             }
         ));
     }
-    if !left_out.is_empty() {
-        if !warning.is_empty() {
-            warning.push_str("; its ");
+    let dc = tests.dc_resistance.len();
+    if dc > 0 {
+        notes.push(if no_load.is_empty() {
+            format!(
+                "the record's {dc} DC-resistance reading(s) are no operating point and not part \
+                 of the diagnosis; `identify` uses them (the classical reduction and the joint \
+                 fit)"
+            )
         } else {
-            warning.push_str("the record's ");
-        }
-        warning.push_str(&format!(
-            "{} reading(s) are not part of the diagnosis, which compares the circuit with \
-             operating points of known slip only; `identify` uses them (the classical \
-             reduction and the joint fit)",
-            crate::excerpt::listed(&left_out)
-        ));
+            format!(
+                "the record's {dc} DC-resistance reading(s) set the stator resistance of the \
+                 no-load test's friction and windage"
+            )
+        });
     }
-    (out, Some(warning))
+    StandardPoints {
+        record: out,
+        free_running,
+        no_load,
+        warning: (!notes.is_empty()).then(|| notes.join("; ")),
+    }
 }
 
 #[cfg(test)]
@@ -127,7 +209,7 @@ mod tests {
     }
 
     #[test]
-    fn locked_rotor_at_the_sweeps_frequency_joins_it_in_segment_order() {
+    fn standard_readings_join_the_sweep_in_segment_order() {
         let mut r = Record {
             operating_points: vec![point(2, 0.01), point(2, 0.5)],
             ..Record::default()
@@ -140,21 +222,56 @@ mod tests {
             dc_current: 1.0,
             winding_temperature: None,
         }];
-        let (out, warning) = with_locked_rotor_points(&r);
-        let slips: Vec<(u32, f64)> = out
+        let got = with_standard_points(&r);
+        let slips: Vec<(u32, f64)> = got
+            .record
             .operating_points
             .iter()
             .map(|p| (p.segment, p.slip))
             .collect();
-        assert_eq!(slips, [(1, 1.0), (1, 1.0), (2, 0.01), (2, 0.5)]);
-        let w = warning.unwrap();
+        assert_eq!(
+            slips,
+            [
+                (0, 0.0),
+                (0, 0.0),
+                (0, 0.0),
+                (0, 0.0),
+                (1, 1.0),
+                (1, 1.0),
+                (2, 0.01),
+                (2, 0.5)
+            ]
+        );
+        assert_eq!(got.free_running, [0]);
+        assert_eq!(got.no_load.len(), 4);
+        let w = got.warning.clone().unwrap();
         assert!(
             w.contains("2 locked-rotor reading(s) are diagnosed with the load test"),
             "{w}"
         );
         assert!(w.contains("(1 at another frequency"), "{w}");
         assert!(
-            w.contains("its 4 no-load, 1 DC-resistance reading(s) are not part"),
+            w.contains("1 DC-resistance reading(s) set the stator resistance"),
+            "{w}"
+        );
+        assert_eq!(got.without_free_running().operating_points.len(), 4);
+    }
+
+    /// A lab's no-load CSV imported as a sweep has slip 0 on every row:
+    /// that segment runs free, a sweep point at slip 0 among others does not.
+    #[test]
+    fn a_sweep_segment_at_zero_slip_throughout_is_a_no_load_test() {
+        let r = Record {
+            operating_points: vec![point(0, 0.0), point(0, 0.0), point(1, 0.0), point(1, 0.2)],
+            ..Record::default()
+        };
+        let got = with_standard_points(&r);
+        assert_eq!(got.free_running, [0]);
+        assert_eq!(got.no_load.len(), 2);
+        assert_eq!(got.record, r);
+        let w = got.warning.clone().unwrap();
+        assert!(
+            w.contains("segment(s) 0 are at zero slip throughout"),
             "{w}"
         );
     }
@@ -165,6 +282,8 @@ mod tests {
             operating_points: vec![point(0, 0.01)],
             ..Record::default()
         };
-        assert_eq!(with_locked_rotor_points(&r), (r, None));
+        let got = with_standard_points(&r);
+        assert!(got.free_running.is_empty() && got.no_load.is_empty());
+        assert_eq!((got.record, got.warning), (r, None));
     }
 }

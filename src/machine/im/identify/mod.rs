@@ -44,8 +44,9 @@ pub use recursive::{
     THETA_SINGLE_L4,
 };
 pub use standard_tests::{
-    reduce_standard_tests, standard_tests_method, StandardTestsError, StandardTestsOptions,
-    StandardTestsReduction, FRICTION_VOLTAGE_SHARE, STANDARD_TESTS,
+    no_load_friction, reduce_standard_tests, standard_tests_method, NoLoadFriction,
+    StandardTestsError, StandardTestsOptions, StandardTestsReduction, FRICTION_VOLTAGE_SHARE,
+    STANDARD_TESTS,
 };
 pub use sweep::{
     predict, predict_gradient, predict_gradient_into, slip_grid, Channels, PhaseData, SlipSweep,
@@ -73,7 +74,8 @@ pub struct ImIdentification {
     pub recursive: Option<RecursiveEstimate>,
 }
 
-fn nameplate_number(record: &Record, key: &str) -> Option<f64> {
+/// The nameplate's number under `key`, where the record has one.
+pub(crate) fn nameplate_number(record: &Record, key: &str) -> Option<f64> {
     record.meta.as_ref()?.nameplate.get(key)?.as_f64()
 }
 

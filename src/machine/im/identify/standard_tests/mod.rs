@@ -47,7 +47,7 @@ use crate::model::{Connection, ImCircuit, LeakageSplit, RotorCage};
 use crate::record::ImStandardTests;
 
 pub use error::StandardTestsError;
-pub use no_load::FRICTION_VOLTAGE_SHARE;
+pub use no_load::{no_load_friction, NoLoadFriction, FRICTION_VOLTAGE_SHARE};
 
 /// The method's key in the report.
 pub const STANDARD_TESTS: &str = "standard_tests";

@@ -91,6 +91,60 @@ pub(super) fn friction(
     })
 }
 
+/// Friction and windage as the IM diagnosis takes them for its
+/// free-running points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NoLoadFriction {
+    /// Friction and windage, W (the intercept, held at ≥ 0).
+    pub pfw: f64,
+    /// The stator resistance per phase the copper loss was taken with, Ω.
+    pub rs: f64,
+    /// Whether `rs` is the DC reading's (else the caller's fallback).
+    pub rs_from_dc: bool,
+    /// What a user should know: the intercept held at 0, every reading used.
+    pub notes: Vec<String>,
+}
+
+/// Friction and windage from no-load readings: the intercept at V = 0 of
+/// the constant losses regressed on V², with the stator resistance of the
+/// DC readings (at the no-load test's temperature) where there are any,
+/// else `rs_fallback` (per phase); `rated` the rated line voltage, else
+/// the highest no-load voltage.
+pub fn no_load_friction(
+    readings: &[SupplyReading],
+    dc: &[crate::record::DcResistanceReading],
+    connection: Connection,
+    rs_fallback: f64,
+    rated: Option<f64>,
+) -> Result<NoLoadFriction, StandardTestsError> {
+    use super::dc_resistance::{dc_resistance, mean_temperature, temperature_factor};
+    let (rs, rs_from_dc) = match dc_resistance(dc, connection) {
+        Ok(d) if !dc.is_empty() => {
+            let t_nl = mean_temperature(readings.iter().map(|r| r.winding_temperature));
+            (d.rs * temperature_factor(d.temperature, t_nl), true)
+        }
+        _ => (rs_fallback, false),
+    };
+    let rated = rated
+        .filter(|v| *v > 0.0)
+        .unwrap_or_else(|| readings.iter().map(|r| r.line_voltage).fold(0.0, f64::max));
+    let fr = friction(readings, connection, rs, rated)?;
+    let mut notes: Vec<String> = fr.note.into_iter().collect();
+    if fr.pfw < 0.0 {
+        notes.push(format!(
+            "the no-load losses extrapolate to {:.3e} W at zero voltage: friction and windage \
+             held at 0",
+            fr.pfw
+        ));
+    }
+    Ok(NoLoadFriction {
+        pfw: fr.pfw.max(0.0),
+        rs,
+        rs_from_dc,
+        notes,
+    })
+}
+
 /// One row per reading, by rising voltage, with `rs` and `xs` (per phase,
 /// at the no-load test's temperature and frequency) and friction `pfw`.
 pub(super) fn rows(
