@@ -1,6 +1,7 @@
 //! A blind case on disk: the record as contract CSV files (one per
-//! segment, each with its segment declaration) and the nameplate, in a
-//! directory of its own. The truth never goes there.
+//! segment, each with its segment declaration; an induction machine's
+//! no-load and locked-rotor tests too) and the nameplate, in a directory
+//! of its own. The truth never goes there.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -54,6 +55,26 @@ pub fn write_case_files(
             );
         }
         files.push(write(format!("sweep-{sweep}.csv"), text)?);
+    }
+    let tests = &record.standard_tests;
+    for (kind, readings) in [
+        (SegmentKind::ImNoLoad, &tests.no_load),
+        (SegmentKind::ImLockedRotor, &tests.locked_rotor),
+    ] {
+        let mut segments: Vec<u32> = readings.iter().map(|r| r.segment).collect();
+        segments.dedup();
+        for seg in segments {
+            let mut text = declaration(seg, kind, kind.as_str());
+            text.push_str("line_voltage_V,line_current_A,input_power_W,frequency_Hz\n");
+            for r in readings.iter().filter(|r| r.segment == seg) {
+                let _ = writeln!(
+                    text,
+                    "{},{},{},{}",
+                    r.line_voltage, r.line_current, r.input_power, r.frequency
+                );
+            }
+            files.push(write(format!("{}-{seg}.csv", kind.as_str()), text)?);
+        }
     }
     let nameplate = match &record.meta {
         Some(meta) if meta.nameplate.is_object() => Some(write(

@@ -12,6 +12,11 @@
 //!   denser near synchronous. Main-flux and leakage saturation show only
 //!   across voltages, so their plans always hold a second voltage (what a
 //!   careful engineer testing for saturation would run).
+//! - A no-load test in 40 % of the plans (plan `sweep_no_load`), after
+//!   the sweeps: 6–10 readings from 30–80 % to 105–115 % of rated
+//!   voltage, the machine running free against friction and windage of
+//!   0.5–2 % of its rating (at the slip where its rotor delivers them,
+//!   found by root search), slip not recorded.
 //! - Meters: current 0.05–0.4 % of reading, power 0.1–0.8 % of reading,
 //!   voltage 0.03–0.15 %, each plus quantisation to a 4½-digit autoranging
 //!   display (one or ten counts of the reading's decade range); the supply voltage itself wanders by
@@ -43,7 +48,12 @@ use super::diagnose::effects::{increasing_root, leakage_factor, skin_effect as s
 use super::COPPER_ALPHA;
 use crate::diagnose::blind::{BlindRecord, CaseTruth};
 use crate::model::{Connection, Effect, C64};
-use crate::record::{OperatingPoint, Record, SegmentKind, TestMeta, SCHEMA_VERSION};
+use crate::record::{
+    ImStandardTests, OperatingPoint, Record, SegmentKind, SupplyReading, TestMeta, SCHEMA_VERSION,
+};
+
+/// Share of the plans with a no-load test beside the sweeps.
+const NO_LOAD_SHARE: f64 = 0.4;
 
 /// Temperature coefficient of aluminium (cage), 1/K.
 const ALPHA_AL: f64 = 0.00403;
@@ -450,6 +460,45 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
             torque: None,
         });
     }
+    // A no-load test in some plans, drawn after the sweeps so that they
+    // stay what they were: the machine running free at several voltages.
+    let mut no_load = Vec::new();
+    let mut setup = BTreeMap::new();
+    if rng.random::<f64>() < NO_LOAD_SHARE {
+        let n = rng.random_range(6..=10);
+        let (lo, hi) = (uniform(rng, 0.3, 0.8), uniform(rng, 1.05, 1.15));
+        let friction = uniform(rng, 0.005, 0.02) * power;
+        setup.insert("no_load_readings".to_string(), n as f64);
+        setup.insert("no_load_lowest_voltage_fraction".to_string(), lo);
+        setup.insert("friction_and_windage_W".to_string(), friction);
+        // After the sweeps, in the windings' last state.
+        let heat = heats.last().copied().unwrap_or(Heat { rs: 1.0, rr: 1.0 });
+        let segment = voltages.len() as u32;
+        let free = |v_line: f64| {
+            free_running(&m, &truth, heat, connection.phase_voltage(v_line), friction)
+        };
+        for k in 0..n {
+            let v_set = line_v * (lo + (hi - lo) * k as f64 / (n - 1) as f64);
+            let v_true = v_set * (1.0 + gaussian(rng, 0.001));
+            let (i, p) = free(v_true);
+            let li = current_meter.read(rng, connection.line_current(i));
+            let lp = power_meter.read(rng, p);
+            let v_read = voltage_meter.read(rng, v_true);
+            let (ci, cp) = free(v_read);
+            clean_i.push(connection.line_current(ci));
+            clean_p.push(cp);
+            meas_i.push(li);
+            meas_p.push(lp);
+            no_load.push(SupplyReading {
+                segment,
+                line_voltage: v_read,
+                line_current: li,
+                input_power: lp,
+                frequency,
+                winding_temperature: None,
+            });
+        }
+    }
     let floor = 0.5
         * (crate::identify::nrmse(&meas_i, &clean_i).unwrap_or(0.0)
             + crate::identify::nrmse(&meas_p, &clean_p).unwrap_or(0.0));
@@ -468,6 +517,9 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
     }
     let regions: Vec<String> = match effect {
         None => vec![],
+        Some(Effect::IronLoss) | Some(Effect::MainFluxSaturation) if !no_load.is_empty() => {
+            vec!["low_slip".into(), "no_load".into()]
+        }
         Some(Effect::IronLoss) | Some(Effect::MainFluxSaturation) => vec!["low_slip".into()],
         Some(Effect::StrayLoadLoss) => vec!["breakdown".into(), "high_slip".into()],
         Some(_) => vec!["high_slip".into()],
@@ -493,6 +545,10 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
             config: String::new(),
         }),
         operating_points: points,
+        standard_tests: ImStandardTests {
+            no_load,
+            ..ImStandardTests::default()
+        },
         ..Record::default()
     };
     let truth = CaseTruth {
@@ -518,10 +574,30 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
         noise_floor: floor,
         regions,
         source: crate::diagnose::blind::OWN_SOURCE.to_string(),
-        plan: "sweep".to_string(),
-        setup: BTreeMap::new(),
+        plan: if record.standard_tests.no_load.is_empty() {
+            "sweep"
+        } else {
+            "sweep_no_load"
+        }
+        .to_string(),
+        setup,
     };
     BlindRecord { record, truth }
+}
+
+/// Phase current and power of the machine running free at phase voltage
+/// `v` against `friction` (W): at the slip where the rotor delivers it.
+fn free_running(m: &Machine, truth: &Truth, heat: Heat, v: f64, friction: f64) -> (f64, f64) {
+    let rr = m.rr * heat.rr;
+    let shaft = |s: f64| {
+        let ir = terminal(m, truth, heat, s, v).2;
+        3.0 * ir * ir * rr * (1.0 - s) / s - friction
+    };
+    let s = increasing_root(shaft, 1e-9, 0.05)
+        .or_else(|| increasing_root(shaft, 1e-9, 0.2))
+        .unwrap_or(0.0);
+    let (i, p, _) = terminal(m, truth, heat, s, v);
+    (i, p)
 }
 
 fn max_step(meter: &Meter, readings: &[f64]) -> f64 {
@@ -613,5 +689,50 @@ mod tests {
             let locked = pts.iter().rfind(|p| p.segment == 0).unwrap().line_current;
             assert!(locked > 2.0 * first, "{first} → {locked}");
         }
+    }
+
+    /// A no-load test, where a plan has one, runs after the sweeps over
+    /// rising voltages from below to above rated, draws the friction and
+    /// windage (more power than the stator copper loss alone), and draws
+    /// about the sweep's near-synchronous current at rated voltage.
+    #[test]
+    fn a_no_load_test_runs_free_after_the_sweeps() {
+        let mut rng = StdRng::seed_from_u64(5);
+        let mut seen = 0;
+        for _ in 0..12 {
+            let case = simulate_im_case(None, &mut rng);
+            let no_load = &case.record.standard_tests.no_load;
+            let plan = case.truth.plan.as_str();
+            if no_load.is_empty() {
+                assert_eq!(plan, "sweep");
+                continue;
+            }
+            seen += 1;
+            assert_eq!(plan, "sweep_no_load");
+            let last_sweep = case.record.operating_points.iter().map(|p| p.segment).max();
+            assert!(no_load.iter().all(|r| Some(r.segment) > last_sweep));
+            assert!(no_load
+                .windows(2)
+                .all(|w| w[1].line_voltage > w[0].line_voltage));
+            let rated = case.record.meta.as_ref().unwrap().nameplate["voltage_V"]
+                .as_f64()
+                .unwrap();
+            assert!(no_load[0].line_voltage < 0.85 * rated);
+            assert!(no_load.last().unwrap().line_voltage > rated);
+            let friction = case.truth.setup["friction_and_windage_W"];
+            assert!(no_load.iter().all(|r| r.input_power > friction));
+            let near_sync = case.record.operating_points[0].line_current;
+            let at_rated = no_load
+                .iter()
+                .min_by(|a, b| {
+                    (a.line_voltage - rated)
+                        .abs()
+                        .total_cmp(&(b.line_voltage - rated).abs())
+                })
+                .unwrap();
+            let ratio = at_rated.line_current / near_sync;
+            assert!((0.5..1.1).contains(&ratio), "{ratio}");
+        }
+        assert!((2..=9).contains(&seen), "{seen} of 12");
     }
 }
