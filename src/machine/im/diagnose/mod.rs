@@ -762,7 +762,7 @@ mod tests {
     /// A locked-rotor test at the sweep's frequency is diagnosed with it
     /// (points at slip 1).
     #[test]
-    fn locked_rotor_readings_join_the_sweep_and_the_rest_is_named() {
+    fn locked_rotor_readings_join_the_sweep() {
         let x = nominal_x();
         let mut r = record(ImAugmentation::nominal(1.0), &x, &[400.0], 4);
         let lr = |v: f64| {
