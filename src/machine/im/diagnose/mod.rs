@@ -78,6 +78,16 @@ pub fn diagnose_im(
     // several of them) on the points of known slip, then the diagnosis'
     // weighted fit.
     let known = data.known_slip();
+    if data.has_free_running() && !known.iter().any(|&k| data.inputs[k].slip < 0.5) {
+        return Err(DiagnoseError::NotEnoughData(format!(
+            "no load test: the record's points of known slip are {} locked-rotor reading(s) \
+             and its {} no-load reading(s) have no measured slip, so nothing places the rotor \
+             between them; record a load test (a slip sweep or a load curve with the speed), or \
+             reduce the standard tests with `motorbench identify` (method standard_tests)",
+            known.len(),
+            points.no_load.len()
+        )));
+    }
     let phase = PhaseData {
         slip: known.iter().map(|&k| data.inputs[k].slip).collect(),
         voltage: known.iter().map(|&k| data.inputs[k].voltage).collect(),
@@ -1016,5 +1026,43 @@ mod tests {
         );
         assert_eq!(d.gap.regions[0].label, "no_load", "{:?}", d.gap.regions);
         assert!(!d.warnings.iter().any(|w| w.contains("one supply voltage")));
+    }
+
+    /// Standard tests without a load test: no points of known slip below
+    /// locked rotor. The diagnosis says what is missing and where the
+    /// tests are reduced instead.
+    #[test]
+    fn no_load_and_locked_rotor_alone_say_what_is_missing() {
+        let x = nominal_x();
+        let model = ImAugmentation::nominal(1.0);
+        let mut rng = StdRng::seed_from_u64(3);
+        let mut r = Record::default();
+        r.standard_tests.no_load = (0..10)
+            .map(|k| free_running(model, &x, 200.0 + 25.0 * k as f64, 100.0, &mut rng))
+            .collect();
+        r.operating_points = (0..6)
+            .map(|k| {
+                let v = 60.0 + 8.0 * k as f64;
+                let (i, p) = model
+                    .predict(&x, &super::effects::PointInput::at(1.0, v / 3f64.sqrt()))
+                    .unwrap();
+                OperatingPoint {
+                    segment: 2,
+                    slip: 1.0,
+                    line_voltage: v,
+                    line_current: i,
+                    input_power: p,
+                    speed: 0.0,
+                    frequency: 50.0,
+                    torque: None,
+                }
+            })
+            .collect();
+        let e = diagnose_im(&r, &star()).unwrap_err();
+        let text = e.to_string();
+        assert!(matches!(e, DiagnoseError::NotEnoughData(_)), "{text}");
+        assert!(text.contains("no load test"), "{text}");
+        assert!(text.contains("10 no-load reading(s)"), "{text}");
+        assert!(text.contains("motorbench identify"), "{text}");
     }
 }
