@@ -105,6 +105,49 @@ fn an_im_export_identifies_to_the_report_of_the_run() {
     assert_eq!(from_csv, recorded_without_provenance(&report));
 }
 
+/// A record of the standard tests (DC resistance, no load, locked rotor,
+/// load sweeps): every test is a CSV file of its own kind, and the CSV set
+/// identifies to the run's report (the classical reduction and the joint
+/// fit included).
+#[test]
+fn a_standard_tests_export_keeps_every_test() {
+    let dir = tempfile::tempdir().unwrap();
+    let (record, report) = fresh_record("config/sim-im-standard.toml", dir.path());
+    let exported = export(&record, &dir.path().join("export"), "csv");
+    let kinds: Vec<String> = exported["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|f| f.as_str().filter(|f| f.ends_with(".csv")))
+        .map(|f| {
+            let text = std::fs::read_to_string(f).unwrap();
+            let first = text.lines().next().unwrap().to_string();
+            first
+                .split("kind=")
+                .nth(1)
+                .unwrap()
+                .split(' ')
+                .next()
+                .unwrap()
+                .to_string()
+        })
+        .collect();
+    for kind in [
+        "im_dc_resistance",
+        "im_no_load",
+        "im_locked_rotor",
+        "im_slip_sweep",
+    ] {
+        assert!(
+            kinds.iter().any(|k| k == kind),
+            "{kind} missing from {kinds:?}"
+        );
+    }
+    let from_csv = identify_as_told(&exported);
+    assert!(from_csv["methods"]["standard_tests"]["params"]["Pfw"]["value"].is_number());
+    assert_eq!(from_csv, recorded_without_provenance(&report));
+}
+
 #[test]
 fn parquet_reads_in_pandas_in_one_call_with_the_csv_numbers() {
     let dir = tempfile::tempdir().unwrap();

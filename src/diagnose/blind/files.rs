@@ -7,6 +7,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::SuiteError;
+use crate::record::export::csv::{declaration, supply_test_text};
 use crate::record::{Record, SegmentKind};
 
 /// Write `record` into `dir` (created if missing) as CSV files, plus
@@ -64,15 +65,8 @@ pub fn write_case_files(
         let mut segments: Vec<u32> = readings.iter().map(|r| r.segment).collect();
         segments.dedup();
         for seg in segments {
-            let mut text = declaration(seg, kind, kind.as_str());
-            text.push_str("line_voltage_V,line_current_A,input_power_W,frequency_Hz\n");
-            for r in readings.iter().filter(|r| r.segment == seg) {
-                let _ = writeln!(
-                    text,
-                    "{},{},{},{}",
-                    r.line_voltage, r.line_current, r.input_power, r.frequency
-                );
-            }
+            let readings: Vec<_> = readings.iter().filter(|r| r.segment == seg).collect();
+            let text = supply_test_text(seg, kind, kind.as_str(), &readings, None);
             files.push(write(format!("{}-{seg}.csv", kind.as_str()), text)?);
         }
     }
@@ -84,12 +78,4 @@ pub fn write_case_files(
         _ => None,
     };
     Ok((files, nameplate))
-}
-
-fn declaration(index: u32, kind: SegmentKind, label: &str) -> String {
-    let label = label.replace(['\n', '\r'], " ");
-    format!(
-        "# motorbench segment {index} kind={} label={label}\n",
-        kind.as_str()
-    )
 }

@@ -9,6 +9,11 @@
 //! - Induction-machine sweeps: one row per operating point, `slip`,
 //!   `line_voltage_V`, `line_current_A`, `input_power_W`, `frequency_Hz`,
 //!   and `torque_Nm` when every point of the sweep has a torque.
+//! - The induction machine's standard tests, one row per reading:
+//!   `im_dc_resistance` (`dc_voltage_V`, `dc_current_A`), `im_no_load` and
+//!   `im_locked_rotor` (`line_voltage_V`, `line_current_A`,
+//!   `input_power_W`, and `frequency_Hz` where every reading has one);
+//!   `winding_temperature_C` where every reading of the segment has one.
 //!
 //! Every file opens with the contract's declaration
 //! (`# motorbench segment <index> kind=<kind> label=<label>`) and a
@@ -21,7 +26,10 @@ use crate::record::csv::{COL_CURRENT, COL_SPEED, COL_TIME, COL_VOLTAGE};
 use crate::record::csv_im::{
     COL_FREQUENCY, COL_INPUT_POWER, COL_LINE_CURRENT, COL_LINE_VOLTAGE, COL_SLIP, COL_TORQUE,
 };
-use crate::record::{DcSegment, OperatingPoint, Record, SegmentKind};
+use crate::record::csv_im_tests::{COL_DC_CURRENT, COL_DC_VOLTAGE, COL_WINDING_TEMPERATURE};
+use crate::record::{
+    DcResistanceReading, DcSegment, OperatingPoint, Record, SegmentKind, SupplyReading,
+};
 
 /// One CSV file's name suffix and text.
 #[derive(Debug, Clone, PartialEq)]
@@ -63,19 +71,136 @@ pub fn segment_files(record: &Record, source: &str) -> Vec<CsvFile> {
             text: im_text(index, &label, &points, source),
         });
     }
+    let label = |index: u32, kind: SegmentKind| {
+        record
+            .segments
+            .iter()
+            .find(|s| s.index == index)
+            .map_or_else(|| kind.as_str().to_string(), |s| s.label.clone())
+    };
+    let tests = &record.standard_tests;
+    for index in segment_indices(tests.dc_resistance.iter().map(|r| r.segment)) {
+        let readings: Vec<&DcResistanceReading> = tests
+            .dc_resistance
+            .iter()
+            .filter(|r| r.segment == index)
+            .collect();
+        let mut text = preamble(
+            index,
+            SegmentKind::ImDcResistance,
+            &label(index, SegmentKind::ImDcResistance),
+            source,
+        );
+        let temperature = readings.iter().all(|r| r.winding_temperature.is_some());
+        let _ = write!(text, "{COL_DC_VOLTAGE},{COL_DC_CURRENT}");
+        columns_end(&mut text, temperature.then_some(COL_WINDING_TEMPERATURE));
+        for r in readings {
+            let _ = write!(text, "{:?},{:?}", r.dc_voltage, r.dc_current);
+            row_end(&mut text, r.winding_temperature.filter(|_| temperature));
+        }
+        out.push(CsvFile {
+            segment: index,
+            text,
+        });
+    }
+    for (kind, readings) in [
+        (SegmentKind::ImNoLoad, &tests.no_load),
+        (SegmentKind::ImLockedRotor, &tests.locked_rotor),
+    ] {
+        for index in segment_indices(readings.iter().map(|r| r.segment)) {
+            let readings: Vec<&SupplyReading> =
+                readings.iter().filter(|r| r.segment == index).collect();
+            out.push(CsvFile {
+                segment: index,
+                text: supply_test_text(index, kind, &label(index, kind), &readings, Some(source)),
+            });
+        }
+    }
     out.sort_by_key(|f| f.segment);
     out
 }
 
-/// The declaration and the provenance comment.
-fn preamble(index: u32, kind: SegmentKind, label: &str, source: &str) -> String {
+/// The distinct segment indices of `segments`, in order.
+fn segment_indices(segments: impl Iterator<Item = u32>) -> Vec<u32> {
+    let mut v: Vec<u32> = segments.collect();
+    v.sort_unstable();
+    v.dedup();
+    v
+}
+
+/// End a header line, with the optional column `last`.
+fn columns_end(text: &mut String, last: Option<&str>) {
+    match last {
+        Some(c) => {
+            let _ = writeln!(text, ",{c}");
+        }
+        None => text.push('\n'),
+    }
+}
+
+/// End a row, with the optional value `last`.
+fn row_end(text: &mut String, last: Option<f64>) {
+    match last {
+        Some(v) => {
+            let _ = writeln!(text, ",{v:?}");
+        }
+        None => text.push('\n'),
+    }
+}
+
+/// One `im_no_load` or `im_locked_rotor` segment (`kind`) as the
+/// contract's CSV file: `source`, where given, goes into a comment.
+pub fn supply_test_text(
+    index: u32,
+    kind: SegmentKind,
+    label: &str,
+    readings: &[&SupplyReading],
+    source: Option<&str>,
+) -> String {
+    let mut text = match source {
+        Some(source) => preamble(index, kind, label, source),
+        None => declaration(index, kind, label),
+    };
+    let frequency = readings.iter().all(|r| r.frequency.is_finite());
+    let temperature = readings.iter().all(|r| r.winding_temperature.is_some());
+    let _ = write!(
+        text,
+        "{COL_LINE_VOLTAGE},{COL_LINE_CURRENT},{COL_INPUT_POWER}{}",
+        if frequency {
+            format!(",{COL_FREQUENCY}")
+        } else {
+            String::new()
+        }
+    );
+    columns_end(&mut text, temperature.then_some(COL_WINDING_TEMPERATURE));
+    for r in readings {
+        let _ = write!(
+            text,
+            "{:?},{:?},{:?}",
+            r.line_voltage, r.line_current, r.input_power
+        );
+        if frequency {
+            let _ = write!(text, ",{:?}", r.frequency);
+        }
+        row_end(&mut text, r.winding_temperature.filter(|_| temperature));
+    }
+    text
+}
+
+/// The contract's declaration line of a segment.
+pub fn declaration(index: u32, kind: SegmentKind, label: &str) -> String {
     let label: String = label
         .chars()
         .map(|c| if c.is_control() { ' ' } else { c })
         .collect();
+    format!("# motorbench segment {index} kind={kind} label={label}\n")
+}
+
+/// The declaration and the provenance comment.
+fn preamble(index: u32, kind: SegmentKind, label: &str, source: &str) -> String {
     format!(
-        "# motorbench segment {index} kind={kind} label={label}\n\
-         # exported by {} from {source}\n",
+        "{}# exported by {} from {source}\n",
+        declaration(index, kind, label),
         crate::record::library_name()
     )
 }
@@ -190,5 +315,56 @@ mod tests {
         assert_eq!(back.points.len(), 2);
         assert_eq!(back.points[1].torque, Some(20.0));
         assert_eq!(back.points[0].slip, 0.03);
+    }
+
+    /// The standard tests read back bit for bit, the temperature and the
+    /// frequency with them; a segment whose readings lack a frequency
+    /// leaves the column out (the importer's `--frequency` then applies).
+    #[test]
+    fn standard_tests_read_back_with_their_temperatures() {
+        let mut record = Record::default();
+        record.standard_tests.dc_resistance = vec![DcResistanceReading {
+            segment: 0,
+            dc_voltage: 2.0 / 3.0,
+            dc_current: 1.25,
+            winding_temperature: Some(21.5),
+        }];
+        let reading = |segment: u32, frequency: f64| SupplyReading {
+            segment,
+            line_voltage: 400.0 / 3.0,
+            line_current: 0.1 + 0.2,
+            input_power: 123.456_789,
+            frequency,
+            winding_temperature: Some(40.25),
+        };
+        record.standard_tests.no_load = vec![reading(1, 50.0), reading(1, 50.0)];
+        record.standard_tests.locked_rotor = vec![reading(2, f64::NAN)];
+        let files = segment_files(&record, "r.mcap");
+        assert_eq!(
+            files.iter().map(|f| f.segment).collect::<Vec<_>>(),
+            [0, 1, 2]
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let path = |k: usize| {
+            let p = dir.path().join(format!("s{k}.csv"));
+            std::fs::write(&p, &files[k].text).unwrap();
+            p
+        };
+        let dc = crate::record::read_dc_resistance_csv(&path(0), 9).unwrap();
+        assert_eq!(dc.readings, record.standard_tests.dc_resistance);
+        let nl =
+            crate::record::read_supply_test_csv(&path(1), SegmentKind::ImNoLoad, 9, None).unwrap();
+        assert_eq!(nl.readings, record.standard_tests.no_load);
+        assert!(!files[2].text.contains("frequency_Hz"), "{}", files[2].text);
+        let lr = crate::record::read_supply_test_csv(
+            &path(2),
+            SegmentKind::ImLockedRotor,
+            9,
+            Some(12.5),
+        )
+        .unwrap();
+        assert_eq!(lr.index, 2);
+        assert_eq!(lr.readings[0].frequency, 12.5);
+        assert_eq!(lr.readings[0].input_power, 123.456_789);
     }
 }
