@@ -46,6 +46,15 @@ pub struct SweepSet {
     pub scale_i: Vec<f64>,
     /// Scale of each power reading: `|P| + floor`, W.
     pub scale_p: Vec<f64>,
+    /// Measured shaft torque, N·m, where the record has a torque column
+    /// and the synchronous speed is known.
+    pub torque: Vec<Option<f64>>,
+    /// Synchronous (mechanical) speed of each point, rad/s (NaN unknown).
+    pub sync_speed: Vec<f64>,
+    /// Scale of each torque reading: `|T| + floor`, N·m.
+    pub scale_t: Vec<f64>,
+    /// Relative noise of the torque, once estimated.
+    pub sigma_t: f64,
     /// Relative noise of the current (σ per unit of scale), once estimated.
     pub sigma_i: f64,
     /// Relative noise of the power, once estimated.
@@ -160,6 +169,25 @@ impl SweepSet {
             .collect();
         let floor = |v: &[f64]| DIGIT_FLOOR * v.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let (fi, fp) = (floor(&d.current), floor(&d.power));
+        let poles = record
+            .meta
+            .as_ref()
+            .and_then(|m| m.nameplate.get("poles"))
+            .and_then(serde_json::Value::as_f64);
+        let (torque, sync_speed) = shaft_torque(&record.operating_points, &ratios, &free, poles);
+        if sweep.points.iter().any(|p| p.torque.is_some()) && torque.iter().all(Option::is_none) {
+            warnings.push(
+                "the torque column is not used: neither a speed reading nor the nameplate's \
+                 \"poles\" (with the supply frequency) gives the synchronous speed it needs"
+                    .into(),
+            );
+        }
+        let measured: Vec<f64> = torque.iter().flatten().copied().collect();
+        let ft = floor(&measured);
+        let scale_t = torque
+            .iter()
+            .map(|t| t.map_or(1.0, |t| t.abs() + ft))
+            .collect();
         let known = || {
             d.slip
                 .iter()
@@ -181,6 +209,10 @@ impl SweepSet {
             inputs,
             scale_i: d.current.iter().map(|i| i.abs() + fi).collect(),
             scale_p: d.power.iter().map(|p| p.abs() + fp).collect(),
+            torque,
+            sync_speed,
+            scale_t,
+            sigma_t: 1.0,
             current: d.current,
             power: d.power,
             segment: sweep.points.iter().map(|p| p.segment).collect(),
@@ -233,6 +265,11 @@ impl SweepSet {
         (0..self.len()).filter(|&k| !self.free_running[k]).collect()
     }
 
+    /// Whether any point has a measured shaft torque.
+    pub fn has_torque(&self) -> bool {
+        self.torque.iter().any(Option::is_some)
+    }
+
     /// Whether any point runs free (the record has a no-load test).
     pub fn has_free_running(&self) -> bool {
         self.free_running.iter().any(|f| *f)
@@ -281,6 +318,48 @@ impl SweepSet {
             ),
         )
     }
+}
+
+/// Each point's measured shaft torque (where it has one and the
+/// synchronous speed is known) and synchronous speed, rad/s: the median of
+/// `speed/(1 − s)` over the points of known slip below 0.9 at the
+/// reference frequency, else `2π·f/(poles/2)` from the nameplate's
+/// `poles`, scaled by each point's frequency ratio.
+fn shaft_torque(
+    points: &[OperatingPoint],
+    ratios: &[f64],
+    free: &[bool],
+    poles: Option<f64>,
+) -> (Vec<Option<f64>>, Vec<f64>) {
+    let mut sync: Vec<f64> = points
+        .iter()
+        .zip(ratios)
+        .zip(free)
+        .filter(|((p, _), f)| !**f && p.slip < 0.9 && p.speed.is_finite() && p.speed > 0.0)
+        .map(|((p, r), _)| p.speed / (1.0 - p.slip) / r)
+        .collect();
+    sync.sort_by(f64::total_cmp);
+    let from_poles = || {
+        let f = points
+            .iter()
+            .zip(ratios)
+            .map(|(p, r)| p.frequency / r)
+            .find(|f| f.is_finite() && *f > 0.0)?;
+        let pairs = poles.filter(|p| *p >= 2.0)? / 2.0;
+        Some(std::f64::consts::TAU * f / pairs)
+    };
+    let reference = sync.get(sync.len() / 2).copied().or_else(from_poles);
+    let sync_speed: Vec<f64> = ratios
+        .iter()
+        .map(|r| reference.map_or(f64::NAN, |w| w * r))
+        .collect();
+    let torque = points
+        .iter()
+        .zip(&sync_speed)
+        .zip(free)
+        .map(|((p, w), f)| p.torque.filter(|t| t.is_finite() && w.is_finite() && !*f))
+        .collect();
+    (torque, sync_speed)
 }
 
 /// Each point's supply frequency over the reference, the frequency most

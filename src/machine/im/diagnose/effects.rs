@@ -145,6 +145,13 @@ pub struct ImAugmentation {
     /// parameter of every model, since it trades with the stator
     /// resistance that each model fits differently.
     pub friction: bool,
+    /// Whether the vector ends with `Tfw`, the torque (N·m, its value,
+    /// not its logarithm) by which the measured shaft torque falls short
+    /// of the electromagnetic one at synchronous speed, in proportion to
+    /// the speed (`Tfw·(1 − s)`: the friction and windage on the motor's
+    /// side of the sensor, none at standstill): on a record with a torque
+    /// column.
+    pub torque: bool,
 }
 
 /// The two usual forms of main-flux saturation. They are the same
@@ -206,6 +213,9 @@ pub struct Terminal {
     pub air_gap_voltage: f64,
     /// Rotor current (referred), A.
     pub rotor_current: f64,
+    /// Three-phase air-gap power into the rotor branch, W: the
+    /// electromagnetic torque times the synchronous speed.
+    pub rotor_power: f64,
 }
 
 /// The elements of a single-cage circuit, Ω.
@@ -242,6 +252,7 @@ pub fn from_air_gap(zs: C64, y_ag: C64, y_r: C64, v: f64) -> Terminal {
         power: 3.0 * e * e * (y_ag.re + zs.re * y_ag.norm_sqr()),
         air_gap_voltage: e,
         rotor_current: e * y_r.norm(),
+        rotor_power: 3.0 * e * e * y_r.re,
     }
 }
 
@@ -293,6 +304,7 @@ impl ImAugmentation {
             split_ratio,
             flux: SaturatingFlux::AirGap,
             friction: false,
+            torque: false,
         }
     }
 
@@ -303,6 +315,7 @@ impl ImAugmentation {
             split_ratio,
             flux: SaturatingFlux::AirGap,
             friction: false,
+            torque: false,
         }
     }
 
@@ -337,14 +350,29 @@ impl ImAugmentation {
 
     /// Length of the parameter vector.
     pub fn len(&self) -> usize {
-        NOMINAL_KEYS.len() + self.effect_params().len() + usize::from(self.friction)
+        self.friction_index() + usize::from(self.friction) + usize::from(self.torque)
+    }
+
+    /// Where `ln Pfw` sits in the vector (after the effect's parameters).
+    fn friction_index(&self) -> usize {
+        NOMINAL_KEYS.len() + self.effect_params().len()
     }
 
     /// The friction and windage of the free-running points in `x`, W (0
     /// where the model carries none).
     pub fn friction_power(&self, x: &[f64]) -> f64 {
         if self.friction {
-            x[self.len() - 1].exp()
+            x[self.friction_index()].exp()
+        } else {
+            0.0
+        }
+    }
+
+    /// The shaft torque's shortfall `Tfw` in `x`, N·m (0 where the model
+    /// carries none).
+    pub fn torque_shortfall(&self, x: &[f64]) -> f64 {
+        if self.torque {
+            x[self.len() - 1]
         } else {
             0.0
         }
@@ -583,6 +611,7 @@ pub fn main_flux_terminal(c: &Cage, s: f64, v: f64, d: impl Fn(f64) -> f64) -> O
         power: 3.0 * e * e * (ya.re + rs * ya.norm_sqr()),
         air_gap_voltage: e,
         rotor_current: e * y_r.norm(),
+        rotor_power: 3.0 * e * e * y_r.re,
     })
 }
 
@@ -616,6 +645,8 @@ pub fn stray_terminal(c: &Cage, s: f64, v: f64, p_sll: f64) -> Terminal {
         power: 3.0 * v * total.re,
         air_gap_voltage: e,
         rotor_current: e * y_r.norm(),
+        // The stray loss takes power from the supply, not torque.
+        rotor_power: 3.0 * e * e * y_r.re,
     }
 }
 

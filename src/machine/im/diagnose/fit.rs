@@ -24,17 +24,27 @@ pub struct AugmentedFit {
 }
 
 /// Weighted residuals of `model` at point `k`: current and power, each
-/// divided by its noise scale. `None` outside the physical region.
+/// divided by its noise scale, and the shaft torque's (0 where the point
+/// has no torque). `None` outside the physical region.
 pub fn weighted_residual(
     model: &ImAugmentation,
     x: &[f64],
     data: &SweepSet,
     k: usize,
-) -> Option<(f64, f64)> {
-    let (i, p) = model.predict(x, &data.inputs[k])?;
+) -> Option<(f64, f64, f64)> {
+    let t = model.terminal(x, &data.inputs[k])?;
+    let torque = match data.torque[k] {
+        Some(measured) => {
+            let predicted = t.rotor_power / data.sync_speed[k]
+                - model.torque_shortfall(x) * (1.0 - data.inputs[k].slip);
+            (measured - predicted) / (data.sigma_t * data.scale_t[k])
+        }
+        None => 0.0,
+    };
     Some((
-        (data.current[k] - i) / (data.sigma_i * data.scale_i[k]),
-        (data.power[k] - p) / (data.sigma_p * data.scale_p[k]),
+        (data.current[k] - t.current) / (data.sigma_i * data.scale_i[k]),
+        (data.power[k] - t.power) / (data.sigma_p * data.scale_p[k]),
+        torque,
     ))
 }
 
@@ -47,11 +57,14 @@ struct Problem<'a> {
 impl Problem<'_> {
     fn residuals_of(&self, x: &[f64]) -> Option<DVector<f64>> {
         let n = self.idx.len();
-        let mut r = DVector::zeros(2 * n);
+        let mut r = DVector::zeros(self.rows());
         for (j, &k) in self.idx.iter().enumerate() {
-            let (a, b) = weighted_residual(&self.model, x, self.data, k)?;
+            let (a, b, c) = weighted_residual(&self.model, x, self.data, k)?;
             r[j] = a;
             r[n + j] = b;
+            if self.model.torque {
+                r[2 * n + j] = c;
+            }
         }
         Some(r)
     }
@@ -59,7 +72,7 @@ impl Problem<'_> {
 
 impl Residuals for Problem<'_> {
     fn rows(&self) -> usize {
-        2 * self.idx.len()
+        (2 + usize::from(self.model.torque)) * self.idx.len()
     }
 
     fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
@@ -79,8 +92,7 @@ fn jacobian(
     x: &[f64],
 ) -> Option<DMatrix<f64>> {
     let p = Problem { model, data, idx };
-    let n = idx.len();
-    let mut jac = DMatrix::zeros(2 * n, x.len());
+    let mut jac = DMatrix::zeros(p.rows(), x.len());
     let mut xp = x.to_vec();
     for j in 0..x.len() {
         let h = 1e-6 * (1.0 + x[j].abs());
@@ -123,7 +135,7 @@ pub fn fit(
         let lm = LevenbergMarquardt::new()
             .with_patience(100)
             .with_tol(1e-10)
-            .with_ftol(negligible_ftol(2 * idx.len()));
+            .with_ftol(negligible_ftol(problem.problem.rows()));
         let (p, report) = lm.minimize(problem);
         evaluations += report.number_of_evaluations;
         let x: Vec<f64> = p.x.iter().copied().collect();
@@ -151,8 +163,9 @@ pub fn starts_from(
     extra: &[Vec<f64>],
 ) -> Vec<Vec<f64>> {
     let (v, i) = data.maxima();
-    // The friction, where the model carries it, as the nominal fit has it.
-    let friction = nominal.get(4).filter(|_| model.friction).copied();
+    // The friction and the torque's shortfall, where the model carries
+    // them, as the nominal fit has them.
+    let nuisance = &nominal[4.min(nominal.len())..];
     let mut out: Vec<Vec<f64>> = model
         .effect_starts(nominal, v, i)
         .into_iter()
@@ -161,7 +174,7 @@ pub fn starts_from(
                 .iter()
                 .copied()
                 .chain(e)
-                .chain(friction)
+                .chain(nuisance.iter().copied())
                 .collect()
         })
         .collect();
@@ -176,6 +189,9 @@ pub fn starts_from(
 pub struct HeldOut {
     /// Weighted held-out residual per point (current, power).
     pub weighted: Vec<(f64, f64)>,
+    /// Weighted held-out residual of the shaft torque per point (0 where
+    /// the point has none).
+    pub weighted_torque: Vec<f64>,
     /// Predicted phase current and power per point (held out).
     pub predicted: Vec<(f64, f64)>,
     /// The vector fitted for each fold.
@@ -193,6 +209,7 @@ pub fn held_out(
 ) -> Option<HeldOut> {
     let n = data.len();
     let mut weighted = vec![(f64::NAN, f64::NAN); n];
+    let mut weighted_torque = vec![0.0; n];
     let mut predicted = vec![(f64::NAN, f64::NAN); n];
     let mut fold_x = Vec::with_capacity(folds.len());
     for (f, out) in folds.iter().enumerate() {
@@ -205,12 +222,15 @@ pub fn held_out(
         for &k in out {
             let (i, p) = model.predict(&fitted.x, &data.inputs[k])?;
             predicted[k] = (i, p);
-            weighted[k] = weighted_residual(&model, &fitted.x, data, k)?;
+            let (a, b, c) = weighted_residual(&model, &fitted.x, data, k)?;
+            weighted[k] = (a, b);
+            weighted_torque[k] = c;
         }
         fold_x.push(fitted.x);
     }
     Some(HeldOut {
         weighted,
+        weighted_torque,
         predicted,
         fold_x,
     })
@@ -315,6 +335,9 @@ pub fn log_mask(model: &ImAugmentation) -> Vec<bool> {
     );
     if model.friction {
         m.push(true);
+    }
+    if model.torque {
+        m.push(false);
     }
     m
 }

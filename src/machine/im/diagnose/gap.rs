@@ -15,11 +15,16 @@ use std::collections::BTreeMap;
 use statrs::distribution::{ContinuousCDF, Normal, StudentsT};
 
 use super::data::SweepSet;
+use super::fit::HeldOut;
 use crate::contract::{GapRegion, RegionAxis, ResidualEvidence};
 use crate::model::C64;
 
 /// Channels of the IM contract, in order (current, power).
 pub const CHANNELS: [&str; 2] = ["line_current", "input_power"];
+
+/// The shaft torque's channel, where a record has a torque column (an
+/// additive extension of the contract's channels).
+pub const TORQUE_CHANNEL: &str = "shaft_torque";
 
 /// The slip ranges of the three regions.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -76,23 +81,30 @@ fn no_load_segments(data: &SweepSet) -> Vec<u32> {
 /// channel, per supply voltage.
 pub fn shares(
     data: &SweepSet,
-    weighted: &[(f64, f64)],
+    held: &HeldOut,
     regions: &SlipRegions,
 ) -> (Vec<GapRegion>, BTreeMap<String, f64>, BTreeMap<String, f64>) {
-    let total: f64 = weighted.iter().map(|(a, b)| a * a + b * b).sum();
+    let weighted = &held.weighted;
+    // The channel `c` (current, power, torque) of point `k`, squared.
+    let sq = |c: usize, k: usize| match c {
+        0 => weighted[k].0.powi(2),
+        1 => weighted[k].1.powi(2),
+        _ => held.weighted_torque[k].powi(2),
+    };
+    let channels: Vec<&str> = CHANNELS
+        .iter()
+        .copied()
+        .chain(data.has_torque().then_some(TORQUE_CHANNEL))
+        .collect();
+    let total: f64 = (0..data.len())
+        .map(|k| (0..channels.len()).map(|c| sq(c, k)).sum::<f64>())
+        .sum();
     let total = if total > 0.0 { total } else { 1.0 };
     let mut out = Vec::new();
     let mut by_channel = BTreeMap::new();
     let mut by_voltage = BTreeMap::new();
-    for (c, name) in CHANNELS.iter().enumerate() {
-        let sq = |k: usize| {
-            let (a, b) = weighted[k];
-            if c == 0 {
-                a * a
-            } else {
-                b * b
-            }
-        };
+    for (c, name) in channels.iter().enumerate() {
+        let sq = |k: usize| sq(c, k);
         by_channel.insert(
             name.to_string(),
             (0..data.len()).map(sq).sum::<f64>() / total,
@@ -129,15 +141,9 @@ pub fn shares(
         let line = |k: &usize| data.connection.line_voltage(data.inputs[*k].voltage);
         let from = idx.iter().map(line).fold(f64::INFINITY, f64::min);
         let to = idx.iter().map(line).fold(0.0, f64::max);
+        // A no-load reading has no torque: its channels are two.
         for (c, name) in CHANNELS.iter().enumerate() {
-            let sq = |k: &usize| {
-                if c == 0 {
-                    weighted[*k].0
-                } else {
-                    weighted[*k].1
-                }
-                .powi(2)
-            };
+            let sq = |k: &usize| sq(c, *k);
             out.push(GapRegion {
                 channel: name.to_string(),
                 axis: RegionAxis::Voltage,
@@ -153,7 +159,7 @@ pub fn shares(
     for (g, &v) in data.group_voltage.iter().enumerate() {
         let s: f64 = (0..data.len())
             .filter(|&k| data.group[k] == g)
-            .map(|k| weighted[k].0.powi(2) + weighted[k].1.powi(2))
+            .map(|k| (0..channels.len()).map(|c| sq(c, k)).sum::<f64>())
             .sum();
         by_voltage.insert(format!("{v:.0}"), s / total);
     }

@@ -154,8 +154,26 @@ pub fn diagnose_im(
             }
         }
     }
+    let torque = data.has_torque();
+    if torque {
+        // The shortfall starts at none; it is linear in the torque.
+        x_lm.push(0.0);
+        let n = data.torque.iter().flatten().count();
+        warnings.push(format!(
+            "the shaft torque of {n} point(s) joins the fit (the air-gap power over the \
+             synchronous speed, {:.4e} rad/s from the speed readings or the nameplate's poles, \
+             less Tfw·(1 − s), the friction and windage before the sensor, which every model \
+             fits); the gap's NRMSE stays the contract's, over current and power",
+            data.sync_speed
+                .iter()
+                .copied()
+                .find(|w| w.is_finite())
+                .unwrap_or(f64::NAN)
+        ));
+    }
     let nominal = ImAugmentation {
         friction: data.has_free_running(),
+        torque,
         ..ImAugmentation::nominal(split.ratio())
     };
     let all: Vec<usize> = (0..data.len()).collect();
@@ -188,6 +206,7 @@ pub fn diagnose_im(
             let model = ImAugmentation {
                 flux,
                 friction: nominal.friction,
+                torque: nominal.torque,
                 ..ImAugmentation::with(effect, split.ratio())
             };
             let starts = starts_from(&model, &nominal_full.x, &data, &[]);
@@ -297,7 +316,7 @@ pub fn diagnose_im(
                 .map_or(f64::NAN, |t| t.air_gap_voltage)
         })
         .collect();
-    let (gap_regions, channels, segments) = shares(&data, &nominal_held.weighted, &regions);
+    let (gap_regions, channels, segments) = shares(&data, &nominal_held, &regions);
     let gap = Gap {
         regions: gap_regions.clone(),
         channels,
@@ -382,20 +401,32 @@ fn estimate_noise(data: &mut SweepSet, model: &ImAugmentation, x: &[f64]) {
             .cmp(&data.segment[b])
             .then(data.inputs[a].slip.total_cmp(&data.inputs[b].slip))
     });
-    let (mut ri, mut rp) = (Vec::new(), Vec::new());
+    let (mut ri, mut rp, mut rt) = (Vec::new(), Vec::new(), Vec::new());
     for &k in &order {
-        if let Some((i, p)) = model.predict(x, &data.inputs[k]) {
-            ri.push((data.current[k] - i) / data.scale_i[k]);
-            rp.push((data.power[k] - p) / data.scale_p[k]);
+        if let Some(t) = model.terminal(x, &data.inputs[k]) {
+            ri.push((data.current[k] - t.current) / data.scale_i[k]);
+            rp.push((data.power[k] - t.power) / data.scale_p[k]);
+            if let Some(measured) = data.torque[k] {
+                let predicted = t.rotor_power / data.sync_speed[k]
+                    - model.torque_shortfall(x) * (1.0 - data.inputs[k].slip);
+                rt.push((measured - predicted) / data.scale_t[k]);
+            }
         }
     }
     data.sigma_i = noise_sigma(&ri).max(1e-7);
     data.sigma_p = noise_sigma(&rp).max(1e-7);
+    if rt.len() >= 3 {
+        data.sigma_t = noise_sigma(&rt).max(1e-7);
+    }
 }
 
-/// Per point: the sum of the squared weighted residuals of both channels.
+/// Per point: the sum of the squared weighted residuals of its channels.
 fn blocks(h: &HeldOut) -> Vec<f64> {
-    h.weighted.iter().map(|(a, b)| a * a + b * b).collect()
+    h.weighted
+        .iter()
+        .zip(&h.weighted_torque)
+        .map(|((a, b), t)| a * a + b * b + t * t)
+        .collect()
 }
 
 /// Mean over current and power of the NRMSE of `pred` (phase values;
@@ -463,9 +494,14 @@ fn nominal_params(
         "Xs".into(),
         estimate(ratio * f.x[3].exp(), ci(3, ratio), "ohm"),
     );
+    let mut j = 4 + model.effect_params().len();
     if model.friction {
-        let j = f.x.len() - 1;
         out.insert("Pfw".into(), estimate(f.x[j].exp(), ci(j, 1.0), "W"));
+        j += 1;
+    }
+    if model.torque {
+        let ci = iv[j].half_width.map(|h| [iv[j].x - h, iv[j].x + h]);
+        out.insert("Tfw".into(), estimate(f.x[j], ci, "N*m"));
     }
     out
 }
@@ -572,8 +608,11 @@ fn residual_plot(
 ) -> ResidualPlot {
     let after = winner.map_or(nominal, |w| &w.held);
     let mut panels = Vec::new();
-    for r in gap_regions.iter().take(PLOT_PANELS) {
-        let c = CHANNELS.iter().position(|n| *n == r.channel).unwrap_or(0);
+    // Panels of current and power (the plot holds no torque prediction).
+    let plotted = gap_regions
+        .iter()
+        .filter_map(|r| Some((r, CHANNELS.iter().position(|n| *n == r.channel)?)));
+    for (r, c) in plotted.take(PLOT_PANELS) {
         let no_load = r.axis == RegionAxis::Voltage;
         let g = r
             .voltage
@@ -1064,5 +1103,60 @@ mod tests {
         assert!(text.contains("no load test"), "{text}");
         assert!(text.contains("10 no-load reading(s)"), "{text}");
         assert!(text.contains("motorbench identify"), "{text}");
+    }
+
+    /// `record` with a torque column: the air-gap power over the
+    /// synchronous speed (157.08 rad/s, as the speed column) less 0.8 N·m
+    /// of friction at synchronous speed, in proportion to the speed.
+    fn with_torque(mut r: Record, model: ImAugmentation, x: &[f64]) -> Record {
+        let mut rng = StdRng::seed_from_u64(17);
+        let noise = Normal::new(0.0, 0.002).unwrap();
+        for p in &mut r.operating_points {
+            let input = super::effects::PointInput::at(p.slip, p.line_voltage / 3f64.sqrt());
+            let t = model.terminal(x, &input).unwrap();
+            let torque = t.rotor_power / 157.08 - 0.8 * (1.0 - p.slip);
+            p.torque = Some(torque * (1.0 + noise.sample(&mut rng)));
+        }
+        r
+    }
+
+    /// A machine with nothing unmodelled but friction on the motor's side
+    /// of the torque sensor: the torque joins the fit, its channel has
+    /// its share of the gap, the friction `Tfw` is found, and no effect
+    /// is called.
+    #[test]
+    fn a_torque_column_joins_the_fit_with_its_friction() {
+        let model = ImAugmentation::nominal(1.0);
+        let x = nominal_x();
+        let r = with_torque(record(model, &x, &[400.0, 300.0], 12), model, &x);
+        let d = diagnose_im(&r, &star()).unwrap().report;
+        assert_eq!(d.verdict.effect, "none", "{:?}", d.candidates);
+        assert_warned(&d.warnings, "the shaft torque of 60 point(s) joins the fit");
+        assert!(
+            d.gap.channels.contains_key("shaft_torque"),
+            "{:?}",
+            d.gap.channels
+        );
+        let total: f64 = d.gap.channels.values().sum();
+        assert!((total - 1.0).abs() < 1e-9, "{:?}", d.gap.channels);
+        let tfw = &d.nominal.params["Tfw"];
+        let [lo, hi] = tfw.ci95.expect("an interval");
+        assert!(lo <= 0.8 && 0.8 <= hi, "{tfw:?}");
+    }
+
+    /// Without a speed reading or the nameplate's poles the synchronous
+    /// speed is unknown: the torque is left out, and the report says why.
+    #[test]
+    fn a_torque_column_without_speed_is_left_out_with_the_reason() {
+        let model = ImAugmentation::nominal(1.0);
+        let x = nominal_x();
+        let mut r = with_torque(record(model, &x, &[400.0], 13), model, &x);
+        for p in &mut r.operating_points {
+            p.speed = f64::NAN;
+        }
+        let d = diagnose_im(&r, &star()).unwrap().report;
+        assert_warned(&d.warnings, "the torque column is not used");
+        assert!(!d.gap.channels.contains_key("shaft_torque"));
+        assert!(!d.nominal.params.contains_key("Tfw"));
     }
 }
