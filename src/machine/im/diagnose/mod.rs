@@ -735,6 +735,12 @@ mod tests {
         [0.8f64, 110.0, 0.9, 3.0].iter().map(|v| v.ln()).collect()
     }
 
+    /// `p`'s 95 % interval exists and holds `truth`.
+    fn assert_holds(p: &ParamEstimate, truth: f64) {
+        let [lo, hi] = p.ci95.expect("an interval");
+        assert!(lo <= truth && truth <= hi, "{truth} outside {p:?}");
+    }
+
     fn star() -> DiagnoseOptions {
         DiagnoseOptions {
             connection: Some(Connection::Star),
@@ -775,9 +781,7 @@ mod tests {
         assert!(d.warnings.iter().any(|w| w.contains("star assumed")));
         // The nominal fit recovers the machine (Xs = Xr by convention here).
         for (key, truth) in [("Rs", 0.8), ("Xm", 110.0), ("Rr", 0.9), ("Xr", 3.0)] {
-            let p = &d.nominal.params[key];
-            let [lo, hi] = p.ci95.expect("interval");
-            assert!(lo <= truth && truth <= hi, "{key}: {p:?}");
+            assert_holds(&d.nominal.params[key], truth);
         }
         let shares: f64 = d.gap.regions.iter().map(|r| r.share).sum();
         assert!((shares - 1.0).abs() < 1e-9, "region shares sum to {shares}");
@@ -798,9 +802,7 @@ mod tests {
             .iter()
             .find(|c| c.effect == "iron_loss")
             .unwrap();
-        let rfe = &winner.params["Rfe"];
-        let [lo, hi] = rfe.ci95.expect("interval");
-        assert!(lo <= 1200.0 && 1200.0 <= hi, "{rfe:?}");
+        assert_holds(&winner.params["Rfe"], 1200.0);
         // Corrected Rs is back near the truth; the nominal fit was biased.
         let rs = &d.verdict.corrected_params["Rs"];
         assert!((rs.corrected - 0.8).abs() < (rs.nominal - 0.8).abs());
@@ -933,14 +935,12 @@ mod tests {
             d.candidates
         );
         assert_warned(&d.warnings, "fitted as saturation of the stator flux");
-        let es = &d
+        let fitted = d
             .candidates
             .iter()
             .find(|c| c.effect == "main_flux_saturation")
-            .unwrap()
-            .params["Es"];
-        let [lo, hi] = es.ci95.expect("interval");
-        assert!(lo <= 260.0 && 260.0 <= hi, "{es:?}");
+            .unwrap();
+        assert_holds(&fitted.params["Es"], 260.0);
     }
 
     #[test]
@@ -1035,9 +1035,7 @@ mod tests {
         // The nominal fit finds the machine and its friction.
         let rs = d.nominal.params["Rs"].value;
         assert!((rs - 0.8).abs() < 0.05 * 0.8, "Rs {rs}");
-        let pfw = &d.nominal.params["Pfw"];
-        let [lo, hi] = pfw.ci95.expect("an interval");
-        assert!(lo <= 120.0 && 120.0 <= hi, "{pfw:?}");
+        assert_holds(&d.nominal.params["Pfw"], 120.0);
     }
 
     /// Main-flux saturation on a machine swept at one voltage: the no-load
@@ -1139,9 +1137,7 @@ mod tests {
         );
         let total: f64 = d.gap.channels.values().sum();
         assert!((total - 1.0).abs() < 1e-9, "{:?}", d.gap.channels);
-        let tfw = &d.nominal.params["Tfw"];
-        let [lo, hi] = tfw.ci95.expect("an interval");
-        assert!(lo <= 0.8 && 0.8 <= hi, "{tfw:?}");
+        assert_holds(&d.nominal.params["Tfw"], 0.8);
     }
 
     /// Without a speed reading or the nameplate's poles the synchronous
