@@ -31,7 +31,7 @@ use self::data::SweepSet;
 use self::effects::{effect_name, ImAugmentation, SaturatingFlux, IM_EFFECTS, NOMINAL_KEYS};
 use self::fit::{fit, held_out, intervals, starts_from, AugmentedFit, HeldOut};
 use self::gap::{evidence, shares, SlipRegions, CHANNELS};
-use self::standard_points::with_standard_points;
+use self::standard_points::{with_standard_points, StandardPoints};
 use self::verdict::separating_plan;
 use crate::contract::{
     reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, RegionAxis,
@@ -44,7 +44,7 @@ use crate::diagnose::decision::{
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{fit_lm, no_load_friction, LmOptions, PhaseData, SplitPolicy};
 use crate::machine::im::identify::nameplate_number;
-use crate::model::{Effect, ImModel, LeakageSplit};
+use crate::model::{Connection, Effect, ImModel, LeakageSplit};
 use crate::record::{Record, SCHEMA_VERSION};
 use crate::report::ParamEstimate;
 
@@ -107,48 +107,9 @@ pub fn diagnose_im(
     };
     let mut x_lm: Vec<f64> = [c.rs, c.xm, rr, xr].iter().map(|v| v.ln()).collect();
     if !points.no_load.is_empty() {
-        // The friction's start: the standard's intercept of the no-load
-        // losses; each model then fits its own.
-        let friction = no_load_friction(
-            &points.no_load,
-            &record.standard_tests.dc_resistance,
-            data.connection,
-            c.rs,
-            nameplate_number(record, "voltage_V"),
-        );
-        match friction {
-            Ok(f) => {
-                // An intercept held at 0 starts at a thousandth of the
-                // no-load power instead (the vector holds its logarithm).
-                let mean_power = points
-                    .no_load
-                    .iter()
-                    .map(|r| r.input_power.abs())
-                    .sum::<f64>()
-                    / points.no_load.len() as f64;
-                x_lm.push(f.pfw.max(1e-3 * mean_power).ln());
-                warnings.push(format!(
-                    "the record's {} no-load reading(s) are diagnosed as free-running points, at \
-                     the slip where the rotor delivers the friction and windage, which every \
-                     model fits (Pfw in its parameters; started at {:.4e} W, the no-load losses \
-                     extrapolated to zero voltage with Rs = {:.4e} ohm {})",
-                    points.no_load.len(),
-                    f.pfw,
-                    f.rs,
-                    if f.rs_from_dc {
-                        "of the DC reading"
-                    } else {
-                        "of the nominal fit to the points of known slip"
-                    }
-                ));
-                warnings.extend(f.notes.iter().map(|n| format!("no-load test: {n}")));
-            }
-            Err(e) => {
-                warnings.push(format!(
-                    "the record's {} no-load reading(s) are not part of the diagnosis: their \
-                     friction and windage cannot be estimated ({e})",
-                    points.no_load.len()
-                ));
+        match friction_start(&points, record, data.connection, c.rs, &mut warnings) {
+            Some(ln_pfw) => x_lm.push(ln_pfw),
+            None => {
                 data = SweepSet::from_record(&points.without_free_running(), &[], options)?;
                 data.warnings.clear();
             }
@@ -158,18 +119,7 @@ pub fn diagnose_im(
     if torque {
         // The shortfall starts at none; it is linear in the torque.
         x_lm.push(0.0);
-        let n = data.torque.iter().flatten().count();
-        warnings.push(format!(
-            "the shaft torque of {n} point(s) joins the fit (the air-gap power over the \
-             synchronous speed, {:.4e} rad/s from the speed readings or the nameplate's poles, \
-             less Tfw·(1 − s), the friction and windage before the sensor, which every model \
-             fits); the gap's NRMSE stays the contract's, over current and power",
-            data.sync_speed
-                .iter()
-                .copied()
-                .find(|w| w.is_finite())
-                .unwrap_or(f64::NAN)
-        ));
+        warnings.push(torque_note(&data));
     }
     let nominal = ImAugmentation {
         friction: data.has_free_running(),
@@ -351,6 +301,75 @@ pub fn diagnose_im(
         warnings,
     };
     Ok(DiagnosisRun { report, plot })
+}
+
+/// The start of `ln Pfw` for the record's no-load readings (the
+/// standard's intercept of the no-load losses, `rs` the nominal fit's where
+/// the record has no DC reading), with warnings saying how it was taken;
+/// `None`, with the reason, when it cannot be estimated: the readings then
+/// leave the diagnosis.
+fn friction_start(
+    points: &StandardPoints,
+    record: &Record,
+    connection: Connection,
+    rs: f64,
+    warnings: &mut Vec<String>,
+) -> Option<f64> {
+    let no_load = &points.no_load;
+    let friction = no_load_friction(
+        no_load,
+        &record.standard_tests.dc_resistance,
+        connection,
+        rs,
+        nameplate_number(record, "voltage_V"),
+    );
+    let f = match friction {
+        Ok(f) => f,
+        Err(e) => {
+            warnings.push(format!(
+                "the record's {} no-load reading(s) are not part of the diagnosis: their \
+                 friction and windage cannot be estimated ({e})",
+                no_load.len()
+            ));
+            return None;
+        }
+    };
+    warnings.push(format!(
+        "the record's {} no-load reading(s) are diagnosed as free-running points, at the slip \
+         where the rotor delivers the friction and windage, which every model fits (Pfw in its \
+         parameters; started at {:.4e} W, the no-load losses extrapolated to zero voltage with \
+         Rs = {:.4e} ohm {})",
+        no_load.len(),
+        f.pfw,
+        f.rs,
+        if f.rs_from_dc {
+            "of the DC reading"
+        } else {
+            "of the nominal fit to the points of known slip"
+        }
+    ));
+    warnings.extend(f.notes.iter().map(|n| format!("no-load test: {n}")));
+    // An intercept held at 0 starts at a thousandth of the no-load power
+    // instead (the vector holds its logarithm).
+    let mean_power =
+        no_load.iter().map(|r| r.input_power.abs()).sum::<f64>() / no_load.len() as f64;
+    Some(f.pfw.max(1e-3 * mean_power).ln())
+}
+
+/// What the report says of a torque column that joins the fit.
+fn torque_note(data: &SweepSet) -> String {
+    format!(
+        "the shaft torque of {} point(s) joins the fit (the air-gap power over the synchronous \
+         speed, {:.4e} rad/s from the speed readings or the nameplate's poles, less Tfw·(1 − s), \
+         the friction and windage before the sensor, which every model fits); the gap's NRMSE \
+         stays the contract's, over current and power",
+        data.torque.iter().flatten().count(),
+        data.sync_speed
+            .iter()
+            .copied()
+            .find(|w| w.is_finite())
+            .unwrap_or(f64::NAN)
+    )
 }
 
 /// A verdict `w` that leaves more than twice the noise floor says so (as
