@@ -81,10 +81,14 @@ def dc_perturb(kind, header, rows, segment, rng):
 
 
 def im_perturb(kind, header, rows, segment, rng):
-    """An IM sweep as a real record may come: units, scatter, slips."""
+    """An IM sweep (or a no-load or locked-rotor test beside it, which has
+    no slip column) as a real record may come: units, scatter, slips."""
     c = header.split(",")
-    ii, ip, iv, isl = (c.index(k) for k in ("line_current_A", "input_power_W", "line_voltage_V", "slip"))
+    ii, ip, iv = (c.index(k) for k in ("line_current_A", "input_power_W", "line_voltage_V"))
+    isl = c.index("slip") if "slip" in c else None
     r = [list(x) for x in rows]
+    if isl is None and kind in ("slip_error", "slip_not_measured"):
+        return r
     if kind == "outlier":
         x = r[rng.randrange(len(r))]
         j = rng.choice([ii, ip])

@@ -80,10 +80,11 @@ pub fn diagnose_im(
     let known = data.known_slip();
     if data.has_free_running() && !known.iter().any(|&k| data.inputs[k].slip < 0.5) {
         return Err(DiagnoseError::NotEnoughData(format!(
-            "no load test: the record's points of known slip are {} locked-rotor reading(s) \
-             and its {} no-load reading(s) have no measured slip, so nothing places the rotor \
-             between them; record a load test (a slip sweep or a load curve with the speed), or \
-             reduce the standard tests with `motorbench identify` (method standard_tests)",
+            "no load test: {} point(s) of known slip, all at locked rotor, and {} free-running \
+             no-load reading(s) (slip not measured, or 0 throughout their segment): nothing \
+             places the rotor between them; record a load test (a slip sweep or a load curve \
+             with the speed), or reduce the standard tests with `motorbench identify` (method \
+             standard_tests)",
             known.len(),
             points.no_load.len()
         )));
@@ -1118,7 +1119,7 @@ mod tests {
         let text = e.to_string();
         assert!(matches!(e, DiagnoseError::NotEnoughData(_)), "{text}");
         assert!(text.contains("no load test"), "{text}");
-        assert!(text.contains("10 no-load reading(s)"), "{text}");
+        assert!(text.contains("10 free-running no-load reading(s)"), "{text}");
         assert!(text.contains("motorbench identify"), "{text}");
     }
 
