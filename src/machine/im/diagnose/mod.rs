@@ -1119,7 +1119,10 @@ mod tests {
         let text = e.to_string();
         assert!(matches!(e, DiagnoseError::NotEnoughData(_)), "{text}");
         assert!(text.contains("no load test"), "{text}");
-        assert!(text.contains("10 free-running no-load reading(s)"), "{text}");
+        assert!(
+            text.contains("10 free-running no-load reading(s)"),
+            "{text}"
+        );
         assert!(text.contains("motorbench identify"), "{text}");
     }
 
