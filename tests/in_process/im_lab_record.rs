@@ -233,7 +233,8 @@ fn a_verdict_that_leaves_most_of_the_gap_says_so() {
 /// plainest, the no-load current growing faster than the voltage: the
 /// no-load points run free (friction and windage from their own losses),
 /// hold most of the gap, and the verdict is main-flux saturation, which
-/// takes most of the gap; the core loss it leaves is said.
+/// takes most of the gap; the core loss it leaves is named as a second
+/// effect beside it.
 #[test]
 fn the_no_load_test_shows_the_saturation() {
     let run = diagnosed();
@@ -246,6 +247,7 @@ fn the_no_load_test_shows_the_saturation() {
         "segment(s) 0 are at zero slip throughout",
         "10 no-load reading(s) are diagnosed as free-running points",
         "main_flux_saturation: named as the verdict, though it leaves",
+        "a second effect: main_flux_saturation with a core loss beside it",
     ] {
         assert!(
             d.warnings.iter().any(|w| w.contains(expected)),

@@ -152,6 +152,10 @@ pub struct ImAugmentation {
     /// side of the sensor, none at standstill): on a record with a torque
     /// column.
     pub torque: bool,
+    /// Whether the vector holds `ln Rfe` after the effect's parameters: a
+    /// core loss beside the effect (a second effect; never with
+    /// [`Effect::IronLoss`], which is the core loss).
+    pub iron: bool,
 }
 
 /// The two usual forms of main-flux saturation. They are the same
@@ -231,14 +235,23 @@ pub struct Cage {
     pub rr: f64,
     /// Rotor leakage reactance.
     pub xr: f64,
+    /// Core-loss conductance in parallel with `xm`, S (0: no core loss).
+    pub gfe: f64,
 }
 
-/// Terminal values of a linear single-cage circuit (iron loss optional)
-/// at slip `s` and phase voltage `v`.
-pub fn linear_terminal(c: &Cage, rfe: Option<f64>, s: f64, v: f64) -> Terminal {
-    let Cage { rs, xs, xm, rr, xr } = *c;
+/// Terminal values of a linear single-cage circuit at slip `s` and phase
+/// voltage `v`.
+pub fn linear_terminal(c: &Cage, s: f64, v: f64) -> Terminal {
+    let Cage {
+        rs,
+        xs,
+        xm,
+        rr,
+        xr,
+        gfe,
+    } = *c;
     let y_r = C64::new(s, 0.0) / C64::new(rr, s * xr);
-    let y_m = C64::new(rfe.map_or(0.0, |r| 1.0 / r), -1.0 / xm);
+    let y_m = C64::new(gfe, -1.0 / xm);
     from_air_gap(C64::new(rs, xs), y_m + y_r, y_r, v)
 }
 
@@ -305,6 +318,7 @@ impl ImAugmentation {
             flux: SaturatingFlux::AirGap,
             friction: false,
             torque: false,
+            iron: false,
         }
     }
 
@@ -316,6 +330,7 @@ impl ImAugmentation {
             flux: SaturatingFlux::AirGap,
             friction: false,
             torque: false,
+            iron: false,
         }
     }
 
@@ -353,9 +368,25 @@ impl ImAugmentation {
         self.friction_index() + usize::from(self.friction) + usize::from(self.torque)
     }
 
-    /// Where `ln Pfw` sits in the vector (after the effect's parameters).
-    fn friction_index(&self) -> usize {
+    /// Where `ln Rfe` of a core loss beside the effect sits in the vector
+    /// (after the effect's parameters).
+    pub fn iron_index(&self) -> usize {
         NOMINAL_KEYS.len() + self.effect_params().len()
+    }
+
+    /// The core-loss conductance beside the effect, S (0 without); `None`
+    /// where the vector leaves the physical region.
+    fn core_conductance(&self, x: &[f64]) -> Option<f64> {
+        if !self.iron {
+            return Some(0.0);
+        }
+        let g = (-x[self.iron_index()]).exp();
+        (g.is_finite() && g > 0.0).then_some(g)
+    }
+
+    /// Where `ln Pfw` sits in the vector (after the core loss's).
+    fn friction_index(&self) -> usize {
+        self.iron_index() + usize::from(self.iron)
     }
 
     /// The friction and windage of the free-running points in `x`, W (0
@@ -477,15 +508,23 @@ impl ImAugmentation {
             xm: r * xm,
             rr,
             xr: r * xr,
+            gfe: self.core_conductance(x)?,
         };
         let t = match self.effect {
-            None => linear_terminal(&cage, None, s, v),
+            None => linear_terminal(&cage, s, v),
             Some(Effect::IronLoss) => {
                 let rfe = x[4].exp();
                 if !(rfe.is_finite() && rfe > 0.0) {
                     return None;
                 }
-                linear_terminal(&cage, Some(rfe), s, v)
+                linear_terminal(
+                    &Cage {
+                        gfe: 1.0 / rfe,
+                        ..cage
+                    },
+                    s,
+                    v,
+                )
             }
             Some(Effect::DeepBar) => {
                 let (xi1, b) = (x[4].exp(), logistic(x[5]));
@@ -501,7 +540,7 @@ impl ImAugmentation {
                     xr: cage.xr * fx,
                     ..cage
                 };
-                linear_terminal(&deep, None, s, v)
+                linear_terminal(&deep, s, v)
             }
             Some(Effect::MainFluxSaturation) => {
                 let es = x[4].exp();
@@ -525,7 +564,7 @@ impl ImAugmentation {
                 leakage_terminal(&cage, s, v, |i| leakage_factor(i, knee, slope, 0.25))?
             }
             Some(Effect::StrayLoadLoss) => {
-                let t = linear_terminal(&cage, None, s, v);
+                let t = linear_terminal(&cage, s, v);
                 let p_sll = 3.0 * x[4].exp() * t.rotor_current * t.rotor_current;
                 if !p_sll.is_finite() {
                     return None;
@@ -542,7 +581,7 @@ impl ImAugmentation {
                     rr: cage.rr * fr,
                     ..cage
                 };
-                linear_terminal(&hot, None, s, v)
+                linear_terminal(&hot, s, v)
             }
             Some(_) => return None,
         };
@@ -579,6 +618,7 @@ pub fn gamma_circuit(c: &Cage) -> Cage {
         xm: ls,
         rr: g * g * c.rr,
         xr: g * c.xs + g * g * c.xr,
+        gfe: c.gfe,
     }
 }
 
@@ -592,10 +632,11 @@ pub fn main_flux_terminal(c: &Cage, s: f64, v: f64, d: impl Fn(f64) -> f64) -> O
         xm: xm0,
         rr,
         xr,
+        gfe,
     } = *c;
     let zs = C64::new(rs, xs);
     let y_r = C64::new(s, 0.0) / C64::new(rr, s * xr);
-    let y_ag = |e: f64| C64::new(0.0, -d(e) / xm0) + y_r;
+    let y_ag = |e: f64| C64::new(gfe, -d(e) / xm0) + y_r;
     let g = |e: f64| e * (C64::new(1.0, 0.0) + zs * y_ag(e)).norm() - v;
     let mut hi = v;
     while g(hi) < 0.0 {
@@ -633,9 +674,16 @@ pub fn leakage_factor(i: f64, knee: f64, slope: f64, width: f64) -> f64 {
 /// Terminal values with a loss `p_sll` (W, three phases) drawn from the
 /// supply as in-phase current on top of the circuit's own current.
 pub fn stray_terminal(c: &Cage, s: f64, v: f64, p_sll: f64) -> Terminal {
-    let Cage { rs, xs, xm, rr, xr } = *c;
+    let Cage {
+        rs,
+        xs,
+        xm,
+        rr,
+        xr,
+        gfe,
+    } = *c;
     let y_r = C64::new(s, 0.0) / C64::new(rr, s * xr);
-    let y_ag = C64::new(0.0, -1.0 / xm) + y_r;
+    let y_ag = C64::new(gfe, -1.0 / xm) + y_r;
     let z = C64::new(rs, xs) + y_ag.inv();
     let i = C64::new(v, 0.0) / z;
     let e = (C64::new(v, 0.0) - i * C64::new(rs, xs)).norm();
@@ -660,7 +708,7 @@ pub fn leakage_terminal(c: &Cage, s: f64, v: f64, f: impl Fn(f64) -> f64) -> Opt
             xr: c.xr * k,
             ..*c
         };
-        linear_terminal(&sat, None, s, v)
+        linear_terminal(&sat, s, v)
     };
     let z = |i: f64| {
         let t = at(i);
@@ -711,6 +759,7 @@ mod tests {
             xm: 110.0,
             rr: 0.9,
             xr: 3.0,
+            gfe: 0.0,
         };
         let g = gamma_circuit(&c);
         assert_eq!(g.xs, 0.0);

@@ -333,6 +333,9 @@ pub fn log_mask(model: &ImAugmentation) -> Vec<bool> {
             .iter()
             .map(|p| p.transform == super::effects::Transform::Log),
     );
+    if model.iron {
+        m.push(true);
+    }
     if model.friction {
         m.push(true);
     }
