@@ -674,27 +674,16 @@ pub fn leakage_factor(i: f64, knee: f64, slope: f64, width: f64) -> f64 {
 /// Terminal values with a loss `p_sll` (W, three phases) drawn from the
 /// supply as in-phase current on top of the circuit's own current.
 pub fn stray_terminal(c: &Cage, s: f64, v: f64, p_sll: f64) -> Terminal {
-    let Cage {
-        rs,
-        xs,
-        xm,
-        rr,
-        xr,
-        gfe,
-    } = *c;
-    let y_r = C64::new(s, 0.0) / C64::new(rr, s * xr);
-    let y_ag = C64::new(gfe, -1.0 / xm) + y_r;
-    let z = C64::new(rs, xs) + y_ag.inv();
-    let i = C64::new(v, 0.0) / z;
-    let e = (C64::new(v, 0.0) - i * C64::new(rs, xs)).norm();
-    let total = i + C64::new(p_sll / (3.0 * v), 0.0);
+    let t = linear_terminal(c, s, v);
+    // The current's part in phase with the voltage is P/(3·v); the loss
+    // adds to it. It takes power from the supply, not torque.
+    let active = t.power / (3.0 * v);
+    let reactive_sq = (t.current * t.current - active * active).max(0.0);
+    let active = active + p_sll / (3.0 * v);
     Terminal {
-        current: total.norm(),
-        power: 3.0 * v * total.re,
-        air_gap_voltage: e,
-        rotor_current: e * y_r.norm(),
-        // The stray loss takes power from the supply, not torque.
-        rotor_power: 3.0 * e * e * y_r.re,
+        current: (active * active + reactive_sq).sqrt(),
+        power: t.power + p_sll,
+        ..t
     }
 }
 
