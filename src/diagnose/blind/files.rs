@@ -7,7 +7,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::SuiteError;
-use crate::record::export::csv::{declaration, supply_test_text};
+use crate::record::export::csv::{declaration, supply_test_files};
 use crate::record::{Record, SegmentKind};
 
 /// Write `record` into `dir` (created if missing) as CSV files, plus
@@ -57,18 +57,13 @@ pub fn write_case_files(
         }
         files.push(write(format!("sweep-{sweep}.csv"), text)?);
     }
-    let tests = &record.standard_tests;
-    for (kind, readings) in [
-        (SegmentKind::ImNoLoad, &tests.no_load),
-        (SegmentKind::ImLockedRotor, &tests.locked_rotor),
-    ] {
-        let mut segments: Vec<u32> = readings.iter().map(|r| r.segment).collect();
-        segments.dedup();
-        for seg in segments {
-            let readings: Vec<_> = readings.iter().filter(|r| r.segment == seg).collect();
-            let text = supply_test_text(seg, kind, kind.as_str(), &readings, None);
-            files.push(write(format!("{}-{seg}.csv", kind.as_str()), text)?);
-        }
+    for (kind, file) in
+        supply_test_files(&record.standard_tests, |_, kind| kind.as_str().into(), None)
+    {
+        files.push(write(
+            format!("{}-{}.csv", kind.as_str(), file.segment),
+            file.text,
+        )?);
     }
     let nameplate = match &record.meta {
         Some(meta) if meta.nameplate.is_object() => Some(write(

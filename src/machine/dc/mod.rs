@@ -41,9 +41,7 @@ pub use sim_rig::{sim_rig, SimPowerStage, SimSensors};
 pub use split::split_single_segment;
 pub use supply_limits::SupplyLimitDetector;
 pub use text::render_text;
-pub use timing::{
-    prepare_dc_record, shift_voltage_one_sample_later, voltage_timing, VoltageTiming,
-};
+pub use timing::prepare_dc_record;
 
 use std::path::Path;
 

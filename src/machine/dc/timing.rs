@@ -79,6 +79,19 @@ impl VoltageTiming {
     pub fn leads_by_one_sample(&self) -> bool {
         self.same_sample.abs() < NO_PART && self.previous_sample > CLEAR_PART
     }
+
+    /// The report's note on a column that leads the current.
+    fn note(&self) -> String {
+        format!(
+            "the current's increments answer the voltage read one sample earlier (t = {:.1}) \
+             and not the one read at the same instant (t = {:.1}, over {} increments): the \
+             voltage column leads the current by one sample. Either the logger writes the \
+             command as it issues it (motorbench reads the voltage at t[k] as the one applied \
+             over (t[k-1], t[k]]; --voltage-as-issued moves the column one sample later), or \
+             the current sensor is one sample late (`diagnose` may then name sensor_lag)",
+            self.previous_sample, self.same_sample, self.rows
+        )
+    }
 }
 
 fn driven(seg: &DcSegment) -> bool {
@@ -142,27 +155,12 @@ pub fn voltage_timing(record: &Record) -> Option<VoltageTiming> {
 
 /// Move every driven segment's voltage one sample later: the reading at
 /// `t[k]` becomes the one logged at `t[k−1]`.
-pub fn shift_voltage_one_sample_later(record: &mut Record) {
+fn shift_voltage_one_sample_later(record: &mut Record) {
     for seg in record.segments.iter_mut().filter(|s| driven(s)) {
         // The first sample's interval began before the segment: its own
         // reading is the best guess of what was applied then.
         seg.voltage.rotate_right(1);
         seg.voltage[0] = seg.voltage[1];
-    }
-}
-
-impl VoltageTiming {
-    /// The report's note on a column that leads the current.
-    fn note(&self) -> String {
-        format!(
-            "the current's increments answer the voltage read one sample earlier (t = {:.1}) \
-             and not the one read at the same instant (t = {:.1}, over {} increments): the \
-             voltage column leads the current by one sample. Either the logger writes the \
-             command as it issues it (motorbench reads the voltage at t[k] as the one applied \
-             over (t[k-1], t[k]]; --voltage-as-issued moves the column one sample later), or \
-             the current sensor is one sample late (`diagnose` may then name sensor_lag)",
-            self.previous_sample, self.same_sample, self.rows
-        )
     }
 }
 

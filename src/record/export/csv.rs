@@ -28,7 +28,8 @@ use crate::record::csv_im::{
 };
 use crate::record::csv_im_tests::{COL_DC_CURRENT, COL_DC_VOLTAGE, COL_WINDING_TEMPERATURE};
 use crate::record::{
-    DcResistanceReading, DcSegment, OperatingPoint, Record, SegmentKind, SupplyReading,
+    DcResistanceReading, DcSegment, ImStandardTests, OperatingPoint, Record, SegmentKind,
+    SupplyReading,
 };
 
 /// One CSV file's name suffix and text.
@@ -52,32 +53,30 @@ pub fn segment_files(record: &Record, source: &str) -> Vec<CsvFile> {
             text: dc_text(s, source),
         })
         .collect();
-    let mut sweeps: Vec<u32> = record.operating_points.iter().map(|p| p.segment).collect();
-    sweeps.sort_unstable();
-    sweeps.dedup();
-    for index in sweeps {
+    // A segment's label as recorded, else `default`.
+    let label = |index: u32, default: String| {
+        record
+            .segments
+            .iter()
+            .find(|s| s.index == index)
+            .map_or(default, |s| s.label.clone())
+    };
+    for index in segment_indices(record.operating_points.iter().map(|p| p.segment)) {
         let points: Vec<&OperatingPoint> = record
             .operating_points
             .iter()
             .filter(|p| p.segment == index)
             .collect();
-        let label = record
-            .segments
-            .iter()
-            .find(|s| s.index == index)
-            .map_or_else(|| format!("sweep {index}"), |s| s.label.clone());
         out.push(CsvFile {
             segment: index,
-            text: im_text(index, &label, &points, source),
+            text: im_text(
+                index,
+                &label(index, format!("sweep {index}")),
+                &points,
+                source,
+            ),
         });
     }
-    let label = |index: u32, kind: SegmentKind| {
-        record
-            .segments
-            .iter()
-            .find(|s| s.index == index)
-            .map_or_else(|| kind.as_str().to_string(), |s| s.label.clone())
-    };
     let tests = &record.standard_tests;
     for index in segment_indices(tests.dc_resistance.iter().map(|r| r.segment)) {
         let readings: Vec<&DcResistanceReading> = tests
@@ -85,12 +84,8 @@ pub fn segment_files(record: &Record, source: &str) -> Vec<CsvFile> {
             .iter()
             .filter(|r| r.segment == index)
             .collect();
-        let mut text = preamble(
-            index,
-            SegmentKind::ImDcResistance,
-            &label(index, SegmentKind::ImDcResistance),
-            source,
-        );
+        let kind = SegmentKind::ImDcResistance;
+        let mut text = preamble(index, kind, &label(index, kind.as_str().into()), source);
         let temperature = readings.iter().all(|r| r.winding_temperature.is_some());
         let _ = write!(text, "{COL_DC_VOLTAGE},{COL_DC_CURRENT}");
         columns_end(&mut text, temperature.then_some(COL_WINDING_TEMPERATURE));
@@ -103,6 +98,25 @@ pub fn segment_files(record: &Record, source: &str) -> Vec<CsvFile> {
             text,
         });
     }
+    let supply = supply_test_files(
+        tests,
+        |index, kind| label(index, kind.as_str().into()),
+        Some(source),
+    );
+    out.extend(supply.into_iter().map(|(_, f)| f));
+    out.sort_by_key(|f| f.segment);
+    out
+}
+
+/// The no-load and locked-rotor tests of `tests`, one file per segment
+/// with its kind, labelled by `label`; `source`, where given, goes into a
+/// comment.
+pub fn supply_test_files(
+    tests: &ImStandardTests,
+    label: impl Fn(u32, SegmentKind) -> String,
+    source: Option<&str>,
+) -> Vec<(SegmentKind, CsvFile)> {
+    let mut out = Vec::new();
     for (kind, readings) in [
         (SegmentKind::ImNoLoad, &tests.no_load),
         (SegmentKind::ImLockedRotor, &tests.locked_rotor),
@@ -110,13 +124,16 @@ pub fn segment_files(record: &Record, source: &str) -> Vec<CsvFile> {
         for index in segment_indices(readings.iter().map(|r| r.segment)) {
             let readings: Vec<&SupplyReading> =
                 readings.iter().filter(|r| r.segment == index).collect();
-            out.push(CsvFile {
-                segment: index,
-                text: supply_test_text(index, kind, &label(index, kind), &readings, Some(source)),
-            });
+            let text = supply_test_text(index, kind, &label(index, kind), &readings, source);
+            out.push((
+                kind,
+                CsvFile {
+                    segment: index,
+                    text,
+                },
+            ));
         }
     }
-    out.sort_by_key(|f| f.segment);
     out
 }
 
@@ -150,7 +167,7 @@ fn row_end(text: &mut String, last: Option<f64>) {
 
 /// One `im_no_load` or `im_locked_rotor` segment (`kind`) as the
 /// contract's CSV file: `source`, where given, goes into a comment.
-pub fn supply_test_text(
+fn supply_test_text(
     index: u32,
     kind: SegmentKind,
     label: &str,

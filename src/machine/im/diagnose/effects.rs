@@ -365,7 +365,7 @@ impl ImAugmentation {
 
     /// Length of the parameter vector.
     pub fn len(&self) -> usize {
-        self.friction_index() + usize::from(self.friction) + usize::from(self.torque)
+        self.torque_index() + usize::from(self.torque)
     }
 
     /// Where `ln Rfe` of a core loss beside the effect sits in the vector
@@ -374,19 +374,27 @@ impl ImAugmentation {
         NOMINAL_KEYS.len() + self.effect_params().len()
     }
 
-    /// The core-loss conductance beside the effect, S (0 without); `None`
-    /// where the vector leaves the physical region.
-    fn core_conductance(&self, x: &[f64]) -> Option<f64> {
-        if !self.iron {
-            return Some(0.0);
-        }
-        let g = (-x[self.iron_index()]).exp();
-        (g.is_finite() && g > 0.0).then_some(g)
+    /// Where `ln Pfw` sits in the vector (after the core loss's).
+    pub fn friction_index(&self) -> usize {
+        self.iron_index() + usize::from(self.iron)
     }
 
-    /// Where `ln Pfw` sits in the vector (after the core loss's).
-    fn friction_index(&self) -> usize {
-        self.iron_index() + usize::from(self.iron)
+    /// Where `Tfw` sits in the vector (last, after the friction's).
+    pub fn torque_index(&self) -> usize {
+        self.friction_index() + usize::from(self.friction)
+    }
+
+    /// The core-loss conductance `1/Rfe` in parallel with `Xm`, S: the
+    /// iron-loss effect's own `Rfe`, or a core loss beside another effect;
+    /// 0 without; `None` where the vector leaves the physical region.
+    fn core_conductance(&self, x: &[f64]) -> Option<f64> {
+        let k = match self.effect {
+            Some(Effect::IronLoss) => 4,
+            _ if self.iron => self.iron_index(),
+            _ => return Some(0.0),
+        };
+        let rfe = x[k].exp();
+        (rfe.is_finite() && rfe > 0.0).then(|| 1.0 / rfe)
     }
 
     /// The friction and windage of the free-running points in `x`, W (0
@@ -403,7 +411,7 @@ impl ImAugmentation {
     /// carries none).
     pub fn torque_shortfall(&self, x: &[f64]) -> f64 {
         if self.torque {
-            x[self.len() - 1]
+            x[self.torque_index()]
         } else {
             0.0
         }
@@ -453,10 +461,10 @@ impl ImAugmentation {
     /// Terminal values at one point; a free-running point at the slip
     /// where the shaft delivers its loss.
     pub fn terminal(&self, x: &[f64], p: &PointInput) -> Option<Terminal> {
-        let loss = self.friction_power(x);
         if !p.free_running {
             return self.terminal_at_slip(x, p);
         }
+        let loss = self.friction_power(x);
         if !(loss.is_finite() && loss > 0.0) {
             return self.terminal_at_slip(x, &PointInput { slip: 0.0, ..*p });
         }
@@ -511,21 +519,8 @@ impl ImAugmentation {
             gfe: self.core_conductance(x)?,
         };
         let t = match self.effect {
-            None => linear_terminal(&cage, s, v),
-            Some(Effect::IronLoss) => {
-                let rfe = x[4].exp();
-                if !(rfe.is_finite() && rfe > 0.0) {
-                    return None;
-                }
-                linear_terminal(
-                    &Cage {
-                        gfe: 1.0 / rfe,
-                        ..cage
-                    },
-                    s,
-                    v,
-                )
-            }
+            // Iron loss is the cage's core-loss conductance.
+            None | Some(Effect::IronLoss) => linear_terminal(&cage, s, v),
             Some(Effect::DeepBar) => {
                 let (xi1, b) = (x[4].exp(), logistic(x[5]));
                 if !xi1.is_finite() {
@@ -765,7 +760,7 @@ mod tests {
     /// same current and power to a part in 10⁴, where zero slip misses the
     /// power by a third.
     #[test]
-    fn a_free_running_point_is_zero_slip_with_its_shaft_loss_in_phase() {
+    fn a_free_running_point_is_at_the_slip_that_delivers_its_friction() {
         let nominal = ImAugmentation::nominal(1.0);
         let x = x0();
         let friction = 150.0;

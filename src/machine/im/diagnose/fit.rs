@@ -7,7 +7,7 @@ use levenberg_marquardt::LevenbergMarquardt;
 use nalgebra::{DMatrix, DVector};
 
 use super::data::SweepSet;
-use super::effects::ImAugmentation;
+use super::effects::{ImAugmentation, Terminal};
 use crate::diagnose::decision::negligible_ftol;
 use crate::identify::least_squares::{AtParams, Residuals};
 use crate::identify::PRACTICAL_LIMIT;
@@ -33,19 +33,40 @@ pub fn weighted_residual(
     k: usize,
 ) -> Option<(f64, f64, f64)> {
     let t = model.terminal(x, &data.inputs[k])?;
-    let torque = match data.torque[k] {
-        Some(measured) => {
-            let predicted = t.rotor_power / data.sync_speed[k]
-                - model.torque_shortfall(x) * (1.0 - data.inputs[k].slip);
-            (measured - predicted) / (data.sigma_t * data.scale_t[k])
-        }
-        None => 0.0,
-    };
-    Some((
+    Some(weighted_of(model, x, data, k, &t))
+}
+
+/// [`weighted_residual`] from the model's terminal values `t` at point `k`.
+fn weighted_of(
+    model: &ImAugmentation,
+    x: &[f64],
+    data: &SweepSet,
+    k: usize,
+    t: &Terminal,
+) -> (f64, f64, f64) {
+    let torque =
+        torque_misfit(model, x, data, k, t).map_or(0.0, |d| d / (data.sigma_t * data.scale_t[k]));
+    (
         (data.current[k] - t.current) / (data.sigma_i * data.scale_i[k]),
         (data.power[k] - t.power) / (data.sigma_p * data.scale_p[k]),
         torque,
-    ))
+    )
+}
+
+/// Measured less modelled shaft torque at point `k`, N·m, from the
+/// model's terminal values `t` (the air-gap power over the synchronous
+/// speed, less `Tfw·(1 − s)`); `None` where the point has no torque.
+pub fn torque_misfit(
+    model: &ImAugmentation,
+    x: &[f64],
+    data: &SweepSet,
+    k: usize,
+    t: &Terminal,
+) -> Option<f64> {
+    let measured = data.torque[k]?;
+    let predicted = t.rotor_power / data.sync_speed[k]
+        - model.torque_shortfall(x) * (1.0 - data.inputs[k].slip);
+    Some(measured - predicted)
 }
 
 struct Problem<'a> {
@@ -220,9 +241,9 @@ pub fn held_out(
         }
         let fitted = fit(model, data, &train, &starts)?;
         for &k in out {
-            let (i, p) = model.predict(&fitted.x, &data.inputs[k])?;
-            predicted[k] = (i, p);
-            let (a, b, c) = weighted_residual(&model, &fitted.x, data, k)?;
+            let t = model.terminal(&fitted.x, &data.inputs[k])?;
+            predicted[k] = (t.current, t.power);
+            let (a, b, c) = weighted_of(&model, &fitted.x, data, k, &t);
             weighted[k] = (a, b);
             weighted_torque[k] = c;
         }

@@ -56,6 +56,12 @@ impl SlipRegions {
         v
     }
 
+    /// Whether point `k` of `data` is one of known slip (not a no-load
+    /// reading) in voltage group `group` and the region `label`.
+    pub fn holds(&self, data: &SweepSet, k: usize, group: usize, label: &str) -> bool {
+        data.group[k] == group && !data.free_running[k] && self.label(data.inputs[k].slip) == label
+    }
+
     /// Label of the region a slip falls in.
     pub fn label(&self, s: f64) -> &'static str {
         let bounds = self.bounds();
@@ -112,11 +118,7 @@ pub fn shares(
         for (g, &v) in data.group_voltage.iter().enumerate() {
             for (label, from, to) in regions.bounds() {
                 let idx: Vec<usize> = (0..data.len())
-                    .filter(|&k| {
-                        data.group[k] == g
-                            && !data.free_running[k]
-                            && regions.label(data.inputs[k].slip) == label
-                    })
+                    .filter(|&k| regions.holds(data, k, g, label))
                     .collect();
                 if idx.is_empty() {
                     continue;

@@ -30,7 +30,7 @@ use std::collections::BTreeMap;
 
 use self::data::SweepSet;
 use self::effects::{effect_name, ImAugmentation, SaturatingFlux, IM_EFFECTS, NOMINAL_KEYS};
-use self::fit::{fit, held_out, intervals, starts_from, AugmentedFit, HeldOut};
+use self::fit::{fit, held_out, intervals, starts_from, torque_misfit, AugmentedFit, HeldOut};
 use self::gap::{evidence, shares, SlipRegions, CHANNELS};
 use self::standard_points::{with_standard_points, StandardPoints};
 use self::verdict::separating_plan;
@@ -434,10 +434,8 @@ fn estimate_noise(data: &mut SweepSet, model: &ImAugmentation, x: &[f64]) {
         if let Some(t) = model.terminal(x, &data.inputs[k]) {
             ri.push((data.current[k] - t.current) / data.scale_i[k]);
             rp.push((data.power[k] - t.power) / data.scale_p[k]);
-            if let Some(measured) = data.torque[k] {
-                let predicted = t.rotor_power / data.sync_speed[k]
-                    - model.torque_shortfall(x) * (1.0 - data.inputs[k].slip);
-                rt.push((measured - predicted) / data.scale_t[k]);
+            if let Some(d) = torque_misfit(model, x, data, k, &t) {
+                rt.push(d / data.scale_t[k]);
             }
         }
     }
@@ -522,12 +520,12 @@ fn nominal_params(
         "Xs".into(),
         estimate(ratio * f.x[3].exp(), ci(3, ratio), "ohm"),
     );
-    let mut j = model.iron_index() + usize::from(model.iron);
     if model.friction {
+        let j = model.friction_index();
         out.insert("Pfw".into(), estimate(f.x[j].exp(), ci(j, 1.0), "W"));
-        j += 1;
     }
     if model.torque {
+        let j = model.torque_index();
         let ci = iv[j].half_width.map(|h| [iv[j].x - h, iv[j].x + h]);
         out.insert("Tfw".into(), estimate(f.x[j], ci, "N*m"));
     }
@@ -659,9 +657,7 @@ fn residual_plot(
                 if no_load {
                     data.free_running[k] && Some(data.segment[k]) == r.segment
                 } else {
-                    data.group[k] == g
-                        && !data.free_running[k]
-                        && regions.label(data.inputs[k].slip) == r.label
+                    regions.holds(data, k, g, &r.label)
                 }
             })
             .collect();

@@ -167,7 +167,7 @@ pub fn with_standard_points(record: &Record) -> StandardPoints {
         } else {
             format!(
                 "the record's {dc} DC-resistance reading(s) set the stator resistance of the \
-                 no-load test's friction and windage"
+                 no-load friction's start value"
             )
         });
     }
