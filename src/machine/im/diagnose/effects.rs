@@ -145,8 +145,8 @@ pub struct ImAugmentation {
     /// parameter of every model, since it trades with the stator
     /// resistance that each model fits differently.
     pub friction: bool,
-    /// Whether the vector ends with `Tfw`, the torque (N·m, its value,
-    /// not its logarithm) by which the measured shaft torque falls short
+    /// Whether the vector ends with `ln Tfw`, the torque (N·m, > 0) by
+    /// which the measured shaft torque falls short
     /// of the electromagnetic one at synchronous speed, in proportion to
     /// the speed (`Tfw·(1 − s)`: the friction and windage on the motor's
     /// side of the sensor, none at standstill): on a record with a torque
@@ -379,7 +379,7 @@ impl ImAugmentation {
         self.iron_index() + usize::from(self.iron)
     }
 
-    /// Where `Tfw` sits in the vector (last, after the friction's).
+    /// Where `ln Tfw` sits in the vector (last, after the friction's).
     pub fn torque_index(&self) -> usize {
         self.friction_index() + usize::from(self.friction)
     }
@@ -411,7 +411,7 @@ impl ImAugmentation {
     /// carries none).
     pub fn torque_shortfall(&self, x: &[f64]) -> f64 {
         if self.torque {
-            x[self.torque_index()]
+            x[self.torque_index()].exp()
         } else {
             0.0
         }

@@ -361,7 +361,7 @@ pub fn log_mask(model: &ImAugmentation) -> Vec<bool> {
         m.push(true);
     }
     if model.torque {
-        m.push(false);
+        m.push(true);
     }
     m
 }

@@ -119,8 +119,14 @@ pub fn diagnose_im(
     }
     let torque = data.has_torque();
     if torque {
-        // The shortfall starts at none; it is linear in the torque.
-        x_lm.push(0.0);
+        // The shortfall (a friction, > 0) starts at a thousandth of the
+        // largest torque read.
+        let largest = data
+            .torque
+            .iter()
+            .flatten()
+            .fold(0.0f64, |m, t| m.max(t.abs()));
+        x_lm.push((1e-3 * largest).max(f64::MIN_POSITIVE).ln());
         warnings.push(torque_note(&data));
     }
     let nominal = ImAugmentation {
@@ -526,8 +532,7 @@ fn nominal_params(
     }
     if model.torque {
         let j = model.torque_index();
-        let ci = iv[j].half_width.map(|h| [iv[j].x - h, iv[j].x + h]);
-        out.insert("Tfw".into(), estimate(f.x[j], ci, "N*m"));
+        out.insert("Tfw".into(), estimate(f.x[j].exp(), ci(j, 1.0), "N*m"));
     }
     out
 }
