@@ -320,12 +320,19 @@ pub async fn prepare(
 
 impl Job {
     /// Run the test to its end (completed, aborted or failed) and update
-    /// the index.
-    pub async fn run(self) -> JobEnd {
+    /// the index. `on_safe` is awaited as soon as the sequencer has
+    /// returned (the rig is safe), before the analysis and before the
+    /// status says `finished`: a rig latched by the stop is latched
+    /// before anyone can see its test finished and start another.
+    pub async fn run<F, Fut>(self, on_safe: F)
+    where
+        F: FnOnce(JobEnd) -> Fut,
+        Fut: std::future::Future<Output = ()>,
+    {
         let Job { supervised, ending } = self;
         let progress = FeedProgress::new(ending.run.clone(), supervised.machine().durations());
         let (recording, end) = supervised.run(&progress).await;
-        conclude(ending, recording, end).await
+        conclude(ending, recording, end, on_safe).await
     }
 }
 
@@ -371,10 +378,15 @@ impl Ending {
 }
 
 /// The end of every test, once the sequencer has returned (the rig is
-/// safe): the supervisor's stop recorded, the supervisor finished, the
-/// record analysed (off the reactor), finished and indexed with its
-/// report and plot, the status published.
-async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
+/// safe): the rig told how the run ended (`on_safe`), the supervisor's
+/// stop recorded, the supervisor finished, the record analysed (off the
+/// reactor), finished and indexed with its report and plot, the status
+/// published.
+async fn conclude<F, Fut>(ending: Ending, recording: Recording, ran: RunEnd, on_safe: F)
+where
+    F: FnOnce(JobEnd) -> Fut,
+    Fut: std::future::Future<Output = ()>,
+{
     let (run, index, dir, name) = (
         ending.run.clone(),
         ending.index.clone(),
@@ -387,10 +399,11 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
         stop,
         winding_rise_k,
     } = ran;
-    let end = JobEnd {
+    on_safe(JobEnd {
         latch: stop.clone().filter(|s| s.cause.latches()),
         winding_rise_k,
-    };
+    })
+    .await;
     // Every segment is on disk (the recorder flushes at each marker): a
     // daemon killed from here on leaves a record that only lacks its
     // analysis, marked so on the next start.
@@ -419,7 +432,7 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
                 .count(RecordOutcome::Failed, stop.as_ref(), (0, 0))
                 .await;
             finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
-            return end;
+            return;
         }
     };
     let failure = concluded
@@ -465,7 +478,7 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
                 )
                 .await;
             finish_failed(&run, &index, &name, reason, stop.as_ref()).await;
-            return end;
+            return;
         }
     };
     let report = analysis.report();
@@ -535,7 +548,6 @@ async fn conclude(ending: Ending, recording: Recording, ran: RunEnd) -> JobEnd {
         s.eta_s = Some(0.0);
         s.eta_max_s = Some(0.0);
     });
-    end
 }
 
 /// Mark a test failed in the index and its status.

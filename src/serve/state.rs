@@ -356,20 +356,25 @@ impl Daemon {
         let rig = rig.clone();
         let latches = self.latches.clone();
         let handle = tokio::spawn(async move {
-            let end = job.run().await;
+            // The rig learns how the run ended as soon as it is safe,
+            // before the analysis: its test cannot be seen finished while
+            // a latching stop is not latched yet.
+            job.run(|end| async move {
+                let mut rt = rig.runtime.lock().await;
+                rt.winding_rise_k = end.winding_rise_k;
+                rt.winding_at = Instant::now();
+                if let Some(stop) = &end.latch {
+                    if rt.latch.is_none() {
+                        let latch = Latch::from_report(stop);
+                        latches.set(&rig.name, Some(latch.clone()));
+                        rt.latch = Some(latch);
+                    }
+                }
+            })
+            .await;
             // The analysis' memory is free now: hand it back, so that the
             // daemon's resident size follows its live heap.
             super::heap::release_freed_memory().await;
-            let mut rt = rig.runtime.lock().await;
-            rt.winding_rise_k = end.winding_rise_k;
-            rt.winding_at = Instant::now();
-            if let Some(stop) = &end.latch {
-                if rt.latch.is_none() {
-                    let latch = Latch::from_report(stop);
-                    latches.set(&rig.name, Some(latch.clone()));
-                    rt.latch = Some(latch);
-                }
-            }
         });
         let mut jobs = lock(&self.jobs);
         jobs.retain(|j| !j.is_finished());
@@ -477,6 +482,36 @@ impl Daemon {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A test stopped by a latching fault (a NaN current) on the
+    /// simulated DC rig: the moment its status says `finished`, the rig is
+    /// `tripped` and refuses the next test. The latch used to be set after
+    /// the status was published, which left a window in which the rig
+    /// read `idle` and would start a new test.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_latching_stop_is_latched_before_its_test_is_seen_finished() {
+        let dir = tempfile::tempdir().unwrap();
+        let shipped = concat!(env!("CARGO_MANIFEST_DIR"), "/config/sim-dc.toml");
+        let text = std::fs::read_to_string(shipped).unwrap()
+            + "\n[[fault]]\nkind = \"nan\"\nat_s = 0.3\ntarget = \"armature_current\"\n";
+        let config = dir.path().join("rig.toml");
+        std::fs::write(&config, text).unwrap();
+        let rigs = crate::serve::load_rigs(&[config]).unwrap();
+        let daemon = Arc::new(Daemon::new(rigs, &dir.path().join("records")).unwrap());
+        let test = serde_json::json!({"levels_V": [60, 248], "coastdown": false});
+        let run = daemon
+            .start("rig", test.as_object())
+            .await
+            .expect("the test starts");
+        run.wait_finished().await;
+        let rig = daemon.rig("rig").await.unwrap();
+        assert_eq!(rig.state, "tripped", "{:?}", run.status().stop);
+        assert!(
+            matches!(daemon.start("rig", None).await, Err(StartError::Tripped(_))),
+            "a tripped rig refuses the next test"
+        );
+        daemon.shutdown().await;
+    }
 
     #[test]
     fn only_the_newest_finished_tests_are_kept_and_running_ones_stay() {
