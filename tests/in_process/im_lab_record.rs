@@ -196,35 +196,36 @@ fn diagnosis_gives_physical_answers_only() {
 }
 
 /// The machine has both core loss and main-flux saturation. Without its
-/// no-load test the record cannot tell them apart: neither candidate alone
-/// explains the gap, and the report says so: the verdict leaves most of
-/// it, and the candidate that took more of it alone is named with the test
-/// that separates the two.
+/// no-load test, the core-loss candidate fits the noise-weighted held-out
+/// points better than the nominal model (those weigh the small readings
+/// most) but grows the held-out gap the report states: it is named as such
+/// and is no verdict, nor a look-alike. The verdict shrinks the gap (it
+/// was `iron_loss`, 0.0354 → 0.0365, before a verdict had to).
 #[test]
-fn a_verdict_that_leaves_most_of_the_gap_says_so() {
+fn without_the_no_load_test_the_verdict_shrinks_the_gap() {
     let run = diagnosed_files(&files()[1..]);
     let d = &run.report;
     let v = &d.verdict;
-    assert!(v.gap_after > 2.0 * d.gap.noise_floor, "{v:?}");
-    let named = format!("{}: named as the verdict, though it leaves", v.effect);
-    assert!(
-        d.warnings.iter().any(|w| w.starts_with(&named)),
-        "{:?}",
-        d.warnings
-    );
-    let better = d
+    assert_eq!(v.effect, "main_flux_saturation", "{:?}", d.candidates);
+    assert!(v.gap_after < 0.8 * v.gap_before, "{v:?}");
+    let core = d
         .candidates
         .iter()
-        .filter(|c| c.validation_nrmse < v.gap_after)
-        .min_by(|a, b| a.validation_nrmse.total_cmp(&b.validation_nrmse))
-        .expect("a candidate took more of the gap");
-    let alone = format!("{}: alone takes the held-out gap", better.effect);
+        .find(|c| c.effect == "iron_loss")
+        .expect("the core loss is a candidate");
+    assert!(core.validation_nrmse > v.gap_before, "{core:?}");
     assert!(
         d.warnings
             .iter()
-            .any(|w| w.starts_with(&alone) && w.contains("separates them")),
+            .any(|w| w.starts_with("iron_loss: fits the noise-weighted")
+                && w.ends_with("not a verdict")),
         "{:?}",
         d.warnings
+    );
+    assert!(
+        v.look_alikes.iter().all(|l| l.effect != "iron_loss"),
+        "{:?}",
+        v.look_alikes
     );
 }
 

@@ -13,8 +13,9 @@
 //!    nominal parameters, cross-validated on the same folds, compared with
 //!    the nominal model per operating point by the paired sign-flip test of
 //!    [`crate::diagnose::decision`] (Bonferroni over the six candidates), ranked by
-//!    the held-out BIC score. The verdict is the best-scoring candidate if
-//!    its test is significant and its score positive, else `none`.
+//!    the held-out BIC score. The verdict is the best-scoring candidate
+//!    among those that shrink the held-out NRMSE, if its test is
+//!    significant and its score positive, else `none`.
 //!
 //! The method is written up in `docs/diagnosis-im.md`.
 
@@ -217,10 +218,28 @@ pub fn diagnose_im(
         candidates.iter().any(|c| c.effect == name)
     };
 
-    // Verdict.
+    // Verdict. A candidate that grows the held-out gap the report states
+    // (its NRMSE over current and power) can be no verdict, however it
+    // scores on the noise-weighted residuals: those weigh the small
+    // readings most, and a gain there can come with a larger misfit of
+    // the large ones.
+    let widens = |e: &Evaluated| e.validation_nrmse >= gap_before;
+    if let Some(w) = evaluated
+        .iter()
+        .take_while(|e| widens(e))
+        .find(|e| physical(e) && e.test.significant() && e.score > 0.0)
+    {
+        warnings.push(format!(
+            "{}: fits the noise-weighted held-out points better (p = {:.3}) but grows the \
+             held-out gap ({gap_before:.4} → {:.4}): not a verdict",
+            effect_name(Some(w.effect)),
+            w.test.p_value,
+            w.validation_nrmse
+        ));
+    }
     let winner = evaluated
         .iter()
-        .find(|e| physical(e))
+        .find(|e| physical(e) && !widens(e))
         .filter(|e| e.test.significant() && e.score > 0.0);
     let regions = {
         let v = &nominal_full.x;
@@ -589,9 +608,12 @@ fn verdict_of(
     let mut look_alikes = Vec::new();
     for other in evaluated.iter().filter(|o| o.effect != w.effect) {
         // The verdict is not significantly better than `other` on the
-        // same held-out points, and `other` itself beats the nominal.
+        // same held-out points, and `other` itself beats the nominal (and
+        // shrinks the held-out gap, as a verdict must).
         let versus = held_out_sign_flip_test(&other.blocks, &w.blocks, 1);
-        let also_explains = other.test.significant() && !versus.significant();
+        let also_explains = other.test.significant()
+            && other.validation_nrmse < gap_before
+            && !versus.significant();
         let one_voltage_flux = !data.several_voltages()
             && other.effect == Effect::MainFluxSaturation
             && !versus.significant();
