@@ -40,12 +40,12 @@ use crate::contract::{
     Verdict,
 };
 use crate::diagnose::decision::{
-    explained_share, held_out_sign_flip_test, noise_sigma, partial_verdict_warning,
+    explained_share, held_out_sign_flip_test, median, noise_sigma, partial_verdict_warning,
     penalised_score, HeldOutTest,
 };
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{fit_lm, no_load_friction, LmOptions, PhaseData, SplitPolicy};
-use crate::machine::im::identify::nameplate_number;
+use crate::machine::im::identify::{nameplate_number, CHECK_THE_COLUMNS};
 use crate::model::{Connection, Effect, ImModel, LeakageSplit};
 use crate::record::{Record, SCHEMA_VERSION};
 use crate::report::ParamEstimate;
@@ -100,7 +100,13 @@ pub fn diagnose_im(
     let mut lm_opts = LmOptions::new(ImModel::Single);
     lm_opts.split = split;
     lm_opts.split_policy = SplitPolicy::Always;
-    let lm = fit_lm(&phase, &lm_opts).map_err(|e| DiagnoseError::NominalFit(e.to_string()))?;
+    // A fit that ends outside every circuit (a Jacobian or residual that is
+    // not finite) means no single cage follows these readings.
+    let lm = fit_lm(&phase, &lm_opts).map_err(|e| {
+        DiagnoseError::NominalFit(format!(
+            "{e}: no single-cage circuit follows these readings. {CHECK_THE_COLUMNS}"
+        ))
+    })?;
     let c = lm.circuit;
     let (rr, xr) = match c.rotor {
         crate::model::RotorCage::Single { rr, xr } => (rr, xr),
@@ -136,11 +142,21 @@ pub fn diagnose_im(
         ..ImAugmentation::nominal(split.ratio())
     };
     let all: Vec<usize> = (0..data.len()).collect();
-    let unweighted = fit(nominal, &data, &all, std::slice::from_ref(&x_lm))
-        .ok_or_else(|| DiagnoseError::NominalFit("no finite nominal fit".into()))?;
+    let unweighted = fit(nominal, &data, &all, std::slice::from_ref(&x_lm)).ok_or_else(|| {
+        DiagnoseError::NominalFit(format!(
+            "no finite nominal fit: no single-cage circuit follows these readings. \
+                 {CHECK_THE_COLUMNS}"
+        ))
+    })?;
     estimate_noise(&mut data, &nominal, &unweighted.x);
     let nominal_full = fit(nominal, &data, &all, &[unweighted.x, x_lm])
         .ok_or_else(|| DiagnoseError::NominalFit("no finite weighted nominal fit".into()))?;
+    if let Some(why) = unusable_nominal(&data, &nominal, &nominal_full.x, split.ratio()) {
+        return Err(DiagnoseError::NominalFit(format!(
+            "{why}: no single-cage circuit follows these readings, and no effect can be judged \
+             against it. {CHECK_THE_COLUMNS}"
+        )));
+    }
 
     let (folds, validation) = data.folds();
     let nominal_held = held_out(nominal, &data, &folds, &nominal_full.x, &[]).ok_or_else(|| {
@@ -504,6 +520,47 @@ fn noise_floor(data: &SweepSet) -> f64 {
         + part(&data.power, &data.scale_p, data.sigma_p))
 }
 
+/// Elements of a usable nominal circuit lie within this factor of the
+/// record's impedance (median phase voltage over median phase current)
+/// either way: a fit that ends further out has run off to a degenerate
+/// circuit (a magnetising branch that is an open circuit, a leakage of
+/// nothing), not to a machine.
+const ELEMENT_RANGE: f64 = 1e6;
+
+/// Why the nominal fit `x` is no machine to diagnose against, if it is
+/// not: it predicts the readings worse than their mean (a fit NRMSE above
+/// 1), or an element left [`ELEMENT_RANGE`] of the record's impedance.
+fn unusable_nominal(
+    data: &SweepSet,
+    model: &ImAugmentation,
+    x: &[f64],
+    ratio: f64,
+) -> Option<String> {
+    let pred: Vec<(f64, f64)> = data
+        .inputs
+        .iter()
+        .map(|p| model.predict(x, p).unwrap_or((f64::NAN, f64::NAN)))
+        .collect();
+    let nrmse = mean_nrmse(data, &pred);
+    if nrmse.is_nan() || nrmse > 1.0 {
+        return Some(format!(
+            "the nominal fit predicts the readings worse than their mean (fit NRMSE {nrmse:.3})"
+        ));
+    }
+    let mut v: Vec<f64> = data.inputs.iter().map(|p| p.voltage).collect();
+    let mut i = data.current.clone();
+    let base = median(&mut v)? / median(&mut i)?;
+    circuit_values(x, ratio)
+        .into_iter()
+        .find(|(_, z)| !(z * ELEMENT_RANGE >= base && *z <= ELEMENT_RANGE * base))
+        .map(|(key, z)| {
+            format!(
+                "the nominal fit ran off to {key} = {z:.3e} ohm, beyond a million times the \
+                 record's impedance ({base:.3e} ohm) either way"
+            )
+        })
+}
+
 /// The nominal elements (Ω) of a vector, with the convention's `Xs`.
 fn circuit_values(x: &[f64], ratio: f64) -> [(&'static str, f64); 5] {
     [
@@ -810,6 +867,24 @@ mod tests {
         let e = diagnose_im(&bad, &star()).unwrap_err().to_string();
         assert!(
             e.contains("operating point 4") && e.contains("line_current"),
+            "{e}"
+        );
+    }
+
+    /// An input power of half what the machine took (one wattmeter of
+    /// two read as the total): no single cage follows the readings, and
+    /// the refusal says which columns to check.
+    #[test]
+    fn a_record_no_circuit_follows_is_refused_with_the_columns_to_check() {
+        let mut r = record(ImAugmentation::nominal(1.0), &nominal_x(), &[400.0], 1);
+        for p in &mut r.operating_points {
+            p.input_power *= 0.5;
+        }
+        let e = diagnose_im(&r, &star()).unwrap_err();
+        assert!(
+            matches!(&e, DiagnoseError::NominalFit(m)
+                if m.contains("no single-cage circuit follows these readings")
+                    && m.contains("three-phase total input power in W")),
             "{e}"
         );
     }

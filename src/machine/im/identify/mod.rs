@@ -269,6 +269,13 @@ fn misfit_warning(c: &ImCircuit, sweep: &SlipSweep, model: ImModel) -> Option<St
     })
 }
 
+/// What to check when no circuit follows a record's readings at all.
+pub const CHECK_THE_COLUMNS: &str = "Check that the columns belong together: the line current \
+     in A and the three-phase total input power in W at the same instants, with the slip \
+     measured there (one phase's power, or one of two wattmeters, is a fraction of the total; a \
+     scaled sensor reads a multiple); readings that jump from point to point do not follow slip \
+     as a machine's do";
+
 /// Whether the circuit `c` predicts almost none of the measured current
 /// or power (an rms relative residual of 90 % or more): relative residuals
 /// give every prediction of zero a cost of one per point, so a fit to
@@ -475,11 +482,7 @@ fn lm_method(
                 format!(
                     "the fit of the {model} circuit collapsed to elements of zero, predicting \
                      almost none of the measured current and power: no {model} circuit follows \
-                     these readings. Check that the columns belong together: the line current \
-                     in A and the three-phase total input power in W at the same instants, with \
-                     the slip measured there (one phase's power, or one of two wattmeters, is a \
-                     fraction of the total; a scaled sensor reads a multiple); readings that jump \
-                     from point to point do not follow slip as a machine's do"
+                     these readings. {CHECK_THE_COLUMNS}"
                 )
             } else {
                 format!(
