@@ -402,6 +402,23 @@ impl<'a> CsvRow<'a> {
     }
 }
 
+impl CsvRow<'_> {
+    /// Field `col` of an optional column: `None` where the cell is empty
+    /// (not measured at this row), else as [`CsvRow::number`].
+    pub(super) fn optional_number(&self, col: usize) -> Result<Option<f64>, RecordError> {
+        if self.is_empty(col) {
+            Ok(None)
+        } else {
+            self.number(col).map(Some)
+        }
+    }
+
+    /// Whether field `col` is empty (blank or an empty quote).
+    pub(super) fn is_empty(&self, col: usize) -> bool {
+        unquote(self.fields[col]).is_empty()
+    }
+}
+
 pub(super) fn unquote(s: &str) -> &str {
     let s = s.trim();
     for q in ['"', '\''] {

@@ -137,7 +137,8 @@ pub fn read_im_csv(
             }
             Ok(v)
         };
-        let f = match f_col {
+        // An empty cell of an optional column: not measured at this point.
+        let f = match f_col.filter(|&c| !row.is_empty(c)) {
             Some(c) => positive(c)?,
             None => frequency.unwrap_or(f64::NAN),
         };
@@ -175,7 +176,7 @@ pub fn read_im_csv(
         let line_voltage = positive(v_col)?;
         let line_current = positive(i_col)?;
         let input_power = number(p_col)?;
-        let torque = t_col.map(number).transpose()?;
+        let torque = t_col.map(|c| row.optional_number(c)).transpose()?.flatten();
         let speed = match pole_pairs {
             Some(p) if p > 0 => (1.0 - slip) * std::f64::consts::TAU * f / f64::from(p),
             _ => f64::NAN,

@@ -108,7 +108,11 @@ fn read_table(
             .collect::<Result<Vec<_>, _>>()?;
         let extra = opt
             .iter()
-            .map(|c| c.map(|c| row.number(c)).transpose())
+            .map(|c| {
+                c.map(|c| row.optional_number(c))
+                    .transpose()
+                    .map(Option::flatten)
+            })
             .collect::<Result<Vec<_>, _>>()?;
         rows.push((no, values, extra));
     }

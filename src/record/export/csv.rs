@@ -8,12 +8,17 @@
 //!   [`crate::record::RecordBuilder`]).
 //! - Induction-machine sweeps: one row per operating point, `slip`,
 //!   `line_voltage_V`, `line_current_A`, `input_power_W`, `frequency_Hz`,
-//!   and `torque_Nm` when every point of the sweep has a torque.
+//!   and `torque_Nm` when a point of the sweep has a torque.
 //! - The induction machine's standard tests, one row per reading:
 //!   `im_dc_resistance` (`dc_voltage_V`, `dc_current_A`), `im_no_load` and
 //!   `im_locked_rotor` (`line_voltage_V`, `line_current_A`,
-//!   `input_power_W`, and `frequency_Hz` where every reading has one);
-//!   `winding_temperature_C` where every reading of the segment has one.
+//!   `input_power_W`, and `frequency_Hz` where a reading has one);
+//!   `winding_temperature_C` where a reading of the segment has one.
+//!
+//! An optional column is written when any row of the file has a value,
+//! and its cell is left empty in a row that has none (the importer reads
+//! an empty cell as "not measured"): no reading's value is dropped
+//! because another reading lacks one.
 //!
 //! Every file opens with the contract's declaration
 //! (`# motorbench segment <index> kind=<kind> label=<label>`) and a
@@ -86,12 +91,12 @@ pub fn segment_files(record: &Record, source: &str) -> Vec<CsvFile> {
             .collect();
         let kind = SegmentKind::ImDcResistance;
         let mut text = preamble(index, kind, &label(index, kind.as_str().into()), source);
-        let temperature = readings.iter().all(|r| r.winding_temperature.is_some());
+        let temperature = readings.iter().any(|r| r.winding_temperature.is_some());
         let _ = write!(text, "{COL_DC_VOLTAGE},{COL_DC_CURRENT}");
         columns_end(&mut text, temperature.then_some(COL_WINDING_TEMPERATURE));
         for r in readings {
             let _ = write!(text, "{:?},{:?}", r.dc_voltage, r.dc_current);
-            row_end(&mut text, r.winding_temperature.filter(|_| temperature));
+            row_end(&mut text, temperature, r.winding_temperature);
         }
         out.push(CsvFile {
             segment: index,
@@ -155,14 +160,24 @@ fn columns_end(text: &mut String, last: Option<&str>) {
     }
 }
 
-/// End a row, with the optional value `last`.
-fn row_end(text: &mut String, last: Option<f64>) {
-    match last {
-        Some(v) => {
-            let _ = writeln!(text, ",{v:?}");
-        }
-        None => text.push('\n'),
+/// End a row, with the cell of the optional last column where the file
+/// has that column (`column`).
+fn row_end(text: &mut String, column: bool, last: Option<f64>) {
+    if column {
+        text.push(',');
+        text.push_str(&cell(last));
     }
+    text.push('\n');
+}
+
+/// A cell of an optional column: the value, or empty where there is none.
+fn cell(v: Option<f64>) -> String {
+    v.map_or_else(String::new, |v| format!("{v:?}"))
+}
+
+/// A frequency as an optional value (NaN where it was not given).
+fn given(frequency: f64) -> Option<f64> {
+    frequency.is_finite().then_some(frequency)
 }
 
 /// One `im_no_load` or `im_locked_rotor` segment (`kind`) as the
@@ -178,8 +193,8 @@ fn supply_test_text(
         Some(source) => preamble(index, kind, label, source),
         None => declaration(index, kind, label),
     };
-    let frequency = readings.iter().all(|r| r.frequency.is_finite());
-    let temperature = readings.iter().all(|r| r.winding_temperature.is_some());
+    let frequency = readings.iter().any(|r| r.frequency.is_finite());
+    let temperature = readings.iter().any(|r| r.winding_temperature.is_some());
     let _ = write!(
         text,
         "{COL_LINE_VOLTAGE},{COL_LINE_CURRENT},{COL_INPUT_POWER}{}",
@@ -197,9 +212,9 @@ fn supply_test_text(
             r.line_voltage, r.line_current, r.input_power
         );
         if frequency {
-            let _ = write!(text, ",{:?}", r.frequency);
+            let _ = write!(text, ",{}", cell(given(r.frequency)));
         }
-        row_end(&mut text, r.winding_temperature.filter(|_| temperature));
+        row_end(&mut text, temperature, r.winding_temperature);
     }
     text
 }
@@ -238,7 +253,7 @@ fn dc_text(s: &DcSegment, source: &str) -> String {
 
 fn im_text(index: u32, label: &str, points: &[&OperatingPoint], source: &str) -> String {
     let mut text = preamble(index, SegmentKind::ImSlipSweep, label, source);
-    let torque = points.iter().all(|p| p.torque.is_some());
+    let torque = points.iter().any(|p| p.torque.is_some());
     let torque_column = if torque {
         format!(",{COL_TORQUE}")
     } else {
@@ -251,15 +266,14 @@ fn im_text(index: u32, label: &str, points: &[&OperatingPoint], source: &str) ->
     for p in points {
         let _ = write!(
             text,
-            "{:?},{:?},{:?},{:?},{:?}",
-            p.slip, p.line_voltage, p.line_current, p.input_power, p.frequency
+            "{:?},{:?},{:?},{:?},{}",
+            p.slip,
+            p.line_voltage,
+            p.line_current,
+            p.input_power,
+            cell(given(p.frequency))
         );
-        match p.torque.filter(|_| torque) {
-            Some(t) => {
-                let _ = writeln!(text, ",{t:?}");
-            }
-            None => text.push('\n'),
-        }
+        row_end(&mut text, torque, p.torque);
     }
     text
 }
@@ -334,9 +348,44 @@ mod tests {
         assert_eq!(back.points[0].slip, 0.03);
     }
 
+    /// A sweep where only some points have a torque, and one point has no
+    /// frequency: every torque read is kept (the others' cells are empty)
+    /// and the file reads back, the missing frequency the importer's.
+    #[test]
+    fn a_sweep_keeps_the_torque_of_the_points_that_have_one() {
+        let point = |slip: f64, torque: Option<f64>, frequency: f64| OperatingPoint {
+            segment: 0,
+            slip,
+            line_voltage: 400.0,
+            line_current: 7.25,
+            input_power: 3100.5,
+            speed: f64::NAN,
+            frequency,
+            torque,
+        };
+        let record = Record {
+            operating_points: vec![
+                point(0.03, Some(0.6), 50.0),
+                point(0.5, None, f64::NAN),
+                point(1.0, Some(20.0), 50.0),
+            ],
+            ..Record::default()
+        };
+        let text = &segment_files(&record, "r.mcap")[0].text;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("s.csv");
+        std::fs::write(&path, text).unwrap();
+        let back = read_im_csv(&path, 0, Some(60.0), None).unwrap();
+        let torques: Vec<Option<f64>> = back.points.iter().map(|p| p.torque).collect();
+        assert_eq!(torques, [Some(0.6), None, Some(20.0)], "{text}");
+        let frequencies: Vec<f64> = back.points.iter().map(|p| p.frequency).collect();
+        assert_eq!(frequencies, [50.0, 60.0, 50.0], "{text}");
+    }
+
     /// The standard tests read back bit for bit, the temperature and the
-    /// frequency with them; a segment whose readings lack a frequency
-    /// leaves the column out (the importer's `--frequency` then applies).
+    /// frequency with them, where only some readings have a temperature
+    /// too; a segment whose readings lack a frequency leaves the column
+    /// out (the importer's `--frequency` then applies).
     #[test]
     fn standard_tests_read_back_with_their_temperatures() {
         let mut record = Record::default();
@@ -355,6 +404,9 @@ mod tests {
             winding_temperature: Some(40.25),
         };
         record.standard_tests.no_load = vec![reading(1, 50.0), reading(1, 50.0)];
+        // A reading without a temperature keeps the others' (its cell is
+        // empty).
+        record.standard_tests.no_load[1].winding_temperature = None;
         record.standard_tests.locked_rotor = vec![reading(2, f64::NAN)];
         let files = segment_files(&record, "r.mcap");
         assert_eq!(
