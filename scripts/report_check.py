@@ -11,6 +11,11 @@ each report for:
 - a parameter outside its physical range, judged by its unit: resistances,
   inductances, reactances, inertias and the torque constant > 0; friction
   and torque >= 0 (identified values, and a verdict's corrected values);
+- an NRMSE above 1 reported as a result (a method's fit or held-out
+  score, the nominal model's, the verdict's gap before or after; a
+  candidate's is a comparison and may exceed 1): a model worse than the
+  readings' mean is a fit that failed, which the report must say instead
+  of scoring it;
 - a run that took longer than the bound (`--max-seconds`, default 5 s).
 
 Prints one line per finding and a summary per suite and source; exit 1
@@ -29,6 +34,7 @@ import time
 
 POSITIVE = {"ohm", "H", "kg*m^2", "V*s/rad", "N*m/A"}
 NON_NEGATIVE = {"N*m", "N*m*s/rad", "N*m*s^2/rad^2", "W"}
+NRMSE_KEYS = {"fit_nrmse", "validation_nrmse", "gap_before", "gap_after"}
 OPTIONAL = {"ci95", "reason", "best", "validation_nrmse", "params", "region", "verdict"}
 
 
@@ -53,6 +59,12 @@ def findings(report, where):
                 if unit in NON_NEGATIVE and not v >= 0:
                     found.append(f"{where}: {path}.{key} = {v} {unit} (must be >= 0)")
             for k, v in x.items():
+                # A candidate's held-out NRMSE compares it with the nominal
+                # model (a candidate worse than the mean is just a bad one);
+                # the results are the methods', the nominal's and the verdict's.
+                scored = ".candidates[" not in path
+                if scored and k in NRMSE_KEYS and isinstance(v, (int, float)) and v > 1.0:
+                    found.append(f"{where}: {path}.{k} = {v} (an NRMSE above 1: a failed fit scored)")
                 if v is None and k not in OPTIONAL:
                     found.append(f"{where}: {path}.{k} is null (a NaN?)")
                 walk(v, f"{path}.{k}")

@@ -271,6 +271,28 @@ impl IdentificationReport {
         }
     }
 
+    /// A held-out NRMSE is a score only below 1 (the held-out data's own
+    /// mean scores 1): a method whose model, fitted without the held-out
+    /// data, predicts them worse than their mean gets no
+    /// `validation_nrmse`, and a warning gives the number and what it
+    /// means. Its parameters stay, as what the fitting data give.
+    pub fn unscore_failed_predictions(&mut self) {
+        for (name, method) in &mut self.methods {
+            let Some(v) = method
+                .validation_nrmse
+                .filter(|v| !(v.is_finite() && *v < 1.0))
+            else {
+                continue;
+            };
+            self.warnings.push(format!(
+                "{name}: held-out NRMSE {v:.3e}, not reported as a score: the model fitted \
+                 without the held-out data predicts them worse than their own mean (a model \
+                 that misfits this record, or held-out data unlike the rest)"
+            ));
+            method.validation_nrmse = None;
+        }
+    }
+
     /// The report as JSON text (pretty, stable key order).
     pub fn to_json_pretty(&self) -> String {
         serde_json::to_string_pretty(self).expect("a report always serialises")
@@ -280,6 +302,31 @@ impl IdentificationReport {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A held-out NRMSE of 1 or more (or not finite) is no score: it is
+    /// left out with a warning naming the method and the number; one below
+    /// 1 stays.
+    #[test]
+    fn a_prediction_worse_than_the_mean_is_no_score() {
+        let mut report = IdentificationReport::with_best_params(&[("K", 0.05, "V*s/rad")]);
+        let fitted = |v: f64| MethodReport::fitted(BTreeMap::new(), Some(v));
+        report.methods.insert("equation_error".into(), fitted(8.37));
+        report.methods.insert("moments".into(), fitted(f64::NAN));
+        report.unscore_failed_predictions();
+        assert_eq!(report.methods["output_error"].validation_nrmse, Some(0.01));
+        for name in ["equation_error", "moments"] {
+            assert_eq!(report.methods[name].validation_nrmse, None, "{name}");
+            assert!(
+                report
+                    .warnings
+                    .iter()
+                    .any(|w| w.starts_with(&format!("{name}: held-out NRMSE"))),
+                "{:?}",
+                report.warnings
+            );
+        }
+        assert!(report.warnings.iter().any(|w| w.contains("8.370e0")));
+    }
 
     #[test]
     fn a_method_outside_the_physical_range_does_not_apply() {

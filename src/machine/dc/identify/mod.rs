@@ -447,6 +447,7 @@ pub fn identify_dc(record: &Record) -> Identification {
 
     friction_bound::refuse_friction_beyond_torque(record, &mut report);
     report.refuse_unphysical();
+    report.unscore_failed_predictions();
     report.best = best_method(&report);
     let equation_error_applies = report
         .methods

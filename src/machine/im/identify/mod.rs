@@ -504,21 +504,13 @@ fn lm_method(
                 .into(),
         );
     }
-    let mut validation_nrmse = if segments.len() >= 2 {
+    // A held-out NRMSE of 1 or more is no score
+    // (`IdentificationReport::unscore_failed_predictions`).
+    let validation_nrmse = if segments.len() >= 2 {
         validate(sweep, &opts, &fit, warnings)
     } else {
         None
     };
-    // An NRMSE of 1 is the held-out data's own mean: above it the fit is
-    // no prediction at all, and the number is no score.
-    if let Some(v) = validation_nrmse.filter(|v| !(v.is_finite() && *v < 1.0)) {
-        warnings.push(format!(
-            "lm: held-out NRMSE {v:.3e}, not reported as a score: the circuit fitted without the \
-             held-out points predicts them worse than their own mean (a circuit that misfits \
-             these data, or held-out points unlike the rest)"
-        ));
-        validation_nrmse = None;
-    }
     let report = MethodReport {
         applies: true,
         params: Some(params_of(&values)),
@@ -630,6 +622,7 @@ pub fn identify_im(
             .find(|m| report.methods.get(*m).is_some_and(|r| r.applies))
             .map(String::from);
         report.warnings = warnings;
+        report.unscore_failed_predictions();
         return ImIdentification {
             report,
             sweep,
@@ -668,6 +661,7 @@ pub fn identify_im(
         .find(|m| report.methods.get(*m).is_some_and(|r| r.applies))
         .map(String::from);
     report.warnings = warnings;
+    report.unscore_failed_predictions();
     ImIdentification {
         report,
         sweep,
