@@ -871,6 +871,59 @@ mod tests {
         );
     }
 
+    /// A candidate as the decision sees it: held-out NRMSE `nrmse`,
+    /// p-value `p`.
+    fn evaluated(effect: Effect, nrmse: f64, p: f64) -> Evaluated {
+        Evaluated {
+            effect,
+            model: ImAugmentation::with(effect, 1.0),
+            full: AugmentedFit {
+                x: Vec::new(),
+                cost: 0.0,
+                evaluations: 0,
+            },
+            held: HeldOut {
+                weighted: Vec::new(),
+                weighted_torque: Vec::new(),
+                predicted: Vec::new(),
+                fold_x: Vec::new(),
+            },
+            blocks: Vec::new(),
+            test: HeldOutTest {
+                mean_gain: 1.0,
+                blocks: 30,
+                p_value: p,
+            },
+            score: 1.0,
+            validation_nrmse: nrmse,
+        }
+    }
+
+    /// A verdict that leaves more than twice the floor says so, and the
+    /// candidate that alone took the gap furthest, beyond the verdict, is
+    /// named with why it is not the verdict and the test that separates
+    /// the two; a verdict within twice the floor gets neither.
+    #[test]
+    fn a_partial_verdict_names_the_candidate_that_went_further() {
+        let verdict = evaluated(Effect::IronLoss, 0.03, 0.001);
+        let further = evaluated(Effect::MainFluxSaturation, 0.02, 0.04);
+        let worse = evaluated(Effect::DeepBar, 0.035, 0.5);
+        let others = [&verdict, &further, &worse];
+        let w = gap_left_warnings(&verdict, &others, 0.05, 0.01);
+        assert_eq!(w.len(), 2, "{w:?}");
+        assert!(w[0].starts_with("iron_loss: named as the verdict, though it leaves"));
+        assert!(
+            w[1].starts_with(
+                "main_flux_saturation: alone takes the held-out gap from 0.0500 to 0.0200"
+            ) && w[1].contains("not beyond what noise gives (p = 0.040)")
+                && w[1].contains("at a reduced supply voltage"),
+            "{}",
+            w[1]
+        );
+        let within = evaluated(Effect::IronLoss, 0.015, 0.001);
+        assert!(gap_left_warnings(&within, &others, 0.05, 0.01).is_empty());
+    }
+
     /// An input power of half what the machine took (one wattmeter of
     /// two read as the total): no single cage follows the readings, and
     /// the refusal says which columns to check.
