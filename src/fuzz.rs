@@ -27,7 +27,7 @@ use motorbench_drivers::serial::StreamRecord;
 
 use crate::config::TestConfig;
 use crate::contract::{unphysical_param, IdentificationReport};
-use crate::machine::{analyse_dc, analyse_im};
+use crate::machine::{analyse, AnalyseOptions};
 use crate::model::ImModel;
 use crate::record::{load_record_files, read_mcap, Record, SegmentKind};
 
@@ -84,11 +84,11 @@ pub fn identify_segment(data: &[u8]) {
         if samples > IDENTIFY_MAX_SAMPLES {
             continue;
         }
-        let analysed = if kind.is_im() {
-            analyse_im(&record, None, ImModel::SingleFe, false)
-        } else {
-            analyse_dc(&record, None, false)
+        let options = AnalyseOptions {
+            im_model: Some(ImModel::SingleFe),
+            ..AnalyseOptions::default()
         };
+        let analysed = analyse(&record, kind, &options, false);
         check_report(analysed.analysis.report());
     }
 }

@@ -11,7 +11,6 @@ use clap::{Args, ValueEnum};
 
 use super::Failure;
 use crate::config::recorded_im_model;
-use crate::model::ImModel;
 use crate::record::export::{export_record, ExportError, Exported, Formats};
 
 /// `motorbench export`.
@@ -113,8 +112,9 @@ fn identify_command(e: &Exported) -> Option<Vec<String>> {
         "--kind".to_string(),
         meta.kind.as_str().to_string(),
     ];
-    if meta.kind.is_im() {
-        let model = recorded_im_model(&meta.config).unwrap_or(ImModel::SingleFe);
+    // The circuit the test's configuration named (an induction machine's;
+    // `identify` fits its default, single cage with iron loss, otherwise).
+    if let Some(model) = recorded_im_model(&meta.config) {
         cmd.push("--model".to_string());
         cmd.push(model.as_str().to_string());
     }

@@ -7,7 +7,7 @@ use clap::{Args, ValueEnum};
 
 use super::output::print_analysis;
 use super::{Failure, RecordInput};
-use crate::machine::{analyse_dc, analyse_im};
+use crate::machine::{analyse, AnalyseOptions};
 use crate::model::ImModel;
 
 /// `motorbench identify`.
@@ -51,11 +51,11 @@ impl From<ModelArg> for ImModel {
 /// Identify the motor in `args.input`.
 pub fn identify(args: IdentifyArgs) -> Result<(), Failure> {
     let record = args.input.load()?;
-    let analysed = if args.input.kind().is_im() {
-        analyse_im(&record, args.input.connection(), args.model.into(), false)
-    } else {
-        analyse_dc(&record, None, false)
+    let options = AnalyseOptions {
+        connection: args.input.connection(),
+        im_model: Some(args.model.into()),
     };
+    let analysed = analyse(&record, args.input.kind(), &options, false);
     print_analysis(
         analysed.analysis.as_ref(),
         &record,

@@ -9,8 +9,7 @@ use clap::{Args, ValueEnum};
 
 use super::output::warn_if_damaged;
 use super::Failure;
-use crate::identify::{check_input_power, check_plausible_files};
-use crate::machine::dc::prepare_dc_record;
+use crate::machine::{check_record, ready_record};
 use crate::model::Connection;
 use crate::record::{load_record_files, Record, SegmentKind};
 
@@ -54,10 +53,10 @@ impl RecordInput {
     }
 
     /// Load the record; warn on stderr when it is damaged (recovered up to
-    /// its last good chunk); refuse DC files whose values are not
-    /// plausible for their kind, and make a DC record ready for the DC
-    /// methods ([`prepare_dc_record`]: one segment split, gaps cut, the
-    /// voltage's timing checked or moved). Errors are bad input (exit
+    /// its last good chunk); refuse values its machine cannot give
+    /// ([`check_record`]), and make it ready for its machine's methods
+    /// ([`ready_record`]: a DC record's single segment split, gaps cut,
+    /// the voltage's timing checked or moved). Errors are bad input (exit
     /// code 2).
     pub fn load(&self) -> Result<Record, Failure> {
         let kind = self.kind();
@@ -65,15 +64,8 @@ impl RecordInput {
             load_record_files(kind, &self.files, self.nameplate.as_deref(), self.frequency)
                 .map_err(Failure::bad_input)?;
         warn_if_damaged(&self.files[0], &record);
-        if kind.is_im() {
-            check_input_power(&record).map_err(|e| match &self.files[..] {
-                [one] => Failure::bad_input(format!("{}: {e}", one.display())),
-                _ => Failure::bad_input(e),
-            })?;
-            return Ok(record);
-        }
-        check_plausible_files(&record, kind, &self.files).map_err(Failure::bad_input)?;
-        Ok(prepare_dc_record(record, self.voltage_as_issued))
+        check_record(&record, kind, &self.files).map_err(Failure::bad_input)?;
+        Ok(ready_record(record, kind, self.voltage_as_issued))
     }
 }
 

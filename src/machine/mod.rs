@@ -21,15 +21,21 @@
 //! [`crate::config::PlanKind`]s), the record's [`SegmentKind`]s (the
 //! compiler then lists the exhaustive matches on them, the diagnosis'
 //! dispatch [`crate::diagnose::diagnose`] among them) and a branch in
-//! [`analyse_record`] (the one place a record is mapped to its machine,
-//! as `into_machine` is for a plan).
+//! each function of `records.rs` ([`analyse`], [`check_record`],
+//! [`ready_record`]: the one place a record is mapped to its machine, as
+//! `into_machine` is for a plan).
 
 pub mod dc;
 pub mod im;
+mod records;
 mod sim_parts;
 
 pub use dc::analyse_dc;
 pub use im::analyse_im;
+pub use records::{
+    analyse, analyse_record, check_record, ready_record, record_analysis_kind, AnalyseOptions,
+    ImplausibleRecord,
+};
 
 use std::any::Any;
 use std::path::Path;
@@ -252,34 +258,6 @@ fn test_warnings<'a>(events: impl IntoIterator<Item = (u64, &'a Event)>) -> Vec<
         ));
     }
     out
-}
-
-/// Analyse a record of any machine (`replay`): an induction-machine
-/// record (one that holds operating points or standard-test readings) by
-/// the circuit its configuration named (else single cage with iron loss),
-/// any other as a DC record.
-pub fn analyse_record(record: &Record, diagnose: bool) -> Analysed {
-    if is_im_record(record) {
-        analyse_im(record, None, im::recorded_model(record), diagnose)
-    } else {
-        analyse_dc(record, None, diagnose)
-    }
-}
-
-/// The kind [`analyse_record`] analyses `record` as (and diagnoses it
-/// as, with [`Analysed::diagnose`]).
-pub fn record_analysis_kind(record: &Record) -> SegmentKind {
-    if is_im_record(record) {
-        SegmentKind::ImSlipSweep
-    } else {
-        SegmentKind::DcStep
-    }
-}
-
-/// Whether `record` is an induction machine's (it holds operating points
-/// or standard-test readings).
-fn is_im_record(record: &Record) -> bool {
-    !(record.operating_points.is_empty() && record.standard_tests.is_empty())
 }
 
 #[cfg(test)]

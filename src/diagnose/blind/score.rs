@@ -14,7 +14,7 @@ use super::CaseTruth;
 use super::SuiteError;
 use crate::contract::Diagnosis;
 use crate::diagnose::{diagnose, DiagnoseOptions};
-use crate::machine::dc::prepare_dc_record;
+use crate::machine::ready_record;
 use crate::record::{load_record_files, SegmentKind};
 
 /// The comparison of one case.
@@ -333,12 +333,8 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
         let nameplate = case.nameplate.as_ref().map(|p| dir.join(p));
         let started = Instant::now();
         let record = load_record_files(kind, &files, nameplate.as_deref(), None)?;
-        // Made ready as `motorbench diagnose` makes a DC record.
-        let record = if kind.is_im() {
-            record
-        } else {
-            prepare_dc_record(record, false)
-        };
+        // Made ready as `motorbench diagnose` makes it.
+        let record = ready_record(record, kind, false);
         let report = diagnose(&record, kind, &DiagnoseOptions::default()).map(|run| run.report);
         verdicts.push((report, started.elapsed().as_secs_f64()));
         progress(n + 1, total);
