@@ -24,6 +24,9 @@ pub use crate::contract::{
     ResidualEvidence, Verdict,
 };
 pub use crate::machine::dc::diagnose::diagnose_dc;
+/// Diagnose a record as a test of its kind, by its machine's diagnosis
+/// (the mapping lives with the machines, `machine/records.rs`).
+pub use crate::machine::diagnose;
 pub use crate::machine::im::diagnose::diagnose_im;
 pub use plot::{write_residual_svg, ResidualPanel, ResidualPlot, ResidualPlotError};
 pub use text::render_diagnosis_text;
@@ -50,22 +53,6 @@ pub fn attach_diagnosis(
             report.warnings.push(format!("diagnosis: {e}"));
             None
         }
-    }
-}
-
-/// Diagnose `record` as a test of `kind` (`dc_step` and `dc_coastdown`
-/// records go to the DC diagnosis, `im_slip_sweep` to the IM one).
-pub fn diagnose(
-    record: &Record,
-    kind: SegmentKind,
-    options: &DiagnoseOptions,
-) -> Result<DiagnosisRun, DiagnoseError> {
-    match kind {
-        SegmentKind::ImSlipSweep
-        | SegmentKind::ImDcResistance
-        | SegmentKind::ImNoLoad
-        | SegmentKind::ImLockedRotor => diagnose_im(record, options),
-        SegmentKind::DcStep | SegmentKind::DcCoastdown => diagnose_dc(record, options),
     }
 }
 

@@ -19,11 +19,10 @@
 //! plot, blind-case simulator) and implementing this trait, plus a
 //! [`crate::config::TestConfig`] variant (with its
 //! [`crate::config::PlanKind`]s), the record's [`SegmentKind`]s (the
-//! compiler then lists the exhaustive matches on them, the diagnosis'
-//! dispatch [`crate::diagnose::diagnose`] among them) and a branch in
-//! each function of `records.rs` ([`analyse`], [`check_record`],
-//! [`ready_record`]: the one place a record is mapped to its machine, as
-//! `into_machine` is for a plan).
+//! compiler then lists the exhaustive matches on them) and a branch in
+//! each function of `records.rs` ([`analyse`], [`diagnose`],
+//! [`check_record`], [`ready_record`]: the one place a record is mapped
+//! to its machine, as `into_machine` is for a plan).
 
 pub mod dc;
 pub mod im;
@@ -33,8 +32,8 @@ mod sim_parts;
 pub use dc::analyse_dc;
 pub use im::analyse_im;
 pub use records::{
-    analyse, analyse_record, check_record, ready_record, record_analysis_kind, AnalyseOptions,
-    ImplausibleRecord,
+    analyse, analyse_record, check_record, diagnose, ready_record, record_analysis_kind,
+    AnalyseOptions, ImplausibleRecord,
 };
 
 use std::any::Any;

@@ -1,6 +1,6 @@
 //! A record read without a rig (CSV files, an MCAP file, a blind case),
 //! mapped to its machine: the checks a loaded record gets, the preparation
-//! its machine's methods need, and its analysis. The one place a record
+//! its machine's methods need, its analysis and its diagnosis. The one place a record
 //! kind is mapped to a machine, as
 //! [`crate::config::TestConfig::into_machine`] is for a plan: the CLI's
 //! `identify`, `diagnose` and `replay`, the blind benchmark and the fuzz
@@ -11,10 +11,11 @@ use std::path::{Path, PathBuf};
 use super::dc::{analyse_dc, prepare_dc_record};
 use super::im::{analyse_im, recorded_model};
 use super::Analysed;
+use crate::diagnose::{diagnose_dc, diagnose_im, DiagnoseError, DiagnoseOptions, DiagnosisRun};
 use crate::identify::{
     check_input_power, check_plausible_files, ImplausibleFile, ImplausiblePower,
 };
-use crate::model::{Connection, ImModel};
+use crate::model::{Connection, ImModel, Machine};
 use crate::record::{Record, SegmentKind};
 
 /// What the analysis of a record takes beside it.
@@ -55,13 +56,12 @@ pub fn check_record(
     kind: SegmentKind,
     files: &[PathBuf],
 ) -> Result<(), ImplausibleRecord> {
-    if kind.is_im() {
-        check_input_power(record).map_err(|power| ImplausibleRecord::Im {
+    match kind.machine() {
+        Machine::Dc => Ok(check_plausible_files(record, kind, files)?),
+        Machine::Induction => check_input_power(record).map_err(|power| ImplausibleRecord::Im {
             file: only(files).map(Path::to_path_buf),
             power,
-        })
-    } else {
-        Ok(check_plausible_files(record, kind, files)?)
+        }),
     }
 }
 
@@ -78,10 +78,23 @@ fn only(files: &[PathBuf]) -> Option<&Path> {
 /// the voltage's timing checked, or moved when `voltage_as_issued`); an
 /// induction machine's as it is.
 pub fn ready_record(record: Record, kind: SegmentKind, voltage_as_issued: bool) -> Record {
-    if kind.is_im() {
-        record
-    } else {
-        prepare_dc_record(record, voltage_as_issued)
+    match kind.machine() {
+        Machine::Dc => prepare_dc_record(record, voltage_as_issued),
+        Machine::Induction => record,
+    }
+}
+
+/// Diagnose `record` as a test of `kind`: the DC diagnosis for `dc_step`
+/// and `dc_coastdown` records, the induction machine's for its sweep and
+/// standard tests.
+pub fn diagnose(
+    record: &Record,
+    kind: SegmentKind,
+    options: &DiagnoseOptions,
+) -> Result<DiagnosisRun, DiagnoseError> {
+    match kind.machine() {
+        Machine::Dc => diagnose_dc(record, options),
+        Machine::Induction => diagnose_im(record, options),
     }
 }
 
@@ -92,11 +105,12 @@ pub fn analyse(
     options: &AnalyseOptions,
     diagnose: bool,
 ) -> Analysed {
-    if kind.is_im() {
-        let model = options.im_model.unwrap_or_else(|| recorded_model(record));
-        analyse_im(record, options.connection, model, diagnose)
-    } else {
-        analyse_dc(record, None, diagnose)
+    match kind.machine() {
+        Machine::Dc => analyse_dc(record, None, diagnose),
+        Machine::Induction => {
+            let model = options.im_model.unwrap_or_else(|| recorded_model(record));
+            analyse_im(record, options.connection, model, diagnose)
+        }
     }
 }
 

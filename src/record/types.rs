@@ -54,15 +54,21 @@ impl SegmentKind {
         }
     }
 
+    /// The machine whose test this kind is.
+    pub fn machine(self) -> crate::model::Machine {
+        use crate::model::Machine;
+        match self {
+            SegmentKind::DcStep | SegmentKind::DcCoastdown => Machine::Dc,
+            SegmentKind::ImSlipSweep
+            | SegmentKind::ImDcResistance
+            | SegmentKind::ImNoLoad
+            | SegmentKind::ImLockedRotor => Machine::Induction,
+        }
+    }
+
     /// Whether the kind is one of the induction machine's tests.
     pub fn is_im(self) -> bool {
-        matches!(
-            self,
-            SegmentKind::ImSlipSweep
-                | SegmentKind::ImDcResistance
-                | SegmentKind::ImNoLoad
-                | SegmentKind::ImLockedRotor
-        )
+        self.machine() == crate::model::Machine::Induction
     }
 }
 
