@@ -55,6 +55,26 @@ pub fn partial_verdict_warning(
     })
 }
 
+/// Why a nominal model is no baseline to judge effects against, if it is
+/// not: it predicts the readings worse than their own mean (a fit NRMSE
+/// above 1, which the mean scores), or, fitted without them, the held-out
+/// readings. A shrink of such a gap measures nothing about an effect.
+pub fn no_baseline(fit_nrmse: f64, held_out_nrmse: f64) -> Option<String> {
+    let worse = |v: f64| v.is_nan() || v > 1.0;
+    if worse(fit_nrmse) {
+        Some(format!(
+            "the nominal fit predicts the readings worse than their mean (fit NRMSE {fit_nrmse:.3})"
+        ))
+    } else if worse(held_out_nrmse) {
+        Some(format!(
+            "the nominal model, fitted without them, predicts the held-out readings worse than \
+             their mean (held-out NRMSE {held_out_nrmse:.3})"
+        ))
+    } else {
+        None
+    }
+}
+
 /// A diagnosis fit stops when an iteration lowers its sum of squared,
 /// noise-weighted residuals by less than this fraction of one row's mean
 /// square: far below any difference the held-out decision can see.
@@ -328,6 +348,19 @@ pub fn residual_noise_sigma(residuals: &[&[f64]], readings: &[&[f64]]) -> f64 {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+
+    /// A nominal model worse than the readings' mean, in the fit or held
+    /// out, is no baseline, and the reason names which NRMSE; a NaN is no
+    /// baseline either; within 1 both is.
+    #[test]
+    fn a_model_worse_than_the_mean_is_no_baseline() {
+        assert_eq!(no_baseline(0.2, 0.9), None);
+        assert!(no_baseline(2.206, 2.5).unwrap().contains("fit NRMSE 2.206"));
+        assert!(no_baseline(0.6, 1.036)
+            .unwrap()
+            .contains("held-out NRMSE 1.036"));
+        assert!(no_baseline(f64::NAN, 0.1).is_some());
+    }
     use rand::{rngs::StdRng, SeedableRng};
     use rand_distr::{Distribution, Normal};
 

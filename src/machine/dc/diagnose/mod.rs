@@ -47,8 +47,8 @@ use crate::contract::{
 };
 use crate::diagnose::decision::{
     block_sums, effective_samples, explained_share, held_out_relative_sign_flip_test,
-    held_out_test, median, partial_verdict_warning, penalised_score, residual_noise_sigma,
-    HeldOutTest, EXPLAINED,
+    held_out_test, median, no_baseline, partial_verdict_warning, penalised_score,
+    residual_noise_sigma, HeldOutTest, EXPLAINED,
 };
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{
@@ -393,6 +393,13 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
         }
     };
     let nominal = family(nominal_all.clone(), Vec::new(), nominal_folds);
+    if let Some(why) = no_baseline(fit_nrmse(&nominal_all.model, &runs), nominal.validation) {
+        return Err(DiagnoseError::NominalFit(format!(
+            "{why}: no DC motor model follows these readings, and no effect can be judged \
+             against it. {CHECK_THE_COLUMNS}"
+        ))
+        .into());
+    }
     let mut families: Vec<(Effect, FamilyResult)> = Vec::new();
     for (c, (d, f)) in cand_all.iter().enumerate() {
         let folds: Option<Vec<HeldOutSeries>> = if cv {
@@ -791,6 +798,12 @@ fn series_of(run: &SegmentRun, si: &[f64], sw: &[f64]) -> Option<HeldOutSeries> 
         nrmse: nrmse_v,
     })
 }
+
+/// What to check when no DC motor model follows a record's readings.
+const CHECK_THE_COLUMNS: &str = "Check that the columns belong together: the armature voltage \
+     in V, the armature current in A and the speed in rad/s at the same instants (a voltage \
+     column that is a set point, or held while the motor moves; a current or speed in other \
+     units, scaled, or of another channel)";
 
 /// NRMSE of a model on every segment it was fitted to (mean over segments).
 fn fit_nrmse(model: &AugModel, runs: &[SegmentRun]) -> f64 {
@@ -1516,6 +1529,29 @@ mod tests {
         let fr = shaft.unwrap().params["fr"].value;
         let truth = case.truth.effect_params["fr"];
         assert!((fr / truth - 1.0).abs() < 0.01, "fr {fr} against {truth}");
+    }
+
+    /// A record whose first segment's voltage column is held at its first
+    /// value while the motor moves (a set point logged in place of the
+    /// armature voltage; the robustness sweep's `flat_first_segment` of
+    /// seed 20261121 case 42): no DC model follows it (fit NRMSE above 1),
+    /// and the refusal says which columns to check instead of scoring a
+    /// gap against it.
+    #[test]
+    fn a_record_no_motor_follows_is_refused_with_the_columns_to_check() {
+        let mut case =
+            crate::diagnose::blind::suite_case(20261121, 42, Default::default()).unwrap();
+        let seg = &mut case.record.segments[0];
+        let held = seg.voltage[0];
+        seg.voltage.fill(held);
+        let record = crate::machine::ready_record(case.record, SegmentKind::DcStep, false);
+        let e = diagnose_dc(&record, &DiagnoseOptions::default()).unwrap_err();
+        assert!(
+            matches!(&e, DiagnoseError::NominalFit(m)
+                if m.contains("worse than their mean")
+                    && m.contains("the armature voltage in V")),
+            "{e}"
+        );
     }
 
     /// Interleaved blocks held out: a withheld armature reaction is named

@@ -40,8 +40,8 @@ use crate::contract::{
     Verdict,
 };
 use crate::diagnose::decision::{
-    explained_share, held_out_sign_flip_test, median, noise_sigma, partial_verdict_warning,
-    penalised_score, HeldOutTest,
+    explained_share, held_out_sign_flip_test, median, no_baseline, noise_sigma,
+    partial_verdict_warning, penalised_score, HeldOutTest,
 };
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{fit_lm, no_load_friction, LmOptions, PhaseData, SplitPolicy};
@@ -165,6 +165,11 @@ pub fn diagnose_im(
     let nominal_blocks = blocks(&nominal_held);
     let sse_nominal: f64 = nominal_blocks.iter().sum();
     let gap_before = held_out_nrmse(&data, &nominal_held);
+    if let Some(why) = no_baseline(0.0, gap_before) {
+        return Err(DiagnoseError::NominalFit(format!(
+            "{why}: no effect can be judged against it. {CHECK_THE_COLUMNS}"
+        )));
+    }
     let n_resid = 2.0 * data.len() as f64;
 
     // Candidates.
@@ -529,7 +534,8 @@ const ELEMENT_RANGE: f64 = 1e6;
 
 /// Why the nominal fit `x` is no machine to diagnose against, if it is
 /// not: it predicts the readings worse than their mean (a fit NRMSE above
-/// 1), or an element left [`ELEMENT_RANGE`] of the record's impedance.
+/// 1, [`no_baseline`]), or an element left [`ELEMENT_RANGE`] of the
+/// record's impedance.
 fn unusable_nominal(
     data: &SweepSet,
     model: &ImAugmentation,
@@ -541,11 +547,8 @@ fn unusable_nominal(
         .iter()
         .map(|p| model.predict(x, p).unwrap_or((f64::NAN, f64::NAN)))
         .collect();
-    let nrmse = mean_nrmse(data, &pred);
-    if nrmse.is_nan() || nrmse > 1.0 {
-        return Some(format!(
-            "the nominal fit predicts the readings worse than their mean (fit NRMSE {nrmse:.3})"
-        ));
+    if let Some(why) = no_baseline(mean_nrmse(data, &pred), 0.0) {
+        return Some(why);
     }
     let mut v: Vec<f64> = data.inputs.iter().map(|p| p.voltage).collect();
     let mut i = data.current.clone();
