@@ -151,12 +151,27 @@ pub fn diagnose_im(
     estimate_noise(&mut data, &nominal, &unweighted.x);
     let nominal_full = fit(nominal, &data, &all, &[unweighted.x, x_lm])
         .ok_or_else(|| DiagnoseError::NominalFit("no finite weighted nominal fit".into()))?;
-    if let Some(why) = unusable_nominal(&data, &nominal, &nominal_full.x, split.ratio()) {
-        return Err(DiagnoseError::NominalFit(format!(
+    // A nominal fit that is no machine is no baseline to judge effects
+    // against: say so, and which columns to check.
+    let refused = |why: String| {
+        DiagnoseError::NominalFit(format!(
             "{why}: no single-cage circuit follows these readings, and no effect can be judged \
              against it. {CHECK_THE_COLUMNS}"
-        )));
+        ))
+    };
+    if let Some(why) = element_beyond_range(&data, &nominal_full.x, split.ratio()) {
+        return Err(refused(why));
     }
+    let fit_pred: Vec<(f64, f64)> = data
+        .inputs
+        .iter()
+        .map(|p| {
+            nominal
+                .predict(&nominal_full.x, p)
+                .unwrap_or((f64::NAN, f64::NAN))
+        })
+        .collect();
+    let fit_nrmse = mean_nrmse(&data, &fit_pred);
 
     let (folds, validation) = data.folds();
     let nominal_held = held_out(nominal, &data, &folds, &nominal_full.x, &[]).ok_or_else(|| {
@@ -165,10 +180,8 @@ pub fn diagnose_im(
     let nominal_blocks = blocks(&nominal_held);
     let sse_nominal: f64 = nominal_blocks.iter().sum();
     let gap_before = held_out_nrmse(&data, &nominal_held);
-    if let Some(why) = no_baseline(0.0, gap_before) {
-        return Err(DiagnoseError::NominalFit(format!(
-            "{why}: no effect can be judged against it. {CHECK_THE_COLUMNS}"
-        )));
+    if let Some(why) = no_baseline(fit_nrmse, gap_before) {
+        return Err(refused(why));
     }
     let n_resid = 2.0 * data.len() as f64;
 
@@ -331,22 +344,13 @@ pub fn diagnose_im(
     };
     let plot = residual_plot(&data, &nominal_held, winner, &gap_regions, &regions);
 
-    let fit_pred: Vec<(f64, f64)> = data
-        .inputs
-        .iter()
-        .map(|p| {
-            nominal
-                .predict(&nominal_full.x, p)
-                .unwrap_or((f64::NAN, f64::NAN))
-        })
-        .collect();
     let report = Diagnosis {
         schema_version: SCHEMA_VERSION.into(),
         kind: "im_slip_sweep".into(),
         nominal: NominalFit {
             model: "single_cage".into(),
             params: nominal_params(&data, &nominal, &nominal_full, split.ratio()),
-            fit_nrmse: mean_nrmse(&data, &fit_pred),
+            fit_nrmse,
             validation_nrmse: gap_before,
         },
         gap,
@@ -532,24 +536,9 @@ fn noise_floor(data: &SweepSet) -> f64 {
 /// nothing), not to a machine.
 const ELEMENT_RANGE: f64 = 1e6;
 
-/// Why the nominal fit `x` is no machine to diagnose against, if it is
-/// not: it predicts the readings worse than their mean (a fit NRMSE above
-/// 1, [`no_baseline`]), or an element left [`ELEMENT_RANGE`] of the
-/// record's impedance.
-fn unusable_nominal(
-    data: &SweepSet,
-    model: &ImAugmentation,
-    x: &[f64],
-    ratio: f64,
-) -> Option<String> {
-    let pred: Vec<(f64, f64)> = data
-        .inputs
-        .iter()
-        .map(|p| model.predict(x, p).unwrap_or((f64::NAN, f64::NAN)))
-        .collect();
-    if let Some(why) = no_baseline(mean_nrmse(data, &pred), 0.0) {
-        return Some(why);
-    }
+/// The element of the nominal fit `x` that left [`ELEMENT_RANGE`] of the
+/// record's impedance, if one did: a fit run off to no machine.
+fn element_beyond_range(data: &SweepSet, x: &[f64], ratio: f64) -> Option<String> {
     let mut v: Vec<f64> = data.inputs.iter().map(|p| p.voltage).collect();
     let mut i = data.current.clone();
     let base = median(&mut v)? / median(&mut i)?;
@@ -558,8 +547,8 @@ fn unusable_nominal(
         .find(|(_, z)| !(z * ELEMENT_RANGE >= base && *z <= ELEMENT_RANGE * base))
         .map(|(key, z)| {
             format!(
-                "the nominal fit ran off to {key} = {z:.3e} ohm, beyond a million times the \
-                 record's impedance ({base:.3e} ohm) either way"
+                "the nominal fit ran off to {key} = {z:.3e} ohm, outside a millionth to a \
+                 million times the record's impedance ({base:.3e} ohm)"
             )
         })
 }
