@@ -348,6 +348,8 @@ pub fn residual_noise_sigma(residuals: &[&[f64]], readings: &[&[f64]]) -> f64 {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use rand::{rngs::StdRng, SeedableRng};
+    use rand_distr::{Distribution, Normal};
 
     /// A nominal model worse than the readings' mean, in the fit or held
     /// out, is no baseline, and the reason names which NRMSE; a NaN is no
@@ -361,8 +363,6 @@ pub(crate) mod tests {
             .contains("held-out NRMSE 1.036"));
         assert!(no_baseline(f64::NAN, 0.1).is_some());
     }
-    use rand::{rngs::StdRng, SeedableRng};
-    use rand_distr::{Distribution, Normal};
 
     #[test]
     fn a_verdict_that_leaves_the_gap_says_what_it_removed() {

@@ -400,9 +400,7 @@ impl<'a> CsvRow<'a> {
             Err(bad("a finite number"))
         }
     }
-}
 
-impl CsvRow<'_> {
     /// Field `col` of an optional column: `None` where the cell is empty
     /// (not measured at this row), else as [`CsvRow::number`].
     pub(super) fn optional_number(&self, col: usize) -> Result<Option<f64>, RecordError> {

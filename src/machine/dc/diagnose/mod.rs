@@ -393,7 +393,8 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
         }
     };
     let nominal = family(nominal_all.clone(), Vec::new(), nominal_folds);
-    if let Some(why) = no_baseline(fit_nrmse(&nominal_all.model, &runs), nominal.validation) {
+    let nominal_fit_nrmse = fit_nrmse(&nominal_all.model, &runs);
+    if let Some(why) = no_baseline(nominal_fit_nrmse, nominal.validation) {
         return Err(DiagnoseError::NominalFit(format!(
             "{why}: no DC motor model follows these readings, and no effect can be judged \
              against it. {CHECK_THE_COLUMNS}"
@@ -634,7 +635,7 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
         nominal: NominalFit {
             model: "dc_nominal".into(),
             params: nominal_estimates(&nominal_all),
-            fit_nrmse: fit_nrmse(&nominal_all.model, &runs),
+            fit_nrmse: nominal_fit_nrmse,
             validation_nrmse: gap_before,
         },
         gap: Gap {

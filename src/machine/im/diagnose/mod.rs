@@ -100,13 +100,16 @@ pub fn diagnose_im(
     let mut lm_opts = LmOptions::new(ImModel::Single);
     lm_opts.split = split;
     lm_opts.split_policy = SplitPolicy::Always;
-    // A fit that ends outside every circuit (a Jacobian or residual that is
-    // not finite) means no single cage follows these readings.
-    let lm = fit_lm(&phase, &lm_opts).map_err(|e| {
+    // A nominal fit that ends outside every circuit (a Jacobian or residual
+    // that is not finite), or that is no machine, is no baseline to judge
+    // effects against: say so, and which columns to check.
+    let refused = |why: String| {
         DiagnoseError::NominalFit(format!(
-            "{e}: no single-cage circuit follows these readings. {CHECK_THE_COLUMNS}"
+            "{why}: no single-cage circuit follows these readings, and no effect can be judged \
+             against it. {CHECK_THE_COLUMNS}"
         ))
-    })?;
+    };
+    let lm = fit_lm(&phase, &lm_opts).map_err(|e| refused(e.to_string()))?;
     let c = lm.circuit;
     let (rr, xr) = match c.rotor {
         crate::model::RotorCage::Single { rr, xr } => (rr, xr),
@@ -142,23 +145,11 @@ pub fn diagnose_im(
         ..ImAugmentation::nominal(split.ratio())
     };
     let all: Vec<usize> = (0..data.len()).collect();
-    let unweighted = fit(nominal, &data, &all, std::slice::from_ref(&x_lm)).ok_or_else(|| {
-        DiagnoseError::NominalFit(format!(
-            "no finite nominal fit: no single-cage circuit follows these readings. \
-                 {CHECK_THE_COLUMNS}"
-        ))
-    })?;
+    let unweighted = fit(nominal, &data, &all, std::slice::from_ref(&x_lm))
+        .ok_or_else(|| refused("no finite nominal fit".into()))?;
     estimate_noise(&mut data, &nominal, &unweighted.x);
     let nominal_full = fit(nominal, &data, &all, &[unweighted.x, x_lm])
         .ok_or_else(|| DiagnoseError::NominalFit("no finite weighted nominal fit".into()))?;
-    // A nominal fit that is no machine is no baseline to judge effects
-    // against: say so, and which columns to check.
-    let refused = |why: String| {
-        DiagnoseError::NominalFit(format!(
-            "{why}: no single-cage circuit follows these readings, and no effect can be judged \
-             against it. {CHECK_THE_COLUMNS}"
-        ))
-    };
     if let Some(why) = element_beyond_range(&data, &nominal_full.x, split.ratio()) {
         return Err(refused(why));
     }
