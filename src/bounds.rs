@@ -29,8 +29,9 @@ pub const MAX_WAIT_S: f64 = 3_600.0;
 pub const MAX_TEST_DURATION_S: f64 = 86_400.0;
 
 /// Most readings per channel a whole test may take when every step runs
-/// to its timeout. The test's in-memory record grows with it (a few tens
-/// of bytes per reading and channel), so this bounds a test's memory.
+/// to its timeout. The record file grows with it, and `replay` and
+/// `identify` read a record file into memory whole (the live test's
+/// memory does not grow with its length: `record::thinning`).
 pub const MAX_TEST_READINGS: f64 = 5e7;
 
 /// Most samples in one settle window, or averaged into one operating
@@ -127,7 +128,7 @@ pub enum BoundsError {
     /// A test that could take more than [`MAX_TEST_READINGS`] readings
     /// per channel.
     #[error(
-        "the test could take {readings:.3e} readings per channel ({duration_s:.0} s at {rate_hz} Hz): at most {max:.0e}, the memory one test's record may hold",
+        "the test could take {readings:.3e} readings per channel ({duration_s:.0} s at {rate_hz} Hz): at most {max:.0e}, what a record file read back whole may hold",
         max = MAX_TEST_READINGS
     )]
     TestReadings {
@@ -323,7 +324,7 @@ mod tests {
             ),
             (
                 test_length(3600.0, 100_000.0).unwrap_err(),
-                "the test could take 3.600e8 readings per channel (3600 s at 100000 Hz): at most 5e7, the memory one test's record may hold",
+                "the test could take 3.600e8 readings per channel (3600 s at 100000 Hz): at most 5e7, what a record file read back whole may hold",
             ),
             (call_timeout_ms(0).unwrap_err(), "0 ms: want 1 to 10000"),
             (

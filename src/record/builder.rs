@@ -27,10 +27,15 @@
 //! - Time in seconds is `t_ns as f64 * 1e-9`.
 //! - Events go to [`Record::events`] in time order; the last result
 //!   becomes [`Record::recorded_result`]. Segments are sorted by index.
+//! - At [`Resolution::Analysis`] (the default) a long step segment keeps
+//!   its first and last samples of each series, and a note says what was
+//!   left out: [`super::thinning`] has the rule.
+//!   [`Resolution::Full`] keeps every sample.
 
 use std::collections::BTreeMap;
 
 use super::schema::SENSOR_PREFIX;
+use super::thinning::{splices, Head, Resolution, SpanSeries, PENDING};
 use super::types::{
     ChannelSpec, DcSegment, Entry, Event, ImStandardTests, OperatingPoint, Record, SegmentKind,
     SegmentPhase, SupplyLimit, TestMeta,
@@ -62,8 +67,18 @@ pub struct RecordBuilder {
     meta: Option<TestMeta>,
     /// For each channel index, the series it feeds (if any).
     roles: Vec<Option<Series>>,
-    /// `(t_ns, value)` per series: voltage, current, speed.
-    samples: [Vec<(u64, f64)>; 3],
+    /// `(t_ns, value)` per series (voltage, current, speed) not yet
+    /// assigned to a segment.
+    pending: [Vec<(u64, f64)>; 3],
+    /// Per series, the samples assigned and kept: a segment's head, and
+    /// whatever lies outside every segment.
+    kept: [Vec<(u64, f64)>; 3],
+    /// Per segment index and series, its samples counted and its tail.
+    spans_series: BTreeMap<u32, [SpanSeries; 3]>,
+    /// Per segment index, where its head ends.
+    heads: BTreeMap<u32, Head>,
+    /// What the record keeps of its samples.
+    resolution: Resolution,
     spans: BTreeMap<u32, SegmentSpan>,
     events: Vec<(u64, Event)>,
     result: Option<serde_json::Value>,
@@ -113,7 +128,11 @@ impl RecordBuilder {
         RecordBuilder {
             meta,
             roles,
-            samples: Default::default(),
+            pending: Default::default(),
+            kept: Default::default(),
+            spans_series: BTreeMap::new(),
+            heads: BTreeMap::new(),
+            resolution: Resolution::Analysis,
             spans: BTreeMap::new(),
             events: Vec::new(),
             result: None,
@@ -133,7 +152,11 @@ impl RecordBuilder {
                         continue;
                     }
                     if let Some(Some(series)) = self.roles.get(index) {
-                        self.samples[series.slot()].push((*t_ns, value));
+                        let slot = series.slot();
+                        self.pending[slot].push((*t_ns, value));
+                        if self.pending[slot].len() >= 2 * PENDING {
+                            self.assign(slot, PENDING);
+                        }
                     }
                 }
             }
@@ -160,11 +183,67 @@ impl RecordBuilder {
         }
     }
 
+    /// What the record keeps of its samples (default
+    /// [`Resolution::Analysis`]).
+    pub fn resolution(mut self, resolution: Resolution) -> Self {
+        self.resolution = resolution;
+        self
+    }
+
+    /// Assigns the `count` oldest pending samples of series `slot` to the
+    /// segments known now: a sample is kept when it lies outside every
+    /// segment or in the head of one that contains it (a boundary sample
+    /// belongs to both segments), and goes to the tails of the segments
+    /// that contain it otherwise.
+    fn assign(&mut self, slot: usize, count: usize) {
+        let pending = &mut self.pending[slot];
+        // Stable: samples at one instant keep their arrival order.
+        pending.sort_by_key(|&(t, _)| t);
+        let count = count.min(pending.len());
+        let whole = self.resolution == Resolution::Full;
+        for (t, v) in pending.drain(..count) {
+            let contains = |span: &&SegmentSpan| t >= span.start && span.end.is_none_or(|e| t <= e);
+            let (mut inside, mut in_head) = (false, false);
+            for (index, span) in self.spans.iter().filter(|(_, s)| contains(s)) {
+                inside = true;
+                let end = self.heads.get(index).and_then(|h| h.end);
+                in_head |= whole
+                    || span.kind == SegmentKind::DcCoastdown
+                    || end.is_none_or(|end| t <= end);
+            }
+            for (index, span) in self.spans.iter().filter(|(_, s)| contains(s)) {
+                let series = &mut self.spans_series.entry(*index).or_default()[slot];
+                if !in_head {
+                    series.tail(t, v);
+                    continue;
+                }
+                series.head();
+                let head = self.heads.entry(*index).or_default();
+                if slot == Series::Current.slot()
+                    && !whole
+                    && span.kind != SegmentKind::DcCoastdown
+                    && head.end.is_none()
+                {
+                    head.reading(t, v);
+                }
+            }
+            if in_head || !inside {
+                self.kept[slot].push((t, v));
+            }
+        }
+    }
+
     /// Builds the record.
-    pub fn finish(self) -> Record {
+    pub fn finish(mut self) -> Record {
+        for slot in 0..3 {
+            let n = self.pending[slot].len();
+            self.assign(slot, n);
+        }
         let RecordBuilder {
             meta,
-            mut samples,
+            mut kept,
+            mut spans_series,
+            heads,
             spans,
             mut events,
             result,
@@ -173,39 +252,95 @@ impl RecordBuilder {
             supply_limits,
             ..
         } = self;
-        for s in &mut samples {
-            // Stable: samples at one instant keep their arrival order.
+        // A segment's tail that follows its head without a cut holds
+        // samples as read; the cut ones are read with their segment below.
+        let mut cut_tails: [Vec<(u64, f64)>; 3] = Default::default();
+        for series in spans_series.values_mut() {
+            let cut = series[1].is_cut();
+            for (slot, s) in series.iter_mut().enumerate() {
+                if cut {
+                    cut_tails[slot].extend(s.last());
+                } else {
+                    kept[slot].extend(s.tail.drain(..));
+                }
+            }
+        }
+        for s in kept.iter_mut().chain(cut_tails.iter_mut()) {
             s.sort_by_key(|&(t, _)| t);
         }
-        let complete = samples.iter().all(|s| !s.is_empty());
-        let [voltage, current, speed] = &samples;
-        let segments = spans
-            .into_iter()
-            .map(|(index, span)| {
-                let mut seg = DcSegment {
-                    index,
-                    kind: Some(span.kind),
-                    label: match span.end {
-                        Some(_) => span.label,
-                        None => span.label + INCOMPLETE_SUFFIX,
-                    },
-                    ..DcSegment::default()
-                };
-                if complete {
-                    let end = span.end.unwrap_or(u64::MAX);
-                    let base: Vec<(u64, f64)> = current
+        let complete = kept.iter().all(|s| !s.is_empty());
+        let readable = |slot: usize| {
+            let mut all = kept[slot].clone();
+            all.extend_from_slice(&cut_tails[slot]);
+            all.sort_by_key(|&(t, _)| t);
+            all
+        };
+        let (voltage, speed) = (readable(0), readable(2));
+        let read_at = |seg: &mut DcSegment, at: &mut dyn Iterator<Item = (u64, f64)>| {
+            for (t, i) in at {
+                seg.time.push(t as f64 * 1e-9);
+                seg.current.push(i);
+                seg.voltage.push(interpolate(&voltage, t));
+                seg.speed.push(interpolate(&speed, t));
+            }
+        };
+        let mut notes = Vec::new();
+        // `(head's last time, time left out)` of each spliced segment, s.
+        let mut cuts: Vec<(f64, f64)> = Vec::new();
+        let mut segments = Vec::with_capacity(spans.len());
+        for (index, span) in spans {
+            let mut seg = DcSegment {
+                index,
+                kind: Some(span.kind),
+                label: match span.end {
+                    Some(_) => span.label,
+                    None => span.label + INCOMPLETE_SUFFIX,
+                },
+                ..DcSegment::default()
+            };
+            let end = span.end.unwrap_or(u64::MAX);
+            let within = |&(t, _): &(u64, f64)| span.start <= t && t <= end;
+            let cut = spans_series
+                .get(&index)
+                .filter(|s| s[1].is_cut())
+                .map(|s| s[1].seen);
+            if !complete {
+                segments.push(seg);
+                continue;
+            }
+            let Some(seen) = cut else {
+                read_at(&mut seg, &mut kept[1].iter().copied().filter(within));
+                segments.push(seg);
+                continue;
+            };
+            let head_end = heads.get(&index).and_then(|h| h.end).unwrap_or(end);
+            read_at(
+                &mut seg,
+                &mut kept[1]
+                    .iter()
+                    .copied()
+                    .filter(|&(t, _)| span.start <= t && t <= head_end),
+            );
+            let mut tail = DcSegment::default();
+            read_at(&mut tail, &mut cut_tails[1].iter().copied().filter(within));
+            let (note, cut) = splice(&mut seg, tail, seen, span.start, end);
+            notes.push(note);
+            cuts.extend(cut);
+            segments.push(seg);
+        }
+        // The analysis' clock leaves out what a splice left out: a segment
+        // that followed a spliced one still follows it.
+        if !cuts.is_empty() {
+            for seg in &mut segments {
+                for t in &mut seg.time {
+                    *t -= cuts
                         .iter()
-                        .copied()
-                        .filter(|&(t, _)| span.start <= t && t <= end)
-                        .collect();
-                    seg.time = base.iter().map(|&(t, _)| t as f64 * 1e-9).collect();
-                    seg.current = base.iter().map(|&(_, v)| v).collect();
-                    seg.voltage = base.iter().map(|&(t, _)| interpolate(voltage, t)).collect();
-                    seg.speed = base.iter().map(|&(t, _)| interpolate(speed, t)).collect();
+                        .filter(|&&(at, _)| at < *t)
+                        .map(|(_, s)| s)
+                        .sum::<f64>();
                 }
-                seg
-            })
-            .collect();
+            }
+        }
         events.sort_by_key(|&(t, _)| t);
         Record {
             meta,
@@ -216,9 +351,66 @@ impl RecordBuilder {
             supply_limits,
             recorded_result: result,
             recovery: None,
-            notes: Vec::new(),
+            notes,
         }
     }
+}
+
+/// Joins `tail` to `seg` (its head) where the head ends on the tail's
+/// level ([`splices`]), and returns the note for the report and the cut:
+/// the head's last time and the time between it and the tail, less one
+/// sample interval, which the analysis' clock leaves out. Otherwise `seg`
+/// keeps its head alone. `seg` has `seen` current readings from `start` to
+/// `end`, ns.
+fn splice(
+    seg: &mut DcSegment,
+    tail: DcSegment,
+    seen: usize,
+    start: u64,
+    end: u64,
+) -> (String, Option<(f64, f64)>) {
+    let n = seg.time.len();
+    let length = match end {
+        u64::MAX => String::new(),
+        end => format!(" over {:.1} s", (end - start) as f64 * 1e-9),
+    };
+    let settled = n >= 2
+        && !tail.time.is_empty()
+        && [
+            (&seg.voltage, &tail.voltage),
+            (&seg.current, &tail.current),
+            (&seg.speed, &tail.speed),
+        ]
+        .iter()
+        .all(|(h, t)| splices(h, t));
+    let head_s = seg.time[n.saturating_sub(1)] - seg.time[0];
+    let kept =
+        "the record file keeps them all (`motorbench export` writes them, and a CSV file is \
+                read whole)";
+    if !settled {
+        let note = format!(
+            "{} holds {seen} current readings{length}; its first {n} ({head_s:.2} s) do not end on \
+             the level its last {} hold: the analysis reads the first {n} alone; {kept}",
+            seg.label,
+            tail.time.len(),
+        );
+        return (note, None);
+    }
+    let at = seg.time[n - 1];
+    let left_out = tail.time[0] - at - head_s / (n - 1) as f64;
+    seg.time.extend(tail.time);
+    seg.voltage.extend(tail.voltage);
+    seg.current.extend(tail.current);
+    seg.speed.extend(tail.speed);
+    let note = format!(
+        "{} holds {seen} current readings{length}: the analysis reads its first {n} ({head_s:.2} s, \
+         the step) and its last {} (the settled level), and its clock leaves out the {left_out:.1} \
+         s between them (times after {:.3} s read that much earlier); {kept}",
+        seg.label,
+        seg.time.len() - n,
+        at,
+    );
+    (note, Some((at, left_out)))
 }
 
 /// The value of the series `s` (sorted by time, not empty) at `t`: linear
@@ -241,7 +433,9 @@ fn interpolate(s: &[(u64, f64)], t: u64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::record::types::EventLevel;
+    use crate::record::thinning::{HEAD_MAX, HEAD_SAMPLES, PAST_HEAD, TAIL_SAMPLES};
+    use crate::record::types::{EventLevel, SegmentMarker};
+    use crate::record::Record;
 
     fn channels() -> Vec<ChannelSpec> {
         vec![
@@ -331,6 +525,143 @@ mod tests {
             s.speed,
             vec![0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.0]
         );
+    }
+
+    /// A record of one segment of `kind` and `n` samples 500 µs apart
+    /// (voltage, current and speed each `x(k)`), then a short second
+    /// segment.
+    fn long_record(
+        n: u64,
+        kind: SegmentKind,
+        resolution: Resolution,
+        x: impl Fn(u64) -> f64,
+    ) -> Record {
+        let mut b = RecordBuilder::new(None, channels()).resolution(resolution);
+        let dt = 500_000;
+        let marker = |t, phase, label: &str| Entry::Segment {
+            t_ns: t,
+            marker: SegmentMarker {
+                index: 4,
+                kind,
+                phase,
+                label: label.into(),
+            },
+        };
+        b.push(&marker(0, SegmentPhase::Start, "long"));
+        for k in 0..n + 100 {
+            let x = x(k);
+            b.push(&samples(k * dt, &[(1, x), (2, x), (3, x)]));
+            if k == n - 1 {
+                b.push(&marker(k * dt, SegmentPhase::End, "long"));
+                b.push(&Entry::dc_step_marker(
+                    k * dt,
+                    7,
+                    SegmentPhase::Start,
+                    "next",
+                ));
+            }
+        }
+        b.push(&Entry::dc_step_marker(
+            (n + 99) * dt,
+            7,
+            SegmentPhase::End,
+            "next",
+        ));
+        b.finish()
+    }
+
+    /// A step from 0 to 2 with 500 µs samples settling in about 20 ms,
+    /// then held, with ±0.01 alternating noise.
+    fn settling(k: u64) -> f64 {
+        2.0 * (1.0 - (-(k as f64) / 40.0).exp()) + if k % 2 == 0 { 0.01 } else { -0.01 }
+    }
+
+    #[test]
+    fn a_long_settled_hold_is_read_as_its_head_and_its_tail() {
+        let n = 200_000;
+        let r = long_record(n, SegmentKind::DcStep, Resolution::Analysis, settling);
+        assert_eq!(r.segments.len(), 2);
+        let (long, next) = (&r.segments[0], &r.segments[1]);
+        assert_eq!(long.index, 4);
+        let (h, t) = (HEAD_SAMPLES, TAIL_SAMPLES);
+        assert_eq!(long.time.len(), h + t);
+        // The head as read, then the hold's last samples (the boundary
+        // sample, the next segment's first, left out).
+        let want: Vec<f64> = (0..h as u64)
+            .chain(n - 1 - t as u64..n - 1)
+            .map(settling)
+            .collect();
+        for series in [&long.current, &long.voltage, &long.speed] {
+            let differs: Vec<(usize, f64, f64)> = series
+                .iter()
+                .zip(&want)
+                .enumerate()
+                .filter(|(_, (a, b))| a != b)
+                .map(|(k, (a, b))| (k, *a, *b))
+                .take(3)
+                .collect();
+            assert!(differs.is_empty(), "the head and the tail: {differs:?}");
+        }
+        // Evenly sampled: the tail follows the head one interval later.
+        for w in long.time.windows(2) {
+            assert!((w[1] - w[0] - 5e-4).abs() < 1e-9, "{w:?}");
+        }
+        // The next segment starts at the shared boundary sample, whole,
+        // one sample interval after the last, on the analysis' clock.
+        assert_eq!(next.current[0], settling(n - 1));
+        let gap = next.time[0] - long.time[long.time.len() - 1];
+        assert!((gap - 5e-4).abs() < 1e-9, "{gap}");
+        assert_eq!(next.time.len(), 101);
+        assert_eq!(r.notes.len(), 1);
+        assert_eq!(
+            r.notes[0],
+            "long holds 200000 current readings over 100.0 s: the analysis reads its first 2048 \
+             (1.02 s, the step) and its last 2048 (the settled level), and its clock leaves out \
+             the 98.0 s between them (times after 1.024 s read that much earlier); the record \
+             file keeps them all (`motorbench export` writes them, and a CSV file is read whole)"
+        );
+    }
+
+    #[test]
+    fn a_segment_that_never_settles_is_read_as_its_longest_head() {
+        let n = 30_000;
+        let r = long_record(n, SegmentKind::DcStep, Resolution::Analysis, |k| k as f64);
+        let long = &r.segments[0];
+        let first: Vec<f64> = (0..HEAD_MAX).map(|k| k as f64).collect();
+        assert!(long.current == first && long.speed == first);
+        assert!(
+            r.notes[0].contains("do not end on the level"),
+            "{}",
+            r.notes[0]
+        );
+    }
+
+    #[test]
+    fn a_coast_down_and_a_full_resolution_record_are_read_whole() {
+        let n = 100_000;
+        for (kind, resolution) in [
+            (SegmentKind::DcCoastdown, Resolution::Analysis),
+            (SegmentKind::DcStep, Resolution::Full),
+        ] {
+            let r = long_record(n, kind, resolution, |k| k as f64);
+            assert_eq!(r.segments[0].current.len(), n as usize, "{kind:?}");
+            assert!(r.segments[0]
+                .current
+                .iter()
+                .enumerate()
+                .all(|(k, &i)| i == k as f64));
+            assert!(r.notes.is_empty());
+        }
+    }
+
+    #[test]
+    fn a_segment_within_its_head_and_what_follows_is_read_whole() {
+        let n = (HEAD_SAMPLES + PAST_HEAD) as u64;
+        let thin = long_record(n, SegmentKind::DcStep, Resolution::Analysis, settling);
+        let full = long_record(n, SegmentKind::DcStep, Resolution::Full, settling);
+        assert!(thin.segments == full.segments, "the same segments");
+        assert!(thin.notes.is_empty());
+        assert_eq!(thin.segments[0].time.len(), n as usize);
     }
 
     #[test]

@@ -6,7 +6,9 @@
 //!   [`recover_record`] finishes a cut file's readable part as a new file
 //!   with a summary and index (`motorbench recover`).
 //! - [`RecordBuilder`] turns entries into a [`Record`]; the live bench and
-//!   the reader share it, so a replay gives bit-identical data.
+//!   the reader share it, so a replay gives bit-identical data. The
+//!   analysis reads a long step segment's first samples ([`Resolution`]),
+//!   so a test's memory does not grow with its length.
 //! - [`read_dc_csv`] imports one DC segment from CSV, [`read_im_csv`] one
 //!   induction-machine slip sweep, [`read_dc_resistance_csv`] and
 //!   [`read_supply_test_csv`] its standard tests (DC resistance, no load,
@@ -31,6 +33,7 @@ mod reader;
 mod recover;
 pub mod schema;
 mod start;
+mod thinning;
 mod types;
 mod writer;
 
@@ -46,5 +49,6 @@ pub use files::load_record_files;
 pub use reader::{build_record, read_entries, read_mcap, Entries};
 pub use recover::{recover_record, Recovered, DAMAGED_SUFFIX};
 pub use start::TestStart;
+pub use thinning::{Resolution, HEAD_SAMPLES, TAIL_SAMPLES};
 pub use types::*;
 pub use writer::{library_name, Recorder, RecorderBacklog, RecorderStats, QUEUE_CAPACITY};

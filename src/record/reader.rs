@@ -51,6 +51,7 @@ use super::schema::{
     TOPIC_EVENT, TOPIC_OPERATING_POINT, TOPIC_RESULT, TOPIC_SEGMENT, TOPIC_STANDARD_TEST,
     TOPIC_SUPPLY_LIMIT,
 };
+use super::thinning::Resolution;
 use super::types::{ChannelSpec, Entry, Record, Recovery, SegmentKind, TestMeta};
 use crate::contract::READ_SCHEMA_VERSIONS;
 
@@ -92,15 +93,21 @@ pub fn read_mcap(path: &Path) -> Result<Record, RecordError> {
             reason: format!("{}; not one message before the damage", r.reason),
         });
     }
-    let mut record = build_record(meta, channels, &entries);
+    let mut record = build_record(meta, channels, &entries, Resolution::Analysis);
     record.recovery = recovery;
     Ok(record)
 }
 
 /// The [`Record`] of what [`read_entries`] read (through
-/// [`RecordBuilder`], like the live bench); its `recovery` is not set.
-pub fn build_record(meta: TestMeta, channels: Vec<ChannelSpec>, entries: &[Entry]) -> Record {
-    let mut builder = RecordBuilder::new(Some(meta), channels);
+/// [`RecordBuilder`], like the live bench) at `resolution`; its
+/// `recovery` is not set.
+pub fn build_record(
+    meta: TestMeta,
+    channels: Vec<ChannelSpec>,
+    entries: &[Entry],
+    resolution: Resolution,
+) -> Record {
+    let mut builder = RecordBuilder::new(Some(meta), channels).resolution(resolution);
     for e in entries {
         builder.push(e);
     }
@@ -672,6 +679,45 @@ mod tests {
                 assert_eq!(xb, yb);
             }
         }
+    }
+
+    #[test]
+    fn replay_equals_live_for_a_long_hold_read_as_its_head_and_tail() {
+        // 100 s at 1 kHz in one step segment: a step settling in 20 ms,
+        // then held, with alternating noise. Its samples are assigned to
+        // the segment while it is being recorded (more than twice
+        // thinning::PENDING of them), as in a live test.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("long.mcap");
+        let n = 100_000u64;
+        let mut entries = vec![Entry::dc_step_marker(0, 0, SegmentPhase::Start, "held")];
+        for k in 0..n {
+            let x =
+                2.0 * (1.0 - (-(k as f64) / 20.0).exp()) + if k % 2 == 0 { 0.01 } else { -0.01 };
+            entries.push(Entry::Samples {
+                t_ns: k * 1_000_000,
+                values: vec![(0, 24.0), (1, x), (2, 100.0 * x)],
+            });
+        }
+        entries.push(Entry::dc_step_marker(
+            (n - 1) * 1_000_000,
+            0,
+            SegmentPhase::End,
+            "held",
+        ));
+        record_to(&path, &entries);
+        let replay = read_mcap(&path).unwrap();
+        assert_eq!(replay, live(&entries));
+        let seg = &replay.segments[0];
+        assert_eq!(
+            seg.time.len(),
+            crate::record::HEAD_SAMPLES + crate::record::TAIL_SAMPLES
+        );
+        assert_eq!(replay.notes.len(), 1);
+        assert!(replay.notes[0].starts_with("held holds 100000 current readings over 100.0 s"));
+        // Every sample is in the file.
+        let (_, _, back, _) = read_entries(&path).unwrap();
+        assert_eq!(flat(&back), flat(&entries));
     }
 
     #[test]

@@ -18,7 +18,7 @@ pub mod table;
 
 use std::path::{Path, PathBuf};
 
-use super::{build_record, read_entries, RecordError};
+use super::{build_record, read_entries, RecordError, Resolution};
 
 /// What can go wrong in an export.
 #[derive(Debug, thiserror::Error)]
@@ -117,7 +117,7 @@ pub fn export_record(
         out.parquet = Some(path);
     }
     if formats.csv {
-        let record = build_record(meta.clone(), channels, &entries);
+        let record = build_record(meta.clone(), channels, &entries, Resolution::Full);
         for file in csv::segment_files(&record, &source) {
             let path = out_dir.join(format!("{stem}.segment-{}.csv", file.segment));
             std::fs::write(&path, file.text).map_err(io(&path))?;
