@@ -253,35 +253,33 @@ impl RecordBuilder {
             ..
         } = self;
         // A segment's tail that follows its head without a cut holds
-        // samples as read; the cut ones are read with their segment below.
-        let mut cut_tails: [Vec<(u64, f64)>; 3] = Default::default();
+        // samples as read. A cut segment's current tail is read with its
+        // segment below; its voltage and speed are read at its instants
+        // with the rest.
+        let mut cut_tail = Vec::new();
         for series in spans_series.values_mut() {
             let cut = series[1].is_cut();
             for (slot, s) in series.iter_mut().enumerate() {
-                if cut {
-                    cut_tails[slot].extend(s.last());
-                } else {
-                    kept[slot].extend(s.tail.drain(..));
+                match (cut, slot == Series::Current.slot()) {
+                    (true, true) => cut_tail.extend(s.last()),
+                    (true, false) => kept[slot].extend(s.last()),
+                    (false, _) => kept[slot].extend(s.tail.drain(..)),
                 }
             }
         }
-        for s in kept.iter_mut().chain(cut_tails.iter_mut()) {
+        for s in kept.iter_mut() {
             s.sort_by_key(|&(t, _)| t);
         }
+        cut_tail.sort_by_key(|&(t, _)| t);
+        // A cut segment's head is kept: a series with samples keeps some.
         let complete = kept.iter().all(|s| !s.is_empty());
-        let readable = |slot: usize| {
-            let mut all = kept[slot].clone();
-            all.extend_from_slice(&cut_tails[slot]);
-            all.sort_by_key(|&(t, _)| t);
-            all
-        };
-        let (voltage, speed) = (readable(0), readable(2));
+        let [voltage, current, speed] = &kept;
         let read_at = |seg: &mut DcSegment, at: &mut dyn Iterator<Item = (u64, f64)>| {
             for (t, i) in at {
                 seg.time.push(t as f64 * 1e-9);
                 seg.current.push(i);
-                seg.voltage.push(interpolate(&voltage, t));
-                seg.speed.push(interpolate(&speed, t));
+                seg.voltage.push(interpolate(voltage, t));
+                seg.speed.push(interpolate(speed, t));
             }
         };
         let mut notes = Vec::new();
@@ -309,20 +307,20 @@ impl RecordBuilder {
                 continue;
             }
             let Some(seen) = cut else {
-                read_at(&mut seg, &mut kept[1].iter().copied().filter(within));
+                read_at(&mut seg, &mut current.iter().copied().filter(within));
                 segments.push(seg);
                 continue;
             };
             let head_end = heads.get(&index).and_then(|h| h.end).unwrap_or(end);
             read_at(
                 &mut seg,
-                &mut kept[1]
+                &mut current
                     .iter()
                     .copied()
                     .filter(|&(t, _)| span.start <= t && t <= head_end),
             );
             let mut tail = DcSegment::default();
-            read_at(&mut tail, &mut cut_tails[1].iter().copied().filter(within));
+            read_at(&mut tail, &mut cut_tail.iter().copied().filter(within));
             let (note, cut) = splice(&mut seg, tail, seen, span.start, end);
             notes.push(note);
             cuts.extend(cut);
