@@ -12,18 +12,19 @@
 //!   agrees with the window's before it ([`agree`]). The head holds twice
 //!   the readings up to there, at least [`HEAD_SAMPLES`] and at most
 //!   [`HEAD_MAX`]: what is left of the transient at its end is the square
-//!   of what was left when the motor settled (a method that integrates
-//!   the response, as the moments do, loses nothing it would see). Voltage
-//!   and speed readings up to the head's last current reading belong to
-//!   it;
+//!   of what was left when the motor settled, so a method that integrates
+//!   the response (the moments) still sees all of it. Voltage and speed
+//!   readings up to the head's last current reading belong to it;
 //! - its last [`TAIL_SAMPLES`] samples: the settled level the plan held.
 //!
 //! What lies between is more of the same level, and would cost memory and
 //! analysis time in proportion to the hold's length. Where the head ends
 //! on the level the tail holds ([`splices`]), the tail follows the head
-//! one sample interval later (its times moved earlier by what was left
-//! out), so the segment stays evenly sampled: every DC model is simulated
-//! one sample interval at a time, and under a constant voltage a settled
+//! one sample interval later: the analysis' clock leaves out what lies
+//! between (times after the head, in this segment and the ones after it,
+//! read that much earlier), so every segment stays evenly sampled and
+//! still follows the one before it. Every DC model is simulated one
+//! sample interval at a time, and under a constant voltage a settled
 //! motor's state at the head's end is its state at the tail's start.
 //! Where it does not (a drift), the segment is its head alone.
 //!
