@@ -44,6 +44,10 @@ use super::types::{
 /// Appended to the label of a segment that has no end marker.
 pub const INCOMPLETE_SUFFIX: &str = " (incomplete)";
 
+/// The current's slot: the time base, and the series whose head and
+/// tail decide a segment's cut.
+const CURRENT: usize = 1;
+
 /// Which DC series a channel feeds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Series {
@@ -91,7 +95,7 @@ impl Series {
     fn slot(self) -> usize {
         match self {
             Series::Voltage => 0,
-            Series::Current => 1,
+            Series::Current => CURRENT,
             Series::Speed => 2,
         }
     }
@@ -219,7 +223,7 @@ impl RecordBuilder {
                 }
                 series.head();
                 let head = self.heads.entry(*index).or_default();
-                if slot == Series::Current.slot()
+                if slot == CURRENT
                     && !whole
                     && span.kind != SegmentKind::DcCoastdown
                     && head.end.is_none()
@@ -258,9 +262,9 @@ impl RecordBuilder {
         // with the rest.
         let mut cut_tail = Vec::new();
         for series in spans_series.values_mut() {
-            let cut = series[1].is_cut();
+            let cut = series[CURRENT].is_cut();
             for (slot, s) in series.iter_mut().enumerate() {
-                match (cut, slot == Series::Current.slot()) {
+                match (cut, slot == CURRENT) {
                     (true, true) => cut_tail.extend(s.last()),
                     (true, false) => kept[slot].extend(s.last()),
                     (false, _) => kept[slot].extend(s.tail.drain(..)),
@@ -300,8 +304,8 @@ impl RecordBuilder {
             let within = |&(t, _): &(u64, f64)| span.start <= t && t <= end;
             let cut = spans_series
                 .get(&index)
-                .filter(|s| s[1].is_cut())
-                .map(|s| s[1].seen);
+                .filter(|s| s[CURRENT].is_cut())
+                .map(|s| s[CURRENT].seen);
             if !complete {
                 segments.push(seg);
                 continue;
@@ -321,9 +325,9 @@ impl RecordBuilder {
             );
             let mut tail = DcSegment::default();
             read_at(&mut tail, &mut cut_tail.iter().copied().filter(within));
-            let (note, cut) = splice(&mut seg, tail, seen, span.start, end);
+            let (note, left_out) = splice(&mut seg, tail, seen, span.start, end);
             notes.push(note);
-            cuts.extend(cut);
+            cuts.extend(left_out);
             segments.push(seg);
         }
         // The analysis' clock leaves out what a splice left out: a segment
@@ -381,7 +385,10 @@ fn splice(
         ]
         .iter()
         .all(|(h, t)| splices(h, t));
-    let head_s = seg.time[n.saturating_sub(1)] - seg.time[0];
+    let head_s = match (seg.time.first(), seg.time.last()) {
+        (Some(first), Some(last)) => last - first,
+        _ => 0.0,
+    };
     let kept =
         "the record file keeps them all (`motorbench export` writes them, and a CSV file is \
                 read whole)";
