@@ -117,21 +117,9 @@ impl RecordBuilder {
     /// A builder for a record with this metadata and channel list (the
     /// list whose indices [`Entry::Samples`] refers to).
     pub fn new(meta: Option<TestMeta>, channels: Vec<ChannelSpec>) -> Self {
-        let mut taken = [false; 3];
-        let roles = channels
-            .iter()
-            .map(|c| {
-                let s = Series::of(c)?;
-                if taken[s.slot()] {
-                    return None;
-                }
-                taken[s.slot()] = true;
-                Some(s)
-            })
-            .collect();
-        RecordBuilder {
+        let mut builder = RecordBuilder {
             meta,
-            roles,
+            roles: Vec::with_capacity(channels.len()),
             pending: Default::default(),
             kept: Default::default(),
             spans_series: BTreeMap::new(),
@@ -143,11 +131,28 @@ impl RecordBuilder {
             points: Vec::new(),
             standard_tests: ImStandardTests::default(),
             supply_limits: Vec::new(),
+        };
+        for c in &channels {
+            builder.add_channel(c);
         }
+        builder
+    }
+
+    /// Appends a channel to the list [`Entry::Samples`] indexes into (a
+    /// file declares its channels as it goes).
+    pub fn add_channel(&mut self, spec: &ChannelSpec) {
+        let role = Series::of(spec).filter(|s| !self.roles.contains(&Some(*s)));
+        self.roles.push(role);
+    }
+
+    /// Sets the record's metadata (a file may carry it anywhere).
+    pub fn set_meta(&mut self, meta: TestMeta) {
+        self.meta = Some(meta);
     }
 
     /// Takes one entry. Samples on channels outside the list given to
-    /// [`RecordBuilder::new`] are ignored.
+    /// [`RecordBuilder::new`] and [`RecordBuilder::add_channel`] are
+    /// ignored.
     pub fn push(&mut self, entry: &Entry) {
         match entry {
             Entry::Samples { t_ns, values } => {

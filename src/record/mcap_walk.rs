@@ -23,6 +23,8 @@
 //! summary) are walked, not handed on: damage there is reported too, after
 //! the data.
 
+use std::io::{self, Read};
+
 use mcap::records::{op, Record};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 use mcap::{McapError, MAGIC};
@@ -53,20 +55,42 @@ pub(crate) fn chunk_limit(file_len: usize) -> usize {
 /// schema, metadata, channel and message record of its data section in file order,
 /// chunks opened. Returns where damage ended the walk, if anywhere.
 pub(crate) fn walk_records(bytes: &[u8], visit: &mut dyn FnMut(Record<'_>)) -> Option<Damage> {
+    let mut source = bytes;
+    walk_source(&mut source, bytes.len() as u64, visit)
+        .unwrap_or_else(|_| unreachable!("reading a byte slice does not fail"))
+}
+
+/// [`walk_records`] over a file of `file_len` bytes read from `source`
+/// as the walk goes: at most one record (a chunk, compressed) is held at
+/// a time, so a walk's memory does not grow with the file. An error
+/// reading `source` ends the walk as that error.
+pub(crate) fn walk_source(
+    source: &mut dyn Read,
+    file_len: u64,
+    visit: &mut dyn FnMut(Record<'_>),
+) -> io::Result<Option<Damage>> {
+    let file_len = usize::try_from(file_len).unwrap_or(usize::MAX);
     let options = LinearReaderOptions::default()
         .with_emit_chunks(true)
-        .with_record_length_limit(bytes.len())
+        .with_record_length_limit(file_len)
         .with_validate_data_section_crc(true)
         .with_validate_summary_section_crc(true);
     let mut reader = LinearReader::new_with_options(options);
-    let limit = chunk_limit(bytes.len());
-    let mut unread = bytes;
+    let limit = chunk_limit(file_len);
+    // The file's first bytes, to tell a file that is not MCAP at all.
+    let mut first = Vec::with_capacity(MAGIC.len());
     // Where the record being read starts (0: still at the start magic).
     let mut start = 0u64;
     let mut in_data_section = true;
     while let Some(event) = reader.next_event() {
         match event {
-            Ok(LinearReadEvent::ReadRequest(need)) => feed(&mut reader, &mut unread, need),
+            Ok(LinearReadEvent::ReadRequest(need)) => {
+                let buf = reader.insert(need);
+                let n = read_some(source, buf)?;
+                let wanted = n.min(MAGIC.len() - first.len());
+                first.extend_from_slice(&buf[..wanted]);
+                reader.notify_read(n);
+            }
             Ok(LinearReadEvent::Record { opcode, data }) => {
                 let at = start.max(MAGIC.len() as u64);
                 start = at + RECORD_PREFIX + data.len() as u64;
@@ -74,7 +98,7 @@ pub(crate) fn walk_records(bytes: &[u8], visit: &mut dyn FnMut(Record<'_>)) -> O
                     continue;
                 }
                 let handed = match opcode {
-                    op::CHUNK => walk_chunk(&bytes[at as usize..start as usize], limit, visit),
+                    op::CHUNK => walk_chunk(data, limit, visit),
                     op::DATA_END => {
                         in_data_section = false;
                         Ok(())
@@ -82,33 +106,33 @@ pub(crate) fn walk_records(bytes: &[u8], visit: &mut dyn FnMut(Record<'_>)) -> O
                     _ => hand_on(opcode, data, visit),
                 };
                 if let Err(reason) = handed {
-                    return Some(Damage {
+                    return Ok(Some(Damage {
                         offset: at,
                         reason: reason.to_string(),
-                    });
+                    }));
                 }
             }
             Err(e) => {
-                let at_magic = start == 0 && !bytes.starts_with(MAGIC);
+                let at_magic = start == 0 && !first.starts_with(MAGIC);
                 let offset = if at_magic {
                     0
                 } else {
                     start.max(MAGIC.len() as u64)
                 };
-                return Some(Damage {
+                return Ok(Some(Damage {
                     offset,
                     reason: describe(&e),
-                });
+                }));
             }
         }
     }
-    None
+    Ok(None)
 }
 
-/// Reads one chunk record (`record`: opcode, length and body) with its own
+/// Reads one chunk record (`body`: the chunk's body) with its own
 /// reader, handing its records on once its CRC has been checked.
 fn walk_chunk(
-    record: &[u8],
+    body: &[u8],
     limit: usize,
     visit: &mut dyn FnMut(Record<'_>),
 ) -> Result<(), WalkError> {
@@ -118,10 +142,17 @@ fn walk_chunk(
         .with_prevalidate_chunk_crcs(true)
         .with_record_length_limit(limit);
     let mut reader = LinearReader::new_with_options(options);
-    let mut unread = record;
+    // The reader reads the chunk as a record: opcode, length, body.
+    let mut prefix = [op::CHUNK; RECORD_PREFIX as usize];
+    prefix[1..].copy_from_slice(&(body.len() as u64).to_le_bytes());
+    let mut record = (&prefix[..]).chain(body);
     while let Some(event) = reader.next_event() {
         match event {
-            Ok(LinearReadEvent::ReadRequest(need)) => feed(&mut reader, &mut unread, need),
+            Ok(LinearReadEvent::ReadRequest(need)) => {
+                let n = read_some(&mut record, reader.insert(need))
+                    .unwrap_or_else(|_| unreachable!("reading bytes in memory does not fail"));
+                reader.notify_read(n);
+            }
             Ok(LinearReadEvent::Record { opcode, data }) => {
                 hand_on(opcode, data, visit).map_err(|e| WalkError::InChunk(Box::new(e)))?
             }
@@ -131,12 +162,15 @@ fn walk_chunk(
     Ok(())
 }
 
-/// Gives `reader` up to `need` more bytes of `unread` (none: the end).
-fn feed(reader: &mut LinearReader, unread: &mut &[u8], need: usize) {
-    let n = need.min(unread.len());
-    reader.insert(n).copy_from_slice(&unread[..n]);
-    reader.notify_read(n);
-    *unread = &unread[n..];
+/// Reads what `source` gives into `buf` (0: the end), retrying an
+/// interrupted read.
+fn read_some(source: &mut dyn Read, buf: &mut [u8]) -> io::Result<usize> {
+    loop {
+        match source.read(buf) {
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+            read => return read,
+        }
+    }
 }
 
 /// Parses and visits a record the reader uses; skips the others.

@@ -11,6 +11,15 @@
 //! carries the cut file's damage in its `motorbench.recovery` metadata,
 //! and reads back with the same [`Record::recovery`].
 //!
+//! The file is read from disk in pieces, a record (a chunk) at a time,
+//! and [`read_record`] (so [`read_mcap`]) hands each entry to the
+//! [`RecordBuilder`] as it is decoded: no list of entries is made, so
+//! replaying a one-hour record takes no more memory than a short one.
+//! [`read_entries`] collects them all (export, the records index).
+//! Entries read before the `motorbench.test` metadata (which gives their
+//! origin; motorbench writes it first, the contract does not say where)
+//! wait for it.
+//!
 //! Refused as damaged ([`RecordError::Damaged`], naming the offset): a
 //! file damaged before its MCAP header or its `motorbench.test` metadata,
 //! and (by [`read_mcap`]) one with not a single message before the damage.
@@ -36,6 +45,8 @@
 //! Topics outside the contract are ignored.
 
 use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::BufReader;
 use std::path::Path;
 
 use mcap::records::Record as McapRecord;
@@ -44,7 +55,7 @@ use serde::Deserialize;
 use super::builder::RecordBuilder;
 use super::error::{DecodeError, RecordError};
 use super::log_event::AnyEvent;
-use super::mcap_walk::{walk_records, Damage};
+use super::mcap_walk::{walk_source, Damage};
 use super::schema::{
     is_sample_topic_for, COMMAND_PREFIX, MESSAGE_ENCODING, METADATA_NAME, METADATA_RECOVERY,
     METADATA_START_TIME_NS, RECOVERY_MESSAGES, RECOVERY_OFFSET, RECOVERY_REASON, SENSOR_PREFIX,
@@ -80,12 +91,21 @@ struct SamplePayload {
 }
 
 /// Reads a record file into a [`Record`] (through [`RecordBuilder`], like
-/// the live bench).
+/// the live bench) at [`Resolution::Analysis`]: see [`read_record`].
+pub fn read_mcap(path: &Path) -> Result<Record, RecordError> {
+    read_record(path, Resolution::Analysis)
+}
+
+/// Reads a record file into a [`Record`] at `resolution`, handing each
+/// entry to a [`RecordBuilder`] as it is read: the file is read in pieces
+/// and no list of its entries is made, so at [`Resolution::Analysis`] the
+/// memory a replay takes does not grow with the test's length.
 ///
 /// A damaged file with not one message before the damage is refused
 /// ([`RecordError::Damaged`]): there is nothing to identify.
-pub fn read_mcap(path: &Path) -> Result<Record, RecordError> {
-    let (meta, channels, entries, recovery) = read_entries(path)?;
+pub fn read_record(path: &Path, resolution: Resolution) -> Result<Record, RecordError> {
+    let mut builder = RecordBuilder::new(None, Vec::new()).resolution(resolution);
+    let (meta, _, recovery) = read_into(path, &mut builder)?;
     if let Some(r) = recovery.as_ref().filter(|r| r.messages == 0) {
         return Err(RecordError::Damaged {
             path: path.to_path_buf(),
@@ -93,7 +113,8 @@ pub fn read_mcap(path: &Path) -> Result<Record, RecordError> {
             reason: format!("{}; not one message before the damage", r.reason),
         });
     }
-    let mut record = build_record(meta, channels, &entries, Resolution::Analysis);
+    builder.set_meta(meta);
+    let mut record = builder.finish();
     record.recovery = recovery;
     Ok(record)
 }
@@ -114,34 +135,72 @@ pub fn build_record(
     builder.finish()
 }
 
-/// Reads a record file into its metadata, sample channels and entries.
-/// See the module docs for what is refused.
+/// Reads a record file into its metadata, sample channels and entries
+/// (all of them, in memory). See the module docs for what is refused.
 pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
-    let bytes = std::fs::read(path).map_err(|e| RecordError::io(path, e))?;
+    let mut entries = Vec::new();
+    let (meta, channels, recovery) = read_into(path, &mut entries)?;
+    Ok((meta, channels, entries, recovery))
+}
 
-    let mut state = Reading::new(path);
+/// What a reading hands the channels and entries it reads to, in file
+/// order; an entry's time counts from the test's start.
+trait EntrySink {
+    /// A sample channel, the next index [`Entry::Samples`] refers to.
+    fn channel(&mut self, spec: &ChannelSpec);
+    /// The next entry.
+    fn entry(&mut self, entry: Entry);
+}
+
+impl EntrySink for Vec<Entry> {
+    fn channel(&mut self, _: &ChannelSpec) {}
+
+    fn entry(&mut self, entry: Entry) {
+        self.push(entry);
+    }
+}
+
+impl EntrySink for RecordBuilder {
+    fn channel(&mut self, spec: &ChannelSpec) {
+        self.add_channel(spec);
+    }
+
+    fn entry(&mut self, entry: Entry) {
+        self.push(&entry);
+    }
+}
+
+/// Reads a record file, handing its channels and entries to `sink` as
+/// they are read (those before the `motorbench.test` metadata once it is
+/// read); its metadata, sample channels and what was lost if it is
+/// damaged. See the module docs for what is refused.
+fn read_into(
+    path: &Path,
+    sink: &mut dyn EntrySink,
+) -> Result<(TestMeta, Vec<ChannelSpec>, Option<Recovery>), RecordError> {
+    let io = |e| RecordError::io(path, e);
+    let file = File::open(path).map_err(io)?;
+    let file_len = file.metadata().map_err(io)?.len();
+    let mut source = BufReader::with_capacity(1 << 16, file);
+
+    let mut state = Reading::new(path, sink);
     let mut header_seen = false;
-    let mut metadata: Option<BTreeMap<String, String>> = None;
     // What was cut, in a recovered copy of a cut record.
     let mut recovered: Option<BTreeMap<String, String>> = None;
-    // The first content error; reported only if the metadata is in order
-    // (a file of another schema_version is refused as such).
-    let mut failure: Option<RecordError> = None;
-    let damage = walk_records(&bytes, &mut |record| match record {
+    let damage = walk_source(&mut source, file_len, &mut |record| match record {
         McapRecord::Header(_) => header_seen = true,
-        McapRecord::Metadata(m) if m.name == METADATA_NAME && metadata.is_none() => {
-            metadata = Some(m.metadata);
-        }
+        McapRecord::Metadata(m) if m.name == METADATA_NAME => state.metadata(&m.metadata),
         McapRecord::Metadata(m) if m.name == METADATA_RECOVERY => recovered = Some(m.metadata),
-        _ if failure.is_some() => {}
+        // The first content error; reported only if the metadata is in
+        // order (a file of another schema_version is refused as such).
+        _ if state.failure.is_some() => {}
         other => {
             if let Err(e) = state.take(other) {
-                failure = Some(e);
+                state.failure = Some(e);
             }
         }
-    });
-    let file_len = bytes.len() as u64;
-    drop(bytes);
+    })
+    .map_err(io)?;
     let damaged = |d: &Damage, context: &str| RecordError::Damaged {
         path: path.to_path_buf(),
         offset: d.offset,
@@ -151,7 +210,8 @@ pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
         return Err(damaged(d, " (not an MCAP file?)"));
     }
 
-    let Some(metadata) = metadata else {
+    let read = state.finish();
+    let Some(read_meta) = read.meta else {
         return Err(match &damage {
             Some(d) => damaged(d, &format!(" (no {METADATA_NAME} metadata before it)")),
             None => {
@@ -160,10 +220,8 @@ pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
         });
     };
     // Damage may be what broke the metadata or a message: say both.
-    let read_meta =
-        meta_from(path, &metadata).and_then(|meta| Ok((origin_ns(path, &meta, &metadata)?, meta)));
-    let (origin, meta) = match (read_meta, failure, &damage) {
-        (Ok(read), None, _) => read,
+    let meta = match (read_meta, read.failure, &damage) {
+        (Ok((_, meta)), None, _) => meta,
         (Err(e), _, Some(d)) | (Ok(_), Some(e), Some(d)) => {
             let text = e.to_string();
             let prefix = format!("{}: ", path.display());
@@ -172,27 +230,17 @@ pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
         }
         (Err(e), _, None) | (Ok(_), Some(e), None) => return Err(e),
     };
-    let (channels, mut entries, messages) = state.finish();
-    for e in &mut entries {
-        let t = e.t_ns_mut();
-        *t = t.checked_sub(origin).ok_or_else(|| {
-            RecordError::not_motorbench(
-                path,
-                format!(
-                    "a message at log_time {t} is before the test's start \
-                     ({METADATA_START_TIME_NS} {origin})"
-                ),
-            )
-        })?;
+    if let Some(e) = read.before_start {
+        return Err(e);
     }
     let recovery = damage
         .map(|d| Recovery {
-            messages,
+            messages: read.messages,
             offset: d.offset,
             reason: damage_text(&d, file_len),
         })
         .or_else(|| recovered.as_ref().and_then(recovery_note));
-    Ok((meta, channels, entries, recovery))
+    Ok((meta, read.channels, recovery))
 }
 
 /// The cut a recovered copy records (`motorbench.recovery`), as the cut
@@ -215,26 +263,93 @@ fn damage_text(d: &Damage, file_len: u64) -> String {
     )
 }
 
-/// Channels and entries read so far.
-struct Reading<'p> {
+/// The metadata as read: the origin of `log_time` and the test's
+/// metadata, or why they are refused.
+type MetaRead = Result<(u64, TestMeta), RecordError>;
+
+/// What a reading has found so far; entries go on to its sink.
+struct Reading<'p, 's> {
     path: &'p Path,
+    sink: &'s mut dyn EntrySink,
     routes: HashMap<u16, (String, Route)>,
     channels: Vec<ChannelSpec>,
-    entries: Vec<Entry>,
+    /// The first `motorbench.test` metadata record, read.
+    meta: Option<MetaRead>,
+    /// Entries read before the metadata (which gives their origin).
+    early: Vec<Entry>,
     /// Sample values at one log time, not yet made an entry.
     pending: Option<(u64, Vec<(usize, f64)>)>,
     messages: u64,
+    /// The first content error.
+    failure: Option<RecordError>,
+    /// The first message before the test's start.
+    before_start: Option<RecordError>,
 }
 
-impl<'p> Reading<'p> {
-    fn new(path: &'p Path) -> Self {
+/// What [`Reading::finish`] leaves: everything but the entries.
+struct Found {
+    channels: Vec<ChannelSpec>,
+    meta: Option<MetaRead>,
+    messages: u64,
+    failure: Option<RecordError>,
+    before_start: Option<RecordError>,
+}
+
+impl<'p, 's> Reading<'p, 's> {
+    fn new(path: &'p Path, sink: &'s mut dyn EntrySink) -> Self {
         Reading {
             path,
+            sink,
             routes: HashMap::new(),
             channels: Vec::new(),
-            entries: Vec::new(),
+            meta: None,
+            early: Vec::new(),
             pending: None,
             messages: 0,
+            failure: None,
+            before_start: None,
+        }
+    }
+
+    /// Takes a `motorbench.test` metadata record (the first one only),
+    /// handing on the entries read before it.
+    fn metadata(&mut self, md: &BTreeMap<String, String>) {
+        if self.meta.is_some() {
+            return;
+        }
+        let path = self.path;
+        self.meta =
+            Some(meta_from(path, md).and_then(|meta| Ok((origin_ns(path, &meta, md)?, meta))));
+        for entry in std::mem::take(&mut self.early) {
+            self.emit(entry);
+        }
+    }
+
+    /// Hands `entry` on with its time from the test's start; keeps it
+    /// until the metadata says where that is.
+    fn emit(&mut self, mut entry: Entry) {
+        let origin = match &self.meta {
+            None => return self.early.push(entry),
+            Some(Ok((origin, _))) => *origin,
+            // Refused at the end: nothing to hand on.
+            Some(Err(_)) => return,
+        };
+        let t = entry.t_ns_mut();
+        match t.checked_sub(origin) {
+            Some(since_start) => {
+                *t = since_start;
+                self.sink.entry(entry);
+            }
+            None if self.before_start.is_none() => {
+                self.before_start = Some(RecordError::not_motorbench(
+                    self.path,
+                    format!(
+                        "a message at log_time {t} is before the test's start \
+                         ({METADATA_START_TIME_NS} {origin})"
+                    ),
+                ));
+            }
+            None => {}
         }
     }
 
@@ -244,6 +359,9 @@ impl<'p> Reading<'p> {
         match record {
             McapRecord::Channel(c) if !self.routes.contains_key(&c.id) => {
                 let route = route_of(path, &c, &mut self.channels)?;
+                if let Route::Sample(index) = route {
+                    self.sink.channel(&self.channels[index]);
+                }
                 self.routes.insert(c.id, (c.topic, route));
             }
             McapRecord::Message { header, data } => {
@@ -311,7 +429,7 @@ impl<'p> Reading<'p> {
                 };
                 if let Some(entry) = entry {
                     self.flush_pending();
-                    self.entries.push(entry);
+                    self.emit(entry);
                 }
             }
             _ => {}
@@ -322,15 +440,21 @@ impl<'p> Reading<'p> {
     fn flush_pending(&mut self) {
         if let Some((t_ns, values)) = self.pending.take() {
             if !values.is_empty() {
-                self.entries.push(Entry::Samples { t_ns, values });
+                self.emit(Entry::Samples { t_ns, values });
             }
         }
     }
 
-    /// The sample channels, the entries and the number of messages read.
-    fn finish(mut self) -> (Vec<ChannelSpec>, Vec<Entry>, u64) {
+    /// Hands on the last entry; what was read besides the entries.
+    fn finish(mut self) -> Found {
         self.flush_pending();
-        (self.channels, self.entries, self.messages)
+        Found {
+            channels: self.channels,
+            meta: self.meta,
+            messages: self.messages,
+            failure: self.failure,
+            before_start: self.before_start,
+        }
     }
 }
 
@@ -852,17 +976,36 @@ mod tests {
         event: &[u8],
         log_time: u64,
     ) {
+        raw_file_ordered(path, metadata, event, log_time, false);
+    }
+
+    /// [`raw_file_at`], the metadata written after the event where
+    /// `metadata_last` (the contract does not say where it goes).
+    fn raw_file_ordered(
+        path: &Path,
+        metadata: Option<BTreeMap<String, String>>,
+        event: &[u8],
+        log_time: u64,
+        metadata_last: bool,
+    ) {
         let file = std::fs::File::create(path).unwrap();
         let mut w = mcap::WriteOptions::new()
             .create(BufWriter::new(file))
             .unwrap();
-        if let Some(md) = metadata {
-            w.write_metadata(&Metadata {
-                name: METADATA_NAME.into(),
-                metadata: md,
-            })
-            .unwrap();
-        }
+        let (first, last) = match metadata_last {
+            false => (metadata, None),
+            true => (None, metadata),
+        };
+        let write_metadata = |w: &mut mcap::Writer<_>, md: Option<BTreeMap<String, String>>| {
+            if let Some(md) = md {
+                w.write_metadata(&Metadata {
+                    name: METADATA_NAME.into(),
+                    metadata: md,
+                })
+                .unwrap();
+            }
+        };
+        write_metadata(&mut w, first);
         let schema = w
             .add_schema(
                 "motorbench.Event",
@@ -883,6 +1026,7 @@ mod tests {
             event,
         )
         .unwrap();
+        write_metadata(&mut w, last);
         w.finish().unwrap();
     }
 
@@ -979,6 +1123,25 @@ mod tests {
             )]
         );
         assert_eq!(r.meta.unwrap().schema_version, "2");
+    }
+
+    #[test]
+    fn metadata_after_the_messages_reads_the_same() {
+        let dir = tempfile::tempdir().unwrap();
+        let first = dir.path().join("first.mcap");
+        let last = dir.path().join("last.mcap");
+        let t = 1_795_255_200_000_000_042;
+        raw_file_ordered(&first, Some(v2_metadata()), LOG, t, false);
+        raw_file_ordered(&last, Some(v2_metadata()), LOG, t, true);
+        let (a, b) = (read_mcap(&first).unwrap(), read_mcap(&last).unwrap());
+        assert_eq!(a.events.len(), 1);
+        assert_eq!(a.events[0].0, 42);
+        assert_eq!(a, b);
+        assert_eq!(read_entries(&first).unwrap(), read_entries(&last).unwrap());
+        // Before the start, wherever the start is said.
+        raw_file_ordered(&last, Some(v2_metadata()), LOG, t - 43, true);
+        let s = read_mcap(&last).unwrap_err().to_string();
+        assert!(s.contains("before the test's start"), "{s}");
     }
 
     #[test]
