@@ -37,8 +37,8 @@ use std::collections::BTreeMap;
 use super::schema::SENSOR_PREFIX;
 use super::thinning::{splices, Head, Resolution, SpanSeries, PENDING};
 use super::types::{
-    ChannelSpec, DcSegment, Entry, Event, ImStandardTests, OperatingPoint, Record, SegmentKind,
-    SegmentPhase, SupplyLimit, TestMeta,
+    ChannelSpec, ClockCut, DcSegment, Entry, Event, ImStandardTests, OperatingPoint, Record,
+    SegmentKind, SegmentPhase, SupplyLimit, TestMeta,
 };
 
 /// Appended to the label of a segment that has no end marker.
@@ -292,8 +292,8 @@ impl RecordBuilder {
             }
         };
         let mut notes = Vec::new();
-        // `(head's last time, time left out)` of each spliced segment, s.
-        let mut cuts: Vec<(f64, f64)> = Vec::new();
+        // Each spliced segment's cut, its time still the record's.
+        let mut cuts: Vec<ClockCut> = Vec::new();
         let mut segments = Vec::with_capacity(spans.len());
         for (index, span) in spans {
             let mut seg = DcSegment {
@@ -332,22 +332,35 @@ impl RecordBuilder {
             read_at(&mut tail, &mut cut_tail.iter().copied().filter(within));
             let (note, left_out) = splice(&mut seg, tail, seen, span.start, end);
             notes.push(note);
-            cuts.extend(left_out);
+            cuts.extend(left_out.map(|(at_s, left_out_s)| ClockCut {
+                segment: index,
+                at_s,
+                left_out_s,
+            }));
             segments.push(seg);
         }
         // The analysis' clock leaves out what a splice left out: a segment
         // that followed a spliced one still follows it.
+        let earlier = |cuts: &[ClockCut], t: f64| {
+            cuts.iter()
+                .filter(|c| c.at_s < t)
+                .map(|c| c.left_out_s)
+                .sum::<f64>()
+        };
         if !cuts.is_empty() {
             for seg in &mut segments {
                 for t in &mut seg.time {
-                    *t -= cuts
-                        .iter()
-                        .filter(|&&(at, _)| at < *t)
-                        .map(|(_, s)| s)
-                        .sum::<f64>();
+                    *t -= earlier(&cuts, *t);
                 }
             }
         }
+        let cuts = cuts
+            .iter()
+            .map(|c| ClockCut {
+                at_s: c.at_s - earlier(&cuts, c.at_s),
+                ..*c
+            })
+            .collect();
         events.sort_by_key(|&(t, _)| t);
         Record {
             meta,
@@ -359,6 +372,7 @@ impl RecordBuilder {
             recorded_result: result,
             recovery: None,
             notes,
+            cuts,
         }
     }
 }
@@ -622,6 +636,13 @@ mod tests {
         let gap = next.time[0] - long.time[long.time.len() - 1];
         assert!((gap - 5e-4).abs() < 1e-9, "{gap}");
         assert_eq!(next.time.len(), 101);
+        // The cut, on the analysis' clock: after the head's last sample,
+        // as long as the note says.
+        assert_eq!(r.cuts.len(), 1);
+        let cut = r.cuts[0];
+        assert_eq!((cut.segment, cut.at_s), (4, long.time[h - 1]));
+        let left_out = ((n - 1 - t as u64) - h as u64) as f64 * 5e-4;
+        assert!((cut.left_out_s - left_out).abs() < 1e-9, "{cut:?}");
         assert_eq!(r.notes.len(), 1);
         assert_eq!(
             r.notes[0],
@@ -644,6 +665,8 @@ mod tests {
             "{}",
             r.notes[0]
         );
+        // Its head alone: the clock leaves nothing out.
+        assert!(r.cuts.is_empty());
     }
 
     #[test]
@@ -660,7 +683,7 @@ mod tests {
                 .iter()
                 .enumerate()
                 .all(|(k, &i)| i == k as f64));
-            assert!(r.notes.is_empty());
+            assert!(r.notes.is_empty() && r.cuts.is_empty());
         }
     }
 

@@ -477,4 +477,19 @@ pub struct Record {
     /// What was done to the record after reading it (a single segment
     /// split, say), for the report's warnings; not part of the contract.
     pub notes: Vec<String>,
+    /// Where the analysis' clock leaves out the middle of a long hold
+    /// ([`super::thinning`]), in segment order; not part of the contract.
+    pub cuts: Vec<ClockCut>,
+}
+
+/// A stretch of a long hold the analysis does not read: its clock jumps
+/// over it, so the samples after it read earlier than the file has them.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ClockCut {
+    /// The segment it lies in.
+    pub segment: u32,
+    /// The analysis' time of the last sample before it, s.
+    pub at_s: f64,
+    /// How long it lasts, s.
+    pub left_out_s: f64,
 }

@@ -30,6 +30,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::legend;
+use crate::record::ClockCut;
 
 /// Total width of the picture in pixels.
 const WIDTH: u32 = 1200;
@@ -51,6 +52,10 @@ const MEASURED_COLOUR: RGBColor = RGBColor(175, 175, 175);
 const MEASURED_WIDTH: u32 = 5;
 /// Width of a model's line, px.
 const MODEL_WIDTH: u32 = 2;
+/// Colour of the line that marks a cut in the time axis (drawn dashed).
+const CUT_COLOUR: RGBColor = RGBColor(90, 90, 90);
+/// Width of the line that marks a cut, px.
+const CUT_WIDTH: u32 = 1;
 /// Colours of model traces, cycled when there are more models than colours.
 const MODEL_COLOURS: [RGBColor; 8] = [
     tab10::BLUE,
@@ -106,6 +111,11 @@ pub struct SegmentPlot {
     pub current: Vec<Trace>,
     /// Speed traces in rad/s: measurement first, then models.
     pub speed: Vec<Trace>,
+    /// Where the time axis leaves out part of a long hold the analysis
+    /// does not read, at or before this segment: one within the segment
+    /// is drawn as a dashed line marked with what it leaves out; any of
+    /// them says so on the time axis.
+    pub cuts: Vec<ClockCut>,
 }
 
 /// Why a plot could not be produced.
@@ -194,12 +204,18 @@ fn dashed_strokes(plots: &[SegmentPlot]) -> Vec<String> {
         .map(|p| p.current.len().max(p.speed.len()))
         .max()
         .unwrap_or(0);
+    let stroke = |RGBColor(r, g, b): RGBColor, width: u32| {
+        format!("stroke=\"#{r:02X}{g:02X}{b:02X}\" stroke-width=\"{width}\"")
+    };
     (2..most)
         .filter(|&i| is_dashed(i))
-        .map(|i| {
-            let RGBColor(r, g, b) = MODEL_COLOURS[(i - 1) % MODEL_COLOURS.len()];
-            format!("stroke=\"#{r:02X}{g:02X}{b:02X}\" stroke-width=\"{MODEL_WIDTH}\"")
-        })
+        .map(|i| stroke(MODEL_COLOURS[(i - 1) % MODEL_COLOURS.len()], MODEL_WIDTH))
+        .chain(
+            plots
+                .iter()
+                .any(|p| !p.cuts.is_empty())
+                .then(|| stroke(CUT_COLOUR, CUT_WIDTH)),
+        )
         .collect()
 }
 
@@ -302,8 +318,14 @@ fn draw_row<DB: DrawingBackend>(
     );
 
     let panels = body.split_evenly((1, 2));
-    draw_panel(&panels[0], Quantity::Current, time_range, &current)?;
-    draw_panel(&panels[1], Quantity::Speed, time_range, &speed)?;
+    draw_panel(
+        &panels[0],
+        Quantity::Current,
+        time_range,
+        &current,
+        &plot.cuts,
+    )?;
+    draw_panel(&panels[1], Quantity::Speed, time_range, &speed, &plot.cuts)?;
     Ok(())
 }
 
@@ -341,6 +363,7 @@ fn draw_panel<DB: DrawingBackend>(
     quantity: Quantity,
     time_range: (f64, f64),
     curves: &[Curve<'_>],
+    cuts: &[ClockCut],
 ) -> Result<(), PlotError> {
     let value_range = padded_range(
         curves.iter().flat_map(|c| c.points.iter().map(|p| p.1)),
@@ -362,7 +385,10 @@ fn draw_panel<DB: DrawingBackend>(
     let y_format = move |v: &f64| format_tick(*v, y_span);
     chart
         .configure_mesh()
-        .x_desc("time since the start [s]")
+        .x_desc(match cuts {
+            [] => "time since the start [s]",
+            _ => "time since the start, less what is left out [s]",
+        })
         .y_desc(quantity.axis_label())
         .x_labels(8)
         .y_labels(6)
@@ -389,6 +415,26 @@ fn draw_panel<DB: DrawingBackend>(
         // polyline, not one element per dash.
         chart
             .draw_series(LineSeries::new(points, style))
+            .map_err(render_error)?;
+    }
+    // A cut: a dashed line where the clock jumps (dashed by `dash`), and
+    // what it leaves out beside it at the top.
+    let label = TextStyle::from((FONT, 12).into_font())
+        .color(&CUT_COLOUR)
+        .pos(Pos::new(HPos::Left, VPos::Top));
+    for cut in cuts
+        .iter()
+        .filter(|c| (time_range.0..=time_range.1).contains(&c.at_s))
+    {
+        let style = ShapeStyle::from(&CUT_COLOUR).stroke_width(CUT_WIDTH);
+        let line = [(cut.at_s, value_range.0), (cut.at_s, value_range.1)];
+        chart
+            .draw_series(LineSeries::new(line, style))
+            .map_err(render_error)?;
+        let text = format!("{:.1} s left out", cut.left_out_s);
+        let mark = EmptyElement::at((cut.at_s, value_range.1)) + Text::new(text, (4, 2), &label);
+        chart
+            .draw_series(std::iter::once(mark))
             .map_err(render_error)?;
     }
     Ok(())
@@ -534,6 +580,7 @@ mod tests {
                 trace("model dc", wave(2.1)),
                 trace("model friction", wave(1.9)),
             ],
+            cuts: vec![],
         }
     }
 
@@ -653,6 +700,39 @@ mod tests {
     }
 
     #[test]
+    fn a_cut_in_the_time_axis_is_marked_and_said() {
+        let plain = render_segments_svg(&[segment("whole", 400)]).unwrap();
+        assert!(plain.contains("time since the start [s]"));
+        assert!(!plain.contains("left out"));
+        let mut cut = segment("cut", 400);
+        cut.cuts = vec![
+            // Before this segment: it shifts its clock, not drawn here.
+            ClockCut {
+                segment: 0,
+                at_s: -1.0,
+                left_out_s: 3.0,
+            },
+            ClockCut {
+                segment: 1,
+                at_s: 0.1,
+                left_out_s: 58.04,
+            },
+        ];
+        let svg = render_segments_svg(&[cut]).unwrap();
+        assert_svg_document(&svg);
+        // In both panels, once each: the drawn cut only.
+        assert_eq!(svg.matches("58.0 s left out").count(), 2);
+        assert!(!svg.contains("3.0 s left out"));
+        assert_eq!(
+            svg.matches("time since the start, less what is left out [s]")
+                .count(),
+            2
+        );
+        // The line is dashed by the SVG.
+        assert!(svg.contains(r##"stroke="#5A5A5A" stroke-width="1" stroke-dasharray="7 5""##));
+    }
+
+    #[test]
     fn ten_long_segments_stay_small() {
         let plots: Vec<SegmentPlot> = (0..10)
             .map(|i| segment(&format!("segment {i}"), 20_000))
@@ -677,30 +757,35 @@ mod tests {
                 time: time.clone(),
                 current: vec![trace("measured", vec![f64::NAN; 50])],
                 speed: vec![trace("measured", vec![f64::INFINITY; 50])],
+                cuts: vec![],
             },
             SegmentPlot {
                 title: "empty traces".into(),
                 time: time.clone(),
                 current: vec![trace("measured", vec![]), trace("model", vec![])],
                 speed: vec![],
+                cuts: vec![],
             },
             SegmentPlot {
                 title: "no time".into(),
                 time: vec![],
                 current: vec![trace("measured", vec![1.0, 2.0])],
                 speed: vec![trace("measured", vec![1.0])],
+                cuts: vec![],
             },
             SegmentPlot {
                 title: "flat and single".into(),
                 time: bad_time,
                 current: vec![trace("measured", vec![2.5; 50])],
                 speed: vec![trace("measured", vec![0.0])],
+                cuts: vec![],
             },
             SegmentPlot {
                 title: "huge".into(),
                 time,
                 current: vec![trace("measured", vec![f64::MAX, f64::MIN, 0.0])],
                 speed: vec![trace("measured", vec![1e-300, -1e-300])],
+                cuts: vec![],
             },
         ];
         let svg = render_segments_svg(&plots).unwrap();
@@ -744,6 +829,7 @@ mod tests {
                     time,
                     current: vec![trace("measured", values)],
                     speed: vec![],
+                    cuts: vec![],
                 }
             })
             .collect();

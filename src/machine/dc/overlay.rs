@@ -43,6 +43,12 @@ pub fn segment_plots(record: &Record, id: &Identification) -> Vec<SegmentPlot> {
                 time: seg.time.clone(),
                 current,
                 speed,
+                cuts: record
+                    .cuts
+                    .iter()
+                    .filter(|c| seg.time.last().is_some_and(|&end| c.at_s <= end))
+                    .copied()
+                    .collect(),
             }
         })
         .collect()
