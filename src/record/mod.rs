@@ -46,7 +46,9 @@ pub use csv_im_tests::{
 };
 pub use error::{LoadError, RecordError};
 pub use files::load_record_files;
-pub use reader::{build_record, read_entries, read_mcap, read_record, Entries};
+pub use reader::{
+    build_record, read_entries, read_mcap, read_outline, read_record, Entries, Outline,
+};
 pub use recover::{recover_record, Recovered, DAMAGED_SUFFIX};
 pub use start::TestStart;
 pub use thinning::{Resolution, HEAD_SAMPLES, TAIL_SAMPLES};

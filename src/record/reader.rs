@@ -143,6 +143,57 @@ pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
     Ok((meta, channels, entries, recovery))
 }
 
+/// A record file without its samples: what [`read_outline`] finds.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outline {
+    /// The test's metadata.
+    pub meta: TestMeta,
+    /// Every entry but the samples, in file order.
+    pub entries: Vec<Entry>,
+    /// The sample values read.
+    pub samples: u64,
+    /// The latest time of any entry, samples included, ns since the start.
+    pub last_t_ns: u64,
+    /// What was lost if the file is damaged.
+    pub recovery: Option<Recovery>,
+}
+
+/// [`Outline`]'s entries and counts as they are read.
+#[derive(Default)]
+struct OutlineSink {
+    entries: Vec<Entry>,
+    samples: u64,
+    last_t_ns: u64,
+}
+
+impl EntrySink for OutlineSink {
+    fn channel(&mut self, _: &ChannelSpec) {}
+
+    fn entry(&mut self, entry: Entry) {
+        self.last_t_ns = self.last_t_ns.max(entry.t_ns());
+        match entry {
+            Entry::Samples { values, .. } => self.samples += values.len() as u64,
+            other => self.entries.push(other),
+        }
+    }
+}
+
+/// Reads a record file's metadata, events, markers and result, counting
+/// its samples without keeping them: how a record ended, in memory that
+/// does not grow with its length (the daemon's records index reads every
+/// interrupted record at start-up). Refused as [`read_entries`] refuses.
+pub fn read_outline(path: &Path) -> Result<Outline, RecordError> {
+    let mut sink = OutlineSink::default();
+    let (meta, _, recovery) = read_into(path, &mut sink)?;
+    Ok(Outline {
+        meta,
+        entries: sink.entries,
+        samples: sink.samples,
+        last_t_ns: sink.last_t_ns,
+        recovery,
+    })
+}
+
 /// What a reading hands the channels and entries it reads to, in file
 /// order; an entry's time counts from the test's start.
 trait EntrySink {
@@ -770,6 +821,19 @@ mod tests {
         for (a, b) in seg.voltage.iter().zip(awkward) {
             assert_eq!(a.to_bits(), b.to_bits());
         }
+
+        // The outline: every entry but the samples, which it counts.
+        let outline = read_outline(&path).unwrap();
+        assert_eq!(outline.meta, meta());
+        let others: Vec<Entry> = entries
+            .iter()
+            .filter(|e| !matches!(e, Entry::Samples { .. }))
+            .cloned()
+            .collect();
+        assert_eq!(outline.entries, others);
+        assert_eq!(outline.samples, awkward.len() as u64 * 4);
+        assert_eq!(outline.last_t_ns, 110);
+        assert!(outline.recovery.is_none());
     }
 
     #[test]

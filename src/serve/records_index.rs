@@ -26,7 +26,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 use crate::config::Retention;
-use crate::record::{read_entries, Entry, EventLevel};
+use crate::record::{read_outline, Entry, EventLevel, Outline};
 
 /// File name of the index in the records directory.
 pub const INDEX_FILE: &str = "index.json";
@@ -297,11 +297,11 @@ impl RecordsIndex {
         let mut interrupted = Vec::new();
         for e in &mut index.entries {
             if e.outcome == RecordOutcome::Running {
-                let read = read_entries(&dir.join(&e.mcap));
+                let read = read_outline(&dir.join(&e.mcap));
                 // The analysis writes the identification into the record
                 // as soon as it exists: a record that holds it keeps it.
                 let identified = match &read {
-                    Ok((_, _, entries, _)) if e.data_complete => identified(entries, &e.mcap),
+                    Ok(o) if e.data_complete => identified(&o.entries, &e.mcap),
                     _ => None,
                 };
                 (e.outcome, e.reason) = if let Some((outcome, reason, key_results)) = identified {
@@ -510,28 +510,21 @@ fn files_size(dir: &Path, e: &IndexEntry) -> u64 {
 
 /// What the MCAP reader gets back from a (possibly truncated) record.
 fn recover(path: &Path) -> Recovered {
-    recovered_of(read_entries(path))
+    recovered_of(read_outline(path))
 }
 
-/// [`Recovered`] from what [`read_entries`] returned.
-fn recovered_of(read: Result<crate::record::Entries, crate::record::RecordError>) -> Recovered {
+/// [`Recovered`] from what [`read_outline`] returned.
+fn recovered_of(read: Result<Outline, crate::record::RecordError>) -> Recovered {
     match read {
-        Ok((_, _, entries, recovery)) => {
-            let last_t_ns = entries.iter().map(Entry::t_ns).max().unwrap_or(0);
-            let messages: u64 = match &recovery {
+        Ok(o) => {
+            let messages = match &o.recovery {
                 Some(r) => r.messages,
-                None => entries
-                    .iter()
-                    .map(|e| match e {
-                        Entry::Samples { values, .. } => values.len() as u64,
-                        _ => 1,
-                    })
-                    .sum(),
+                None => o.samples + o.entries.len() as u64,
             };
             Recovered {
                 messages,
-                last_t_s: last_t_ns as f64 * 1e-9,
-                damage: recovery.map(|r| r.reason),
+                last_t_s: o.last_t_ns as f64 * 1e-9,
+                damage: o.recovery.map(|r| r.reason),
             }
         }
         Err(e) => Recovered {
@@ -555,8 +548,8 @@ fn entry_from_file(dir: &Path, path: &Path) -> IndexEntry {
         .unwrap_or("unnamed")
         .to_string();
     let mcap = format!("{name}.mcap");
-    let read = read_entries(path).ok();
-    let meta = read.as_ref().map(|(m, ..)| m);
+    let read = read_outline(path).ok();
+    let meta = read.as_ref().map(|o| &o.meta);
     let modified = std::fs::metadata(path)
         .and_then(|m| m.modified())
         .unwrap_or(UNIX_EPOCH);
@@ -571,7 +564,11 @@ fn entry_from_file(dir: &Path, path: &Path) -> IndexEntry {
     let svg = format!("{name}.svg");
     let residuals_svg = format!("{name}.residuals.svg");
     let (outcome, reason, key_results) = match &read {
-        Some((_, _, entries, None)) => outcome_of(entries),
+        Some(Outline {
+            entries,
+            recovery: None,
+            ..
+        }) => outcome_of(entries),
         _ => (
             RecordOutcome::Interrupted,
             Some("found in the records directory without an index entry".into()),
@@ -806,7 +803,13 @@ mod tests {
                 .rev()
                 .find(|&n| {
                     std::fs::write(path, &bytes[..n]).unwrap();
-                    matches!(read_entries(path), Ok((_, _, _, Some(_))))
+                    matches!(
+                        read_outline(path),
+                        Ok(Outline {
+                            recovery: Some(_),
+                            ..
+                        })
+                    )
                 })
                 .unwrap();
             std::fs::write(path, &bytes[..n]).unwrap();
