@@ -148,6 +148,8 @@ pub fn read_entries(path: &Path) -> Result<Entries, RecordError> {
 pub struct Outline {
     /// The test's metadata.
     pub meta: TestMeta,
+    /// The sample channels (the list [`Entry::Samples`] indexes into).
+    pub channels: Vec<ChannelSpec>,
     /// Every entry but the samples, in file order.
     pub entries: Vec<Entry>,
     /// The sample values read.
@@ -184,14 +186,35 @@ impl EntrySink for OutlineSink {
 /// interrupted record at start-up). Refused as [`read_entries`] refuses.
 pub fn read_outline(path: &Path) -> Result<Outline, RecordError> {
     let mut sink = OutlineSink::default();
-    let (meta, _, recovery) = read_into(path, &mut sink)?;
+    let (meta, channels, recovery) = read_into(path, &mut sink)?;
     Ok(Outline {
         meta,
+        channels,
         entries: sink.entries,
         samples: sink.samples,
         last_t_ns: sink.last_t_ns,
         recovery,
     })
+}
+
+/// Reads a record file, handing each entry to `each` as it is read (in
+/// file order, its time from the test's start), without keeping any: for
+/// work that streams a record (the export). Its metadata, sample channels
+/// (the list [`Entry::Samples`] indexes into) and what was lost if it is
+/// damaged. Refused as [`read_entries`] refuses.
+pub fn read_each(
+    path: &Path,
+    each: &mut dyn FnMut(Entry),
+) -> Result<(TestMeta, Vec<ChannelSpec>, Option<Recovery>), RecordError> {
+    struct Each<'f>(&'f mut dyn FnMut(Entry));
+    impl EntrySink for Each<'_> {
+        fn channel(&mut self, _: &ChannelSpec) {}
+
+        fn entry(&mut self, entry: Entry) {
+            (self.0)(entry);
+        }
+    }
+    read_into(path, &mut Each(each))
 }
 
 /// What a reading hands the channels and entries it reads to, in file

@@ -47,17 +47,38 @@ pub struct CsvFile {
 }
 
 /// The CSV files of `record`'s segments that hold data, in index order;
-/// `source` (the record's file name) goes into a comment.
-pub fn segment_files(record: &Record, source: &str) -> Vec<CsvFile> {
-    let mut out: Vec<CsvFile> = record
+/// `source` (the record's file name) goes into a comment. A DC segment's
+/// text is made when the iterator reaches it, so a long record's files are
+/// not all held at once.
+pub fn segment_files<'a>(
+    record: &'a Record,
+    source: &'a str,
+) -> impl Iterator<Item = CsvFile> + 'a {
+    let mut dc = record
         .segments
         .iter()
         .filter(|s| !s.time.is_empty())
-        .map(|s| CsvFile {
-            segment: s.index,
-            text: dc_text(s, source),
-        })
-        .collect();
+        .peekable();
+    let mut others = other_files(record, source).into_iter().peekable();
+    std::iter::from_fn(move || {
+        let dc_first = match (dc.peek(), others.peek()) {
+            (Some(s), Some(f)) => s.index <= f.segment,
+            (dc_next, _) => dc_next.is_some(),
+        };
+        if dc_first {
+            dc.next().map(|s| CsvFile {
+                segment: s.index,
+                text: dc_text(s, source),
+            })
+        } else {
+            others.next()
+        }
+    })
+}
+
+/// The files of `record`'s induction-machine segments, in index order.
+fn other_files(record: &Record, source: &str) -> Vec<CsvFile> {
+    let mut out: Vec<CsvFile> = Vec::new();
     // A segment's label as recorded, else `default`.
     let label = |index: u32, default: String| {
         record
@@ -298,7 +319,7 @@ mod tests {
             segments: vec![seg.clone()],
             ..Record::default()
         };
-        let files = segment_files(&record, "r.mcap");
+        let files: Vec<CsvFile> = segment_files(&record, "r.mcap").collect();
         assert_eq!(files.len(), 1);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("s.csv");
@@ -335,7 +356,7 @@ mod tests {
             operating_points: vec![point(0.03), point(1.0)],
             ..Record::default()
         };
-        let files = segment_files(&record, "r.mcap");
+        let files: Vec<CsvFile> = segment_files(&record, "r.mcap").collect();
         assert!(files[0].text.contains("torque_Nm"), "{}", files[0].text);
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("s.csv");
@@ -371,7 +392,7 @@ mod tests {
             ],
             ..Record::default()
         };
-        let text = &segment_files(&record, "r.mcap")[0].text;
+        let text = &segment_files(&record, "r.mcap").next().unwrap().text;
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("s.csv");
         std::fs::write(&path, text).unwrap();
@@ -408,7 +429,7 @@ mod tests {
         // empty).
         record.standard_tests.no_load[1].winding_temperature = None;
         record.standard_tests.locked_rotor = vec![reading(2, f64::NAN)];
-        let files = segment_files(&record, "r.mcap");
+        let files: Vec<CsvFile> = segment_files(&record, "r.mcap").collect();
         assert_eq!(
             files.iter().map(|f| f.segment).collect::<Vec<_>>(),
             [0, 1, 2]

@@ -18,7 +18,8 @@ pub mod table;
 
 use std::path::{Path, PathBuf};
 
-use super::{build_record, read_entries, RecordError, Resolution};
+use super::{read_each, read_outline, read_record, RecordError, Resolution};
+use table::{segment_spans, TableRows};
 
 /// What can go wrong in an export.
 #[derive(Debug, thiserror::Error)]
@@ -104,20 +105,39 @@ pub fn export_record(
         move |source| ExportError::Io { path, source }
     };
     std::fs::create_dir_all(out_dir).map_err(io(out_dir))?;
-    let (meta, channels, entries, recovery) = read_entries(record_path)?;
+    // The markers first (a row's segment is known once its segment's
+    // end is), then the samples, written as they come: a long record is
+    // never held whole for the Parquet file.
+    let outline = read_outline(record_path)?;
+    let meta = outline.meta.clone();
     let mut out = Exported {
         meta: Some(meta.clone()),
-        recovery,
+        recovery: outline.recovery.clone(),
         ..Exported::default()
     };
     if formats.parquet {
         let path = out_dir.join(format!("{stem}.parquet"));
-        let table = table::SampleTable::build(&channels, &entries);
-        parquet::write_parquet(&path, &table, &meta)?;
+        let mut rows = TableRows::new(&outline.channels, segment_spans(&outline.entries));
+        let mut file = parquet::ParquetFile::create(&path, &rows.take(), &meta)?;
+        let mut failed = None;
+        read_each(record_path, &mut |entry| {
+            if failed.is_some() {
+                return;
+            }
+            rows.push(&entry);
+            if rows.rows() >= parquet::ROW_GROUP_ROWS {
+                failed = file.write(&rows.take()).err();
+            }
+        })?;
+        if let Some(e) = failed {
+            return Err(e);
+        }
+        file.write(&rows.finish())?;
+        file.close()?;
         out.parquet = Some(path);
     }
     if formats.csv {
-        let record = build_record(meta.clone(), channels, &entries, Resolution::Full);
+        let record = read_record(record_path, Resolution::Full)?;
         for file in csv::segment_files(&record, &source) {
             let path = out_dir.join(format!("{stem}.segment-{}.csv", file.segment));
             std::fs::write(&path, file.text).map_err(io(&path))?;

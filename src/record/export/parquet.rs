@@ -17,7 +17,7 @@
 //! large as its numbers.
 
 use std::fs::File;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use parquet::basic::{LogicalType, Repetition, TimeUnit, Type as PhysicalType};
@@ -33,68 +33,112 @@ use super::ExportError;
 use crate::record::{library_name, TestMeta, TestStart};
 
 /// Rows per row group: bounds the memory a reader needs per group.
-const ROW_GROUP_ROWS: usize = 1 << 18;
+pub const ROW_GROUP_ROWS: usize = 1 << 18;
 
 /// Writes `table` of the record described by `meta` to `path`
 /// (replacing a file there).
 pub fn write_parquet(path: &Path, table: &SampleTable, meta: &TestMeta) -> Result<(), ExportError> {
-    let start = TestStart::parse_rfc3339(&meta.started_at);
-    let pq = |source: ParquetError| ExportError::Parquet {
-        path: path.to_path_buf(),
-        source,
-    };
-    let file = File::create(path).map_err(|source| ExportError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    let props = WriterProperties::builder()
-        .set_created_by(library_name())
-        .set_key_value_metadata(Some(key_values(table, meta)))
-        .build();
-    let mut writer =
-        SerializedFileWriter::new(file, schema(table, start.is_some())?, Arc::new(props))
-            .map_err(pq)?;
-    for from in (0..table.rows()).step_by(ROW_GROUP_ROWS) {
-        let rows = from..(from + ROW_GROUP_ROWS).min(table.rows());
-        let mut group = writer.next_row_group().map_err(pq)?;
-        let mut column = |write: &mut dyn FnMut(
-            &mut parquet::file::writer::SerializedColumnWriter<'_>,
-        ) -> Result<usize, ParquetError>|
-         -> Result<(), ParquetError> {
-            let mut c = group.next_column()?.expect("a column per schema field");
-            write(&mut c)?;
-            c.close()
-        };
-        let times: Vec<f64> = table.t_ns[rows.clone()]
-            .iter()
-            .map(|&t| t as f64 * 1e-9)
-            .collect();
-        column(&mut |c| c.typed::<DoubleType>().write_batch(&times, None, None)).map_err(pq)?;
-        if let Some(start) = start {
-            let wall: Vec<i64> = table.t_ns[rows.clone()]
-                .iter()
-                .map(|&t| i64::try_from(start.unix_ns().saturating_add(t)).unwrap_or(i64::MAX))
-                .collect();
-            column(&mut |c| c.typed::<Int64Type>().write_batch(&wall, None, None)).map_err(pq)?;
-        }
-        let (values, levels) = nullable(&table.segment[rows.clone()], |s| s as i32);
-        column(&mut |c| {
-            c.typed::<Int32Type>()
-                .write_batch(&values, Some(&levels), None)
+    let mut file = ParquetFile::create(path, table, meta)?;
+    file.write(table)?;
+    file.close()
+}
+
+/// A Parquet file being written, a row group at a time.
+pub struct ParquetFile {
+    path: PathBuf,
+    start: Option<TestStart>,
+    writer: SerializedFileWriter<File>,
+}
+
+impl ParquetFile {
+    /// Creates `path` (replacing a file there) for the columns of `table`
+    /// (its rows are not written) of the record described by `meta`.
+    pub fn create(
+        path: &Path,
+        table: &SampleTable,
+        meta: &TestMeta,
+    ) -> Result<ParquetFile, ExportError> {
+        let start = TestStart::parse_rfc3339(&meta.started_at);
+        let file = File::create(path).map_err(|source| ExportError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let props = WriterProperties::builder()
+            .set_created_by(library_name())
+            .set_key_value_metadata(Some(key_values(table, meta)))
+            .build();
+        let writer =
+            SerializedFileWriter::new(file, schema(table, start.is_some())?, Arc::new(props))
+                .map_err(parquet_error(path))?;
+        Ok(ParquetFile {
+            path: path.to_path_buf(),
+            start,
+            writer,
         })
-        .map_err(pq)?;
-        for channel in &table.channels {
-            let (values, levels) = nullable(&channel.cells[rows.clone()], |v| v);
+    }
+
+    /// Writes the rows of `table` (the columns [`ParquetFile::create`]
+    /// was given), in row groups of at most [`ROW_GROUP_ROWS`].
+    pub fn write(&mut self, table: &SampleTable) -> Result<(), ExportError> {
+        let pq = parquet_error(&self.path);
+        let start = self.start;
+        for from in (0..table.rows()).step_by(ROW_GROUP_ROWS) {
+            let rows = from..(from + ROW_GROUP_ROWS).min(table.rows());
+            let mut group = self.writer.next_row_group().map_err(&pq)?;
+            let mut column = |write: &mut dyn FnMut(
+                &mut parquet::file::writer::SerializedColumnWriter<'_>,
+            ) -> Result<usize, ParquetError>|
+             -> Result<(), ParquetError> {
+                let mut c = group.next_column()?.expect("a column per schema field");
+                write(&mut c)?;
+                c.close()
+            };
+            let times: Vec<f64> = table.t_ns[rows.clone()]
+                .iter()
+                .map(|&t| t as f64 * 1e-9)
+                .collect();
+            column(&mut |c| c.typed::<DoubleType>().write_batch(&times, None, None))
+                .map_err(&pq)?;
+            if let Some(start) = start {
+                let wall: Vec<i64> = table.t_ns[rows.clone()]
+                    .iter()
+                    .map(|&t| i64::try_from(start.unix_ns().saturating_add(t)).unwrap_or(i64::MAX))
+                    .collect();
+                column(&mut |c| c.typed::<Int64Type>().write_batch(&wall, None, None))
+                    .map_err(&pq)?;
+            }
+            let (values, levels) = nullable(&table.segment[rows.clone()], |s| s as i32);
             column(&mut |c| {
-                c.typed::<DoubleType>()
+                c.typed::<Int32Type>()
                     .write_batch(&values, Some(&levels), None)
             })
-            .map_err(pq)?;
+            .map_err(&pq)?;
+            for channel in &table.channels {
+                let (values, levels) = nullable(&channel.cells[rows.clone()], |v| v);
+                column(&mut |c| {
+                    c.typed::<DoubleType>()
+                        .write_batch(&values, Some(&levels), None)
+                })
+                .map_err(&pq)?;
+            }
+            group.close().map_err(&pq)?;
         }
-        group.close().map_err(pq)?;
+        Ok(())
     }
-    writer.close().map_err(pq)?;
-    Ok(())
+
+    /// Finishes the file.
+    pub fn close(self) -> Result<(), ExportError> {
+        self.writer.close().map_err(parquet_error(&self.path))?;
+        Ok(())
+    }
+}
+
+/// The [`ExportError`] of a Parquet failure writing `path`.
+fn parquet_error(path: &Path) -> impl Fn(ParquetError) -> ExportError + '_ {
+    move |source| ExportError::Parquet {
+        path: path.to_path_buf(),
+        source,
+    }
 }
 
 /// The present values of `cells` and the definition level of every cell

@@ -15,6 +15,9 @@
 //!   two segments is in both, so it has a row in each: filtering the
 //!   table on one segment gives exactly the instants identification sees
 //!   in it.
+//!
+//! [`TableRows`] builds the table as the entries come, so the export
+//! writes a long record in row groups without holding it whole.
 
 use std::collections::BTreeMap;
 
@@ -56,62 +59,119 @@ impl SampleTable {
 
     /// The table of `entries` recorded on `channels`.
     pub fn build(channels: &[ChannelSpec], entries: &[Entry]) -> SampleTable {
-        // One row per instant first: readings of one instant may come in
-        // several entries (an event between them).
-        let mut instants: Vec<u64> = Vec::new();
-        let mut cells: Vec<Vec<Option<f64>>> = vec![Vec::new(); channels.len()];
+        let mut rows = TableRows::new(channels, segment_spans(entries));
         for e in entries {
-            let Entry::Samples { t_ns, values } = e else {
-                continue;
-            };
-            if instants.last() != Some(t_ns) {
-                instants.push(*t_ns);
-                for c in &mut cells {
-                    c.push(None);
-                }
-            }
-            for &(index, value) in values {
-                if let Some(column) = cells.get_mut(index) {
-                    if value.is_finite() {
-                        *column.last_mut().expect("a row was pushed") = Some(value);
-                    }
-                }
-            }
+            rows.push(e);
         }
-        let spans = spans(entries);
-        let mut table = SampleTable {
+        rows.finish()
+    }
+
+    /// An empty table with the columns of `channels`.
+    pub fn empty(channels: &[ChannelSpec]) -> SampleTable {
+        SampleTable {
             channels: channels
                 .iter()
                 .map(|c| ChannelColumn {
                     name: column_name(c),
                     topic: c.topic.clone(),
                     unit: c.unit.clone(),
-                    cells: Vec::with_capacity(instants.len()),
+                    cells: Vec::new(),
                 })
                 .collect(),
             ..SampleTable::default()
+        }
+    }
+}
+
+/// Builds a [`SampleTable`] from entries as they come, a row per instant
+/// and segment, so that a long record's table can be written in pieces
+/// ([`TableRows::take`]) rather than held whole.
+#[derive(Debug, Clone)]
+pub struct TableRows {
+    /// The columns' channels.
+    channels: Vec<ChannelSpec>,
+    /// Each segment's `start..=end`, ns (see [`segment_spans`]).
+    spans: BTreeMap<u32, (u64, u64)>,
+    /// The instant being read and its cells, one per channel.
+    open: Option<(u64, Vec<Option<f64>>)>,
+    /// The rows of the instants read before it.
+    table: SampleTable,
+}
+
+impl TableRows {
+    /// Rows of `channels` in the segments of `spans`
+    /// ([`segment_spans`] of the record's markers).
+    pub fn new(channels: &[ChannelSpec], spans: BTreeMap<u32, (u64, u64)>) -> TableRows {
+        TableRows {
+            channels: channels.to_vec(),
+            spans,
+            open: None,
+            table: SampleTable::empty(channels),
+        }
+    }
+
+    /// Takes one entry (only samples make rows). Readings of one instant
+    /// may come in several entries (an event between them): they make one
+    /// row.
+    pub fn push(&mut self, entry: &Entry) {
+        let Entry::Samples { t_ns, values } = entry else {
+            return;
         };
-        for (row, &t) in instants.iter().enumerate() {
-            let mut inside = spans
-                .iter()
-                .filter(|(_, &(start, end))| start <= t && t <= end)
-                .map(|(&index, _)| Some(index))
-                .peekable();
-            let none = [None];
-            let segments: Vec<Option<u32>> = if inside.peek().is_some() {
-                inside.collect()
-            } else {
-                none.to_vec()
-            };
-            for segment in segments {
-                table.t_ns.push(t);
-                table.segment.push(segment);
-                for (column, values) in table.channels.iter_mut().zip(&cells) {
-                    column.cells.push(values[row]);
+        if self.open.as_ref().is_none_or(|(t, _)| t != t_ns) {
+            self.close();
+            self.open = Some((*t_ns, vec![None; self.table.channels.len()]));
+        }
+        let (_, cells) = self.open.as_mut().expect("an instant is open");
+        for &(index, value) in values {
+            if let Some(cell) = cells.get_mut(index) {
+                if value.is_finite() {
+                    *cell = Some(value);
                 }
             }
         }
-        table
+    }
+
+    /// The rows of the instants read before the one being read.
+    pub fn rows(&self) -> usize {
+        self.table.rows()
+    }
+
+    /// Hands over the rows so far (the instant being read stays).
+    pub fn take(&mut self) -> SampleTable {
+        std::mem::replace(&mut self.table, SampleTable::empty(&self.channels))
+    }
+
+    /// The rows not taken yet, the last instant's included.
+    pub fn finish(mut self) -> SampleTable {
+        self.close();
+        self.table
+    }
+
+    /// Makes the open instant its rows: one per segment it lies in, one
+    /// with no segment when it lies in none.
+    fn close(&mut self) {
+        let Some((t, cells)) = self.open.take() else {
+            return;
+        };
+        let mut inside = self
+            .spans
+            .iter()
+            .filter(|(_, &(start, end))| start <= t && t <= end)
+            .map(|(&index, _)| Some(index))
+            .peekable();
+        let none = [None];
+        let segments: Vec<Option<u32>> = if inside.peek().is_some() {
+            inside.collect()
+        } else {
+            none.to_vec()
+        };
+        for segment in segments {
+            self.table.t_ns.push(t);
+            self.table.segment.push(segment);
+            for (column, &cell) in self.table.channels.iter_mut().zip(&cells) {
+                column.cells.push(cell);
+            }
+        }
     }
 }
 
@@ -126,7 +186,7 @@ pub fn column_name(c: &ChannelSpec) -> String {
 
 /// Each segment's `start..=end` in ns, by index: the first start, the last
 /// end, open to the end of the record without one (the reader's rule).
-fn spans(entries: &[Entry]) -> BTreeMap<u32, (u64, u64)> {
+pub fn segment_spans(entries: &[Entry]) -> BTreeMap<u32, (u64, u64)> {
     let mut spans: BTreeMap<u32, (u64, Option<u64>)> = BTreeMap::new();
     for e in entries {
         let Entry::Segment { t_ns, marker } = e else {
@@ -189,5 +249,25 @@ mod tests {
             t.channels[1].cells,
             vec![Some(12.0), None, Some(6.0), Some(6.0), None]
         );
+
+        // Taken in pieces as the entries come, the rows are the same: an
+        // instant read across a take stays one row.
+        for cut in 0..entries.len() {
+            let mut rows = TableRows::new(&channels, segment_spans(&entries));
+            for e in &entries[..cut] {
+                rows.push(e);
+            }
+            let mut first = rows.take();
+            for e in &entries[cut..] {
+                rows.push(e);
+            }
+            let rest = rows.finish();
+            first.t_ns.extend(rest.t_ns);
+            first.segment.extend(rest.segment);
+            for (a, b) in first.channels.iter_mut().zip(rest.channels) {
+                a.cells.extend(b.cells);
+            }
+            assert_eq!(first, t, "taken after {cut} entries");
+        }
     }
 }
