@@ -47,7 +47,8 @@ pub use csv_im_tests::{
 pub use error::{LoadError, RecordError};
 pub use files::load_record_files;
 pub use reader::{
-    build_record, read_each, read_entries, read_mcap, read_outline, read_record, Entries, Outline,
+    build_record, read_each, read_entries, read_mcap, read_outline, read_record, refuse_if_empty,
+    Entries, Outline,
 };
 pub use recover::{recover_record, Recovered, DAMAGED_SUFFIX};
 pub use start::TestStart;

@@ -106,17 +106,24 @@ pub fn read_mcap(path: &Path) -> Result<Record, RecordError> {
 pub fn read_record(path: &Path, resolution: Resolution) -> Result<Record, RecordError> {
     let mut builder = RecordBuilder::new(None, Vec::new()).resolution(resolution);
     let (meta, _, recovery) = read_into(path, &mut builder)?;
-    if let Some(r) = recovery.as_ref().filter(|r| r.messages == 0) {
-        return Err(RecordError::Damaged {
-            path: path.to_path_buf(),
-            offset: r.offset,
-            reason: format!("{}; not one message before the damage", r.reason),
-        });
-    }
+    refuse_if_empty(path, recovery.as_ref())?;
     builder.set_meta(meta);
     let mut record = builder.finish();
     record.recovery = recovery;
     Ok(record)
+}
+
+/// Refuses a damaged file with not one message before the damage
+/// ([`RecordError::Damaged`]): there is nothing to identify or export.
+pub fn refuse_if_empty(path: &Path, recovery: Option<&Recovery>) -> Result<(), RecordError> {
+    match recovery.filter(|r| r.messages == 0) {
+        Some(r) => Err(RecordError::Damaged {
+            path: path.to_path_buf(),
+            offset: r.offset,
+            reason: format!("{}; not one message before the damage", r.reason),
+        }),
+        None => Ok(()),
+    }
 }
 
 /// The [`Record`] of what [`read_entries`] read (through

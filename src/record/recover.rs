@@ -24,7 +24,7 @@ use mcap::{Compression, WriteOptions};
 
 use super::error::RecordError;
 use super::mcap_walk::walk_records;
-use super::reader::read_entries;
+use super::reader::{read_outline, refuse_if_empty};
 use super::schema::{METADATA_RECOVERY, RECOVERY_MESSAGES, RECOVERY_OFFSET, RECOVERY_REASON};
 use super::writer::library_name;
 
@@ -54,21 +54,15 @@ pub enum Recovered {
 /// the cut file moved to `<path>.damaged` once the copy is complete. A
 /// whole file is left alone ([`Recovered::Whole`]); a file that is not a
 /// motorbench record, or has not one message before its damage, is
-/// refused as [`read_entries`] refuses it.
+/// refused as [`super::read_entries`] refuses it.
 pub fn recover_record(path: &Path, out: Option<&Path>) -> Result<Recovered, RecordError> {
-    let (_, _, _, recovery) = read_entries(path)?;
+    let recovery = read_outline(path)?.recovery;
     let bytes = std::fs::read(path).map_err(|e| RecordError::io(path, e))?;
     // Whole: no damage (a recovered copy reads with its cut file's).
     let Some(recovery) = recovery.filter(|_| walk_records(&bytes, &mut |_| {}).is_some()) else {
         return Ok(Recovered::Whole);
     };
-    if recovery.messages == 0 {
-        return Err(RecordError::Damaged {
-            path: path.to_path_buf(),
-            offset: recovery.offset,
-            reason: format!("{}; not one message before the damage", recovery.reason),
-        });
-    }
+    refuse_if_empty(path, Some(&recovery))?;
     let target = out.map_or_else(|| with_suffix(path, "recovering"), Path::to_path_buf);
     let note = BTreeMap::from([
         (RECOVERY_MESSAGES.to_string(), recovery.messages.to_string()),

@@ -18,7 +18,7 @@ pub mod table;
 
 use std::path::{Path, PathBuf};
 
-use super::{read_each, read_outline, read_record, RecordError, Resolution};
+use super::{read_each, read_outline, read_record, refuse_if_empty, RecordError, Resolution};
 use table::{segment_spans, TableRows};
 
 /// What can go wrong in an export.
@@ -109,6 +109,8 @@ pub fn export_record(
     // end is), then the samples, written as they come: a long record is
     // never held whole for the Parquet file.
     let outline = read_outline(record_path)?;
+    // A file cut before its first message has nothing to export.
+    refuse_if_empty(record_path, outline.recovery.as_ref())?;
     let meta = outline.meta.clone();
     let mut out = Exported {
         meta: Some(meta.clone()),
