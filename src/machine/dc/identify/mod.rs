@@ -49,8 +49,9 @@ pub(crate) use levels::white_noise;
 pub use levels::{is_coastdown, settled_level, unsettled_channel, SettledLevel};
 pub use moments::{MomentsEstimate, TransferCoefficients};
 pub use output_error::{
-    output_error, state_at_end, ChannelNoise, HeldOut, OutputErrorFit, OutputErrorOptions,
-    SegmentStart, SpeedReading, Uncertainty, PARAM_KEYS, PARAM_UNITS,
+    output_error, prepare_output_error, state_at_end, ChannelNoise, HeldOut, OutputErrorFit,
+    OutputErrorOptions, PreparedFit, SegmentStart, SpeedReading, Uncertainty, PARAM_KEYS,
+    PARAM_UNITS,
 };
 pub use pasek::{PasekEstimate, PasekReading};
 pub use plausibility::{

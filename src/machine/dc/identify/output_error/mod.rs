@@ -152,98 +152,14 @@ pub fn output_error(
     start: Option<DcParams>,
     options: &OutputErrorOptions,
 ) -> Result<OutputErrorFit, NotApplicable> {
-    let mut warnings = Vec::new();
-    let candidates: Vec<(usize, &DcSegment)> = record
-        .segments
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| {
-            s.time.len() >= MIN_SAMPLES
-                && s.kind != Some(SegmentKind::DcCoastdown)
-                && !is_coastdown(s)
-        })
-        .collect();
-    if candidates.is_empty() {
-        return Err(NotApplicable::Missing(format!(
-            "needs at least one step segment of {MIN_SAMPLES} samples or more"
-        )));
-    }
-    let segments: Vec<&DcSegment> = candidates.iter().map(|(_, s)| *s).collect();
-    super::equation_error::excites(&segments)?;
-    let noise = channel_noise(segments.iter().copied(), &mut warnings);
-    let sigma = [noise.current, noise.speed];
-
-    let mut ee_start = None;
-    let mut poorly_conditioned = false;
-    let statics = match start {
-        Some(p) => {
-            p.validate().map_err(|e| {
-                NotApplicable::Unidentifiable(format!("the start values are not a motor: {e}"))
-            })?;
-            p
-        }
-        None => match steady_state_start(record) {
-            Ok(p) => p,
-            Err(why) => {
-                let ee = super::equation_error(record, options.speed_reading).map_err(|e| {
-                    NotApplicable::Missing(format!(
-                        "no start values: {why}; the equation-error fit {e}"
-                    ))
-                })?;
-                warnings.push(format!(
-                    "output_error: started from the equation-error estimate ({why})"
-                ));
-                poorly_conditioned = ["La", "Ra", "K", "J"].iter().any(|key| {
-                    ee.warnings.iter().any(|w| {
-                        w.starts_with(&format!("equation_error: {key} is poorly determined"))
-                    })
-                });
-                ee_start = Some(ee.params);
-                ee.params
-            }
-        },
-    };
-    let statics = with_positive_friction(statics, &candidates);
-
-    let mut inputs = Vec::new();
-    for &(pos, seg) in &candidates {
-        match segment_start(record, pos, &statics, noise.speed) {
-            Ok((start, level_before)) => inputs.push(SegmentInput {
-                level_before,
-                ..SegmentInput::new(seg, start)
-            }),
-            Err(why) => warnings.push(format!(
-                "output_error: segment {} ({}) is not fitted: {why}",
-                seg.index, seg.label
-            )),
-        }
-    }
-    if inputs.is_empty() {
-        return Err(NotApplicable::Missing(
-            "no step segment starts from a known state".into(),
-        ));
-    }
-    let data = FitData {
-        segments: inputs,
-        sigma,
-        reading: options.speed_reading,
-    };
-    let start = match start.or(ee_start) {
-        Some(p) => p,
-        None => {
-            let (p, from_data) =
-                start::crude_start(&statics, &data.segments, sigma, options.speed_reading);
-            for (name, ok) in ["La", "J"].iter().zip(from_data) {
-                if !ok {
-                    warnings.push(format!(
-                        "output_error: no step changed the signals enough to estimate {name} for a start; \
-                         a generic start was used"
-                    ));
-                }
-            }
-            p
-        }
-    };
+    let PreparedFit {
+        candidates,
+        noise,
+        data,
+        start,
+        poorly_conditioned,
+        mut warnings,
+    } = prepare_output_error(record, start, options)?;
 
     let best = if poorly_conditioned {
         let (best, tried) = multi_start::best_of(&data, &start);
@@ -360,6 +276,165 @@ pub fn output_error(
         validation_nrmse,
         warnings,
         simulated,
+    })
+}
+
+/// The least-squares problem [`output_error`] minimises, ready for its
+/// optimiser: the segments fitted with their starts, the noise weights
+/// and the start values. [`PreparedFit::minimise`] runs the optimiser
+/// alone, which is what a comparison with another least-squares solver
+/// on the same problem times.
+pub struct PreparedFit<'a> {
+    /// The record's step segments (position in the record, segment).
+    candidates: Vec<(usize, &'a DcSegment)>,
+    noise: ChannelNoise,
+    data: FitData<'a>,
+    start: DcParams,
+    /// The start came from an equation-error fit that flags La, Ra, K
+    /// or J as poorly determined: the fit runs from several starts.
+    poorly_conditioned: bool,
+    warnings: Vec<String>,
+}
+
+impl PreparedFit<'_> {
+    /// The optimiser from the start values alone: the parameters at the
+    /// least-squares optimum and the residual evaluations it took (each
+    /// with its Jacobian). No intervals, no bias correction, no
+    /// validation; [`output_error`] adds those.
+    pub fn minimise(&self) -> (DcParams, usize) {
+        let best = minimise(&self.data, &self.start);
+        (best.params, best.evaluations)
+    }
+
+    /// Where the optimiser starts.
+    pub fn start(&self) -> DcParams {
+        self.start
+    }
+
+    /// The segments fitted, with how each starts.
+    pub fn segments(&self) -> Vec<(u32, SegmentStart)> {
+        self.data
+            .segments
+            .iter()
+            .map(|s| (s.seg.index, s.start))
+            .collect()
+    }
+
+    /// The noise levels the residuals are weighted by.
+    pub fn noise(&self) -> ChannelNoise {
+        self.noise
+    }
+}
+
+/// [`output_error`]'s problem on `record` before its minimisation: the
+/// step segments, their noise and starts, and the start values (`start`,
+/// or as [`output_error`] finds them).
+pub fn prepare_output_error<'a>(
+    record: &'a Record,
+    start: Option<DcParams>,
+    options: &OutputErrorOptions,
+) -> Result<PreparedFit<'a>, NotApplicable> {
+    let mut warnings = Vec::new();
+
+    let candidates: Vec<(usize, &DcSegment)> = record
+        .segments
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| {
+            s.time.len() >= MIN_SAMPLES
+                && s.kind != Some(SegmentKind::DcCoastdown)
+                && !is_coastdown(s)
+        })
+        .collect();
+    if candidates.is_empty() {
+        return Err(NotApplicable::Missing(format!(
+            "needs at least one step segment of {MIN_SAMPLES} samples or more"
+        )));
+    }
+    let segments: Vec<&DcSegment> = candidates.iter().map(|(_, s)| *s).collect();
+    super::equation_error::excites(&segments)?;
+    let noise = channel_noise(segments.iter().copied(), &mut warnings);
+    let sigma = [noise.current, noise.speed];
+
+    let mut ee_start = None;
+    let mut poorly_conditioned = false;
+    let statics = match start {
+        Some(p) => {
+            p.validate().map_err(|e| {
+                NotApplicable::Unidentifiable(format!("the start values are not a motor: {e}"))
+            })?;
+            p
+        }
+        None => match steady_state_start(record) {
+            Ok(p) => p,
+            Err(why) => {
+                let ee = super::equation_error(record, options.speed_reading).map_err(|e| {
+                    NotApplicable::Missing(format!(
+                        "no start values: {why}; the equation-error fit {e}"
+                    ))
+                })?;
+                warnings.push(format!(
+                    "output_error: started from the equation-error estimate ({why})"
+                ));
+                poorly_conditioned = ["La", "Ra", "K", "J"].iter().any(|key| {
+                    ee.warnings.iter().any(|w| {
+                        w.starts_with(&format!("equation_error: {key} is poorly determined"))
+                    })
+                });
+                ee_start = Some(ee.params);
+                ee.params
+            }
+        },
+    };
+    let statics = with_positive_friction(statics, &candidates);
+
+    let mut inputs = Vec::new();
+    for &(pos, seg) in &candidates {
+        match segment_start(record, pos, &statics, noise.speed) {
+            Ok((start, level_before)) => inputs.push(SegmentInput {
+                level_before,
+                ..SegmentInput::new(seg, start)
+            }),
+            Err(why) => warnings.push(format!(
+                "output_error: segment {} ({}) is not fitted: {why}",
+                seg.index, seg.label
+            )),
+        }
+    }
+    if inputs.is_empty() {
+        return Err(NotApplicable::Missing(
+            "no step segment starts from a known state".into(),
+        ));
+    }
+    let data = FitData {
+        segments: inputs,
+        sigma,
+        reading: options.speed_reading,
+    };
+    let start = match start.or(ee_start) {
+        Some(p) => p,
+        None => {
+            let (p, from_data) =
+                start::crude_start(&statics, &data.segments, sigma, options.speed_reading);
+            for (name, ok) in ["La", "J"].iter().zip(from_data) {
+                if !ok {
+                    warnings.push(format!(
+                        "output_error: no step changed the signals enough to estimate {name} for a start; \
+                         a generic start was used"
+                    ));
+                }
+            }
+            p
+        }
+    };
+
+    Ok(PreparedFit {
+        candidates,
+        noise,
+        data,
+        start,
+        poorly_conditioned,
+        warnings,
     })
 }
 

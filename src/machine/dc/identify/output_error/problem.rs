@@ -23,9 +23,11 @@ use std::cell::RefCell;
 use std::rc::Rc;
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt, TerminationReason};
-use nalgebra::{DMatrix, DVector, Dyn, OMatrix, Owned, SMatrix, SVector, Vector6, U6, U7};
+use nalgebra::{DMatrix, DVector, Dyn, Matrix6, OMatrix, Owned, SMatrix, SVector, Vector6, U6, U7};
 
-use super::simulation::{simulate_lanes, DrivenStep, SegmentInput, SpeedReading};
+use super::simulation::{
+    simulate_lanes, DrivenStep, LaneReadings, SegmentInput, SpeedReading, LANES,
+};
 use crate::identify::square_root::square_root_problem;
 use crate::model::DcParams;
 
@@ -101,29 +103,69 @@ impl FitData<'_> {
             // their rows of it.
             let mut lanes = Vec::with_capacity(params.len());
             let mut rows: Vec<&mut [f64]> = Vec::with_capacity(params.len());
+            let mut sets = Vec::with_capacity(params.len());
             for (l, (p, col)) in params.iter().zip(cols.iter_mut()).enumerate() {
                 if ok[l] {
                     match DrivenStep::new(p, input.dt) {
                         Ok(step) => {
                             lanes.push((*p, step));
                             rows.push(&mut col[at..at + 2 * n]);
+                            sets.push(l);
                         }
                         Err(_) => ok[l] = false,
                     }
                 }
             }
             let (y_i, y_w) = (&input.seg.current[..n], &input.seg.speed[..n]);
-            simulate_lanes(&lanes, input, self.reading, |j, k, i, w| {
-                let row = &mut rows[j][2 * k..2 * k + 2];
-                row[0] = (i - y_i[k]) * wi;
-                row[1] = (w - y_w[k]) * ww;
-            });
+            for ((lanes, rows), sets) in lanes
+                .chunks(LANES)
+                .zip(rows.chunks_mut(LANES))
+                .zip(sets.chunks(LANES))
+            {
+                let mut residuals = WeightedResiduals {
+                    rows,
+                    measured: [y_i, y_w],
+                    weight: [wi, ww],
+                    finite: [0.0; LANES],
+                };
+                simulate_lanes(lanes, input, self.reading, &mut residuals);
+                for (j, &l) in sets.iter().enumerate() {
+                    ok[l] &= residuals.finite[j] == 0.0;
+                }
+            }
             at += 2 * n;
         }
-        ok.iter()
-            .zip(cols.iter())
-            .map(|(ok, col)| *ok && col.iter().all(|v| v.is_finite()))
-            .collect()
+        ok
+    }
+}
+
+/// Each lane's weighted residuals of one segment into its rows: current,
+/// then speed, per sample.
+struct WeightedResiduals<'r, 'y> {
+    rows: &'r mut [&'y mut [f64]],
+    /// Measured current and speed.
+    measured: [&'y [f64]; 2],
+    /// `1/σ` of current and speed.
+    weight: [f64; 2],
+    /// Per lane, the sum of `0·x` over its residuals `x`: zero while
+    /// every one is finite, NaN from the first that is not (a check that
+    /// costs a vector addition per sample, not a pass over the rows).
+    finite: [f64; LANES],
+}
+
+impl LaneReadings for WeightedResiduals<'_, '_> {
+    #[inline(always)]
+    fn readings(&mut self, k: usize, current: &[f64; LANES], speed: &[f64; LANES]) {
+        let (y_i, y_w) = (self.measured[0][k], self.measured[1][k]);
+        let ri: [f64; LANES] = std::array::from_fn(|j| (current[j] - y_i) * self.weight[0]);
+        let rw: [f64; LANES] = std::array::from_fn(|j| (speed[j] - y_w) * self.weight[1]);
+        for j in 0..LANES {
+            self.finite[j] += ri[j] * 0.0 + rw[j] * 0.0;
+        }
+        for (j, row) in self.rows.iter_mut().enumerate() {
+            row[2 * k] = ri[j];
+            row[2 * k + 1] = rw[j];
+        }
     }
 }
 
@@ -269,12 +311,7 @@ impl<'d, 'a> OutputErrorProblem<'d, 'a> {
                 }
                 -FD_STEP
             };
-            let inv_h = 1.0 / h;
-            // Slices, not the vector's strided iterator: this loop runs
-            // over every row of every column and vectorises.
-            for (c, b) in column.iter_mut().zip(r.as_slice()) {
-                *c = (*c - b) * inv_h;
-            }
+            difference(column, r.as_slice(), 1.0 / h);
         }
         true
     }
@@ -329,8 +366,7 @@ impl<'d, 'a> OutputErrorProblem<'d, 'a> {
 /// [`square_root_problem`]); a non-finite linearisation is refused like a
 /// refused `x`.
 fn reduce(jac: &OMatrix<f64, Dyn, U6>, r: &DVector<f64>) -> (SVector<f64, 7>, SMatrix<f64, 7, 6>) {
-    let jtj = jac.tr_mul(jac);
-    let g = jac.tr_mul(r);
+    let (jtj, g) = normal_equations(jac, r);
     let r_norm_sq = if r.as_slice().iter().all(|v| v.is_finite()) {
         r.norm_squared()
     } else {
@@ -352,6 +388,102 @@ fn reduce(jac: &OMatrix<f64, Dyn, U6>, r: &DVector<f64>) -> (SVector<f64, 7>, SM
             (refused, SMatrix::zeros())
         }
     }
+}
+
+/// `column ← (column − base)·inv_h`: a Jacobian column from the residuals
+/// at a step and at the point, compiled for AVX where the processor has
+/// it (checked at run time; the same arithmetic either way).
+fn difference(column: &mut [f64], base: &[f64], inv_h: f64) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the processor has AVX, checked just above.
+        return unsafe { difference_avx(column, base, inv_h) };
+    }
+    difference_kernel(column, base, inv_h)
+}
+
+/// [`difference_kernel`] compiled for AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn difference_avx(column: &mut [f64], base: &[f64], inv_h: f64) {
+    difference_kernel(column, base, inv_h)
+}
+
+/// The body of [`difference`]: slices, not a vector's strided iterator,
+/// so the loop vectorises.
+#[inline(always)]
+fn difference_kernel(column: &mut [f64], base: &[f64], inv_h: f64) {
+    for (c, b) in column.iter_mut().zip(base) {
+        *c = (*c - b) * inv_h;
+    }
+}
+
+/// `JᵀJ` and `Jᵀr`, each entry the same to the bit as nalgebra's
+/// `tr_mul` gives it ([`dot`]), with `JᵀJ`'s lower triangle mirrored from
+/// the upper (a dot product is symmetric to the bit), in one function
+/// compiled for AVX where the processor has it (checked at run time).
+fn normal_equations(jac: &OMatrix<f64, Dyn, U6>, r: &DVector<f64>) -> (Matrix6<f64>, Vector6<f64>) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the processor has AVX, checked just above.
+        return unsafe { normal_equations_avx(jac, r) };
+    }
+    normal_equations_kernel(jac, r)
+}
+
+/// [`normal_equations_kernel`] compiled for AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn normal_equations_avx(
+    jac: &OMatrix<f64, Dyn, U6>,
+    r: &DVector<f64>,
+) -> (Matrix6<f64>, Vector6<f64>) {
+    normal_equations_kernel(jac, r)
+}
+
+/// The body of [`normal_equations`].
+#[inline(always)]
+fn normal_equations_kernel(
+    jac: &OMatrix<f64, Dyn, U6>,
+    r: &DVector<f64>,
+) -> (Matrix6<f64>, Vector6<f64>) {
+    let m = jac.nrows();
+    let column = |n: usize| &jac.as_slice()[n * m..(n + 1) * m];
+    let mut jtj = Matrix6::zeros();
+    for a in 0..NP {
+        for b in a..NP {
+            let d = dot(column(a), column(b));
+            jtj[(a, b)] = d;
+            jtj[(b, a)] = d;
+        }
+    }
+    let g = Vector6::from_fn(|n, _| dot(column(n), r.as_slice()));
+    (jtj, g)
+}
+
+/// `a·b` summed as nalgebra's `dot` sums a contiguous vector: eight
+/// running sums over blocks of eight, added pairwise (0 and 4, 1 and 5,
+/// …), then the rest one by one; so the same to the bit, in a loop the
+/// compiler vectorises for the processor at hand.
+#[inline(always)]
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let b = &b[..a.len()];
+    let mut acc = [0.0f64; 8];
+    let (blocks_a, blocks_b) = (a.chunks_exact(8), b.chunks_exact(8));
+    let (rest_a, rest_b) = (blocks_a.remainder(), blocks_b.remainder());
+    for (x, y) in blocks_a.zip(blocks_b) {
+        for l in 0..8 {
+            acc[l] += x[l] * y[l];
+        }
+    }
+    let mut sum = 0.0;
+    for l in 0..4 {
+        sum += acc[l] + acc[l + 4];
+    }
+    for (x, y) in rest_a.iter().zip(rest_b) {
+        sum += x * y;
+    }
+    sum
 }
 
 impl LeastSquaresProblem<f64, U7, U6> for OutputErrorProblem<'_, '_> {
@@ -537,6 +669,55 @@ mod tests {
         assert!((rj.tr_mul(&rj) - jtj).norm() < 1e-9 * jtj.norm());
         assert!((rj.tr_mul(&rr) - jtr).norm() < 1e-9 * jtr.norm());
         assert!((rr.norm() - r.norm()).abs() < 1e-9 * r.norm());
+    }
+
+    #[test]
+    fn a_lane_with_a_residual_that_is_not_finite_is_refused() {
+        let truth = DcParams::SEED_TABLE4_MOMENTS;
+        let mut segs = staircase(&truth, 5e-4);
+        let other = DcParams {
+            ra: truth.ra * 1.1,
+            ..truth
+        };
+        let m = data(&segs).len();
+        let lanes = |d: &FitData| {
+            let (mut a, mut b) = (vec![0.0; m], vec![0.0; m]);
+            d.residuals_lanes(&[&truth, &other], &mut [&mut a, &mut b])
+        };
+        assert_eq!(lanes(&data(&segs)), [true, true]);
+        // One reading in the third segment overflows: every lane's
+        // residual there is infinite.
+        segs[2].current[700] = f64::INFINITY;
+        assert_eq!(lanes(&data(&segs)), [false, false]);
+        segs[2].current[700] = f64::NAN;
+        assert_eq!(lanes(&data(&segs)), [false, false]);
+    }
+
+    #[test]
+    fn normal_equations_are_nalgebras_to_the_bit() {
+        // Lengths around the blocks of eight, values of every magnitude
+        // and sign.
+        for m in [1, 7, 8, 9, 31, 1000, 1003] {
+            let jac = OMatrix::<f64, Dyn, U6>::from_fn(m, |r, c| {
+                let x = ((r * 7919 + c * 104_729) % 1009) as f64 - 504.0;
+                x * 10f64.powi((r % 7) as i32 - 3) / (1.0 + c as f64)
+            });
+            let r = DVector::from_fn(m, |k, _| ((k * 31) % 17) as f64 * 0.37 - 3.1);
+            let (jtj, g) = normal_equations(&jac, &r);
+            let (want_jtj, want_g) = (jac.tr_mul(&jac), jac.tr_mul(&r));
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(
+                bits(jtj.as_slice()),
+                bits(want_jtj.as_slice()),
+                "JᵀJ, {m} rows"
+            );
+            assert_eq!(bits(g.as_slice()), bits(want_g.as_slice()), "Jᵀr, {m} rows");
+            assert_eq!(
+                bits(jtj.as_slice()),
+                bits(normal_equations_kernel(&jac, &r).0.as_slice()),
+                "the baseline kernel, {m} rows"
+            );
+        }
     }
 
     #[test]

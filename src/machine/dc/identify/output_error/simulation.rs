@@ -143,51 +143,194 @@ pub fn simulate(
     mut out: impl FnMut(f64, f64),
 ) -> Result<(), ParamError> {
     let step = DrivenStep::new(params, input.dt)?;
-    simulate_lanes(&[(params, step)], input, reading, |_, _, i, w| out(i, w));
+    let u = &input.seg.voltage;
+    let inv_dt = 1.0 / input.dt;
+    let interval = reading == SpeedReading::IntervalMean;
+    let (mut i, mut w) = first_sample(params, &step, input, interval, &mut out);
+    for &uk in u.iter().skip(1) {
+        let (ni, nw, dth) = step.step(i, w, uk);
+        (i, w) = (ni, nw);
+        out(ni, if interval { dth * inv_dt } else { nw });
+    }
     Ok(())
 }
 
-/// [`simulate`] for several parameter sets at once, in lockstep: one pass
-/// over the samples steps every lane, so the core overlaps the lanes'
-/// serial recursions (a forward-difference Jacobian's simulations do not
-/// depend on one another). Each lane does the lone simulation's
-/// arithmetic in its order, so its readings are the lone simulation's to
-/// the last bit; `out(lane, sample, current, speed reading)`.
+/// The state at a segment's first sample, as `input.start` says, and its
+/// reading handed to `out`.
+fn first_sample(
+    params: &DcParams,
+    step: &DrivenStep,
+    input: &SegmentInput,
+    interval: bool,
+    out: &mut impl FnMut(f64, f64),
+) -> (f64, f64) {
+    match input.start {
+        SegmentStart::Settled(u0) => {
+            let s = params.steady_state(u0);
+            out(s.current, s.speed);
+            (s.current, s.speed)
+        }
+        SegmentStart::FromRest => {
+            let (i, w, dth) = step.step(0.0, 0.0, input.seg.voltage[0]);
+            // As the steps after it: times the inverse of the interval.
+            out(i, if interval { dth * (1.0 / input.dt) } else { w });
+            (i, w)
+        }
+        SegmentStart::State { current, speed } => {
+            out(current, speed);
+            (current, speed)
+        }
+    }
+}
+
+/// Most parameter sets [`simulate_lanes`] steps at once: the point of a
+/// forward-difference Jacobian and its six steps, and one spare.
+pub const LANES: usize = 8;
+
+/// The coefficients of up to [`LANES`] [`DrivenStep`]s, one array per
+/// coefficient (lane `l` at index `l`), so that one sample's step of every
+/// lane is a handful of vector operations.
+struct LaneSteps {
+    a: [[[f64; LANES]; 2]; 3],
+    b: [[[f64; LANES]; 2]; 3],
+    tst: [f64; LANES],
+}
+
+impl LaneSteps {
+    /// `steps`, padded with copies of the first.
+    fn new(steps: &[&DrivenStep]) -> LaneSteps {
+        let at = |l: usize| steps[if l < steps.len() { l } else { 0 }];
+        LaneSteps {
+            a: std::array::from_fn(|r| {
+                std::array::from_fn(|c| std::array::from_fn(|l| at(l).a[r][c]))
+            }),
+            b: std::array::from_fn(|r| {
+                std::array::from_fn(|c| std::array::from_fn(|l| at(l).b[r][c]))
+            }),
+            tst: std::array::from_fn(|l| at(l).tst),
+        }
+    }
+
+    /// One step of every lane whose rotor turns (`w[l] ≠ 0` for every
+    /// `l`): [`DrivenStep::step`]'s turning branch, operation for
+    /// operation, so each lane gets the lone step's bits. Returns `Δθ`.
+    #[inline(always)]
+    fn step_turning(&self, i: &mut [f64; LANES], w: &mut [f64; LANES], u: f64) -> [f64; LANES] {
+        let (a, b) = (&self.a, &self.b);
+        let mut dth = [0.0; LANES];
+        for l in 0..LANES {
+            // w ≠ 0, so its sign is what `signum` gives.
+            let dir = 1.0f64.copysign(w[l]);
+            let t = self.tst[l] * dir;
+            let (il, wl) = (i[l], w[l]);
+            let ni = a[0][0][l] * il + a[0][1][l] * wl + b[0][0][l] * u + b[0][1][l] * t;
+            let nw = a[1][0][l] * il + a[1][1][l] * wl + b[1][0][l] * u + b[1][1][l] * t;
+            dth[l] = a[2][0][l] * il + a[2][1][l] * wl + b[2][0][l] * u + b[2][1][l] * t;
+            i[l] = ni;
+            w[l] = if nw * dir < 0.0 { 0.0 } else { nw };
+        }
+        dth
+    }
+}
+
+/// What [`simulate_lanes`] hands each sample's readings to. A closure
+/// `FnMut(sample, currents, speed readings)` is one; a type of its own
+/// can ask for its body to be inlined into the simulation's loop (a
+/// closure's call stays a call there).
+pub trait LaneReadings {
+    /// The readings of every lane at `sample`; entries at and beyond the
+    /// number of lanes are padding, to be ignored.
+    fn readings(&mut self, sample: usize, current: &[f64; LANES], speed: &[f64; LANES]);
+}
+
+impl<F: FnMut(usize, &[f64; LANES], &[f64; LANES])> LaneReadings for F {
+    fn readings(&mut self, sample: usize, current: &[f64; LANES], speed: &[f64; LANES]) {
+        self(sample, current, speed)
+    }
+}
+
+/// [`simulate`] for up to [`LANES`] parameter sets at once, in lockstep:
+/// one pass over the samples steps every lane (a forward-difference
+/// Jacobian's simulations do not depend on one another). While every
+/// rotor turns, a sample's step of all lanes is one set of vector
+/// operations (AVX where the processor has it, checked at run time);
+/// otherwise each lane takes the lone simulation's step. Each lane does
+/// the lone simulation's arithmetic in its order, so its readings are the
+/// lone simulation's to the last bit.
+///
+/// `out` gets every sample's readings, in order (see [`LaneReadings`]).
+///
+/// # Panics
+///
+/// With no lane or more than [`LANES`].
 pub fn simulate_lanes(
     lanes: &[(&DcParams, DrivenStep)],
     input: &SegmentInput,
     reading: SpeedReading,
-    mut out: impl FnMut(usize, usize, f64, f64),
+    out: &mut impl LaneReadings,
+) {
+    assert!(
+        !lanes.is_empty() && lanes.len() <= LANES,
+        "1 to {LANES} lanes, not {}",
+        lanes.len()
+    );
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx") {
+        // SAFETY: the processor has AVX, checked just above.
+        unsafe { lanes_avx(lanes, input, reading, out) };
+        return;
+    }
+    lanes_kernel(lanes, input, reading, out);
+}
+
+/// [`lanes_kernel`] compiled for AVX (4 lanes per vector operation; no
+/// fused multiply-add, so the arithmetic is the same).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+fn lanes_avx(
+    lanes: &[(&DcParams, DrivenStep)],
+    input: &SegmentInput,
+    reading: SpeedReading,
+    out: &mut impl LaneReadings,
+) {
+    lanes_kernel(lanes, input, reading, out);
+}
+
+/// The body of [`simulate_lanes`].
+#[inline(always)]
+fn lanes_kernel(
+    lanes: &[(&DcParams, DrivenStep)],
+    input: &SegmentInput,
+    reading: SpeedReading,
+    out: &mut impl LaneReadings,
 ) {
     let u = &input.seg.voltage;
     let inv_dt = 1.0 / input.dt;
     let interval = reading == SpeedReading::IntervalMean;
-    let mut state: Vec<(f64, f64)> = lanes
-        .iter()
-        .enumerate()
-        .map(|(l, (params, step))| match input.start {
-            SegmentStart::Settled(u0) => {
-                let s = params.steady_state(u0);
-                out(l, 0, s.current, s.speed);
-                (s.current, s.speed)
-            }
-            SegmentStart::FromRest => {
-                let (i, w, dth) = step.step(0.0, 0.0, u[0]);
-                out(l, 0, i, if interval { dth * inv_dt } else { w });
-                (i, w)
-            }
-            SegmentStart::State { current, speed } => {
-                out(l, 0, current, speed);
-                (current, speed)
-            }
-        })
-        .collect();
+    let steps: Vec<&DrivenStep> = lanes.iter().map(|(_, s)| s).collect();
+    let block = LaneSteps::new(&steps);
+    let (mut i, mut w) = ([0.0; LANES], [0.0; LANES]);
+    let (mut ci, mut cw) = ([0.0; LANES], [0.0; LANES]);
+    for l in 0..LANES {
+        let (params, step) = &lanes[if l < lanes.len() { l } else { 0 }];
+        (i[l], w[l]) = first_sample(params, step, input, interval, &mut |a, b| {
+            (ci[l], cw[l]) = (a, b);
+        });
+    }
+    out.readings(0, &ci, &cw);
     for (k, &uk) in u.iter().enumerate().skip(1) {
-        for (l, ((_, step), (i, w))) in lanes.iter().zip(state.iter_mut()).enumerate() {
-            let (ni, nw, dth) = step.step(*i, *w, uk);
-            (*i, *w) = (ni, nw);
-            out(l, k, ni, if interval { dth * inv_dt } else { nw });
-        }
+        let dth = if w.iter().all(|w| *w != 0.0) {
+            block.step_turning(&mut i, &mut w, uk)
+        } else {
+            let mut dth = [0.0; LANES];
+            for l in 0..LANES {
+                let (ni, nw, d) = steps[if l < steps.len() { l } else { 0 }].step(i[l], w[l], uk);
+                (i[l], w[l], dth[l]) = (ni, nw, d);
+            }
+            dth
+        };
+        let speed = if interval { dth.map(|d| d * inv_dt) } else { w };
+        out.readings(k, &i, &speed);
     }
 }
 
@@ -371,11 +514,18 @@ mod tests {
     fn every_lane_is_its_parameter_set_alone() {
         let base = DcParams::SEED_TABLE4_MOMENTS;
         let dt = 5e-4;
-        let u: Vec<f64> = (0..2000)
-            .map(|k| if k < 700 { 60.0 } else { 248.0 })
+        // Up, further up, then reversed: the rotor breaks away, turns,
+        // stops (the speed clamped at zero, held by Tst) and reverses.
+        let u: Vec<f64> = (0..2400)
+            .map(|k| match k {
+                0..700 => 60.0,
+                700..1400 => 248.0,
+                _ => -150.0,
+            })
             .collect();
         let (seg, _) = reference(&base, true, &u, dt);
-        let sets: Vec<DcParams> = [1.0, 1.1, 0.9, 1.3]
+        // As many sets as a forward-difference Jacobian's lanes.
+        let sets: Vec<DcParams> = [1.0, 1.1, 0.9, 1.3, 0.7, 1.05, 1.6]
             .iter()
             .enumerate()
             .map(|(n, f)| DcParams {
@@ -398,16 +548,40 @@ mod tests {
                 .iter()
                 .map(|p| (p, DrivenStep::new(p, input.dt).unwrap()))
                 .collect();
-            let mut got = vec![Vec::new(); sets.len()];
-            simulate_lanes(&lanes, &input, SpeedReading::IntervalMean, |l, k, i, w| {
-                got[l].push((k, i.to_bits(), w.to_bits()))
-            });
+            // The dispatched kernel (AVX where the processor has it) and
+            // the kernel as the baseline build compiles it.
+            let mut dispatched = vec![Vec::new(); sets.len()];
+            simulate_lanes(
+                &lanes,
+                &input,
+                SpeedReading::IntervalMean,
+                &mut |k, i: &[f64; LANES], w: &[f64; LANES]| {
+                    for (l, got) in dispatched.iter_mut().enumerate() {
+                        got.push((k, i[l].to_bits(), w[l].to_bits()));
+                    }
+                },
+            );
+            let mut baseline = vec![Vec::new(); sets.len()];
+            lanes_kernel(
+                &lanes,
+                &input,
+                SpeedReading::IntervalMean,
+                &mut |k, i: &[f64; LANES], w: &[f64; LANES]| {
+                    for (l, got) in baseline.iter_mut().enumerate() {
+                        got.push((k, i[l].to_bits(), w[l].to_bits()));
+                    }
+                },
+            );
             for (l, p) in sets.iter().enumerate() {
                 let (i, w) = simulate_series(p, &input, SpeedReading::IntervalMean).unwrap();
                 let alone: Vec<(usize, u64, u64)> = (0..i.len())
                     .map(|k| (k, i[k].to_bits(), w[k].to_bits()))
                     .collect();
-                assert_eq!(got[l], alone, "lane {l} from {start:?}");
+                assert_eq!(dispatched[l], alone, "lane {l} from {start:?}");
+                assert_eq!(
+                    baseline[l], alone,
+                    "lane {l} from {start:?}, baseline kernel"
+                );
             }
         }
     }
