@@ -14,6 +14,7 @@ pub(crate) mod least_squares;
 mod nrmse;
 pub(crate) mod square_root;
 pub(crate) mod stats;
+pub(crate) mod vector;
 
 pub use crate::machine::dc::identify::*;
 pub use crate::machine::im::identify::*;

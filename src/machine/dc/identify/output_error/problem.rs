@@ -29,6 +29,7 @@ use super::simulation::{
     simulate_lanes, DrivenStep, LaneReadings, SegmentInput, SpeedReading, LANES,
 };
 use crate::identify::square_root::square_root_problem;
+use crate::identify::vector::with_avx;
 use crate::model::DcParams;
 
 /// Number of fitted parameters.
@@ -391,54 +392,29 @@ fn reduce(jac: &OMatrix<f64, Dyn, U6>, r: &DVector<f64>) -> (SVector<f64, 7>, SM
 }
 
 /// `column ← (column − base)·inv_h`: a Jacobian column from the residuals
-/// at a step and at the point, compiled for AVX where the processor has
-/// it (checked at run time; the same arithmetic either way).
+/// at a step and at the point (vectorised, AVX where the processor has
+/// it: [`with_avx`]).
 fn difference(column: &mut [f64], base: &[f64], inv_h: f64) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx") {
-        // SAFETY: the processor has AVX, checked just above.
-        return unsafe { difference_avx(column, base, inv_h) };
-    }
-    difference_kernel(column, base, inv_h)
-}
-
-/// [`difference_kernel`] compiled for AVX.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-fn difference_avx(column: &mut [f64], base: &[f64], inv_h: f64) {
-    difference_kernel(column, base, inv_h)
-}
-
-/// The body of [`difference`]: slices, not a vector's strided iterator,
-/// so the loop vectorises.
-#[inline(always)]
-fn difference_kernel(column: &mut [f64], base: &[f64], inv_h: f64) {
-    for (c, b) in column.iter_mut().zip(base) {
-        *c = (*c - b) * inv_h;
-    }
+    with_avx(
+        #[inline(always)]
+        || {
+            // Slices, not a vector's strided iterator, so the loop vectorises.
+            for (c, b) in column.iter_mut().zip(base) {
+                *c = (*c - b) * inv_h;
+            }
+        },
+    )
 }
 
 /// `JᵀJ` and `Jᵀr`, each entry the same to the bit as nalgebra's
-/// `tr_mul` gives it ([`dot`]), with `JᵀJ`'s lower triangle mirrored from
-/// the upper (a dot product is symmetric to the bit), in one function
-/// compiled for AVX where the processor has it (checked at run time).
+/// `tr_mul` gives it ([`DotSums`]), with `JᵀJ`'s lower triangle mirrored
+/// from the upper (a dot product is symmetric to the bit); AVX where the
+/// processor has it ([`with_avx`]).
 fn normal_equations(jac: &OMatrix<f64, Dyn, U6>, r: &DVector<f64>) -> (Matrix6<f64>, Vector6<f64>) {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx") {
-        // SAFETY: the processor has AVX, checked just above.
-        return unsafe { normal_equations_avx(jac, r) };
-    }
-    normal_equations_kernel(jac, r)
-}
-
-/// [`normal_equations_kernel`] compiled for AVX.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-fn normal_equations_avx(
-    jac: &OMatrix<f64, Dyn, U6>,
-    r: &DVector<f64>,
-) -> (Matrix6<f64>, Vector6<f64>) {
-    normal_equations_kernel(jac, r)
+    with_avx(
+        #[inline(always)]
+        || normal_equations_kernel(jac, r),
+    )
 }
 
 /// Rows per block of [`normal_equations_kernel`]: the seven columns' block

@@ -8,6 +8,7 @@
 //! the driven branch of its exact step in scalars (friction direction,
 //! stiction, stop on a sign change). A unit test holds the two equal.
 
+use crate::identify::vector::with_avx;
 use crate::model::{DcMotor, DcParams, ParamError};
 use crate::record::DcSegment;
 
@@ -256,7 +257,7 @@ impl<F: FnMut(usize, &[f64; LANES], &[f64; LANES])> LaneReadings for F {
 /// operations (AVX where the processor has it, checked at run time);
 /// otherwise each lane takes the lone simulation's step. Each lane does
 /// the lone simulation's arithmetic in its order, so its readings are the
-/// lone simulation's to the last bit.
+/// lone simulation's to the last bit ([`with_avx`]).
 ///
 /// `out` gets every sample's readings, in order (see [`LaneReadings`]).
 ///
@@ -274,26 +275,10 @@ pub fn simulate_lanes(
         "1 to {LANES} lanes, not {}",
         lanes.len()
     );
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx") {
-        // SAFETY: the processor has AVX, checked just above.
-        unsafe { lanes_avx(lanes, input, reading, out) };
-        return;
-    }
-    lanes_kernel(lanes, input, reading, out);
-}
-
-/// [`lanes_kernel`] compiled for AVX (4 lanes per vector operation; no
-/// fused multiply-add, so the arithmetic is the same).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-fn lanes_avx(
-    lanes: &[(&DcParams, DrivenStep)],
-    input: &SegmentInput,
-    reading: SpeedReading,
-    out: &mut impl LaneReadings,
-) {
-    lanes_kernel(lanes, input, reading, out);
+    with_avx(
+        #[inline(always)]
+        || lanes_kernel(lanes, input, reading, out),
+    );
 }
 
 /// The body of [`simulate_lanes`].
