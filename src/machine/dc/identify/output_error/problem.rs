@@ -233,7 +233,8 @@ impl<'d, 'a> OutputErrorProblem<'d, 'a> {
         r
     }
 
-    /// [`Self::compute`] into `r`; `false` when refused.
+    /// The weighted residuals at `x` into `r`, all [`REFUSED`] where the
+    /// model refuses the parameters; `false` then.
     fn compute_into(&self, x: &Vector6<f64>, r: &mut [f64]) -> bool {
         let inside = x.iter().all(|v| v.abs() <= MAX_LN);
         let ok = inside && self.data.residuals_into(&self.params_at(x), r);
@@ -419,11 +420,11 @@ fn normal_equations(jac: &OMatrix<f64, Dyn, U6>, r: &DVector<f64>) -> (Matrix6<f
 
 /// Rows per block of [`normal_equations_kernel`]: the seven columns' block
 /// (28 KiB) stays in the first-level cache while its 27 products are
-/// summed. A multiple of 8, so blocks hold whole blocks of [`dot`].
+/// summed. A multiple of 8, so blocks hold whole blocks of [`DotSums`].
 const PRODUCT_BLOCK: usize = 512;
 
 /// The body of [`normal_equations`]: each of the 27 products summed as
-/// [`dot`] sums it, a block of rows at a time (the same sums, in the same
+/// nalgebra's `dot` sums it ([`DotSums`]), a block of rows at a time (the same sums, in the same
 /// order, read from cache instead of memory).
 #[inline(always)]
 fn normal_equations_kernel(
@@ -470,7 +471,8 @@ fn normal_equations_kernel(
     (jtj, g)
 }
 
-/// The eight running sums of [`dot`], fed a block at a time.
+/// The eight running sums of nalgebra's `dot` of a contiguous vector
+/// (over blocks of eight), fed a block of rows at a time.
 #[derive(Debug, Clone, Copy, Default)]
 struct DotSums([f64; 8]);
 
