@@ -535,38 +535,29 @@ mod tests {
                 .collect();
             // The dispatched kernel (AVX where the processor has it) and
             // the kernel as the baseline build compiles it.
-            let mut dispatched = vec![Vec::new(); sets.len()];
-            simulate_lanes(
-                &lanes,
-                &input,
-                SpeedReading::IntervalMean,
-                &mut |k, i: &[f64; LANES], w: &[f64; LANES]| {
-                    for (l, got) in dispatched.iter_mut().enumerate() {
+            for baseline in [false, true] {
+                let mut got = vec![Vec::new(); sets.len()];
+                let mut readings = |k, i: &[f64; LANES], w: &[f64; LANES]| {
+                    for (l, got) in got.iter_mut().enumerate() {
                         got.push((k, i[l].to_bits(), w[l].to_bits()));
                     }
-                },
-            );
-            let mut baseline = vec![Vec::new(); sets.len()];
-            lanes_kernel(
-                &lanes,
-                &input,
-                SpeedReading::IntervalMean,
-                &mut |k, i: &[f64; LANES], w: &[f64; LANES]| {
-                    for (l, got) in baseline.iter_mut().enumerate() {
-                        got.push((k, i[l].to_bits(), w[l].to_bits()));
-                    }
-                },
-            );
-            for (l, p) in sets.iter().enumerate() {
-                let (i, w) = simulate_series(p, &input, SpeedReading::IntervalMean).unwrap();
-                let alone: Vec<(usize, u64, u64)> = (0..i.len())
-                    .map(|k| (k, i[k].to_bits(), w[k].to_bits()))
-                    .collect();
-                assert_eq!(dispatched[l], alone, "lane {l} from {start:?}");
-                assert_eq!(
-                    baseline[l], alone,
-                    "lane {l} from {start:?}, baseline kernel"
-                );
+                };
+                let reading = SpeedReading::IntervalMean;
+                if baseline {
+                    lanes_kernel(&lanes, &input, reading, &mut readings);
+                } else {
+                    simulate_lanes(&lanes, &input, reading, &mut readings);
+                }
+                for (l, p) in sets.iter().enumerate() {
+                    let (i, w) = simulate_series(p, &input, reading).unwrap();
+                    let alone: Vec<(usize, u64, u64)> = (0..i.len())
+                        .map(|k| (k, i[k].to_bits(), w[k].to_bits()))
+                        .collect();
+                    assert_eq!(
+                        got[l], alone,
+                        "lane {l} from {start:?}, baseline {baseline}"
+                    );
+                }
             }
         }
     }
