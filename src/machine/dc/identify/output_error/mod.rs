@@ -299,8 +299,10 @@ pub struct PreparedFit<'a> {
 impl PreparedFit<'_> {
     /// The optimiser from the start values alone: the parameters at the
     /// least-squares optimum and the residual evaluations it took (each
-    /// with its Jacobian). No intervals, no bias correction, no
-    /// validation; [`output_error`] adds those.
+    /// with its Jacobian). One start, even where [`output_error`] would
+    /// run from several (a poorly conditioned equation-error start); no
+    /// intervals, no bias correction, no validation: [`output_error`]
+    /// adds those.
     pub fn minimise(&self) -> (DcParams, usize) {
         let best = minimise(&self.data, &self.start);
         (best.params, best.evaluations)
