@@ -7,6 +7,11 @@
 //! motor's own discretisation ([`DcMotor::driven_zoh`]) and repeats only
 //! the driven branch of its exact step in scalars (friction direction,
 //! stiction, stop on a sign change). A unit test holds the two equal.
+//!
+//! A forward-difference Jacobian simulates seven parameter sets at once
+//! ([`simulate_lanes`]): their steps go as vector operations while every
+//! rotor turns, each lane's arithmetic still the lone simulation's, so
+//! its readings are the same to the bit.
 
 use crate::identify::vector::with_avx;
 use crate::model::{DcMotor, DcParams, ParamError};
@@ -234,10 +239,10 @@ impl LaneSteps {
     }
 }
 
-/// What [`simulate_lanes`] hands each sample's readings to. A closure
-/// `FnMut(sample, currents, speed readings)` is one; a type of its own
-/// can ask for its body to be inlined into the simulation's loop (a
-/// closure's call stays a call there).
+/// What [`simulate_lanes`] hands each sample's readings to: a closure
+/// `FnMut(sample, currents, speed readings)`, or a type of its own whose
+/// method is `#[inline(always)]`, so that it runs inside the simulation's
+/// vector loop instead of as a call per sample.
 pub trait LaneReadings {
     /// The readings of every lane at `sample`; entries at and beyond the
     /// number of lanes are padding, to be ignored.
