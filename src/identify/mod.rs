@@ -12,6 +12,7 @@
 
 pub(crate) mod least_squares;
 mod nrmse;
+pub(crate) mod pieces;
 pub(crate) mod square_root;
 pub(crate) mod stats;
 pub(crate) mod vector;
