@@ -47,9 +47,9 @@ use crate::contract::{
     reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, Verdict,
 };
 use crate::diagnose::decision::{
-    block_sums, effective_samples, explained_share, held_out_relative_sign_flip_test,
-    held_out_test, median, no_baseline, partial_verdict_warning, penalised_score,
-    residual_noise_sigma, HeldOutTest, EXPLAINED,
+    block_sums, effective_samples, explained_share, held_out_either_sign_flip_test, held_out_test,
+    median, no_baseline, partial_verdict_warning, penalised_score, residual_noise_sigma,
+    HeldOutTest, EXPLAINED,
 };
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{
@@ -467,10 +467,11 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
             // much there, which the t-test counts as variance rather than
             // evidence. On the three blind seeds' DC cases it named 4 more
             // withheld effects than the t-test and no false alarm. Each
-            // block counts by the share of its misfit the candidate
-            // removes (`held_out_relative_sign_flip_test`), so that one
-            // transient predicted worse does not outweigh the rest.
-            let mut test = held_out_relative_sign_flip_test(&nominal.blocks, &fam.blocks, tried);
+            // block counts both by its gain and by the share of its misfit
+            // the candidate removes (`held_out_either_sign_flip_test`):
+            // the first sees a gain spread over many blocks, the second
+            // one that one transient predicted worse would outweigh.
+            let mut test = held_out_either_sign_flip_test(&nominal.blocks, &fam.blocks, tried);
             // In sample: the likelihood-ratio test of the effect's
             // parameters on all segments. Blocks of one held-out segment
             // share that fold's parameter estimates, so a candidate's
