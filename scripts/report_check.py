@@ -88,9 +88,15 @@ def main():
     bad = 0
     for suite in suites:
         cases = json.load(open(os.path.join(suite, "cases.json")))["cases"]
+        # The plant that made each case, as the truth names it (own,
+        # gym-electric-motor, motulator).
+        truth_path = os.path.join(suite, "truth.json")
+        sources = {}
+        if os.path.exists(truth_path):
+            sources = {k: t.get("source", "motorbench") for k, t in json.load(open(truth_path))["cases"]}
         stats = {}
         for case in cases:
-            source = "gym-electric-motor" if case["id"].startswith("gem") else "motorbench"
+            source = sources.get(case["id"], "motorbench")
             files = [os.path.join(suite, f) for f in case["files"]]
             extra = []
             if case.get("nameplate"):
