@@ -30,7 +30,7 @@ pub use crate::machine::diagnose;
 pub use crate::machine::im::diagnose::diagnose_im;
 pub use plot::{write_residual_svg, ResidualPanel, ResidualPlot, ResidualPlotError};
 pub use text::render_diagnosis_text;
-pub use threads::{worker_threads, THREADS_VAR};
+pub use threads::{par_map, worker_threads, THREADS_VAR};
 
 use crate::model::Connection;
 use crate::record::{Record, SegmentKind};

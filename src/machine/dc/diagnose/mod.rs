@@ -28,8 +28,6 @@ mod lanes;
 mod model;
 
 use std::collections::BTreeMap;
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
 
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
@@ -51,6 +49,7 @@ use crate::diagnose::decision::{
     median, no_baseline, partial_verdict_warning, penalised_score, residual_noise_sigma,
     HeldOutTest, EXPLAINED,
 };
+use crate::diagnose::par_map;
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{
     is_coastdown, nrmse, output_error, OutputErrorOptions, PARAM_KEYS, PARAM_UNITS,
@@ -719,32 +718,6 @@ fn nominal_estimates(f: &Fitted) -> BTreeMap<String, ParamEstimate> {
                 },
             )
         })
-        .collect()
-}
-
-/// Work on every core (or on `MOTORBENCH_THREADS` of them): `f` over
-/// `items`, results in order.
-fn par_map<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync) -> Vec<R> {
-    let workers = crate::diagnose::worker_threads().min(items.len().max(1));
-    let next = AtomicUsize::new(0);
-    let results: Mutex<Vec<Option<R>>> = Mutex::new((0..items.len()).map(|_| None).collect());
-    std::thread::scope(|scope| {
-        for _ in 0..workers {
-            scope.spawn(|| loop {
-                let n = next.fetch_add(1, Ordering::Relaxed);
-                if n >= items.len() {
-                    break;
-                }
-                let r = f(&items[n]);
-                results.lock().unwrap_or_else(|e| e.into_inner())[n] = Some(r);
-            });
-        }
-    });
-    results
-        .into_inner()
-        .unwrap_or_else(|e| e.into_inner())
-        .into_iter()
-        .map(|r| r.expect("every item is processed"))
         .collect()
 }
 

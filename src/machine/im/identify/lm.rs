@@ -704,18 +704,25 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, ImFitError> {
     // evaluations): more starts, shorter screening runs.
     let bound = evaluation_bound(data.len(), free.len());
     let screen_bound = (bound / starts.len().max(1)).max(5 * (free.len() + 1));
-    let mut results = Vec::new();
-    for s in &starts {
+    // The screening runs are independent: on every core the analysis may
+    // use, results in the starts' order (so the best, and every tie, are
+    // those of the runs one after the other).
+    let screened = crate::diagnose::par_map(&starts, |s| {
         let Solved {
             problem: p,
             cost,
             converged: ok,
             ..
         } = solve(make(open(*s), weights.clone(), s), SCREEN_TOL, screen_bound);
-        evaluations += p.evaluations.get();
-        if let Some(c) = p.param.circuit(p.x.as_slice()) {
-            results.push((cost, ok, c));
-        }
+        (
+            p.evaluations.get(),
+            p.param.circuit(p.x.as_slice()).map(|c| (cost, ok, c)),
+        )
+    });
+    let mut results = Vec::new();
+    for (n, r) in screened {
+        evaluations += n;
+        results.extend(r);
     }
     let best_cost = results.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
     if !best_cost.is_finite() {
