@@ -204,63 +204,15 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
         })
         .clone()
     };
-    let oe_params = || nominal_oe().map_err(DiagnoseError::NominalFit);
     let held = held_levels(&record.segments);
     let pieces = voltage_pieces(&record.segments);
-    let mut nominal = nominal_fit(&held, &nominal_oe, &oe_params, &mut warnings)?;
-    // The voltage as straight pieces is the input where the nominal model
-    // explains the current and speed better from it than from the
-    // readings (with held levels denoised): their noise was the sensor's.
-    // Where the readings are what the motor saw (a controller's command
-    // that jitters), the pieces erase part of the excitation and fit worse.
-    if let Some((pieces, sigma)) = &pieces {
-        let mut scratch = Vec::new();
-        // First the start's residual from either input, which costs two
-        // simulations: only where the pieces lower it materially is the
-        // nominal model fitted from them too.
-        let start_sse = |runs: &[SegmentRun]| {
-            let mut r = Vec::new();
-            runs_residuals(&nominal.spec.start, runs, &nominal.weights, &mut r)
-                .then(|| r.iter().map(|v| v * v).sum::<f64>())
-        };
-        let promising = match (
-            start_sse(&nominal.runs),
-            prepare_runs(pieces, &|| nominal_oe().ok(), &mut Vec::new())
-                .ok()
-                .and_then(|runs| start_sse(&runs)),
-        ) {
-            (Some(readings), Some(smoothed)) => smoothed < (1.0 - MATERIAL_NOISE) * readings,
-            _ => false,
-        };
-        if let Some(alt) = promising
-            .then(|| nominal_fit(pieces, &nominal_oe, &oe_params, &mut scratch).ok())
-            .flatten()
-        {
-            let same_rows = alt.runs.len() == nominal.runs.len()
-                && alt
-                    .runs
-                    .iter()
-                    .zip(&nominal.runs)
-                    .all(|(a, b)| a.len() == b.len());
-            if same_rows && alt.all.sse < (1.0 - MATERIAL_NOISE) * nominal.all.sse {
-                warnings.extend(scratch);
-                warnings.push(format!(
-                    "the armature voltage reading's noise (σ ≈ {sigma:.3} V) is smoothed as \
-                     straight pieces: the nominal model fits the current and speed better from \
-                     them (weighted residual {:.4e} against {:.4e} from the readings)",
-                    alt.all.sse, nominal.all.sse
-                ));
-                nominal = alt;
-            }
-        }
-    }
     let NominalStart {
         runs,
         weights,
         scales: scales0,
         spec: nominal_spec,
         all: nominal_all,
-    } = nominal;
+    } = nominal_of_inputs(&held, pieces.as_ref(), &nominal_oe, &mut warnings)?;
     let candidate_base = floored(&nominal_all.model, scales0.dt, scales0.i_max);
     if !nominal_all.converged {
         warnings.push("the nominal fit stopped without converging".into());
@@ -1073,6 +1025,69 @@ fn continuation(last: f64, first: f64, dt: f64) -> Option<Continuation> {
 /// half to two thirds).
 const MATERIAL_NOISE: f64 = 0.05;
 
+/// The nominal model fitted from the readings (`held`: held levels
+/// denoised) or, where the reading noise is a material part of its
+/// misfit, from the voltage as straight pieces (`pieces`, with its noise
+/// σ), with a warning that says so. The pieces are the input where the
+/// nominal model explains the current and speed better from them: the
+/// readings' noise was the sensor's. Where the readings are what the motor
+/// saw (a controller's command that jitters), the pieces erase part of the
+/// excitation and fit worse.
+fn nominal_of_inputs<'a>(
+    held: &'a [DcSegment],
+    pieces: Option<&'a (Vec<DcSegment>, f64)>,
+    estimate: &dyn Fn() -> Result<DcParams, String>,
+    warnings: &mut Vec<String>,
+) -> Result<NominalStart<'a>, DiagnoseError> {
+    let readings = nominal_fit(held, estimate, warnings)?;
+    let Some((pieces, sigma)) = pieces else {
+        return Ok(readings);
+    };
+    // First the start's residual from either input, which costs two
+    // simulations: only where the pieces lower it materially is the
+    // nominal model fitted from them too.
+    let start_sse = |runs: &[SegmentRun]| {
+        let mut r = Vec::new();
+        runs_residuals(&readings.spec.start, runs, &readings.weights, &mut r)
+            .then(|| r.iter().map(|v| v * v).sum::<f64>())
+    };
+    let promising = match (
+        start_sse(&readings.runs),
+        prepare_runs(pieces, &|| estimate().ok(), &mut Vec::new())
+            .ok()
+            .and_then(|runs| start_sse(&runs)),
+    ) {
+        (Some(from_readings), Some(from_pieces)) => {
+            from_pieces < (1.0 - MATERIAL_NOISE) * from_readings
+        }
+        _ => false,
+    };
+    let mut scratch = Vec::new();
+    let Some(smoothed) = promising
+        .then(|| nominal_fit(pieces, estimate, &mut scratch).ok())
+        .flatten()
+    else {
+        return Ok(readings);
+    };
+    let same_rows = smoothed.runs.len() == readings.runs.len()
+        && smoothed
+            .runs
+            .iter()
+            .zip(&readings.runs)
+            .all(|(a, b)| a.len() == b.len());
+    if !(same_rows && smoothed.all.sse < (1.0 - MATERIAL_NOISE) * readings.all.sse) {
+        return Ok(readings);
+    }
+    warnings.extend(scratch);
+    warnings.push(format!(
+        "the armature voltage reading's noise (σ ≈ {sigma:.3} V) is smoothed as straight \
+         pieces: the nominal model fits the current and speed better from them (weighted \
+         residual {:.4e} against {:.4e} from the readings)",
+        smoothed.all.sse, readings.all.sse
+    ));
+    Ok(smoothed)
+}
+
 /// The nominal model fitted to a record's runs, and what its fit needs.
 struct NominalStart<'a> {
     runs: Vec<SegmentRun<'a>>,
@@ -1088,14 +1103,13 @@ struct NominalStart<'a> {
 fn nominal_fit<'a>(
     segs: &'a [DcSegment],
     estimate: &dyn Fn() -> Result<DcParams, String>,
-    oe_params: &dyn Fn() -> Result<DcParams, DiagnoseError>,
     warnings: &mut Vec<String>,
 ) -> Result<NominalStart<'a>, DiagnoseError> {
     let runs = prepare_runs(segs, &|| estimate().ok(), warnings)?;
     let weights = channel_weights(&runs, warnings);
     let scales = scales(&runs);
     let spec = FitSpec {
-        start: AugModel::nominal(oe_params()?),
+        start: AugModel::nominal(estimate().map_err(DiagnoseError::NominalFit)?),
         effect: Vec::new(),
     };
     let mut all = fit(&spec, &runs, &weights, 3 * PATIENCE_ALL).ok_or_else(|| {
