@@ -159,10 +159,10 @@ pub fn piecewise_linear(y: &[f64], sigma: f64) -> Vec<f64> {
         }
         best[t] = cost;
         start[t] = from;
-        // PELT: a start whose cost so far already exceeds the best
-        // partition's, less one piece's penalty, can never be the best
-        // start of a later piece (the residual of a piece only grows as
-        // it is lengthened).
+        // PELT: a start whose cost up to `t` (its piece's penalty left
+        // out) already exceeds the best partition's cost at `t` can never
+        // be the best start of a later piece (the residual of a piece only
+        // grows as it is lengthened).
         let mut kept = costs.iter();
         open.retain(|_| kept.next().is_some_and(|&c| c <= cost));
         open.push(t);
