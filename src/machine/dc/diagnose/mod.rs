@@ -1665,8 +1665,9 @@ mod tests {
         assert!((ra / truth - 1.0).abs() < 0.01, "Ra {ra} against {truth}");
     }
 
-    /// The default rig's staircase, whose voltage noise is small beside
-    /// the current's: the readings (with held levels) stay the input.
+    /// A blind case's staircase (seed 3, no effect), whose held levels
+    /// carry the voltage noise: the readings with held levels denoised
+    /// stay the input.
     #[test]
     fn a_quiet_voltage_reading_stays_the_input() {
         let mut rng = StdRng::seed_from_u64(3);
