@@ -113,6 +113,13 @@ impl Series {
     }
 }
 
+/// The DC series slot a channel feeds, if any (0 voltage, 1 current, 2
+/// speed): a `/sensor/` channel of armature voltage, armature current or
+/// speed. Where several channels carry one quantity, the first is used.
+pub(crate) fn dc_slot(spec: &ChannelSpec) -> Option<usize> {
+    Series::of(spec).map(Series::slot)
+}
+
 impl RecordBuilder {
     /// A builder for a record with this metadata and channel list (the
     /// list whose indices [`Entry::Samples`] refers to).

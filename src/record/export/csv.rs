@@ -49,7 +49,9 @@ pub struct CsvFile {
 /// The CSV files of `record`'s segments that hold data, in index order;
 /// `source` (the record's file name) goes into a comment. A DC segment's
 /// text is made when the iterator reaches it, so a long record's files are
-/// not all held at once.
+/// not all held at once. `export` streams the DC files instead
+/// ([`super::dc_stream`], the same bytes) and comes here only for a record
+/// whose readings go back in time.
 pub fn segment_files<'a>(
     record: &'a Record,
     source: &'a str,
@@ -77,7 +79,7 @@ pub fn segment_files<'a>(
 }
 
 /// The files of `record`'s induction-machine segments, in index order.
-fn other_files(record: &Record, source: &str) -> Vec<CsvFile> {
+pub(super) fn other_files(record: &Record, source: &str) -> Vec<CsvFile> {
     let mut out: Vec<CsvFile> = Vec::new();
     // A segment's label as recorded, else `default`.
     let label = |index: u32, default: String| {
@@ -250,7 +252,7 @@ pub fn declaration(index: u32, kind: SegmentKind, label: &str) -> String {
 }
 
 /// The declaration and the provenance comment.
-fn preamble(index: u32, kind: SegmentKind, label: &str, source: &str) -> String {
+pub(super) fn preamble(index: u32, kind: SegmentKind, label: &str, source: &str) -> String {
     format!(
         "{}# exported by {} from {source}\n",
         declaration(index, kind, label),

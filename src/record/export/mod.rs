@@ -2,7 +2,9 @@
 //!
 //! - [`csv`]: each segment as the contract's CSV import file, so that
 //!   `motorbench identify` on the exported files gives the report a replay
-//!   of the record gives (with the exported nameplate);
+//!   of the record gives (with the exported nameplate); the DC segments'
+//!   files are written as the record is read (`dc_stream`), so a long
+//!   record is never held whole for them either;
 //! - [`parquet`]: every channel of the record in one Parquet file, a
 //!   column per channel and the segment index ([`table`]), for pandas,
 //!   polars or MATLAB in one call;
@@ -13,12 +15,17 @@
 //! earlier exports of the same record.
 
 pub mod csv;
+mod dc_stream;
 pub mod parquet;
 pub mod table;
 
 use std::path::{Path, PathBuf};
 
-use super::{read_each, read_outline, read_record, refuse_if_empty, RecordError, Resolution};
+use super::{
+    read_each, read_outline, read_record, refuse_if_empty, Outline, RecordBuilder, RecordError,
+    Resolution,
+};
+use dc_stream::{DcStream, Streamed};
 use table::{segment_spans, TableRows};
 
 /// What can go wrong in an export.
@@ -87,6 +94,52 @@ impl Exported {
     }
 }
 
+/// Writes the record's segments as CSV files into `out_dir`, in index
+/// order: the DC segments as the record is read ([`dc_stream`]), the
+/// induction machine's from `outline`'s entries. A record whose readings
+/// of a series go back in time is read whole instead.
+fn write_csv(
+    record_path: &Path,
+    outline: &Outline,
+    out_dir: &Path,
+    stem: &str,
+    source: &str,
+) -> Result<Vec<PathBuf>, ExportError> {
+    let write = |file: csv::CsvFile| {
+        let path = out_dir.join(format!("{stem}.segment-{}.csv", file.segment));
+        std::fs::write(&path, file.text).map_err(|source| ExportError::Io {
+            path: path.clone(),
+            source,
+        })?;
+        Ok::<_, ExportError>((file.segment, path))
+    };
+    let mut stream = DcStream::new(&outline.channels, &outline.entries, out_dir, stem, source);
+    read_each(record_path, &mut |entry| stream.push(&entry))?;
+    let mut files = match stream.finish()? {
+        Streamed::Files(mut files) => {
+            // Sweeps and standard tests are entries of their own, and their
+            // labels are the markers'.
+            let mut builder = RecordBuilder::new(None, outline.channels.clone());
+            for entry in &outline.entries {
+                builder.push(entry);
+            }
+            for file in csv::other_files(&builder.finish(), source) {
+                files.push(write(file)?);
+            }
+            files
+        }
+        Streamed::OutOfOrder => {
+            let record = read_record(record_path, Resolution::Full)?;
+            csv::segment_files(&record, source)
+                .map(write)
+                .collect::<Result<_, _>>()?
+        }
+    };
+    // Stable: a DC segment's file before another of the same index.
+    files.sort_by_key(|(segment, _)| *segment);
+    Ok(files.into_iter().map(|(_, path)| path).collect())
+}
+
 /// Exports the record at `record_path` into `out_dir` (created if
 /// missing).
 pub fn export_record(
@@ -139,12 +192,7 @@ pub fn export_record(
         out.parquet = Some(path);
     }
     if formats.csv {
-        let record = read_record(record_path, Resolution::Full)?;
-        for file in csv::segment_files(&record, &source) {
-            let path = out_dir.join(format!("{stem}.segment-{}.csv", file.segment));
-            std::fs::write(&path, file.text).map_err(io(&path))?;
-            out.csv.push(path);
-        }
+        out.csv = write_csv(record_path, &outline, out_dir, &stem, &source)?;
         let path = out_dir.join(format!("{stem}.nameplate.json"));
         let text = serde_json::to_string_pretty(&meta.nameplate).expect("JSON serialises");
         std::fs::write(&path, text + "\n").map_err(io(&path))?;

@@ -1,0 +1,466 @@
+//! The DC segments' contract CSV files written as the record is read, so
+//! that exporting an hour of 2 kHz samples holds seconds of them, not the
+//! hour (a whole-record read at full resolution held about 600 MB).
+//!
+//! The rows are those of [`super::csv`] on a full-resolution
+//! [`crate::record::Record`], to the byte: one per armature-current
+//! reading in a segment's `start..=end`, with the voltage and the speed
+//! linearly interpolated at its instant from their own readings (the
+//! first reading at that instant where there is one, the edge value
+//! outside their range; [`crate::record::RecordBuilder`] has the rules).
+//! A row waits until both series have a reading at or after its instant;
+//! readings no row can need any more are let go.
+//!
+//! That needs each series' readings in time order, which a recorder
+//! writes. A file whose readings of one series go back in time is not
+//! streamed: [`DcStream::finish`] says so, and the export reads the
+//! record whole instead.
+
+use std::collections::{BTreeMap, VecDeque};
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::{Path, PathBuf};
+
+use super::ExportError;
+use crate::record::builder::{dc_slot, INCOMPLETE_SUFFIX};
+use crate::record::csv::{COL_CURRENT, COL_SPEED, COL_TIME, COL_VOLTAGE};
+use crate::record::{ChannelSpec, Entry, SegmentKind, SegmentPhase};
+
+/// The series' slots: voltage, current (the time base), speed.
+const VOLTAGE: usize = 0;
+const CURRENT: usize = 1;
+const SPEED: usize = 2;
+
+/// One segment as its markers describe it.
+#[derive(Debug, Clone)]
+struct Span {
+    start: u64,
+    end: u64,
+    kind: SegmentKind,
+    label: String,
+}
+
+/// A current reading waiting for its voltage and speed.
+#[derive(Debug, Clone, Copy)]
+struct Row {
+    t_ns: u64,
+    current: f64,
+}
+
+/// What a stream ended with.
+#[derive(Debug)]
+pub(super) enum Streamed {
+    /// The files written, by segment index.
+    Files(Vec<(u32, PathBuf)>),
+    /// A series went back in time: nothing is kept, read the record whole.
+    OutOfOrder,
+}
+
+/// Writes the DC segments' CSV files of one record from its entries.
+pub(super) struct DcStream<'a> {
+    out_dir: &'a Path,
+    stem: &'a str,
+    source: &'a str,
+    /// The series each channel feeds (the first channel of a quantity).
+    slots: Vec<Option<usize>>,
+    spans: BTreeMap<u32, Span>,
+    /// Voltage and speed readings a waiting or later row may need.
+    series: [VecDeque<(u64, f64)>; 3],
+    /// The latest instant read per series.
+    latest: [Option<u64>; 3],
+    rows: VecDeque<Row>,
+    files: BTreeMap<u32, (PathBuf, BufWriter<File>)>,
+    out_of_order: bool,
+    failed: Option<ExportError>,
+}
+
+impl<'a> DcStream<'a> {
+    /// A stream for a record with these channels and (non-sample)
+    /// entries, writing `<stem>.segment-<index>.csv` into `out_dir`.
+    pub(super) fn new(
+        channels: &[ChannelSpec],
+        entries: &[Entry],
+        out_dir: &'a Path,
+        stem: &'a str,
+        source: &'a str,
+    ) -> DcStream<'a> {
+        let mut slots: Vec<Option<usize>> = Vec::with_capacity(channels.len());
+        for c in channels {
+            let slot = dc_slot(c).filter(|s| !slots.contains(&Some(*s)));
+            slots.push(slot);
+        }
+        DcStream {
+            out_dir,
+            stem,
+            source,
+            slots,
+            spans: spans(entries),
+            series: Default::default(),
+            latest: [None; 3],
+            rows: VecDeque::new(),
+            files: BTreeMap::new(),
+            out_of_order: false,
+            failed: None,
+        }
+    }
+
+    /// Takes the next entry of the file.
+    pub(super) fn push(&mut self, entry: &Entry) {
+        let Entry::Samples { t_ns, values } = entry else {
+            return;
+        };
+        if self.out_of_order || self.failed.is_some() {
+            return;
+        }
+        for &(index, value) in values {
+            let Some(Some(slot)) = self.slots.get(index).copied() else {
+                continue;
+            };
+            if !value.is_finite() {
+                continue;
+            }
+            if self.latest[slot].is_some_and(|t| *t_ns < t) {
+                self.out_of_order = true;
+                return;
+            }
+            self.latest[slot] = Some(*t_ns);
+            if slot == CURRENT {
+                self.rows.push_back(Row {
+                    t_ns: *t_ns,
+                    current: value,
+                });
+            } else {
+                self.series[slot].push_back((*t_ns, value));
+            }
+        }
+        self.write_ready(false);
+        self.let_go();
+    }
+
+    /// Writes the rows still waiting (at the edge values) and closes the
+    /// files.
+    pub(super) fn finish(mut self) -> Result<Streamed, ExportError> {
+        if !self.out_of_order {
+            // A record without one of the three series has no DC rows
+            // (identification says which is missing).
+            if self.latest.iter().all(Option::is_some) {
+                self.write_ready(true);
+            }
+            if let Some(e) = self.failed.take() {
+                return Err(e);
+            }
+        }
+        let mut written = Vec::new();
+        for (index, (path, mut file)) in std::mem::take(&mut self.files) {
+            if self.out_of_order {
+                drop(file);
+                let _ = std::fs::remove_file(&path);
+                continue;
+            }
+            file.flush().map_err(|source| ExportError::Io {
+                path: path.clone(),
+                source,
+            })?;
+            written.push((index, path));
+        }
+        Ok(if self.out_of_order {
+            Streamed::OutOfOrder
+        } else {
+            Streamed::Files(written)
+        })
+    }
+
+    /// Writes the waiting rows whose voltage and speed are known (all of
+    /// them at the end of the file).
+    fn write_ready(&mut self, at_end: bool) {
+        while let Some(&row) = self.rows.front() {
+            let at = |s: &VecDeque<(u64, f64)>| value_at(s, row.t_ns, at_end);
+            let (Some(v), Some(w)) = (at(&self.series[VOLTAGE]), at(&self.series[SPEED])) else {
+                return;
+            };
+            self.rows.pop_front();
+            let inside: Vec<u32> = self
+                .spans
+                .iter()
+                .filter(|(_, s)| s.start <= row.t_ns && row.t_ns <= s.end)
+                .map(|(i, _)| *i)
+                .collect();
+            for index in inside {
+                if let Err(e) = self.write_row(index, row, v, w) {
+                    self.failed = Some(e);
+                    return;
+                }
+            }
+        }
+    }
+
+    fn write_row(&mut self, index: u32, row: Row, v: f64, w: f64) -> Result<(), ExportError> {
+        let path = self
+            .out_dir
+            .join(format!("{}.segment-{index}.csv", self.stem));
+        let io = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| ExportError::Io { path, source }
+        };
+        if !self.files.contains_key(&index) {
+            let span = &self.spans[&index];
+            let mut file = BufWriter::new(File::create(&path).map_err(io(&path))?);
+            let head = super::csv::preamble(index, span.kind, &span.label, self.source);
+            writeln!(
+                file,
+                "{head}{COL_TIME},{COL_VOLTAGE},{COL_CURRENT},{COL_SPEED}"
+            )
+            .map_err(io(&path))?;
+            self.files.insert(index, (path.clone(), file));
+        }
+        let (_, file) = self.files.get_mut(&index).expect("opened above");
+        let t = row.t_ns as f64 * 1e-9;
+        writeln!(file, "{t:?},{v:?},{:?},{w:?}", row.current).map_err(io(&path))
+    }
+
+    /// Lets go of the voltage and speed readings no row can need: all but
+    /// the last one before the next row's instant (rows come in time
+    /// order, so no later row is earlier).
+    fn let_go(&mut self) {
+        let Some(next) = self.rows.front().map(|r| r.t_ns).or(self.latest[CURRENT]) else {
+            return;
+        };
+        for s in [VOLTAGE, SPEED] {
+            let series = &mut self.series[s];
+            while series.len() >= 2 && series[1].0 < next {
+                series.pop_front();
+            }
+        }
+    }
+}
+
+/// The value of the readings `s` (in time order) at `t`, as
+/// [`crate::record::RecordBuilder`] interpolates it; `None` while no
+/// reading at or after `t` has come (unless `at_end`: then the last
+/// reading's value).
+fn value_at(s: &VecDeque<(u64, f64)>, t: u64, at_end: bool) -> Option<f64> {
+    let i = s.partition_point(|&(ts, _)| ts < t);
+    if i == s.len() {
+        return at_end.then(|| s.back().map(|r| r.1)).flatten();
+    }
+    let (t1, v1) = s[i];
+    if t1 == t || i == 0 {
+        return Some(v1);
+    }
+    let (t0, v0) = s[i - 1];
+    let w = (t - t0) as f64 / (t1 - t0) as f64;
+    Some(v0 + (v1 - v0) * w)
+}
+
+/// Each segment's span, kind and label by index, by the reader's rules:
+/// the first start marker's, the last end's, open to the end of the
+/// record (and the label marked incomplete) without one.
+fn spans(entries: &[Entry]) -> BTreeMap<u32, Span> {
+    let mut spans: BTreeMap<u32, (Span, bool)> = BTreeMap::new();
+    for e in entries {
+        let Entry::Segment { t_ns, marker } = e else {
+            continue;
+        };
+        match marker.phase {
+            SegmentPhase::Start => {
+                spans.entry(marker.index).or_insert((
+                    Span {
+                        start: *t_ns,
+                        end: u64::MAX,
+                        kind: marker.kind,
+                        label: marker.label.clone(),
+                    },
+                    false,
+                ));
+            }
+            SegmentPhase::End => {
+                if let Some((span, ended)) = spans.get_mut(&marker.index) {
+                    span.end = *t_ns;
+                    *ended = true;
+                }
+            }
+        }
+    }
+    spans
+        .into_iter()
+        .map(|(i, (mut span, ended))| {
+            if !ended {
+                span.label.push_str(INCOMPLETE_SUFFIX);
+            }
+            (i, span)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::record::{RecordBuilder, Resolution};
+
+    fn channels() -> Vec<ChannelSpec> {
+        vec![
+            ChannelSpec::command("armature_voltage", "V", "psu"),
+            ChannelSpec::sensor("armature_voltage", "V", "daq"),
+            ChannelSpec::sensor("armature_current", "A", "daq"),
+            ChannelSpec::sensor("speed", "rad/s", "enc"),
+            // A second current channel: the first one counts.
+            ChannelSpec::sensor("armature_current", "A", "aux"),
+        ]
+    }
+
+    /// Current every 100 ns from 0 to 6 µs; voltage at every third of its
+    /// instants, twice at 3 µs; speed every 700 ns from 1 µs (so
+    /// the first rows take its edge value) to 4 µs (so the last ones do
+    /// too); a NaN and the command channel beside; segment 0 from 1 µs to
+    /// 3 µs, segment 1 from 3 µs (the boundary reading is in both) with no
+    /// end, segment 2 with an end and no start (ignored).
+    fn entries() -> Vec<Entry> {
+        let mut e = vec![
+            Entry::dc_step_marker(1_000, 0, SegmentPhase::Start, "first"),
+            Entry::dc_step_marker(2_500, 2, SegmentPhase::End, "stray"),
+        ];
+        for k in 0..=60u64 {
+            let t = 100 * k;
+            let mut values = vec![(0, 999.0), (2, (k as f64).sin()), (4, -1.0)];
+            if k == 7 {
+                values.push((2, f64::NAN));
+            }
+            e.push(Entry::Samples { t_ns: t, values });
+            if k % 3 == 0 {
+                let v = 10.0 * (k as f64 * 0.37).cos();
+                e.push(Entry::Samples {
+                    t_ns: t,
+                    values: vec![(1, v)],
+                });
+                if k == 30 {
+                    e.push(Entry::Samples {
+                        t_ns: t,
+                        values: vec![(1, v + 7.0)],
+                    });
+                }
+            }
+            if k % 7 == 3 && (10..=40).contains(&k) {
+                e.push(Entry::Samples {
+                    t_ns: t,
+                    values: vec![(3, 100.0 + k as f64)],
+                });
+            }
+            if k == 30 {
+                e.push(Entry::dc_step_marker(t, 0, SegmentPhase::End, "first"));
+                e.push(Entry::dc_step_marker(t, 1, SegmentPhase::Start, "second"));
+            }
+        }
+        e
+    }
+
+    /// The files of the whole-record export, by name.
+    fn whole(entries: &[Entry], source: &str) -> Vec<(String, String)> {
+        let mut b = RecordBuilder::new(None, channels()).resolution(Resolution::Full);
+        for e in entries {
+            b.push(e);
+        }
+        let record = b.finish();
+        super::super::csv::segment_files(&record, source)
+            .filter(|f| !f.text.is_empty())
+            .map(|f| (format!("rec.segment-{}.csv", f.segment), f.text))
+            .collect()
+    }
+
+    fn streamed(entries: &[Entry], dir: &Path, source: &str) -> Streamed {
+        let markers: Vec<Entry> = entries
+            .iter()
+            .filter(|e| !matches!(e, Entry::Samples { .. }))
+            .cloned()
+            .collect();
+        let mut stream = DcStream::new(&channels(), &markers, dir, "rec", source);
+        for e in entries {
+            stream.push(e);
+        }
+        stream.finish().unwrap()
+    }
+
+    #[test]
+    fn the_stream_writes_the_whole_records_files_to_the_byte() {
+        let dir = tempfile::tempdir().unwrap();
+        let entries = entries();
+        let Streamed::Files(files) = streamed(&entries, dir.path(), "rec.mcap") else {
+            panic!("in order");
+        };
+        let got: Vec<(String, String)> = files
+            .iter()
+            .map(|(_, p)| {
+                let name = p.file_name().unwrap().to_string_lossy().into_owned();
+                (name, std::fs::read_to_string(p).unwrap())
+            })
+            .collect();
+        let want = whole(&entries, "rec.mcap");
+        assert_eq!(got.len(), 2, "segments 0 and 1");
+        assert_eq!(got, want);
+        assert!(want[1].1.contains("second (incomplete)"), "{}", want[1].1);
+    }
+
+    #[test]
+    fn readings_that_go_back_in_time_are_not_streamed() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut entries = entries();
+        // A speed reading far behind the others, after them in the file.
+        entries.push(Entry::Samples {
+            t_ns: 1_200,
+            values: vec![(3, 5.0)],
+        });
+        assert!(matches!(
+            streamed(&entries, dir.path(), "rec.mcap"),
+            Streamed::OutOfOrder
+        ));
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            0,
+            "what was written is removed"
+        );
+    }
+
+    #[test]
+    fn a_record_without_speed_has_no_dc_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let entries: Vec<Entry> = entries()
+            .into_iter()
+            .map(|e| match e {
+                Entry::Samples { t_ns, values } => Entry::Samples {
+                    t_ns,
+                    values: values.into_iter().filter(|v| v.0 != 3).collect(),
+                },
+                e => e,
+            })
+            .collect();
+        let Streamed::Files(files) = streamed(&entries, dir.path(), "rec.mcap") else {
+            panic!("in order");
+        };
+        assert!(files.is_empty() && whole(&entries, "rec.mcap").is_empty());
+    }
+
+    #[test]
+    fn readings_no_row_needs_are_let_go() {
+        // A long record holds a few readings at any time.
+        let dir = tempfile::tempdir().unwrap();
+        let markers = vec![Entry::dc_step_marker(0, 0, SegmentPhase::Start, "long")];
+        let mut stream = DcStream::new(&channels(), &markers, dir.path(), "rec", "rec.mcap");
+        let mut most = 0;
+        for k in 0..100_000u64 {
+            stream.push(&Entry::Samples {
+                t_ns: 500 * k,
+                values: vec![(1, 1.0), (2, 2.0), (3, 3.0)],
+            });
+            most = most
+                .max(stream.rows.len() + stream.series.iter().map(VecDeque::len).sum::<usize>());
+        }
+        assert!(most <= 4, "{most} readings held");
+        let Streamed::Files(files) = stream.finish().unwrap() else {
+            panic!("in order");
+        };
+        let text = std::fs::read_to_string(&files[0].1).unwrap();
+        assert_eq!(
+            text.lines().filter(|l| !l.starts_with('#')).count(),
+            100_001
+        );
+    }
+}
