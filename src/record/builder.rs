@@ -447,7 +447,7 @@ fn splice(
 /// The value of the series `s` (sorted by time, not empty) at `t`: linear
 /// between neighbours, exact where a sample lies at `t` (the first such),
 /// the edge value outside the series' range.
-fn interpolate(s: &[(u64, f64)], t: u64) -> f64 {
+pub(crate) fn interpolate(s: &[(u64, f64)], t: u64) -> f64 {
     let i = s.partition_point(|&(ts, _)| ts < t);
     if i == s.len() {
         return s[s.len() - 1].1;

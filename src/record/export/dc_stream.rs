@@ -22,7 +22,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use super::ExportError;
-use crate::record::builder::{dc_slot, INCOMPLETE_SUFFIX};
+use crate::record::builder::{dc_slot, interpolate, INCOMPLETE_SUFFIX};
 use crate::record::csv::{COL_CURRENT, COL_SPEED, COL_TIME, COL_VOLTAGE};
 use crate::record::{ChannelSpec, Entry, SegmentKind, SegmentPhase};
 
@@ -174,8 +174,11 @@ impl<'a> DcStream<'a> {
     /// them at the end of the file).
     fn write_ready(&mut self, at_end: bool) {
         while let Some(&row) = self.rows.front() {
-            let at = |s: &VecDeque<(u64, f64)>| value_at(s, row.t_ns, at_end);
-            let (Some(v), Some(w)) = (at(&self.series[VOLTAGE]), at(&self.series[SPEED])) else {
+            let [voltage, _, speed] = &mut self.series;
+            let (Some(v), Some(w)) = (
+                value_at(voltage, row.t_ns, at_end),
+                value_at(speed, row.t_ns, at_end),
+            ) else {
                 return;
             };
             self.rows.pop_front();
@@ -238,18 +241,10 @@ impl<'a> DcStream<'a> {
 /// [`crate::record::RecordBuilder`] interpolates it; `None` while no
 /// reading at or after `t` has come (unless `at_end`: then the last
 /// reading's value).
-fn value_at(s: &VecDeque<(u64, f64)>, t: u64, at_end: bool) -> Option<f64> {
-    let i = s.partition_point(|&(ts, _)| ts < t);
-    if i == s.len() {
-        return at_end.then(|| s.back().map(|r| r.1)).flatten();
-    }
-    let (t1, v1) = s[i];
-    if t1 == t || i == 0 {
-        return Some(v1);
-    }
-    let (t0, v0) = s[i - 1];
-    let w = (t - t0) as f64 / (t1 - t0) as f64;
-    Some(v0 + (v1 - v0) * w)
+fn value_at(s: &mut VecDeque<(u64, f64)>, t: u64, at_end: bool) -> Option<f64> {
+    let s = s.make_contiguous();
+    let last = s.last()?.0;
+    (at_end || t <= last).then(|| interpolate(s, t))
 }
 
 /// Each segment's span, kind and label by index, by the reader's rules:
