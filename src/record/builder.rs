@@ -462,13 +462,15 @@ pub(crate) fn interpolate(s: &[(u64, f64)], t: u64) -> f64 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::record::thinning::{HEAD_MAX, HEAD_SAMPLES, PAST_HEAD, TAIL_SAMPLES};
     use crate::record::types::{EventLevel, SegmentMarker};
     use crate::record::Record;
 
-    fn channels() -> Vec<ChannelSpec> {
+    /// A DC record's channels: a voltage command, then the voltage,
+    /// current and speed sensors.
+    pub(crate) fn channels() -> Vec<ChannelSpec> {
         vec![
             ChannelSpec::command("armature_voltage", "V", "psu"),
             ChannelSpec::sensor("armature_voltage", "V", "daq"),

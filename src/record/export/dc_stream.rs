@@ -292,15 +292,12 @@ mod tests {
     use super::*;
     use crate::record::{RecordBuilder, Resolution};
 
+    /// The builder tests' channels and a second current channel (the
+    /// first one counts).
     fn channels() -> Vec<ChannelSpec> {
-        vec![
-            ChannelSpec::command("armature_voltage", "V", "psu"),
-            ChannelSpec::sensor("armature_voltage", "V", "daq"),
-            ChannelSpec::sensor("armature_current", "A", "daq"),
-            ChannelSpec::sensor("speed", "rad/s", "enc"),
-            // A second current channel: the first one counts.
-            ChannelSpec::sensor("armature_current", "A", "aux"),
-        ]
+        let mut channels = crate::record::builder::tests::channels();
+        channels.push(ChannelSpec::sensor("armature_current", "A", "aux"));
+        channels
     }
 
     /// Current every 100 ns from 0 to 6 µs; voltage at every third of its
