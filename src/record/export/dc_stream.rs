@@ -56,11 +56,17 @@ pub(super) enum Streamed {
     OutOfOrder,
 }
 
-/// Writes the DC segments' CSV files of one record from its entries.
-pub(super) struct DcStream<'a> {
+/// The files written so far, and where and how to name them.
+struct Files<'a> {
     out_dir: &'a Path,
     stem: &'a str,
     source: &'a str,
+    open: BTreeMap<u32, (PathBuf, BufWriter<File>)>,
+}
+
+/// Writes the DC segments' CSV files of one record from its entries.
+pub(super) struct DcStream<'a> {
+    files: Files<'a>,
     /// The series each channel feeds (the first channel of a quantity).
     slots: Vec<Option<usize>>,
     spans: BTreeMap<u32, Span>,
@@ -69,7 +75,6 @@ pub(super) struct DcStream<'a> {
     /// The latest instant read per series.
     latest: [Option<u64>; 3],
     rows: VecDeque<Row>,
-    files: BTreeMap<u32, (PathBuf, BufWriter<File>)>,
     out_of_order: bool,
     failed: Option<ExportError>,
 }
@@ -90,15 +95,17 @@ impl<'a> DcStream<'a> {
             slots.push(slot);
         }
         DcStream {
-            out_dir,
-            stem,
-            source,
+            files: Files {
+                out_dir,
+                stem,
+                source,
+                open: BTreeMap::new(),
+            },
             slots,
             spans: spans(entries),
             series: Default::default(),
             latest: [None; 3],
             rows: VecDeque::new(),
-            files: BTreeMap::new(),
             out_of_order: false,
             failed: None,
         }
@@ -151,7 +158,7 @@ impl<'a> DcStream<'a> {
             }
         }
         let mut written = Vec::new();
-        for (index, (path, mut file)) in std::mem::take(&mut self.files) {
+        for (index, (path, mut file)) in std::mem::take(&mut self.files.open) {
             if self.out_of_order {
                 drop(file);
                 let _ = std::fs::remove_file(&path);
@@ -182,43 +189,16 @@ impl<'a> DcStream<'a> {
                 return;
             };
             self.rows.pop_front();
-            let inside: Vec<u32> = self
-                .spans
-                .iter()
-                .filter(|(_, s)| s.start <= row.t_ns && row.t_ns <= s.end)
-                .map(|(i, _)| *i)
-                .collect();
-            for index in inside {
-                if let Err(e) = self.write_row(index, row, v, w) {
+            for (&index, span) in &self.spans {
+                if !(span.start <= row.t_ns && row.t_ns <= span.end) {
+                    continue;
+                }
+                if let Err(e) = self.files.write_row(index, span, row, v, w) {
                     self.failed = Some(e);
                     return;
                 }
             }
         }
-    }
-
-    fn write_row(&mut self, index: u32, row: Row, v: f64, w: f64) -> Result<(), ExportError> {
-        let path = self
-            .out_dir
-            .join(format!("{}.segment-{index}.csv", self.stem));
-        let io = |path: &Path| {
-            let path = path.to_path_buf();
-            move |source| ExportError::Io { path, source }
-        };
-        if !self.files.contains_key(&index) {
-            let span = &self.spans[&index];
-            let mut file = BufWriter::new(File::create(&path).map_err(io(&path))?);
-            let head = super::csv::preamble(index, span.kind, &span.label, self.source);
-            writeln!(
-                file,
-                "{head}{COL_TIME},{COL_VOLTAGE},{COL_CURRENT},{COL_SPEED}"
-            )
-            .map_err(io(&path))?;
-            self.files.insert(index, (path.clone(), file));
-        }
-        let (_, file) = self.files.get_mut(&index).expect("opened above");
-        let t = row.t_ns as f64 * 1e-9;
-        writeln!(file, "{t:?},{v:?},{:?},{w:?}", row.current).map_err(io(&path))
     }
 
     /// Lets go of the voltage and speed readings no row can need: all but
@@ -234,6 +214,40 @@ impl<'a> DcStream<'a> {
                 series.pop_front();
             }
         }
+    }
+}
+
+impl Files<'_> {
+    /// Appends `row` to segment `index`'s file, opened with its header
+    /// by the first row.
+    fn write_row(
+        &mut self,
+        index: u32,
+        span: &Span,
+        row: Row,
+        v: f64,
+        w: f64,
+    ) -> Result<(), ExportError> {
+        let io = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| ExportError::Io { path, source }
+        };
+        if !self.open.contains_key(&index) {
+            let path = self
+                .out_dir
+                .join(format!("{}.segment-{index}.csv", self.stem));
+            let mut file = BufWriter::new(File::create(&path).map_err(io(&path))?);
+            let head = super::csv::preamble(index, span.kind, &span.label, self.source);
+            writeln!(
+                file,
+                "{head}{COL_TIME},{COL_VOLTAGE},{COL_CURRENT},{COL_SPEED}"
+            )
+            .map_err(io(&path))?;
+            self.open.insert(index, (path, file));
+        }
+        let (path, file) = self.open.get_mut(&index).expect("opened above");
+        let t = row.t_ns as f64 * 1e-9;
+        writeln!(file, "{t:?},{v:?},{:?},{w:?}", row.current).map_err(io(path))
     }
 }
 
