@@ -199,7 +199,13 @@ type ChainMatrix = [[f64; MAX_COLS]; MAX_PARAMS];
 impl Parametrisation {
     fn new(base: ImCircuit, free: Vec<ImParam>, xs_ratio: Option<f64>) -> Parametrisation {
         let z = base.impedance(1.0).norm().ln();
-        let bounds = (z + VANISHING.ln(), z - VANISHING.ln());
+        // A base without a finite impedance (no valid circuit: every run
+        // from it is refused) bounds nothing, rather than a NaN bound.
+        let bounds = if z.is_finite() {
+            (z + VANISHING.ln(), z - VANISHING.ln())
+        } else {
+            (f64::NEG_INFINITY, f64::INFINITY)
+        };
         Parametrisation {
             base,
             free,
@@ -1385,6 +1391,16 @@ mod tests {
             d.power.extend(s.power);
         }
         d
+    }
+
+    #[test]
+    fn a_base_without_a_finite_impedance_bounds_nothing() {
+        // `f64::clamp` panics on a NaN bound; such a base has none.
+        let mut c = single(1.0, 2.0, 60.0, 1.2, 3.0);
+        c.rs = f64::NAN;
+        let param = Parametrisation::new(c, ImModel::Single.params().to_vec(), None);
+        assert_eq!(param.bounds, (f64::NEG_INFINITY, f64::INFINITY));
+        assert!(param.circuit(param.x_of(&c).as_slice()).is_none());
     }
 
     #[test]
