@@ -120,14 +120,19 @@ fn the_standard_tests_run_over_modbus_with_a_reduced_frequency_locked_rotor_test
     // reading corrected to it bounds it; src/machine/im/identify/joint.rs),
     // so it is held to the truth at that temperature, as the reduction's
     // is: against the 20 °C value it came out 1.5 % high once, the winding
-    // a few kelvin warm on a run the wall clock made longer.
+    // a few kelvin warm on a run the wall clock made longer. Even so, to
+    // 2 %: the load test comes last, its points carry no temperature and
+    // see Rs as at the locked-rotor test, while the simulated winding
+    // warms under load (0.393 %/K, a 300 s time constant), so a slower
+    // run pulls the joint Rs up (1.02 % in a clean CI run). The
+    // reduction's Rs above is the one held to 0.3 %.
     assert_eq!(v["best"], "joint", "{}", v["best"]);
     for (key, t) in TRUTH {
         let t = if key == "Rs" { rs_hot } else { t };
         let got = value(&v, "joint", key);
         let tol = match key {
             "Pfw" => 0.03,
-            "Rfe" | "Rr" => 0.02,
+            "Rfe" | "Rr" | "Rs" => 0.02,
             _ => 0.01,
         };
         assert!(
