@@ -21,10 +21,11 @@ use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use super::table::segment_spans;
 use super::ExportError;
-use crate::record::builder::{dc_slot, interpolate, INCOMPLETE_SUFFIX};
+use crate::record::builder::{dc_slot, interpolate};
 use crate::record::csv::{COL_CURRENT, COL_SPEED, COL_TIME, COL_VOLTAGE};
-use crate::record::{ChannelSpec, Entry, SegmentKind, SegmentPhase};
+use crate::record::{ChannelSpec, DcSegment, Entry, SegmentKind};
 
 /// The series' slots: voltage, current (the time base), speed.
 const VOLTAGE: usize = 0;
@@ -81,10 +82,13 @@ pub(super) struct DcStream<'a> {
 
 impl<'a> DcStream<'a> {
     /// A stream for a record with these channels and (non-sample)
-    /// entries, writing `<stem>.segment-<index>.csv` into `out_dir`.
+    /// entries, writing `<stem>.segment-<index>.csv` into `out_dir`;
+    /// `segments` are the record built from those entries alone (each
+    /// segment's kind and label as the reader takes them from its markers).
     pub(super) fn new(
         channels: &[ChannelSpec],
         entries: &[Entry],
+        segments: &[DcSegment],
         out_dir: &'a Path,
         stem: &'a str,
         source: &'a str,
@@ -102,7 +106,7 @@ impl<'a> DcStream<'a> {
                 open: BTreeMap::new(),
             },
             slots,
-            spans: spans(entries),
+            spans: spans(entries, segments),
             series: Default::default(),
             latest: [None; 3],
             rows: VecDeque::new(),
@@ -261,42 +265,20 @@ fn value_at(s: &mut VecDeque<(u64, f64)>, t: u64, at_end: bool) -> Option<f64> {
     (at_end || t <= last).then(|| interpolate(s, t))
 }
 
-/// Each segment's span, kind and label by index, by the reader's rules:
-/// the first start marker's, the last end's, open to the end of the
-/// record (and the label marked incomplete) without one.
-fn spans(entries: &[Entry]) -> BTreeMap<u32, Span> {
-    let mut spans: BTreeMap<u32, (Span, bool)> = BTreeMap::new();
-    for e in entries {
-        let Entry::Segment { t_ns, marker } = e else {
-            continue;
-        };
-        match marker.phase {
-            SegmentPhase::Start => {
-                spans.entry(marker.index).or_insert((
-                    Span {
-                        start: *t_ns,
-                        end: u64::MAX,
-                        kind: marker.kind,
-                        label: marker.label.clone(),
-                    },
-                    false,
-                ));
-            }
-            SegmentPhase::End => {
-                if let Some((span, ended)) = spans.get_mut(&marker.index) {
-                    span.end = *t_ns;
-                    *ended = true;
-                }
-            }
-        }
-    }
-    spans
+/// Each segment's span by the reader's rule ([`segment_spans`]), with
+/// its kind and label from `segments`.
+fn spans(entries: &[Entry], segments: &[DcSegment]) -> BTreeMap<u32, Span> {
+    segment_spans(entries)
         .into_iter()
-        .map(|(i, (mut span, ended))| {
-            if !ended {
-                span.label.push_str(INCOMPLETE_SUFFIX);
-            }
-            (i, span)
+        .filter_map(|(index, (start, end))| {
+            let segment = segments.iter().find(|s| s.index == index)?;
+            let span = Span {
+                start,
+                end,
+                kind: segment.kind.unwrap_or(SegmentKind::DcStep),
+                label: segment.label.clone(),
+            };
+            Some((index, span))
         })
         .collect()
 }
@@ -304,7 +286,7 @@ fn spans(entries: &[Entry]) -> BTreeMap<u32, Span> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::record::{RecordBuilder, Resolution};
+    use crate::record::{RecordBuilder, Resolution, SegmentPhase};
 
     /// The builder tests' channels and a second current channel (the
     /// first one counts).
@@ -359,6 +341,16 @@ mod tests {
         e
     }
 
+    /// The segments of the record of `markers` alone, as the export
+    /// builds them.
+    fn marker_segments(markers: &[Entry]) -> Vec<DcSegment> {
+        let mut b = RecordBuilder::new(None, channels());
+        for e in markers {
+            b.push(e);
+        }
+        b.finish().segments
+    }
+
     /// The files of the whole-record export, by name.
     fn whole(entries: &[Entry], source: &str) -> Vec<(String, String)> {
         let mut b = RecordBuilder::new(None, channels()).resolution(Resolution::Full);
@@ -378,7 +370,8 @@ mod tests {
             .filter(|e| !matches!(e, Entry::Samples { .. }))
             .cloned()
             .collect();
-        let mut stream = DcStream::new(&channels(), &markers, dir, "rec", source);
+        let segments = marker_segments(&markers);
+        let mut stream = DcStream::new(&channels(), &markers, &segments, dir, "rec", source);
         for e in entries {
             stream.push(e);
         }
@@ -449,7 +442,15 @@ mod tests {
         // A long record holds a few readings at any time.
         let dir = tempfile::tempdir().unwrap();
         let markers = vec![Entry::dc_step_marker(0, 0, SegmentPhase::Start, "long")];
-        let mut stream = DcStream::new(&channels(), &markers, dir.path(), "rec", "rec.mcap");
+        let segments = marker_segments(&markers);
+        let mut stream = DcStream::new(
+            &channels(),
+            &markers,
+            &segments,
+            dir.path(),
+            "rec",
+            "rec.mcap",
+        );
         let mut most = 0;
         for k in 0..100_000u64 {
             stream.push(&Entry::Samples {

@@ -113,17 +113,26 @@ fn write_csv(
         })?;
         Ok::<_, ExportError>((file.segment, path))
     };
-    let mut stream = DcStream::new(&outline.channels, &outline.entries, out_dir, stem, source);
+    // The record of every entry but the samples: the segments' kinds and
+    // labels as the markers give them, the sweeps' points and the
+    // standard tests' readings (entries of their own).
+    let mut builder = RecordBuilder::new(None, outline.channels.clone());
+    for entry in &outline.entries {
+        builder.push(entry);
+    }
+    let outline_record = builder.finish();
+    let mut stream = DcStream::new(
+        &outline.channels,
+        &outline.entries,
+        &outline_record.segments,
+        out_dir,
+        stem,
+        source,
+    );
     read_each(record_path, &mut |entry| stream.push(&entry))?;
     let mut files = match stream.finish()? {
         Streamed::Files(mut files) => {
-            // Sweeps and standard tests are entries of their own, and their
-            // labels are the markers'.
-            let mut builder = RecordBuilder::new(None, outline.channels.clone());
-            for entry in &outline.entries {
-                builder.push(entry);
-            }
-            for file in csv::other_files(&builder.finish(), source) {
+            for file in csv::other_files(&outline_record, source) {
                 files.push(write(file)?);
             }
             files
