@@ -64,6 +64,7 @@ fn lab_record(load_points: usize) -> Record {
                 speed: f64::NAN,
                 frequency: m.frequency,
                 torque: p.torque,
+                winding_temperature: None,
             }));
     }
     record

@@ -1,6 +1,7 @@
 //! CSV import of one `im_slip_sweep` segment (the contract's "CSV import"):
 //! columns `slip`, `line_voltage_V`, `line_current_A`, `input_power_W`,
-//! optional `torque_Nm` and `frequency_Hz`, in any order, unknown columns
+//! optional `torque_Nm`, `frequency_Hz` and `winding_temperature_C` (°C,
+//! motorbench's addition), in any order, unknown columns
 //! ignored, `#` comment lines, and the optional declaration
 //! `# motorbench segment <index> kind=im_slip_sweep label=<text>`.
 //!
@@ -19,6 +20,7 @@
 use std::path::Path;
 
 use super::csv::{read_text, CsvLines, CsvRow};
+use super::csv_im_tests::{temperature, COL_WINDING_TEMPERATURE};
 use super::error::RecordError;
 use super::types::{OperatingPoint, SegmentKind};
 use crate::excerpt::cut;
@@ -125,6 +127,7 @@ pub fn read_im_csv(
     let p_col = required(COL_INPUT_POWER)?;
     let t_col = find(COL_TORQUE)?;
     let f_col = find(COL_FREQUENCY)?;
+    let temperature_col = find(COL_WINDING_TEMPERATURE)?;
     let index = csv.decl.index.unwrap_or(default_index);
     let mut points = Vec::new();
     for &(no, line) in lines {
@@ -177,6 +180,14 @@ pub fn read_im_csv(
         let line_current = positive(i_col)?;
         let input_power = number(p_col)?;
         let torque = t_col.map(|c| row.optional_number(c)).transpose()?.flatten();
+        let winding_temperature = temperature(
+            path,
+            no,
+            temperature_col
+                .map(|c| row.optional_number(c))
+                .transpose()?
+                .flatten(),
+        )?;
         let speed = match pole_pairs {
             Some(p) if p > 0 => (1.0 - slip) * std::f64::consts::TAU * f / f64::from(p),
             _ => f64::NAN,
@@ -190,6 +201,7 @@ pub fn read_im_csv(
             speed,
             frequency: f,
             torque,
+            winding_temperature,
         });
     }
     if points.is_empty() {
@@ -243,6 +255,33 @@ mod tests {
         assert_eq!(p.frequency, 50.0);
         assert!((p.speed - 0.998 * std::f64::consts::PI * 50.0).abs() < 1e-9);
         assert_eq!(seg.points[1].segment, 1);
+        assert_eq!(p.winding_temperature, None);
+    }
+
+    #[test]
+    fn a_winding_temperature_column_is_read_per_point() {
+        let seg = read(
+            "slip,line_voltage_V,line_current_A,input_power_W,winding_temperature_C\n\
+             0.01,400,4,900,41.5\n0.02,400,5,1500,\n0.03,400,6,2100,44\n",
+        )
+        .unwrap();
+        let t: Vec<Option<f64>> = seg.points.iter().map(|p| p.winding_temperature).collect();
+        assert_eq!(t, [Some(41.5), None, Some(44.0)]);
+    }
+
+    #[test]
+    fn a_winding_temperature_in_kelvin_is_refused_naming_line_and_column() {
+        let e = read(
+            "slip,line_voltage_V,line_current_A,input_power_W,winding_temperature_C\n\
+             0.01,400,4,900,41.5\n0.02,400,5,1500,318.15\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("sweep.csv:3") && e.contains("winding_temperature_C"),
+            "{e}"
+        );
+        assert!(e.contains("not K"), "{e}");
     }
 
     #[test]

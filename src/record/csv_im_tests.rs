@@ -146,7 +146,11 @@ fn positive(path: &Path, line: usize, column: &str, v: f64) -> Result<f64, Recor
 }
 
 /// A winding temperature inside [`TEMPERATURE_RANGE_C`].
-fn temperature(path: &Path, line: usize, t: Option<f64>) -> Result<Option<f64>, RecordError> {
+pub(super) fn temperature(
+    path: &Path,
+    line: usize,
+    t: Option<f64>,
+) -> Result<Option<f64>, RecordError> {
     let (lo, hi) = TEMPERATURE_RANGE_C;
     match t {
         Some(t) if !(lo..=hi).contains(&t) => Err(RecordError::csv(

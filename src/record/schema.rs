@@ -124,7 +124,8 @@ pub const OPERATING_POINT_JSON_SCHEMA: &str = r#"{
     "input_power": {"type": "number"},
     "speed": {"type": "number"},
     "frequency": {"type": "number"},
-    "torque": {"type": ["number", "null"]}
+    "torque": {"type": ["number", "null"]},
+    "winding_temperature": {"type": "number", "description": "degC: the winding thermometer's mean over the point's averaging window; absent where the rig has no thermometer"}
   },
   "required": ["segment", "slip", "line_voltage", "line_current", "input_power", "speed", "frequency", "torque"],
   "additionalProperties": false

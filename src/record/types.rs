@@ -278,6 +278,11 @@ pub struct OperatingPoint {
     pub frequency: f64,
     /// Shaft torque where a torque sensor exists, N·m.
     pub torque: Option<f64>,
+    /// The winding thermometer's mean over the point's averaging window,
+    /// °C (as labs read it), where the rig has one. Absent from the
+    /// message without one, so that such a record is as before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub winding_temperature: Option<f64>,
 }
 
 impl OperatingPoint {
@@ -291,6 +296,10 @@ impl OperatingPoint {
             ("speed", self.speed),
             ("frequency", self.frequency),
             ("torque", self.torque.unwrap_or(0.0)),
+            (
+                "winding_temperature",
+                self.winding_temperature.unwrap_or(0.0),
+            ),
         ]
         .into_iter()
         .find(|(_, v)| !v.is_finite())

@@ -969,6 +969,8 @@ mod tests {
             speed: (1.0 - slip) * 157.08,
             frequency: 50.0,
             torque,
+            // A point with a torque sensor here has a thermometer too.
+            winding_temperature: torque.map(|t| t + 20.5),
         };
         let stats = runtime().block_on(async {
             let rec = Recorder::start(&path, &meta(), &channels(), 8).unwrap();
@@ -997,6 +999,19 @@ mod tests {
             rec.finish().await.unwrap()
         });
         assert_eq!(stats.per_topic["/bench/operating_point"], 2);
+        // A point without a thermometer's reading has no such key: its
+        // message is as before the key was added, and such a message
+        // still reads.
+        let json = |p: OperatingPoint| serde_json::to_string(&p).unwrap();
+        assert!(
+            json(point(0.03, Some(25.0))).ends_with(r#""torque":25.0,"winding_temperature":45.5}"#)
+        );
+        let old = json(point(1.0, None));
+        assert!(old.ends_with(r#""torque":null}"#), "{old}");
+        assert_eq!(
+            serde_json::from_str::<OperatingPoint>(&old).unwrap(),
+            point(1.0, None)
+        );
         let record = read_mcap(&path).unwrap();
         assert_eq!(
             record.operating_points,

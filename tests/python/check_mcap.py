@@ -171,8 +171,13 @@ def shape_problem(schema_name, msg):
     if schema_name == "motorbench.OperatingPoint":
         keys = {"segment", "slip", "line_voltage", "line_current", "input_power",
                 "speed", "frequency", "torque"}
-        if set(msg) != keys:
-            return f"keys {sorted(msg)}, want {sorted(keys)}"
+        # winding_temperature (degC, a number): only where the rig has a
+        # winding thermometer; an additive key, absent otherwise.
+        optional = {"winding_temperature"}
+        if not keys <= set(msg) <= keys | optional:
+            return f"keys {sorted(msg)}, want {sorted(keys)} and optionally {sorted(optional)}"
+        if "winding_temperature" in msg and not is_number(msg["winding_temperature"]):
+            return f"winding_temperature {msg['winding_temperature']!r} is not a number"
         if not is_int(msg["segment"]) or msg["segment"] < 0:
             return "segment is not a non-negative integer"
         for k in sorted(keys - {"segment", "torque"}):

@@ -458,6 +458,7 @@ pub fn simulate_im_case(effect: Option<Effect>, rng: &mut StdRng) -> BlindRecord
             speed: (1.0 - s) * w_sync,
             frequency,
             torque: None,
+            winding_temperature: None,
         });
     }
     // A no-load test in some plans, drawn after the sweeps so that they

@@ -485,6 +485,7 @@ impl Sweep<'_> {
             frequency: self.plan.frequency,
             torque: (!torques.is_empty())
                 .then(|| torques.iter().sum::<f64>() / torques.len() as f64),
+            winding_temperature: self.window_temperature,
         };
         Ok(Some((point, hot)))
     }

@@ -8,7 +8,8 @@
 //!   [`crate::record::RecordBuilder`]).
 //! - Induction-machine sweeps: one row per operating point, `slip`,
 //!   `line_voltage_V`, `line_current_A`, `input_power_W`, `frequency_Hz`,
-//!   and `torque_Nm` when a point of the sweep has a torque.
+//!   `torque_Nm` when a point of the sweep has a torque, and
+//!   `winding_temperature_C` when a point has a winding temperature.
 //! - The induction machine's standard tests, one row per reading:
 //!   `im_dc_resistance` (`dc_voltage_V`, `dc_current_A`), `im_no_load` and
 //!   `im_locked_rotor` (`line_voltage_V`, `line_current_A`,
@@ -277,15 +278,17 @@ fn dc_text(s: &DcSegment, source: &str) -> String {
 fn im_text(index: u32, label: &str, points: &[&OperatingPoint], source: &str) -> String {
     let mut text = preamble(index, SegmentKind::ImSlipSweep, label, source);
     let torque = points.iter().any(|p| p.torque.is_some());
-    let torque_column = if torque {
-        format!(",{COL_TORQUE}")
-    } else {
-        String::new()
-    };
-    let _ = writeln!(
+    let temperature = points.iter().any(|p| p.winding_temperature.is_some());
+    let _ = write!(
         text,
-        "{COL_SLIP},{COL_LINE_VOLTAGE},{COL_LINE_CURRENT},{COL_INPUT_POWER},{COL_FREQUENCY}{torque_column}"
+        "{COL_SLIP},{COL_LINE_VOLTAGE},{COL_LINE_CURRENT},{COL_INPUT_POWER},{COL_FREQUENCY}{}",
+        if torque {
+            format!(",{COL_TORQUE}")
+        } else {
+            String::new()
+        }
     );
+    columns_end(&mut text, temperature.then_some(COL_WINDING_TEMPERATURE));
     for p in points {
         let _ = write!(
             text,
@@ -296,7 +299,10 @@ fn im_text(index: u32, label: &str, points: &[&OperatingPoint], source: &str) ->
             p.input_power,
             cell(given(p.frequency))
         );
-        row_end(&mut text, torque, p.torque);
+        if torque {
+            let _ = write!(text, ",{}", cell(p.torque));
+        }
+        row_end(&mut text, temperature, p.winding_temperature);
     }
     text
 }
@@ -353,6 +359,7 @@ mod tests {
             speed: (1.0 - slip) * 157.079_632_679_489_66,
             frequency: 50.0,
             torque: Some(20.0 * slip),
+            winding_temperature: None,
         };
         let record = Record {
             operating_points: vec![point(0.03), point(1.0)],
@@ -371,8 +378,9 @@ mod tests {
         assert_eq!(back.points[0].slip, 0.03);
     }
 
-    /// A sweep where only some points have a torque, and one point has no
-    /// frequency: every torque read is kept (the others' cells are empty)
+    /// A sweep where only some points have a torque and a winding
+    /// temperature, and one point has no frequency: every torque and
+    /// temperature read is kept (the others' cells are empty)
     /// and the file reads back, the missing frequency the importer's.
     #[test]
     fn a_sweep_keeps_the_torque_of_the_points_that_have_one() {
@@ -385,6 +393,7 @@ mod tests {
             speed: f64::NAN,
             frequency,
             torque,
+            winding_temperature: torque.map(|t| 40.0 + 2.0 * t),
         };
         let record = Record {
             operating_points: vec![
@@ -401,6 +410,13 @@ mod tests {
         let back = read_im_csv(&path, 0, Some(60.0), None).unwrap();
         let torques: Vec<Option<f64>> = back.points.iter().map(|p| p.torque).collect();
         assert_eq!(torques, [Some(0.6), None, Some(20.0)], "{text}");
+        let temperatures: Vec<Option<f64>> =
+            back.points.iter().map(|p| p.winding_temperature).collect();
+        assert_eq!(
+            temperatures,
+            [Some(40.0 + 2.0 * 0.6), None, Some(80.0)],
+            "{text}"
+        );
         let frequencies: Vec<f64> = back.points.iter().map(|p| p.frequency).collect();
         assert_eq!(frequencies, [50.0, 60.0, 50.0], "{text}");
     }

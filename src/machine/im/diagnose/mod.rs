@@ -813,6 +813,7 @@ mod tests {
                     speed: (1.0 - s) * 157.08,
                     frequency: 50.0,
                     torque: None,
+                    winding_temperature: None,
                 }
             })
             .collect();
@@ -1254,6 +1255,7 @@ mod tests {
                     speed: 0.0,
                     frequency: 50.0,
                     torque: None,
+                    winding_temperature: None,
                 }
             })
             .collect();

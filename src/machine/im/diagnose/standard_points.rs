@@ -108,6 +108,7 @@ pub fn with_standard_points(record: &Record) -> StandardPoints {
         speed: if slip == 1.0 { 0.0 } else { f64::NAN },
         frequency: frequency(r.frequency),
         torque: None,
+        winding_temperature: r.winding_temperature,
     };
     let mut out = record.clone();
     out.operating_points
@@ -194,6 +195,7 @@ mod tests {
             speed: (1.0 - slip) * 157.0,
             frequency: 50.0,
             torque: None,
+            winding_temperature: None,
         }
     }
 

@@ -18,9 +18,9 @@
 //!   on its lower bound, the DC reading, and the report says so).
 //! - Where the readings carry the winding temperature and `Rs` has one
 //!   (the DC reading's, corrected by the reduction), each no-load and
-//!   locked-rotor reading sees `Rs` scaled to its own temperature
-//!   (copper's α): the winding warms through the tests. The load test's
-//!   points carry no temperature and take `Rs` as it is.
+//!   locked-rotor reading and each load point sees `Rs` scaled to its own
+//!   temperature (copper's α): the winding warms through the tests, most
+//!   under load. A reading without a temperature takes `Rs` as it is.
 //! - `Xs` is tied to `Xr` in the design class's leakage split (terminal
 //!   readings at one frequency do not separate them), and reported with
 //!   a warning that says so.
@@ -224,7 +224,8 @@ impl Residuals for JointProblem<'_> {
 
 /// The readings of the load test, the locked-rotor and the no-load tests;
 /// a reading without a frequency takes `rated_frequency`; one with a
-/// winding temperature sees `Rs` (at `rs_temperature`) scaled to it.
+/// winding temperature (a load point's included) sees `Rs` (at
+/// `rs_temperature`) scaled to it.
 fn readings(
     points: &[OperatingPoint],
     tests: &ImStandardTests,
@@ -244,7 +245,7 @@ fn readings(
         line_current: p.line_current,
         input_power: p.input_power,
         frequency: f(p.frequency),
-        rs_scale: 1.0,
+        rs_scale: temperature_factor(rs_temperature, p.winding_temperature),
     });
     let supply = |test: Test| {
         move |r: &crate::record::SupplyReading| Reading {
@@ -348,10 +349,25 @@ pub fn fit_joint(
             .iter()
             .fold((1.0f64, 1.0f64), |(a, b), &k| (a.min(k), b.max(k)));
         if hi - lo > 1e-9 {
+            let load = points.len();
+            let load_warm = points
+                .iter()
+                .filter(|p| p.winding_temperature.is_some())
+                .count();
+            let load_note = match (load, load_warm) {
+                (0, _) => String::new(),
+                (n, k) if k == n => "; so does each load point".to_string(),
+                (_, 0) => {
+                    "; the load test's points carry no temperature and see it as it is".to_string()
+                }
+                (n, k) => format!(
+                    "; so do {k} of the {n} load points, the others (without a temperature) see \
+                     it as it is"
+                ),
+            };
             warnings.push(format!(
                 "joint: Rs is at the winding's {t:.1} °C; each no-load and locked-rotor reading \
-                 sees it scaled to its own temperature (copper, × {lo:.4} … {hi:.4}); the load \
-                 test's points carry no temperature and see it as it is"
+                 sees it scaled to its own temperature (copper, × {lo:.4} … {hi:.4}){load_note}"
             ));
         }
     }
@@ -639,6 +655,60 @@ mod tests {
             "{} against {}",
             g.rms_relative,
             f.rms_relative
+        );
+    }
+
+    #[test]
+    fn load_points_at_their_winding_temperature_see_rs_scaled_to_it() {
+        // The DC reading at 20 °C, the locked-rotor and no-load tests at
+        // 40 °C, then the load test with the winding warmed to 95 °C, each
+        // point saying so: Rs back at 40 °C and the circuit exactly.
+        let c = machine();
+        let at = |t: f64| ImCircuit {
+            rs: c.rs * (1.0 + COPPER_ALPHA * (t - 20.0)),
+            ..c
+        };
+        let mut tests = tests_of(&at(40.0), 1.0);
+        tests.dc_resistance = tests_of(&c, 1.0).dc_resistance;
+        tests
+            .dc_resistance
+            .iter_mut()
+            .for_each(|r| r.winding_temperature = Some(20.0));
+        for r in tests.no_load.iter_mut().chain(&mut tests.locked_rotor) {
+            r.winding_temperature = Some(40.0);
+        }
+        let mut warm = load_points(&at(95.0));
+        warm.iter_mut()
+            .for_each(|p| p.winding_temperature = Some(95.0));
+        let f = fit(&tests, &warm).unwrap();
+        let RotorCage::Single { rr, .. } = f.circuit.rotor else {
+            unreachable!()
+        };
+        for (name, got, truth) in [
+            ("Rs", f.circuit.rs, at(40.0).rs),
+            ("Xm", f.circuit.xm, c.xm),
+            ("Rr", rr, 1.1),
+            ("Pfw", f.friction_windage, PFW),
+        ] {
+            assert!((got / truth - 1.0).abs() < 1e-4, "{name}: {got} vs {truth}");
+        }
+        assert!(f.rms_relative < 1e-6, "{}", f.rms_relative);
+        assert_warned(&f.warnings, "so does each load point");
+        // The same points without their temperature: fitted at 40 °C,
+        // they pull Rs up (here to its bound, a winding 60 K warmer than
+        // the DC reading) and misfit.
+        let mut unmarked = warm.clone();
+        unmarked
+            .iter_mut()
+            .for_each(|p| p.winding_temperature = None);
+        let g = fit(&tests, &unmarked).unwrap();
+        assert!(
+            g.rms_relative > 10.0 * f.rms_relative.max(1e-7) && g.circuit.rs > f.circuit.rs,
+            "{} against {}, Rs {} against {}",
+            g.rms_relative,
+            f.rms_relative,
+            g.circuit.rs,
+            f.circuit.rs
         );
     }
 

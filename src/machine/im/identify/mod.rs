@@ -708,6 +708,7 @@ mod tests {
                 speed: (1.0 - p.slip) * std::f64::consts::PI * 50.0,
                 frequency: 50.0,
                 torque: p.torque,
+                winding_temperature: None,
             }));
         }
         Record {
@@ -744,6 +745,7 @@ mod tests {
                     speed: (1.0 - slip) * std::f64::consts::PI * 50.0,
                     frequency: 50.0,
                     torque: None,
+                    winding_temperature: None,
                 }
             })
             .collect();

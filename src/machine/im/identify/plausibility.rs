@@ -146,6 +146,7 @@ mod tests {
                     speed: f64::NAN,
                     frequency: 50.0,
                     torque: None,
+                    winding_temperature: None,
                 })
                 .collect(),
             ..Default::default()

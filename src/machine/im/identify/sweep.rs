@@ -134,6 +134,7 @@ impl SlipSweep {
                 speed: f64::NAN,
                 frequency,
                 torque: None,
+                winding_temperature: None,
             })
             .collect()
     }
