@@ -97,6 +97,10 @@ pub struct PointStatus {
     pub input_power: f64,
     /// Shaft speed, rad/s.
     pub speed: f64,
+    /// The winding thermometer's mean over the point's window, °C, where
+    /// the rig has one (absent otherwise).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub winding_temperature: Option<f64>,
 }
 
 impl From<&OperatingPoint> for PointStatus {
@@ -108,6 +112,7 @@ impl From<&OperatingPoint> for PointStatus {
             line_current: p.line_current,
             input_power: p.input_power,
             speed: p.speed,
+            winding_temperature: p.winding_temperature,
         }
     }
 }

@@ -281,3 +281,99 @@ fn a_bad_standard_test_file_is_refused_with_file_line_and_column() {
         "{stderr}"
     );
 }
+
+/// The load test's sweep file carries each point's winding temperature
+/// (`winding_temperature_C`): the load test ran with the winding at
+/// 80 °C, the other tests at 22 °C. The joint fit sees Rs scaled to each
+/// point's temperature and reports it at the locked-rotor test's; the
+/// same file without the column leaves the warm winding's copper
+/// unexplained.
+#[test]
+fn a_warm_load_test_with_its_temperatures_keeps_the_joint_rs_at_the_other_tests() {
+    use motorbench::machine::im::COPPER_ALPHA;
+    let dir = tempfile::tempdir().unwrap();
+    let f = write_tests(dir.path());
+    let cold = machine();
+    let warm = ImCircuit {
+        rs: cold.rs * (1.0 + COPPER_ALPHA * 58.0),
+        ..cold
+    };
+    let supply = ImSupply {
+        line_voltage: 400.0,
+        frequency: 50.0,
+        connection: Connection::Star,
+        pole_pairs: 2,
+    };
+    let sw = SlipSweep::simulate(
+        &warm,
+        &supply,
+        &slip_grid(30, 0.005),
+        &SweepNoise::relative(0.001),
+        3,
+        &mut StdRng::seed_from_u64(5),
+    );
+    let write = |name: &str, with_temperature: bool| {
+        let mut text = String::from(
+            "# motorbench segment 3 kind=im_slip_sweep label=load, warm\n\
+             slip,line_voltage_V,line_current_A,input_power_W",
+        );
+        text.push_str(if with_temperature {
+            ",winding_temperature_C\n"
+        } else {
+            "\n"
+        });
+        for p in &sw.points {
+            text.push_str(&format!(
+                "{},{},{},{}{}\n",
+                p.slip,
+                p.line_voltage,
+                p.line_current,
+                p.input_power,
+                if with_temperature { ",80.0" } else { "" }
+            ));
+        }
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let joint = |sweep: &Path| {
+        let stdout = identify(&[
+            "--kind",
+            "im_slip_sweep",
+            s(sweep),
+            s(&f.dc),
+            s(&f.no_load),
+            s(&f.locked),
+            "--nameplate",
+            s(&f.nameplate),
+            "--json",
+        ]);
+        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        assert_eq!(v["methods"]["joint"]["applies"], true, "{v}");
+        v
+    };
+    let marked = joint(&write("warm.csv", true));
+    let rs = marked["methods"]["joint"]["params"]["Rs"]["value"]
+        .as_f64()
+        .unwrap();
+    assert!(
+        (rs / cold.rs - 1.0).abs() < 0.01,
+        "joint Rs {rs}, truth {}",
+        cold.rs
+    );
+    let warnings = marked["warnings"].to_string();
+    assert!(warnings.contains("so does each load point"), "{warnings}");
+    let unmarked = joint(&write("warm_unmarked.csv", false));
+    let rs_unmarked = unmarked["methods"]["joint"]["params"]["Rs"]["value"]
+        .as_f64()
+        .unwrap();
+    println!(
+        "joint Rs with the points' temperatures {rs:.5}, without {rs_unmarked:.5}, truth {}",
+        cold.rs
+    );
+    assert!(
+        (rs_unmarked / cold.rs - 1.0).abs() > 3.0 * (rs / cold.rs - 1.0).abs().max(0.001),
+        "without the temperatures Rs {rs_unmarked}, with them {rs}, truth {}",
+        cold.rs
+    );
+}

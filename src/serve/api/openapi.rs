@@ -116,9 +116,22 @@ mod tests {
         assert_eq!(points["type"], "array", "{points}");
         assert_eq!(points["items"]["$ref"], "#/components/schemas/PointStatus");
         let fields = schemas["PointStatus"]["properties"].as_object().unwrap();
-        for f in ["segment", "slip", "line_current", "input_power"] {
+        for f in [
+            "segment",
+            "slip",
+            "line_current",
+            "input_power",
+            "winding_temperature",
+        ] {
             assert!(fields.contains_key(f), "{f}: {fields:?}");
         }
+        // The thermometer's reading is there only where the rig has one.
+        let required = schemas["PointStatus"]["required"].as_array().unwrap();
+        assert!(
+            !required.iter().any(|r| r == "winding_temperature"),
+            "{required:?}"
+        );
+        assert!(required.iter().any(|r| r == "slip"), "{required:?}");
     }
 
     #[test]
