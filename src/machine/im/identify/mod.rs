@@ -55,7 +55,7 @@ pub use sweep::{
 
 use crate::identify::nrmse;
 use crate::model::{Connection, ImCircuit, ImModel, LeakageSplit, PerUnitBase};
-use crate::record::{Record, SegmentKind};
+use crate::record::{OperatingPoint, Record, SegmentKind};
 use crate::report::{IdentificationReport, MethodReport, ParamEstimate};
 
 /// Everything induction-machine identification produced.
@@ -559,6 +559,34 @@ fn recursive_method(
     (report, Some(est))
 }
 
+/// A winding that warmed by more than this over the load test's points
+/// (the thermometer's readings), K, is worth a warning: copper's
+/// resistance then changed by about 2 %, as much as the slip-sweep fits'
+/// `Rs` is typically determined to.
+const WARMING_NOTE_K: f64 = 5.0;
+
+/// The warning where the winding thermometer saw the winding warm by more
+/// than [`WARMING_NOTE_K`] over `points`: the slip-sweep fits take one
+/// `Rs` for all of them.
+fn warming_note(points: &[OperatingPoint]) -> Option<String> {
+    let (lo, hi) = points
+        .iter()
+        .filter_map(|p| p.winding_temperature)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+            (lo.min(t), hi.max(t))
+        });
+    (hi - lo > WARMING_NOTE_K).then(|| {
+        let rise = standard_tests::temperature_factor(Some(lo), Some(hi)) - 1.0;
+        format!(
+            "lm, recursive: the winding thermometer read {lo:.1} to {hi:.1} °C over the load \
+             test's points, so Rs rose by {:.1} % (copper) during the sweep; these fits take one \
+             Rs for every point (the joint fit, given the standard tests, scales it to each \
+             point's temperature)",
+            100.0 * rise
+        )
+    })
+}
+
 /// Identify an induction machine from `record`'s operating points.
 /// `connection` overrides the nameplate's.
 pub fn identify_im(
@@ -652,6 +680,7 @@ pub fn identify_im(
         }
     };
     let (lm_report, lm) = lm_method(&sweep, model, &mut warnings);
+    warnings.extend(warming_note(&record.operating_points));
     let (rec_report, recursive) = recursive_method(&sweep, model, &base, &mut warnings);
     report.methods.insert("lm".into(), lm_report);
     report.methods.insert("recursive".into(), rec_report);
@@ -677,7 +706,6 @@ mod tests {
     use crate::identify::{slip_grid, SweepNoise};
     use crate::machine::im::assert_warned;
     use crate::model::{ImSupply, RotorCage};
-    use crate::record::OperatingPoint;
     use rand::rngs::StdRng;
     use rand::SeedableRng;
 
@@ -725,6 +753,28 @@ mod tests {
             rfe: None,
             rotor: RotorCage::Single { rr: 1.6, xr: 3.0 },
         }
+    }
+
+    #[test]
+    fn a_sweep_whose_winding_warmed_says_so_and_one_that_did_not_is_quiet() {
+        let mut r = record(&machine(), &[400.0], 0.002);
+        let n = r.operating_points.len() as f64;
+        for (k, p) in r.operating_points.iter_mut().enumerate() {
+            p.winding_temperature = Some(30.0 + 20.0 * k as f64 / (n - 1.0));
+        }
+        let id = identify_im(&r, Some(Connection::Delta), ImModel::Single);
+        assert_warned(&id.report.warnings, "read 30.0 to 50.0 °C");
+        // (1 + α·30 K)/(1 + α·10 K), α = 0.393 %/K.
+        assert_warned(&id.report.warnings, "Rs rose by 7.6 %");
+        for p in r.operating_points.iter_mut() {
+            p.winding_temperature = p.winding_temperature.map(|t| 30.0 + (t - 30.0) / 5.0);
+        }
+        let id = identify_im(&r, Some(Connection::Delta), ImModel::Single);
+        assert!(
+            !id.report.warnings.iter().any(|w| w.contains("thermometer")),
+            "{:?}",
+            id.report.warnings
+        );
     }
 
     #[test]
