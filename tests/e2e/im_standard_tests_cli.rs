@@ -82,30 +82,7 @@ fn write_tests(dir: &Path) -> Files {
             read(r.input_power)
         ));
     }
-    let supply = ImSupply {
-        line_voltage: 400.0,
-        frequency: 50.0,
-        connection: conn,
-        pole_pairs: 2,
-    };
-    let sw = SlipSweep::simulate(
-        &c,
-        &supply,
-        &slip_grid(30, 0.005),
-        &SweepNoise::relative(0.001),
-        3,
-        &mut StdRng::seed_from_u64(5),
-    );
-    let mut sweep = String::from(
-        "# motorbench segment 3 kind=im_slip_sweep label=load\n\
-         slip,line_voltage_V,line_current_A,input_power_W\n",
-    );
-    for p in &sw.points {
-        sweep.push_str(&format!(
-            "{},{},{},{}\n",
-            p.slip, p.line_voltage, p.line_current, p.input_power
-        ));
-    }
+    let sweep = sweep_text(&load_test(&c), "load", None);
     let files = Files {
         dc: dir.join("dc.csv"),
         no_load: dir.join("no_load.csv"),
@@ -123,6 +100,49 @@ fn write_tests(dir: &Path) -> Files {
     )
     .unwrap();
     files
+}
+
+/// A 30-point load test of `c` at 400 V, 0.1 % meter errors.
+fn load_test(c: &ImCircuit) -> SlipSweep {
+    let supply = ImSupply {
+        line_voltage: 400.0,
+        frequency: 50.0,
+        connection: Connection::Star,
+        pole_pairs: 2,
+    };
+    SlipSweep::simulate(
+        c,
+        &supply,
+        &slip_grid(30, 0.005),
+        &SweepNoise::relative(0.001),
+        3,
+        &mut StdRng::seed_from_u64(5),
+    )
+}
+
+/// `sw` as segment 3's CSV file, every point at `temperature` °C where
+/// given (column `winding_temperature_C`).
+fn sweep_text(sw: &SlipSweep, label: &str, temperature: Option<f64>) -> String {
+    let mut text = format!(
+        "# motorbench segment 3 kind=im_slip_sweep label={label}\n\
+         slip,line_voltage_V,line_current_A,input_power_W{}\n",
+        if temperature.is_some() {
+            ",winding_temperature_C"
+        } else {
+            ""
+        }
+    );
+    for p in &sw.points {
+        text.push_str(&format!(
+            "{},{},{},{}{}\n",
+            p.slip,
+            p.line_voltage,
+            p.line_current,
+            p.input_power,
+            temperature.map_or(String::new(), |t| format!(",{t}"))
+        ));
+    }
+    text
 }
 
 fn s(p: &Path) -> &str {
@@ -298,42 +318,10 @@ fn a_warm_load_test_with_its_temperatures_keeps_the_joint_rs_at_the_other_tests(
         rs: cold.rs * (1.0 + COPPER_ALPHA * 58.0),
         ..cold
     };
-    let supply = ImSupply {
-        line_voltage: 400.0,
-        frequency: 50.0,
-        connection: Connection::Star,
-        pole_pairs: 2,
-    };
-    let sw = SlipSweep::simulate(
-        &warm,
-        &supply,
-        &slip_grid(30, 0.005),
-        &SweepNoise::relative(0.001),
-        3,
-        &mut StdRng::seed_from_u64(5),
-    );
-    let write = |name: &str, with_temperature: bool| {
-        let mut text = String::from(
-            "# motorbench segment 3 kind=im_slip_sweep label=load, warm\n\
-             slip,line_voltage_V,line_current_A,input_power_W",
-        );
-        text.push_str(if with_temperature {
-            ",winding_temperature_C\n"
-        } else {
-            "\n"
-        });
-        for p in &sw.points {
-            text.push_str(&format!(
-                "{},{},{},{}{}\n",
-                p.slip,
-                p.line_voltage,
-                p.line_current,
-                p.input_power,
-                if with_temperature { ",80.0" } else { "" }
-            ));
-        }
+    let sw = load_test(&warm);
+    let write = |name: &str, temperature: Option<f64>| {
         let path = dir.path().join(name);
-        std::fs::write(&path, text).unwrap();
+        std::fs::write(&path, sweep_text(&sw, "load, warm", temperature)).unwrap();
         path
     };
     let joint = |sweep: &Path| {
@@ -352,7 +340,7 @@ fn a_warm_load_test_with_its_temperatures_keeps_the_joint_rs_at_the_other_tests(
         assert_eq!(v["methods"]["joint"]["applies"], true, "{v}");
         v
     };
-    let marked = joint(&write("warm.csv", true));
+    let marked = joint(&write("warm.csv", Some(80.0)));
     let rs = marked["methods"]["joint"]["params"]["Rs"]["value"]
         .as_f64()
         .unwrap();
@@ -363,7 +351,7 @@ fn a_warm_load_test_with_its_temperatures_keeps_the_joint_rs_at_the_other_tests(
     );
     let warnings = marked["warnings"].to_string();
     assert!(warnings.contains("so does each load point"), "{warnings}");
-    let unmarked = joint(&write("warm_unmarked.csv", false));
+    let unmarked = joint(&write("warm_unmarked.csv", None));
     let rs_unmarked = unmarked["methods"]["joint"]["params"]["Rs"]["value"]
         .as_f64()
         .unwrap();

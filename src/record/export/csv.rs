@@ -117,10 +117,12 @@ pub(super) fn other_files(record: &Record, source: &str) -> Vec<CsvFile> {
         let mut text = preamble(index, kind, &label(index, kind.as_str().into()), source);
         let temperature = readings.iter().any(|r| r.winding_temperature.is_some());
         let _ = write!(text, "{COL_DC_VOLTAGE},{COL_DC_CURRENT}");
-        columns_end(&mut text, temperature.then_some(COL_WINDING_TEMPERATURE));
+        column_if(&mut text, temperature, COL_WINDING_TEMPERATURE);
+        text.push('\n');
         for r in readings {
             let _ = write!(text, "{:?},{:?}", r.dc_voltage, r.dc_current);
-            row_end(&mut text, temperature, r.winding_temperature);
+            cell_if(&mut text, temperature, r.winding_temperature);
+            text.push('\n');
         }
         out.push(CsvFile {
             segment: index,
@@ -174,24 +176,22 @@ fn segment_indices(segments: impl Iterator<Item = u32>) -> Vec<u32> {
     v
 }
 
-/// End a header line, with the optional column `last`.
-fn columns_end(text: &mut String, last: Option<&str>) {
-    match last {
-        Some(c) => {
-            let _ = writeln!(text, ",{c}");
-        }
-        None => text.push('\n'),
+/// The optional column `name` of a header, `,name`, where the file has
+/// that column (`present`).
+fn column_if(text: &mut String, present: bool, name: &str) {
+    if present {
+        text.push(',');
+        text.push_str(name);
     }
 }
 
-/// End a row, with the cell of the optional last column where the file
-/// has that column (`column`).
-fn row_end(text: &mut String, column: bool, last: Option<f64>) {
-    if column {
+/// The cell of an optional column, `,value` (`,` alone for `None`), where
+/// the file has that column (`present`).
+fn cell_if(text: &mut String, present: bool, v: Option<f64>) {
+    if present {
         text.push(',');
-        text.push_str(&cell(last));
+        text.push_str(&cell(v));
     }
-    text.push('\n');
 }
 
 /// A cell of an optional column: the value, or empty where there is none.
@@ -221,24 +221,20 @@ fn supply_test_text(
     let temperature = readings.iter().any(|r| r.winding_temperature.is_some());
     let _ = write!(
         text,
-        "{COL_LINE_VOLTAGE},{COL_LINE_CURRENT},{COL_INPUT_POWER}{}",
-        if frequency {
-            format!(",{COL_FREQUENCY}")
-        } else {
-            String::new()
-        }
+        "{COL_LINE_VOLTAGE},{COL_LINE_CURRENT},{COL_INPUT_POWER}"
     );
-    columns_end(&mut text, temperature.then_some(COL_WINDING_TEMPERATURE));
+    column_if(&mut text, frequency, COL_FREQUENCY);
+    column_if(&mut text, temperature, COL_WINDING_TEMPERATURE);
+    text.push('\n');
     for r in readings {
         let _ = write!(
             text,
             "{:?},{:?},{:?}",
             r.line_voltage, r.line_current, r.input_power
         );
-        if frequency {
-            let _ = write!(text, ",{}", cell(given(r.frequency)));
-        }
-        row_end(&mut text, temperature, r.winding_temperature);
+        cell_if(&mut text, frequency, given(r.frequency));
+        cell_if(&mut text, temperature, r.winding_temperature);
+        text.push('\n');
     }
     text
 }
@@ -281,14 +277,11 @@ fn im_text(index: u32, label: &str, points: &[&OperatingPoint], source: &str) ->
     let temperature = points.iter().any(|p| p.winding_temperature.is_some());
     let _ = write!(
         text,
-        "{COL_SLIP},{COL_LINE_VOLTAGE},{COL_LINE_CURRENT},{COL_INPUT_POWER},{COL_FREQUENCY}{}",
-        if torque {
-            format!(",{COL_TORQUE}")
-        } else {
-            String::new()
-        }
+        "{COL_SLIP},{COL_LINE_VOLTAGE},{COL_LINE_CURRENT},{COL_INPUT_POWER},{COL_FREQUENCY}"
     );
-    columns_end(&mut text, temperature.then_some(COL_WINDING_TEMPERATURE));
+    column_if(&mut text, torque, COL_TORQUE);
+    column_if(&mut text, temperature, COL_WINDING_TEMPERATURE);
+    text.push('\n');
     for p in points {
         let _ = write!(
             text,
@@ -299,10 +292,9 @@ fn im_text(index: u32, label: &str, points: &[&OperatingPoint], source: &str) ->
             p.input_power,
             cell(given(p.frequency))
         );
-        if torque {
-            let _ = write!(text, ",{}", cell(p.torque));
-        }
-        row_end(&mut text, temperature, p.winding_temperature);
+        cell_if(&mut text, torque, p.torque);
+        cell_if(&mut text, temperature, p.winding_temperature);
+        text.push('\n');
     }
     text
 }
