@@ -138,16 +138,17 @@ fn the_standard_tests_run_over_modbus_with_a_reduced_frequency_locked_rotor_test
     // a few kelvin warm on a run the wall clock made longer. The load test
     // comes last, while the simulated winding warms under load (0.393 %/K,
     // a 300 s time constant); its points carry the thermometer's reading,
-    // so each sees Rs scaled to its own temperature (0.21 % off here;
-    // without the points' temperatures the joint Rs came out up to 1.02 %
-    // high, the load pulling it up).
+    // so each sees Rs scaled to its own temperature and the warming no
+    // longer pulls Rs up. Rs to 2 % all the same: the joint fit determines
+    // it to about ±0.8 % (its 95 % interval; the load points' slip comes
+    // from a polled encoder), and runs gave +0.21 % and +0.80 %.
     assert_eq!(v["best"], "joint", "{}", v["best"]);
     for (key, t) in TRUTH {
         let t = if key == "Rs" { rs_hot } else { t };
         let got = value(&v, "joint", key);
         let tol = match key {
             "Pfw" => 0.03,
-            "Rfe" | "Rr" => 0.02,
+            "Rfe" | "Rr" | "Rs" => 0.02,
             _ => 0.01,
         };
         assert!(
