@@ -295,6 +295,9 @@ async fn a_warming_winding_is_corrected_to_its_measured_temperature_and_a_reduce
             "joint {key} {got}, truth {truth}"
         );
     }
+    // The rest of the joint fit, for the figures docs/identification-im.md
+    // quotes.
+    println!("joint Rfe {:.1}, Pfw {:.2} W", joint("Rfe"), joint("Pfw"));
 
     // The same readings without their temperatures: the warm winding's
     // extra copper resistance lands in Rr.
