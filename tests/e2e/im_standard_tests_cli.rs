@@ -151,7 +151,12 @@ fn s(p: &Path) -> &str {
 
 /// `motorbench identify ARGS`, which must succeed; its stdout.
 fn identify(args: &[&str]) -> String {
-    let out = motorbench(&[&["identify"], args].concat());
+    succeeds("identify", args)
+}
+
+/// `motorbench COMMAND ARGS`, which must succeed; its stdout.
+fn succeeds(command: &str, args: &[&str]) -> String {
+    let out = motorbench(&[&[command], args].concat());
     let (stdout, stderr) = text(&out);
     assert!(out.status.success(), "{stderr}");
     stdout
@@ -307,7 +312,8 @@ fn a_bad_standard_test_file_is_refused_with_file_line_and_column() {
 /// 80 °C, the other tests at 22 °C. The joint fit sees Rs scaled to each
 /// point's temperature and reports it at the locked-rotor test's; the
 /// same file without the column leaves the warm winding's copper
-/// unexplained.
+/// unexplained. The diagnosis, given every point's temperature, scales
+/// its Rs the same way.
 #[test]
 fn a_warm_load_test_with_its_temperatures_keeps_the_joint_rs_at_the_other_tests() {
     use motorbench::machine::im::COPPER_ALPHA;
@@ -324,19 +330,25 @@ fn a_warm_load_test_with_its_temperatures_keeps_the_joint_rs_at_the_other_tests(
         std::fs::write(&path, sweep_text(&sw, "load, warm", temperature)).unwrap();
         path
     };
+    let run = |command: &str, sweep: &Path| {
+        let stdout = succeeds(
+            command,
+            &[
+                "--kind",
+                "im_slip_sweep",
+                s(sweep),
+                s(&f.dc),
+                s(&f.no_load),
+                s(&f.locked),
+                "--nameplate",
+                s(&f.nameplate),
+                "--json",
+            ],
+        );
+        serde_json::from_str::<serde_json::Value>(&stdout).unwrap()
+    };
     let joint = |sweep: &Path| {
-        let stdout = identify(&[
-            "--kind",
-            "im_slip_sweep",
-            s(sweep),
-            s(&f.dc),
-            s(&f.no_load),
-            s(&f.locked),
-            "--nameplate",
-            s(&f.nameplate),
-            "--json",
-        ]);
-        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        let v = run("identify", sweep);
         assert_eq!(v["methods"]["joint"]["applies"], true, "{v}");
         v
     };
@@ -363,5 +375,39 @@ fn a_warm_load_test_with_its_temperatures_keeps_the_joint_rs_at_the_other_tests(
         (rs_unmarked / cold.rs - 1.0).abs() > 3.0 * (rs / cold.rs - 1.0).abs().max(0.001),
         "without the temperatures Rs {rs_unmarked}, with them {rs}, truth {}",
         cold.rs
+    );
+
+    // The diagnosis: with every point's temperature the stator's heating
+    // is known, and its Rs is the resistance at the first point's (the
+    // no-load test's 22 °C).
+    let diagnosed = run("diagnose", &dir.path().join("warm.csv"));
+    let warnings = diagnosed["warnings"].to_string();
+    assert!(
+        warnings.contains("follows the winding thermometer (22.0 to 80.0 °C"),
+        "{warnings}"
+    );
+    // The record has core loss, which the nominal circuit can only put
+    // into Rs: the verdict's corrected Rs is the one to compare.
+    let corrected = |v: &serde_json::Value| {
+        v["verdict"]["corrected_params"]["Rs"]["corrected"]
+            .as_f64()
+            .unwrap_or(f64::NAN)
+    };
+    let rs = corrected(&diagnosed);
+    let unmarked = run("diagnose", &dir.path().join("warm_unmarked.csv"));
+    assert!(
+        unmarked["warnings"].to_string().contains("is on 13 of the"),
+        "{unmarked}"
+    );
+    let rs_unmarked = corrected(&unmarked);
+    println!(
+        "diagnosis' corrected Rs with the points' temperatures {rs:.5} (verdict {}), without \
+         {rs_unmarked:.5} (verdict {}), truth {}",
+        diagnosed["verdict"]["effect"], unmarked["verdict"]["effect"], cold.rs
+    );
+    assert!((rs / cold.rs - 1.0).abs() < 0.02, "diagnosis' Rs {rs}");
+    assert!(
+        (rs_unmarked / cold.rs - 1.0).abs() > 2.0 * (rs / cold.rs - 1.0).abs(),
+        "without the temperatures Rs {rs_unmarked}, with them {rs}"
     );
 }

@@ -7,6 +7,7 @@ use super::effects::PointInput;
 use super::standard_points::SAME_FREQUENCY;
 use crate::diagnose::{DiagnoseError, DiagnoseOptions};
 use crate::identify::sweep_of;
+use crate::machine::im::identify::temperature_factor;
 use crate::model::Connection;
 use crate::record::{OperatingPoint, Record};
 
@@ -63,6 +64,48 @@ pub struct SweepSet {
     pub line_per_phase: f64,
     /// Warnings about the data.
     pub warnings: Vec<String>,
+}
+
+/// Per point, the stator resistance over the record's reference (the
+/// first point's winding temperature), copper's α between the two, where
+/// every point has a winding temperature: the measured heating is then
+/// known to every model, and `Rs` is the resistance at the reference.
+/// Where only some points have one, none is used (a scale of 1 against
+/// an unknown temperature would be a guess), with a warning; all 1 where
+/// none has one.
+fn stator_scales(points: &[OperatingPoint], warnings: &mut Vec<String>) -> Vec<f64> {
+    let temperatures: Vec<f64> = points
+        .iter()
+        .filter_map(|p| p.winding_temperature)
+        .collect();
+    let unscaled = vec![1.0; points.len()];
+    let Some(&reference) = temperatures.first() else {
+        return unscaled;
+    };
+    if temperatures.len() < points.len() {
+        warnings.push(format!(
+            "the winding temperature is on {} of the {} operating points: not used (the \
+             diagnosis scales the stator resistance per point only where every point has \
+             one); Rs is one value over the record",
+            temperatures.len(),
+            points.len()
+        ));
+        return unscaled;
+    }
+    let (lo, hi) = temperatures
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+            (lo.min(*t), hi.max(*t))
+        });
+    warnings.push(format!(
+        "the stator resistance follows the winding thermometer ({lo:.1} to {hi:.1} °C over \
+         the points): Rs is given at the first point's {reference:.1} °C, each point's \
+         scaled by copper's α"
+    ));
+    temperatures
+        .iter()
+        .map(|t| temperature_factor(Some(reference), Some(*t)))
+        .collect()
 }
 
 impl SweepSet {
@@ -159,11 +202,13 @@ impl SweepSet {
             .iter()
             .map(|p| free_running.contains(&p.segment))
             .collect();
+        let rs_scales = stator_scales(&record.operating_points, &mut warnings);
         let inputs = (0..n)
             .map(|k| PointInput {
                 heat: heat[k],
                 freq_ratio: ratios[k],
                 free_running: free[k],
+                rs_scale: rs_scales[k],
                 ..PointInput::at(d.slip[k], d.voltage[k])
             })
             .collect();

@@ -68,6 +68,12 @@ pub struct PointInput {
     /// the friction and windage (the vector's last entry, `ln Pfw`, where
     /// the model carries it; zero slip where not), and `slip` is not read.
     pub free_running: bool,
+    /// The stator resistance at this point over the fitted `Rs`: copper's
+    /// at the point's winding temperature over the record's reference
+    /// temperature, where the winding thermometer gives every point one
+    /// (1 where not): every model, the nominal's too, takes the measured
+    /// heating as known.
+    pub rs_scale: f64,
 }
 
 impl PointInput {
@@ -80,6 +86,7 @@ impl PointInput {
             heat: 0.0,
             freq_ratio: 1.0,
             free_running: false,
+            rs_scale: 1.0,
         }
     }
 }
@@ -498,7 +505,7 @@ impl ImAugmentation {
 
     /// Terminal values at one point at its slip.
     fn terminal_at_slip(&self, x: &[f64], p: &PointInput) -> Option<Terminal> {
-        let (rs, xm, rr, xr) = (x[0].exp(), x[1].exp(), x[2].exp(), x[3].exp());
+        let (rs, xm, rr, xr) = (x[0].exp() * p.rs_scale, x[1].exp(), x[2].exp(), x[3].exp());
         let xs = self.split_ratio * xr;
         let (s, v) = (p.slip, p.voltage);
         let finite = [rs, xm, rr, xr].iter().all(|v| v.is_finite() && *v > 0.0);

@@ -973,6 +973,57 @@ mod tests {
         assert_eq!(d.gap.regions[0].label, "low_slip");
     }
 
+    /// A stator that warms by 30 % of its resistance over the sweeps (the
+    /// rotor does not) is a thermal drift to a diagnosis without a
+    /// thermometer; with each point's winding temperature the heating is
+    /// known, the nominal model follows it and there is no gap to name.
+    #[test]
+    fn a_winding_thermometer_makes_the_stator_heating_known() {
+        use crate::machine::im::COPPER_ALPHA;
+        let model = ImAugmentation::with(Effect::ThermalDrift, 1.0);
+        let mut x = nominal_x();
+        x.extend([0.3f64.ln(), 1e-6f64.ln()]);
+        let warm = record(model, &x, &[400.0, 300.0], 5);
+        let verdict = |r: &Record| diagnose_im(r, &star()).unwrap().report;
+        let d = verdict(&warm);
+        assert_eq!(d.verdict.effect, "thermal_drift", "{:?}", d.candidates);
+
+        // The temperature that gives each point's Rs factor 1 + 0.3·h
+        // from 25 °C, h its heat index as `record` simulated it.
+        let total: f64 = warm
+            .operating_points
+            .iter()
+            .map(|p| p.line_current.powi(2))
+            .sum();
+        let mut acc = 0.0;
+        let mut measured = warm.clone();
+        for p in &mut measured.operating_points {
+            let h = (acc + 0.5 * p.line_current.powi(2)) / total;
+            acc += p.line_current.powi(2);
+            let factor = 1.0 + 0.3 * h;
+            p.winding_temperature =
+                Some(20.0 + (factor * (1.0 + COPPER_ALPHA * 5.0) - 1.0) / COPPER_ALPHA);
+        }
+        let first = measured.operating_points[0].winding_temperature.unwrap();
+        let d = verdict(&measured);
+        assert_eq!(d.verdict.effect, "none", "{:?}", d.candidates);
+        assert!(d
+            .warnings
+            .iter()
+            .any(|w| w.contains("follows the winding thermometer")));
+        // Rs at the first point's temperature: the truth there.
+        let rs = d.nominal.params["Rs"].value;
+        let truth = 0.8 * crate::machine::im::identify::temperature_factor(Some(25.0), Some(first));
+        assert!((rs / truth - 1.0).abs() < 0.01, "Rs {rs} against {truth}");
+
+        // A thermometer on some points only is not used, and says so.
+        let mut some = measured.clone();
+        some.operating_points[3].winding_temperature = None;
+        let d = verdict(&some);
+        assert_eq!(d.verdict.effect, "thermal_drift", "{:?}", d.candidates);
+        assert!(d.warnings.iter().any(|w| w.contains("is on 59 of the 60")));
+    }
+
     /// A locked-rotor test at the sweep's frequency is diagnosed with it
     /// (points at slip 1).
     #[test]

@@ -129,7 +129,7 @@ pub fn with_standard_points(record: &Record) -> StandardPoints {
                 line_current: p.line_current,
                 input_power: p.input_power,
                 frequency: p.frequency,
-                winding_temperature: None,
+                winding_temperature: p.winding_temperature,
             }),
     );
     let free_running: Vec<u32> = tests

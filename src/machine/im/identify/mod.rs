@@ -43,6 +43,7 @@ pub use recursive::{
     RecursiveOptions, RecursiveStop, THETA_DOUBLE_L5, THETA_DOUBLE_L7, THETA_SINGLE_FE_L6,
     THETA_SINGLE_L4,
 };
+pub(crate) use standard_tests::temperature_factor;
 pub use standard_tests::{
     no_load_friction, reduce_standard_tests, standard_tests_method, NoLoadFriction,
     StandardTestsError, StandardTestsOptions, StandardTestsReduction, FRICTION_VOLTAGE_SHARE,
