@@ -96,6 +96,11 @@ pub fn diagnose_im(
         voltage: known.iter().map(|&k| data.inputs[k].voltage).collect(),
         current: known.iter().map(|&k| data.current[k]).collect(),
         power: known.iter().map(|&k| data.power[k]).collect(),
+        rs_scale: if data.inputs.iter().all(|p| p.rs_scale == 1.0) {
+            Vec::new()
+        } else {
+            known.iter().map(|&k| data.inputs[k].rs_scale).collect()
+        },
     };
     let mut lm_opts = LmOptions::new(ImModel::Single);
     lm_opts.split = split;

@@ -29,7 +29,7 @@ use super::identifiability::{weak_directions, Identifiability};
 use super::lm_solver::{self, Row, MAX_COLS};
 use super::recursive::paper_cost;
 use super::sweep::{
-    predict, predict_all, predict_gradients_all, Channels, PhaseData, PredictScratch, MAX_PARAMS,
+    predict_all, predict_gradients_all, Channels, PhaseData, PredictScratch, MAX_PARAMS,
 };
 use crate::identify::least_squares::{AtParams, Residuals};
 use crate::identify::stats::t975;
@@ -391,7 +391,7 @@ impl SweepProblem<'_> {
     /// point `k`.
     fn raw_residual(&self, c: &ImCircuit, k: usize) -> (f64, f64) {
         let d = self.data;
-        let (i, p) = predict(c, d.slip[k], d.voltage[k]);
+        let (i, p) = d.predict(c, k);
         (
             (i - d.current[k]) / self.weights.scale_i[k],
             (p - d.power[k]) / self.weights.scale_p[k],
@@ -786,7 +786,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, ImFitError> {
     let mut weights = weights;
     if opts.residual_scale == ResidualScale::Relative {
         for k in 0..data.len() {
-            let (i, p) = predict(&best, data.slip[k], data.voltage[k]);
+            let (i, p) = data.predict(&best, k);
             weights.scale_i[k] = i
                 .abs()
                 .max(1e-3 * weights.scale_i[k])
@@ -994,7 +994,7 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, ImFitError> {
     };
     let (mut si, mut sp) = (0.0, 0.0);
     for k in 0..data.len() {
-        let (i, p) = predict(&circuit, data.slip[k], data.voltage[k]);
+        let (i, p) = data.predict(&circuit, k);
         si += rel(&data.current, k, i).powi(2);
         sp += rel(&data.power, k, p).powi(2);
     }
@@ -1227,6 +1227,7 @@ mod tests {
             voltage: readings.iter().map(|r| r.1 / 3f64.sqrt()).collect(),
             current: readings.iter().map(|r| r.2).collect(),
             power: readings.iter().map(|r| r.3).collect(),
+            rs_scale: Vec::new(),
         };
         let fit = fit_lm(&data, &LmOptions::new(ImModel::SingleFe)).unwrap();
         assert!(fit.identifiability.convention.is_some(), "{fit:?}");

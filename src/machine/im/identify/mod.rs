@@ -143,6 +143,7 @@ pub fn sweep_of(record: &Record, connection: Connection) -> SlipSweep {
             line_current: p.line_current,
             input_power: p.input_power,
             torque: p.torque,
+            winding_temperature: p.winding_temperature,
         })
         .collect();
     let frequency = record
@@ -153,6 +154,7 @@ pub fn sweep_of(record: &Record, connection: Connection) -> SlipSweep {
     SlipSweep {
         connection,
         frequency,
+        reference_temperature: SlipSweep::first_temperature(&points),
         points,
     }
 }
@@ -189,7 +191,7 @@ fn sweep_nrmse(c: &ImCircuit, sweep: &SlipSweep, segment: u32) -> Option<f64> {
     let d = part.phase_data();
     let (mut i, mut p) = (Vec::new(), Vec::new());
     for k in 0..d.len() {
-        let (ik, pk) = predict(c, d.slip[k], d.voltage[k]);
+        let (ik, pk) = d.predict(c, k);
         i.push(ik);
         p.push(pk);
     }
@@ -238,7 +240,7 @@ fn relative_residuals(c: &ImCircuit, sweep: &SlipSweep) -> (Vec<f64>, Vec<f64>) 
     let d = sweep.phase_data();
     (0..d.len())
         .map(|k| {
-            let (i, p) = predict(c, d.slip[k], d.voltage[k]);
+            let (i, p) = d.predict(c, k);
             (
                 (i - d.current[k]) / d.current[k].abs().max(f64::MIN_POSITIVE),
                 (p - d.power[k]) / d.power[k].abs().max(f64::MIN_POSITIVE),
@@ -405,7 +407,7 @@ fn validate(
         };
         let d = sweep.phase_data();
         for k in (0..n).filter(|&k| fold[k] == f) {
-            pred[k] = predict(&fitted.circuit, d.slip[k], d.voltage[k]);
+            pred[k] = d.predict(&fitted.circuit, k);
         }
     }
     if segments.len() >= 2 {
@@ -566,24 +568,40 @@ fn recursive_method(
 /// `Rs` is typically determined to.
 const WARMING_NOTE_K: f64 = 5.0;
 
-/// The warning where the winding thermometer saw the winding warm by more
-/// than [`WARMING_NOTE_K`] over `points`: the slip-sweep fits take one
-/// `Rs` for all of them.
+/// What the slip-sweep fits make of the winding thermometer over
+/// `points`: where every point has a temperature, each point's `Rs` is
+/// scaled to it ([`SlipSweep::rs_scale`]) and the note says at which
+/// temperature `Rs` is given; where only some have one and the winding
+/// warmed by more than [`WARMING_NOTE_K`] over them, that these fits
+/// take one `Rs` for every point.
 fn warming_note(points: &[OperatingPoint]) -> Option<String> {
-    let (lo, hi) = points
+    let temperatures: Vec<f64> = points
         .iter()
         .filter_map(|p| p.winding_temperature)
+        .collect();
+    let (lo, hi) = temperatures
+        .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
-            (lo.min(t), hi.max(t))
+            (lo.min(*t), hi.max(*t))
         });
+    let first = *temperatures.first()?;
+    if temperatures.len() == points.len() {
+        return Some(format!(
+            "lm, recursive: Rs is given at the first point's winding temperature {first:.1} °C; \
+             each point's Rs is scaled to its own (the thermometer read {lo:.1} to {hi:.1} °C; \
+             copper's α)"
+        ));
+    }
     (hi - lo > WARMING_NOTE_K).then(|| {
         let rise = standard_tests::temperature_factor(Some(lo), Some(hi)) - 1.0;
         format!(
             "lm, recursive: the winding thermometer read {lo:.1} to {hi:.1} °C over the load \
-             test's points, so Rs rose by {:.1} % (copper) during the sweep; these fits take one \
-             Rs for every point (the joint fit, given the standard tests, scales it to each \
-             point's temperature)",
-            100.0 * rise
+             test's points, so Rs rose by {:.1} % (copper) during the sweep; with a temperature \
+             on {} of the {} points these fits take one Rs for every point (the joint fit, \
+             given the standard tests, scales it to each point that has one)",
+            100.0 * rise,
+            temperatures.len(),
+            points.len()
         )
     })
 }
@@ -763,10 +781,13 @@ mod tests {
         for (k, p) in r.operating_points.iter_mut().enumerate() {
             p.winding_temperature = Some(30.0 + 20.0 * k as f64 / (n - 1.0));
         }
+        // A thermometer on some points only: one Rs for all.
+        r.operating_points[5].winding_temperature = None;
         let id = identify_im(&r, Some(Connection::Delta), ImModel::Single);
         assert_warned(&id.report.warnings, "read 30.0 to 50.0 °C");
         // (1 + α·30 K)/(1 + α·10 K), α = 0.393 %/K.
         assert_warned(&id.report.warnings, "Rs rose by 7.6 %");
+        assert_warned(&id.report.warnings, "on 39 of the 40 points");
         for p in r.operating_points.iter_mut() {
             p.winding_temperature = p.winding_temperature.map(|t| 30.0 + (t - 30.0) / 5.0);
         }
@@ -776,6 +797,79 @@ mod tests {
             "{:?}",
             id.report.warnings
         );
+    }
+
+    /// A sweep whose stator warms from 30 to 90 °C point by point (its Rs
+    /// by 21 %): with each point's temperature the LM fit gives Rs at the
+    /// first point's; without, one Rs for a warming winding. (The paper's
+    /// recursive estimator stops non-physical on this machine either way;
+    /// its use of the scale is tested in `recursive.rs`.)
+    #[test]
+    fn the_sweep_fits_scale_rs_to_each_point_temperature() {
+        use crate::machine::im::COPPER_ALPHA;
+        let cold = machine();
+        let supply = ImSupply {
+            line_voltage: 400.0,
+            frequency: 50.0,
+            connection: Connection::Delta,
+            pole_pairs: 2,
+        };
+        let mut rng = StdRng::seed_from_u64(5);
+        let slips = slip_grid(40, 0.002);
+        let points: Vec<OperatingPoint> = slips
+            .iter()
+            .enumerate()
+            .map(|(k, &s)| {
+                let t = 30.0 + 60.0 * k as f64 / 39.0;
+                let warm = ImCircuit {
+                    rs: cold.rs * (1.0 + COPPER_ALPHA * (t - 20.0)) / (1.0 + COPPER_ALPHA * 10.0),
+                    ..cold
+                };
+                let noise = SweepNoise::relative(0.002);
+                let p = SlipSweep::simulate(&warm, &supply, &[s], &noise, 0, &mut rng).points[0];
+                OperatingPoint {
+                    segment: 0,
+                    slip: s,
+                    line_voltage: p.line_voltage,
+                    line_current: p.line_current,
+                    input_power: p.input_power,
+                    speed: (1.0 - s) * std::f64::consts::PI * 50.0,
+                    frequency: 50.0,
+                    torque: None,
+                    winding_temperature: Some(t),
+                }
+            })
+            .collect();
+        let mut r = Record {
+            operating_points: points,
+            ..Record::default()
+        };
+        let rs = |r: &Record| {
+            let id = identify_im(r, Some(Connection::Delta), ImModel::Single);
+            let lm = &id.report.methods["lm"];
+            let params = lm.params.as_ref().expect("lm applies");
+            (
+                params["Rs"].value,
+                params["Rs"].ci95.unwrap(),
+                id.report.warnings,
+            )
+        };
+        let (with, [lo, hi], warnings) = rs(&r);
+        assert_warned(
+            &warnings,
+            "Rs is given at the first point's winding temperature 30.0 °C",
+        );
+        for p in r.operating_points.iter_mut() {
+            p.winding_temperature = None;
+        }
+        let (without, _, _) = rs(&r);
+        println!(
+            "lm Rs with each point's temperature {with:.5} [{lo:.5}, {hi:.5}], one Rs for all \
+             {without:.5}; truth {} at 30 °C",
+            cold.rs
+        );
+        assert!(lo <= cold.rs && cold.rs <= hi, "Rs {with} [{lo}, {hi}]");
+        assert!((without / cold.rs - 1.0).abs() > 3.0 * (with / cold.rs - 1.0).abs());
     }
 
     #[test]

@@ -26,7 +26,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::sweep::{predict, predict_gradient, Channels, PhaseData};
+use super::sweep::{Channels, PhaseData};
 use crate::model::{ImCircuit, ImParam};
 
 /// The paper's θ of Eq. 17, single cage with iron loss, l = 6.
@@ -146,7 +146,7 @@ pub fn paper_cost(data: &PhaseData, circuit: &ImCircuit, channels: Channels) -> 
     let n = data.len() as f64;
     let (mut ji, mut jp) = (0.0, 0.0);
     for k in 0..data.len() {
-        let (i, p) = predict(circuit, data.slip[k], data.voltage[k]);
+        let (i, p) = data.predict(circuit, k);
         ji += (data.current[k] - i).powi(2);
         jp += (data.power[k] - p).powi(2);
     }
@@ -185,7 +185,7 @@ pub fn recursive_pass(
     let channel_count = if channels.uses_power() { 2 } else { 1 };
     for channel in 0..channel_count {
         for k in 0..data.len() {
-            let (i, p, di, dp) = predict_gradient(circuit0, data.slip[k], data.voltage[k], free);
+            let (i, p, di, dp) = data.predict_gradient(circuit0, k, free);
             let (y, model, grad) = if channel == 0 {
                 (data.current[k], i, di)
             } else {
@@ -323,6 +323,27 @@ mod tests {
         assert_eq!(est.iterations, 0);
     }
 
+    /// Readings of a winding whose Rs rose point by point: with each
+    /// point's scale the true circuit is already the answer (the cost is
+    /// zero at once); read as one Rs it is not.
+    #[test]
+    fn each_point_sees_rs_at_its_own_scale() {
+        let c = machine();
+        let mut d = data(&c);
+        d.rs_scale = (0..d.len()).map(|k| 1.0 + 0.005 * k as f64).collect();
+        for k in 0..d.len() {
+            (d.current[k], d.power[k]) = d.predict(&c, k);
+        }
+        let est = recursive_estimate(&d, &c, &THETA_SINGLE_L4, &RecursiveOptions::default());
+        assert_eq!((est.stop, est.iterations), (RecursiveStop::Threshold, 0));
+        assert_eq!(est.cost, 0.0);
+        let one_rs = PhaseData {
+            rs_scale: Vec::new(),
+            ..d
+        };
+        assert!(paper_cost(&one_rs, &c, Channels::CurrentAndPower) > 0.0);
+    }
+
     #[test]
     fn linearised_pass_is_the_regularised_gauss_newton_step() {
         // Recursive least squares on the linearised model equals the batch
@@ -335,7 +356,7 @@ mod tests {
         let mut info = DMatrix::identity(3, 3) * 1e-3;
         let mut rhs = DVector::zeros(3);
         for k in 0..d.len() {
-            let (i, p, di, dp) = predict_gradient(&start, d.slip[k], d.voltage[k], &free);
+            let (i, p, di, dp) = d.predict_gradient(&start, k, &free);
             for (g, r) in [(di, d.current[k] - i), (dp, d.power[k] - p)] {
                 let g = DVector::from_vec(g);
                 info += &g * g.transpose();

@@ -7,6 +7,7 @@ use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
 use super::error::SweepError;
+use super::standard_tests::temperature_factor;
 use crate::model::{Connection, ImCircuit, ImParam, ImSupply, C64};
 
 /// One averaged operating point of a sweep, line quantities, SI.
@@ -24,6 +25,8 @@ pub struct SweepPoint {
     pub input_power: f64,
     /// Shaft torque where a torque sensor exists, N·m.
     pub torque: Option<f64>,
+    /// Winding temperature where a thermometer read it, °C.
+    pub winding_temperature: Option<f64>,
 }
 
 /// A slip sweep (one or several segments) of one machine.
@@ -35,6 +38,10 @@ pub struct SlipSweep {
     pub frequency: Option<f64>,
     /// The operating points.
     pub points: Vec<SweepPoint>,
+    /// The winding temperature the fitted `Rs` is at, °C, where every
+    /// point has one ([`SlipSweep::rs_scale`]); kept by a subset of the
+    /// points, so that every fold's `Rs` is at the same temperature.
+    pub reference_temperature: Option<f64>,
 }
 
 /// Which measured curves a fit uses.
@@ -164,6 +171,7 @@ impl SlipSweep {
                     input_power: op.input_power * (1.0 + gaussian(noise.power_relative, rng))
                         + gaussian(noise.power_absolute, rng),
                     torque: Some(op.torque),
+                    winding_temperature: None,
                 }
             })
             .collect();
@@ -171,6 +179,7 @@ impl SlipSweep {
             connection: supply.connection,
             frequency: Some(supply.frequency),
             points,
+            reference_temperature: None,
         }
     }
 
@@ -227,7 +236,34 @@ impl SlipSweep {
                 .map(|p| c.phase_current(p.line_current))
                 .collect(),
             power: self.points.iter().map(|p| p.input_power).collect(),
+            rs_scale: self.rs_scale(),
         }
+    }
+
+    /// Each point's stator resistance over the one at
+    /// [`SlipSweep::reference_temperature`] (copper's α between the two),
+    /// where every point has a winding temperature; empty (one `Rs` for
+    /// all) where not.
+    pub fn rs_scale(&self) -> Vec<f64> {
+        let temperatures: Option<Vec<f64>> =
+            self.points.iter().map(|p| p.winding_temperature).collect();
+        match (self.reference_temperature, temperatures) {
+            (Some(reference), Some(t)) => t
+                .iter()
+                .map(|t| temperature_factor(Some(reference), Some(*t)))
+                .collect(),
+            _ => Vec::new(),
+        }
+    }
+
+    /// The first point's winding temperature where every point has one:
+    /// the reference of [`SlipSweep::rs_scale`].
+    pub fn first_temperature(points: &[SweepPoint]) -> Option<f64> {
+        let all = points.iter().all(|p| p.winding_temperature.is_some());
+        points
+            .first()
+            .and_then(|p| p.winding_temperature)
+            .filter(|_| all)
     }
 }
 
@@ -242,6 +278,10 @@ pub struct PhaseData {
     pub current: Vec<f64>,
     /// Three-phase input power, W.
     pub power: Vec<f64>,
+    /// Each point's stator resistance over the fitted `Rs` (copper's, at
+    /// the point's winding temperature: [`SlipSweep::rs_scale`]); empty
+    /// where the fit takes one `Rs` for every point.
+    pub rs_scale: Vec<f64>,
 }
 
 impl PhaseData {
@@ -264,7 +304,44 @@ impl PhaseData {
             voltage: self.voltage.iter().map(|v| v / v_base).collect(),
             current: self.current.iter().map(|i| i / i_base).collect(),
             power: self.power.iter().map(|p| p / p_base).collect(),
+            rs_scale: self.rs_scale.clone(),
         }
+    }
+
+    /// The circuit as point `k` sees it: `Rs` scaled to the point's
+    /// winding temperature where the data carry one.
+    fn circuit_at(&self, c: &ImCircuit, k: usize) -> ImCircuit {
+        match self.rs_scale.get(k) {
+            Some(f) => ImCircuit { rs: c.rs * f, ..*c },
+            None => *c,
+        }
+    }
+
+    /// [`predict`] at point `k`.
+    pub fn predict(&self, c: &ImCircuit, k: usize) -> (f64, f64) {
+        predict(&self.circuit_at(c, k), self.slip[k], self.voltage[k])
+    }
+
+    /// [`predict_gradient`] at point `k`, the derivatives with respect to
+    /// the fitted `Rs` (at the reference temperature).
+    pub fn predict_gradient(
+        &self,
+        c: &ImCircuit,
+        k: usize,
+        params: &[ImParam],
+    ) -> (f64, f64, Vec<f64>, Vec<f64>) {
+        let (i, p, mut di, mut dp) = predict_gradient(
+            &self.circuit_at(c, k),
+            self.slip[k],
+            self.voltage[k],
+            params,
+        );
+        let rs = params.iter().position(|q| *q == ImParam::Rs);
+        if let (Some(f), Some(q)) = (self.rs_scale.get(k), rs) {
+            di[q] *= f;
+            dp[q] *= f;
+        }
+        (i, p, di, dp)
     }
 }
 
@@ -370,6 +447,12 @@ impl PredictScratch {
             v.resize(data.len(), zero);
         }
         c.impedances_into(&data.slip, &mut self.z_ag, &mut self.z, &mut self.y);
+        // Rs at each point's temperature, where the data carry one.
+        let points = self.z_ag.iter().zip(&mut self.z).zip(&mut self.y);
+        for (((z_ag, z), y), f) in points.zip(&data.rs_scale) {
+            *z = C64::new(c.rs * f, c.xs) + z_ag;
+            *y = z.inv();
+        }
     }
 }
 
@@ -412,6 +495,12 @@ pub(super) fn predict_gradients_all(
     s.minus_z_ag2.resize(n, C64::new(0.0, 0.0));
     s.dz.resize(q * n, C64::new(0.0, 0.0));
     c.impedance_derivatives_into(&data.slip, &s.z_ag, &mut s.minus_z_ag2, &mut s.dz);
+    // dZ/dRs is each point's scale where the data carry one.
+    if let Some(q) = c.model().params().iter().position(|p| *p == ImParam::Rs) {
+        for (d, f) in s.dz[q * n..(q + 1) * n].iter_mut().zip(&data.rs_scale) {
+            *d = C64::new(*f, 0.0);
+        }
+    }
     s.minus_v_zn3.clear();
     let points = s.z.iter().zip(&data.voltage);
     s.minus_v_zn3
@@ -511,6 +600,7 @@ mod tests {
             voltage: vec![230.0, 231.0, 229.0, 1.0, 0.9, 400.0, 120.0],
             current: vec![0.0; 7],
             power: vec![0.0; 7],
+            rs_scale: Vec::new(),
         };
         let n = data.len();
         let mut scratch = PredictScratch::default();
@@ -536,6 +626,55 @@ mod tests {
                         assert_eq!(dp[e * n + k].to_bits(), dp1[e].to_bits(), "{c:?} {s}");
                     }
                 }
+            }
+        }
+    }
+
+    /// With each point's `Rs` scaled (its winding temperature), the
+    /// point-set evaluation is the point's circuit with `Rs` scaled, and
+    /// the derivative with respect to `Rs` is the point's scale times the
+    /// scaled circuit's (the same values up to the order of one product).
+    #[test]
+    fn a_point_scaled_rs_is_that_point_circuit_and_its_derivative() {
+        let data = PhaseData {
+            slip: vec![0.002, 0.03, 0.2, 0.6, 1.0],
+            voltage: vec![230.0, 229.0, 231.0, 230.0, 120.0],
+            current: vec![0.0; 5],
+            power: vec![0.0; 5],
+            rs_scale: vec![1.0, 1.05, 1.1, 1.2, 1.3],
+        };
+        let n = data.len();
+        let mut scratch = PredictScratch::default();
+        for c in [
+            single_cage(1.0, 2.0, 60.0, Some(800.0), 1.2, 2.5),
+            crate::model::SEED_DOUBLE_CAGE_PU,
+        ] {
+            let params = c.model().params();
+            let q = params.len();
+            let (mut i, mut p) = (vec![0.0; n], vec![0.0; n]);
+            predict_all(&c, &data, &mut scratch, &mut i, &mut p);
+            let (mut di, mut dp) = (vec![0.0; q * n], vec![0.0; q * n]);
+            predict_gradients_all(&c, &data, &mut scratch, true, &mut di, &mut dp);
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-13 * a.abs().max(b.abs());
+            for k in 0..n {
+                let hot = ImCircuit {
+                    rs: c.rs * data.rs_scale[k],
+                    ..c
+                };
+                let (ik, pk) = predict(&hot, data.slip[k], data.voltage[k]);
+                assert_eq!((i[k], p[k]), (ik, pk));
+                assert_eq!(data.predict(&c, k), (ik, pk));
+                let (_, _, di1, dp1) = data.predict_gradient(&c, k, params);
+                for e in 0..q {
+                    assert!(close(di[e * n + k], di1[e]) && close(dp[e * n + k], dp1[e]));
+                }
+                // dI/dRs by central differences of the reference Rs.
+                let rs = params.iter().position(|p| *p == ImParam::Rs).unwrap();
+                let h = 1e-6 * c.rs;
+                let at = |rs: f64| data.predict(&ImCircuit { rs, ..c }, k);
+                let ((ia, pa), (ib, pb)) = (at(c.rs + h), at(c.rs - h));
+                assert!(((ia - ib) / (2.0 * h) - di1[rs]).abs() < 1e-6 * di1[rs].abs());
+                assert!(((pa - pb) / (2.0 * h) - dp1[rs]).abs() < 1e-6 * dp1[rs].abs());
             }
         }
     }
