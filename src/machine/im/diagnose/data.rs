@@ -6,8 +6,7 @@
 use super::effects::PointInput;
 use super::standard_points::SAME_FREQUENCY;
 use crate::diagnose::{DiagnoseError, DiagnoseOptions};
-use crate::identify::sweep_of;
-use crate::machine::im::identify::temperature_factor;
+use crate::identify::{sweep_of, SlipSweep};
 use crate::model::Connection;
 use crate::record::{OperatingPoint, Record};
 
@@ -66,46 +65,30 @@ pub struct SweepSet {
     pub warnings: Vec<String>,
 }
 
-/// Per point, the stator resistance over the record's reference (the
-/// first point's winding temperature), copper's α between the two, where
-/// every point has a winding temperature: the measured heating is then
-/// known to every model, and `Rs` is the resistance at the reference.
-/// Where only some points have one, none is used (a scale of 1 against
-/// an unknown temperature would be a guess), with a warning; all 1 where
-/// none has one.
-fn stator_scales(points: &[OperatingPoint], warnings: &mut Vec<String>) -> Vec<f64> {
-    let temperatures: Vec<f64> = points
-        .iter()
-        .filter_map(|p| p.winding_temperature)
-        .collect();
-    let unscaled = vec![1.0; points.len()];
-    let Some(&reference) = temperatures.first() else {
-        return unscaled;
-    };
-    if temperatures.len() < points.len() {
-        warnings.push(format!(
+/// What the diagnosis makes of the winding thermometer: where every
+/// point has a temperature, each point's `Rs` is scaled to it
+/// ([`SlipSweep::rs_scale`], from the first point's), so the measured
+/// heating is known to every model; where only some have one, none is
+/// used (a scale against an unknown temperature would be a guess).
+/// `None` without a thermometer.
+fn thermometer_note(sweep: &SlipSweep) -> Option<String> {
+    let t = sweep.thermometer()?;
+    Some(if t.every_point {
+        format!(
+            "the stator resistance follows the winding thermometer ({:.1} to {:.1} °C over \
+             the points): Rs is given at the first point's {:.1} °C, each point's scaled by \
+             copper's α",
+            t.lo, t.hi, t.first
+        )
+    } else {
+        format!(
             "the winding temperature is on {} of the {} operating points: not used (the \
              diagnosis scales the stator resistance per point only where every point has \
              one); Rs is one value over the record",
-            temperatures.len(),
-            points.len()
-        ));
-        return unscaled;
-    }
-    let (lo, hi) = temperatures
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
-            (lo.min(*t), hi.max(*t))
-        });
-    warnings.push(format!(
-        "the stator resistance follows the winding thermometer ({lo:.1} to {hi:.1} °C over \
-         the points): Rs is given at the first point's {reference:.1} °C, each point's \
-         scaled by copper's α"
-    ));
-    temperatures
-        .iter()
-        .map(|t| temperature_factor(Some(reference), Some(*t)))
-        .collect()
+            t.count,
+            sweep.points.len()
+        )
+    })
 }
 
 impl SweepSet {
@@ -202,13 +185,14 @@ impl SweepSet {
             .iter()
             .map(|p| free_running.contains(&p.segment))
             .collect();
-        let rs_scales = stator_scales(&record.operating_points, &mut warnings);
+        warnings.extend(thermometer_note(&sweep));
+        let rs_scale = sweep.rs_scale();
         let inputs = (0..n)
             .map(|k| PointInput {
                 heat: heat[k],
                 freq_ratio: ratios[k],
                 free_running: free[k],
-                rs_scale: rs_scales[k],
+                rs_scale: rs_scale.get(k).copied().unwrap_or(1.0),
                 ..PointInput::at(d.slip[k], d.voltage[k])
             })
             .collect();

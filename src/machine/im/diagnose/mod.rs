@@ -1018,7 +1018,7 @@ mod tests {
             .any(|w| w.contains("follows the winding thermometer")));
         // Rs at the first point's temperature: the truth there.
         let rs = d.nominal.params["Rs"].value;
-        let truth = 0.8 * crate::machine::im::identify::temperature_factor(Some(25.0), Some(first));
+        let truth = 0.8 * (1.0 + COPPER_ALPHA * (first - 20.0)) / (1.0 + COPPER_ALPHA * 5.0);
         assert!((rs / truth - 1.0).abs() < 0.01, "Rs {rs} against {truth}");
 
         // A thermometer on some points only is not used, and says so.

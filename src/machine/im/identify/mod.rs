@@ -43,7 +43,6 @@ pub use recursive::{
     RecursiveOptions, RecursiveStop, THETA_DOUBLE_L5, THETA_DOUBLE_L7, THETA_SINGLE_FE_L6,
     THETA_SINGLE_L4,
 };
-pub(crate) use standard_tests::temperature_factor;
 pub use standard_tests::{
     no_load_friction, reduce_standard_tests, standard_tests_method, NoLoadFriction,
     StandardTestsError, StandardTestsOptions, StandardTestsReduction, FRICTION_VOLTAGE_SHARE,
@@ -51,12 +50,12 @@ pub use standard_tests::{
 };
 pub use sweep::{
     predict, predict_gradient, predict_gradient_into, slip_grid, Channels, PhaseData, SlipSweep,
-    SweepNoise, SweepPoint, MAX_PARAMS,
+    SweepNoise, SweepPoint, Thermometer, MAX_PARAMS,
 };
 
 use crate::identify::nrmse;
 use crate::model::{Connection, ImCircuit, ImModel, LeakageSplit, PerUnitBase};
-use crate::record::{OperatingPoint, Record, SegmentKind};
+use crate::record::{Record, SegmentKind};
 use crate::report::{IdentificationReport, MethodReport, ParamEstimate};
 
 /// Everything induction-machine identification produced.
@@ -568,24 +567,21 @@ fn recursive_method(
 /// `Rs` is typically determined to.
 const WARMING_NOTE_K: f64 = 5.0;
 
-/// What the slip-sweep fits make of the winding thermometer over
-/// `points`: where every point has a temperature, each point's `Rs` is
-/// scaled to it ([`SlipSweep::rs_scale`]) and the note says at which
+/// What the slip-sweep fits make of the winding thermometer over the
+/// sweep's points: where every point has a temperature, each point's `Rs`
+/// is scaled to it ([`SlipSweep::rs_scale`]) and the note says at which
 /// temperature `Rs` is given; where only some have one and the winding
 /// warmed by more than [`WARMING_NOTE_K`] over them, that these fits
 /// take one `Rs` for every point.
-fn warming_note(points: &[OperatingPoint]) -> Option<String> {
-    let temperatures: Vec<f64> = points
-        .iter()
-        .filter_map(|p| p.winding_temperature)
-        .collect();
-    let (lo, hi) = temperatures
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
-            (lo.min(*t), hi.max(*t))
-        });
-    let first = *temperatures.first()?;
-    if temperatures.len() == points.len() {
+fn warming_note(sweep: &SlipSweep) -> Option<String> {
+    let Thermometer {
+        first,
+        lo,
+        hi,
+        count,
+        every_point,
+    } = sweep.thermometer()?;
+    if every_point {
         return Some(format!(
             "lm, recursive: Rs is given at the first point's winding temperature {first:.1} °C; \
              each point's Rs is scaled to its own (the thermometer read {lo:.1} to {hi:.1} °C; \
@@ -600,8 +596,8 @@ fn warming_note(points: &[OperatingPoint]) -> Option<String> {
              on {} of the {} points these fits take one Rs for every point (the joint fit, \
              given the standard tests, scales it to each point that has one)",
             100.0 * rise,
-            temperatures.len(),
-            points.len()
+            count,
+            sweep.points.len()
         )
     })
 }
@@ -699,7 +695,7 @@ pub fn identify_im(
         }
     };
     let (lm_report, lm) = lm_method(&sweep, model, &mut warnings);
-    warnings.extend(warming_note(&record.operating_points));
+    warnings.extend(warming_note(&sweep));
     let (rec_report, recursive) = recursive_method(&sweep, model, &base, &mut warnings);
     report.methods.insert("lm".into(), lm_report);
     report.methods.insert("recursive".into(), rec_report);
@@ -725,6 +721,7 @@ mod tests {
     use crate::identify::{slip_grid, SweepNoise};
     use crate::machine::im::assert_warned;
     use crate::model::{ImSupply, RotorCage};
+    use crate::record::OperatingPoint;
     use rand::rngs::StdRng;
     use rand::SeedableRng;
 
