@@ -79,6 +79,16 @@ const DELAY_SAMPLES: [f64; 2] = [0.0, 1.0];
 /// (friction rising with speed, which the viscous term already has).
 const BREAKAWAY_SPEEDS: [f64; 2] = [0.05, 0.25];
 
+/// The breakaway excess a fit starts from, as a share of the nominal
+/// static torque: as large as the running friction (dry friction's
+/// excess at rest is anywhere from a small part of it to as much again).
+/// A fit from a large excess sees the effect and comes down to a small
+/// one; from a small one (0.3 before) the excess and its speed band have
+/// vanishing gradients together, and the fit let the effect fade to
+/// nothing on a record whose excess was 1.7 times the static torque
+/// (read as no effect; a blind case, seed 2024 case 39).
+const BREAKAWAY_TORQUE: f64 = 1.0;
+
 /// Every candidate (sensor lag twice, on the current and on the speed; the
 /// brush drop from two knees; shaft compliance from each resonance start):
 /// the best on the fitting data stands for its effect.
@@ -94,11 +104,15 @@ pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
     };
     BREAKAWAY_SPEEDS
         .iter()
-        .map(|share| {
+        .map(|speed| {
             def(
                 Effect::CoulombFriction,
                 Augment::CoulombFriction,
-                [0.3 * p.tst.max(1e-4), share * s.w_max.max(1.0), 0.0],
+                [
+                    BREAKAWAY_TORQUE * p.tst.max(1e-4),
+                    speed * s.w_max.max(1.0),
+                    0.0,
+                ],
                 vec![Transform::Log, Transform::Log],
             )
         })
