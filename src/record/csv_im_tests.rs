@@ -32,7 +32,7 @@ pub const COL_WINDING_TEMPERATURE: &str = "winding_temperature_C";
 
 /// Plausible winding temperatures, °C: below is a sign error or kelvin
 /// mistaken for °C the other way, above is kelvin.
-const TEMPERATURE_RANGE_C: (f64, f64) = (-60.0, 250.0);
+pub const TEMPERATURE_RANGE_C: (f64, f64) = (-60.0, 250.0);
 
 /// One imported standard-test segment.
 #[derive(Debug, Clone, PartialEq)]

@@ -216,6 +216,16 @@ impl SlipSweep {
             if !p.input_power.is_finite() {
                 return bad("input_power", p.input_power, "is not a finite number");
             }
+            // A temperature scales Rs per point: one in kelvin (or not a
+            // number) would scale it wrongly, not merely add noise.
+            let (lo, hi) = crate::record::TEMPERATURE_RANGE_C;
+            if let Some(t) = p.winding_temperature.filter(|t| !(lo..=hi).contains(t)) {
+                return bad(
+                    "winding_temperature",
+                    t,
+                    "is outside -60…250 °C (the key is in °C, not K)",
+                );
+            }
         }
         Ok(())
     }
@@ -599,6 +609,20 @@ mod tests {
         let e = bad.validate().unwrap_err();
         assert!(matches!(e, SweepError::BadPoint { index: 3, .. }), "{e:?}");
         assert!(e.to_string().contains("operating point 3"));
+        // A winding temperature in kelvin would scale Rs wrongly.
+        let mut kelvin = sw.clone();
+        for p in &mut kelvin.points {
+            p.winding_temperature = Some(25.0);
+        }
+        kelvin.validate().unwrap();
+        kelvin.points[5].winding_temperature = Some(298.15);
+        let e = kelvin.validate().unwrap_err().to_string();
+        assert!(
+            e.contains("operating point 5")
+                && e.contains("winding_temperature")
+                && e.contains("not K"),
+            "{e}"
+        );
     }
 
     #[test]
