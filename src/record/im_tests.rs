@@ -9,6 +9,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::TEMPERATURE_RANGE_C;
+
 /// One DC winding-resistance reading between two line terminals.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct DcResistanceReading {
@@ -84,6 +86,26 @@ impl StandardTestReading {
         };
         fields.into_iter().find(|(_, v)| !v.is_finite())
     }
+
+    /// The reading's winding temperature, °C, where it has one.
+    pub fn winding_temperature(&self) -> Option<f64> {
+        match self {
+            StandardTestReading::ImDcResistance(r) => r.winding_temperature,
+            StandardTestReading::ImNoLoad(r) | StandardTestReading::ImLockedRotor(r) => {
+                r.winding_temperature
+            }
+        }
+    }
+}
+
+/// Why a winding temperature cannot be one, °C (outside
+/// [`TEMPERATURE_RANGE_C`]: kelvin, or a sign error); `None` where it can,
+/// or where there is none.
+pub fn implausible_temperature(t: Option<f64>) -> Option<String> {
+    let (lo, hi) = TEMPERATURE_RANGE_C;
+    t.filter(|t| !(lo..=hi).contains(t)).map(|t| {
+        format!("winding_temperature {t} is outside {lo}…{hi} °C (the key is in °C, not K)")
+    })
 }
 
 impl ImStandardTests {

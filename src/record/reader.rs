@@ -54,6 +54,7 @@ use serde::Deserialize;
 
 use super::builder::RecordBuilder;
 use super::error::{DecodeError, RecordError};
+use super::im_tests::{implausible_temperature, StandardTestReading};
 use super::log_event::AnyEvent;
 use super::mcap_walk::{walk_source, Damage};
 use super::schema::{
@@ -63,7 +64,7 @@ use super::schema::{
     TOPIC_SUPPLY_LIMIT,
 };
 use super::thinning::Resolution;
-use super::types::{ChannelSpec, Entry, Record, Recovery, SegmentKind, TestMeta};
+use super::types::{ChannelSpec, Entry, OperatingPoint, Record, Recovery, SegmentKind, TestMeta};
 use crate::contract::READ_SCHEMA_VERSIONS;
 
 /// Everything [`read_entries`] finds in a file: the metadata, the sample
@@ -494,18 +495,26 @@ impl<'p, 's> Reading<'p, 's> {
                         }
                         Some(Entry::Result { t_ns, report })
                     }
-                    Route::OperatingPoint => Some(Entry::OperatingPoint {
-                        t_ns,
-                        point: decode(&data).map_err(|e| bad(e.to_string()))?,
-                    }),
+                    Route::OperatingPoint => {
+                        let point: OperatingPoint =
+                            decode(&data).map_err(|e| bad(e.to_string()))?;
+                        if let Some(why) = implausible_temperature(point.winding_temperature) {
+                            return Err(bad(why));
+                        }
+                        Some(Entry::OperatingPoint { t_ns, point })
+                    }
                     Route::SupplyLimit => Some(Entry::SupplyLimit {
                         t_ns,
                         limit: decode(&data).map_err(|e| bad(e.to_string()))?,
                     }),
-                    Route::StandardTest => Some(Entry::StandardTest {
-                        t_ns,
-                        reading: decode(&data).map_err(|e| bad(e.to_string()))?,
-                    }),
+                    Route::StandardTest => {
+                        let reading: StandardTestReading =
+                            decode(&data).map_err(|e| bad(e.to_string()))?;
+                        if let Some(why) = implausible_temperature(reading.winding_temperature()) {
+                            return Err(bad(why));
+                        }
+                        Some(Entry::StandardTest { t_ns, reading })
+                    }
                     Route::Sample(_) | Route::Ignore => None,
                 };
                 if let Some(entry) = entry {

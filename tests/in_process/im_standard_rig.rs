@@ -82,6 +82,53 @@ async fn standard_test_readings_round_trip_and_a_non_finite_one_is_refused() {
     assert_eq!(tests.locked_rotor, [supply(2, 60.0)]);
 }
 
+/// A record whose winding temperature is in kelvin (another tool's, or a
+/// rig's thermometer mapped wrongly) is refused on reading, naming the
+/// topic and the key: the fits scale Rs by it.
+#[tokio::test]
+async fn a_winding_temperature_in_kelvin_is_refused_on_reading() {
+    let dir = tempfile::tempdir().unwrap();
+    let kelvin = SupplyReading {
+        segment: 1,
+        line_voltage: 400.0,
+        line_current: 2.0,
+        input_power: 150.0,
+        frequency: 50.0,
+        winding_temperature: Some(294.65),
+    };
+    let path = dir.path().join("kelvin.mcap");
+    let rec = Recorder::start(&path, &meta(), &[], 8).unwrap();
+    rec.send(Entry::StandardTest {
+        t_ns: 1,
+        reading: StandardTestReading::ImNoLoad(kelvin),
+    })
+    .await
+    .unwrap();
+    rec.finish().await.unwrap();
+    let e = read_mcap(&path).unwrap_err().to_string();
+    assert!(
+        e.contains("/bench/standard_test")
+            && e.contains("winding_temperature 294.65")
+            && e.contains("not K"),
+        "{e}"
+    );
+    // The same reading in °C reads.
+    let path = dir.path().join("celsius.mcap");
+    let rec = Recorder::start(&path, &meta(), &[], 8).unwrap();
+    let celsius = SupplyReading {
+        winding_temperature: Some(21.5),
+        ..kelvin
+    };
+    rec.send(Entry::StandardTest {
+        t_ns: 1,
+        reading: StandardTestReading::ImNoLoad(celsius),
+    })
+    .await
+    .unwrap();
+    rec.finish().await.unwrap();
+    assert_eq!(read_mcap(&path).unwrap().standard_tests.no_load, [celsius]);
+}
+
 /// Raises the operator's stop when segment `at` begins.
 struct StopAt {
     at: usize,
