@@ -238,17 +238,37 @@ impl Analysed {
 const MAX_TEST_WARNINGS: usize = 20;
 
 /// The report's `test_warnings` of a record's events: each warning as
-/// "at test time T s: message", the first [`MAX_TEST_WARNINGS`] of them,
-/// then how many more the record holds.
+/// "at test time T s: message", at most [`MAX_TEST_WARNINGS`] of them in
+/// time order, then how many more the record holds. Where there are more,
+/// the first of each kind (the message with its numbers left out) is
+/// listed before any repeat, so that a flood of one kind (a late bus's
+/// batches, one a millisecond) cannot hide a warning of another.
 fn test_warnings<'a>(events: impl IntoIterator<Item = (u64, &'a Event)>) -> Vec<String> {
     let warned: Vec<(u64, &Event)> = events
         .into_iter()
         .filter(|(_, e)| e.level == EventLevel::Warn)
         .collect();
-    let mut out: Vec<String> = warned
-        .iter()
+    let kind = |e: &Event| -> String {
+        e.message
+            .chars()
+            .filter(|c| !c.is_ascii_digit() && *c != '.')
+            .collect()
+    };
+    let mut seen = std::collections::HashSet::new();
+    let (first, repeats): (Vec<usize>, Vec<usize>) =
+        (0..warned.len()).partition(|&k| seen.insert(kind(warned[k].1)));
+    let mut listed: Vec<usize> = first
+        .into_iter()
+        .chain(repeats)
         .take(MAX_TEST_WARNINGS)
-        .map(|(t, e)| format!("at test time {:.3} s: {}", *t as f64 * 1e-9, e.message))
+        .collect();
+    listed.sort_unstable();
+    let mut out: Vec<String> = listed
+        .iter()
+        .map(|&k| {
+            let (t, e) = warned[k];
+            format!("at test time {:.3} s: {}", t as f64 * 1e-9, e.message)
+        })
         .collect();
     if warned.len() > MAX_TEST_WARNINGS {
         out.push(format!(
@@ -300,5 +320,34 @@ mod tests {
             listed[20]
         );
         assert!(test_warnings(std::iter::empty()).is_empty());
+    }
+
+    /// A flood of one kind of warning (a late bus's batches) leaves room
+    /// for the one warning of another kind that came after it.
+    #[test]
+    fn a_flood_of_one_warning_does_not_hide_another() {
+        let mut events: Vec<(u64, Event)> = (0..30)
+            .map(|n| {
+                (
+                    n * 1_000_000,
+                    event(
+                        EventLevel::Warn,
+                        &format!(
+                            "merged: a batch of encoder_count arrived {}.0 ms late",
+                            50 - n
+                        ),
+                    ),
+                )
+            })
+            .collect();
+        events.push((40_000_000, event(EventLevel::Warn, "garbage on the line")));
+        let listed = test_warnings(events.iter().map(|(t, e)| (*t, e)));
+        assert_eq!(listed.len(), MAX_TEST_WARNINGS + 1);
+        assert_eq!(listed[19], "at test time 0.040 s: garbage on the line");
+        assert_eq!(
+            listed[0],
+            "at test time 0.000 s: merged: a batch of encoder_count arrived 50.0 ms late"
+        );
+        assert!(listed[20].starts_with("11 more warnings"), "{}", listed[20]);
     }
 }
