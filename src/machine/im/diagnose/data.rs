@@ -72,21 +72,19 @@ pub struct SweepSet {
 /// used (a scale against an unknown temperature would be a guess).
 /// `None` without a thermometer.
 fn thermometer_note(sweep: &SlipSweep) -> Option<String> {
-    let t = sweep.thermometer()?;
-    Some(if t.every_point {
+    let (first, [lo, hi], count) = sweep.thermometer()?;
+    let n = sweep.points.len();
+    Some(if count == n {
         format!(
-            "the stator resistance follows the winding thermometer ({:.1} to {:.1} °C over \
-             the points): Rs is given at the first point's {:.1} °C, each point's scaled by \
-             copper's α",
-            t.lo, t.hi, t.first
+            "the stator resistance follows the winding thermometer ({lo:.1} to {hi:.1} °C over \
+             the points): Rs is given at the first point's {first:.1} °C, each point's scaled \
+             by copper's α"
         )
     } else {
         format!(
-            "the winding temperature is on {} of the {} operating points: not used (the \
+            "the winding temperature is on {count} of the {n} operating points: not used (the \
              diagnosis scales the stator resistance per point only where every point has \
-             one); Rs is one value over the record",
-            t.count,
-            sweep.points.len()
+             one); Rs is one value over the record"
         )
     })
 }

@@ -50,7 +50,7 @@ pub use standard_tests::{
 };
 pub use sweep::{
     predict, predict_gradient, predict_gradient_into, slip_grid, Channels, PhaseData, SlipSweep,
-    SweepNoise, SweepPoint, Thermometer, MAX_PARAMS,
+    SweepNoise, SweepPoint, MAX_PARAMS,
 };
 
 use crate::identify::nrmse;
@@ -574,14 +574,8 @@ const WARMING_NOTE_K: f64 = 5.0;
 /// warmed by more than [`WARMING_NOTE_K`] over them, that these fits
 /// take one `Rs` for every point.
 fn warming_note(sweep: &SlipSweep) -> Option<String> {
-    let Thermometer {
-        first,
-        lo,
-        hi,
-        count,
-        every_point,
-    } = sweep.thermometer()?;
-    if every_point {
+    let (first, [lo, hi], count) = sweep.thermometer()?;
+    if count == sweep.points.len() {
         return Some(format!(
             "lm, recursive: Rs is given at the first point's winding temperature {first:.1} °C; \
              each point's Rs is scaled to its own (the thermometer read {lo:.1} to {hi:.1} °C; \

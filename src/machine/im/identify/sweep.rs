@@ -276,43 +276,23 @@ impl SlipSweep {
             .filter(|_| all)
     }
 
-    /// What the winding thermometer read over the points; `None` where no
-    /// point has a temperature.
-    pub fn thermometer(&self) -> Option<Thermometer> {
+    /// What the winding thermometer read over the points, °C: the first
+    /// point's reading that has one, the lowest and highest, and how many
+    /// points have one (all of them: [`SlipSweep::rs_scale`] scales each
+    /// point's `Rs`); `None` where no point has one.
+    pub fn thermometer(&self) -> Option<(f64, [f64; 2], usize)> {
         let t: Vec<f64> = self
             .points
             .iter()
             .filter_map(|p| p.winding_temperature)
             .collect();
-        let (lo, hi) = t
+        let range = t
             .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
-                (lo.min(*t), hi.max(*t))
+            .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], t| {
+                [lo.min(*t), hi.max(*t)]
             });
-        Some(Thermometer {
-            first: *t.first()?,
-            lo,
-            hi,
-            count: t.len(),
-            every_point: t.len() == self.points.len(),
-        })
+        Some((*t.first()?, range, t.len()))
     }
-}
-
-/// The winding temperatures of a sweep's points, °C.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Thermometer {
-    /// The first point's that has one.
-    pub first: f64,
-    /// The lowest.
-    pub lo: f64,
-    /// The highest.
-    pub hi: f64,
-    /// How many points have one.
-    pub count: usize,
-    /// Whether every point has one (then [`SlipSweep::rs_scale`] scales
-    /// each point's `Rs`).
-    pub every_point: bool,
 }
 
 /// A sweep per phase: what the per-phase circuit predicts.
