@@ -19,7 +19,7 @@ use std::path::Path;
 use super::csv::{read_text, CsvLines, CsvRow};
 use super::csv_im::{COL_FREQUENCY, COL_INPUT_POWER, COL_LINE_CURRENT, COL_LINE_VOLTAGE};
 use super::error::RecordError;
-use super::im_tests::{DcResistanceReading, SupplyReading};
+use super::im_tests::{implausible_temperature, DcResistanceReading, SupplyReading};
 use super::types::SegmentKind;
 use crate::excerpt::cut;
 
@@ -29,10 +29,6 @@ pub const COL_DC_VOLTAGE: &str = "dc_voltage_V";
 pub const COL_DC_CURRENT: &str = "dc_current_A";
 /// Optional winding-temperature column, °C.
 pub const COL_WINDING_TEMPERATURE: &str = "winding_temperature_C";
-
-/// Plausible winding temperatures, °C: below is a sign error or kelvin
-/// mistaken for °C the other way, above is kelvin.
-pub const TEMPERATURE_RANGE_C: (f64, f64) = (-60.0, 250.0);
 
 /// One imported standard-test segment.
 #[derive(Debug, Clone, PartialEq)]
@@ -145,21 +141,20 @@ fn positive(path: &Path, line: usize, column: &str, v: f64) -> Result<f64, Recor
     }
 }
 
-/// A winding temperature inside [`TEMPERATURE_RANGE_C`].
+/// A winding temperature that can be one ([`implausible_temperature`]).
 pub(super) fn temperature(
     path: &Path,
     line: usize,
     t: Option<f64>,
 ) -> Result<Option<f64>, RecordError> {
-    let (lo, hi) = TEMPERATURE_RANGE_C;
-    match t {
-        Some(t) if !(lo..=hi).contains(&t) => Err(RecordError::csv(
+    match t.and_then(|t| implausible_temperature(t).map(|why| (t, why))) {
+        Some((t, why)) => Err(RecordError::csv(
             path,
             line,
             Some(COL_WINDING_TEMPERATURE),
-            format!("{t} °C is outside {lo}…{hi} °C (the column is in °C, not K)"),
+            format!("{t} {why}"),
         )),
-        _ => Ok(t),
+        None => Ok(t),
     }
 }
 

@@ -9,7 +9,18 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::TEMPERATURE_RANGE_C;
+/// Plausible winding temperatures, °C: below is a sign error or kelvin
+/// mistaken for °C the other way, above is kelvin.
+pub const TEMPERATURE_RANGE_C: (f64, f64) = (-60.0, 250.0);
+
+/// Why a winding temperature `t`, °C, cannot be one (outside
+/// [`TEMPERATURE_RANGE_C`]: kelvin, a sign error, not a number); `None`
+/// where it can. Every reader of a temperature (CSV import, record
+/// reader, slip-sweep validation) asks this one question.
+pub fn implausible_temperature(t: f64) -> Option<&'static str> {
+    let (lo, hi) = TEMPERATURE_RANGE_C;
+    (!(lo..=hi).contains(&t)).then_some("is outside -60…250 °C (the value is in °C, not K)")
+}
 
 /// One DC winding-resistance reading between two line terminals.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -98,16 +109,6 @@ impl StandardTestReading {
     }
 }
 
-/// Why a winding temperature cannot be one, °C (outside
-/// [`TEMPERATURE_RANGE_C`]: kelvin, or a sign error); `None` where it can,
-/// or where there is none.
-pub fn implausible_temperature(t: Option<f64>) -> Option<String> {
-    let (lo, hi) = TEMPERATURE_RANGE_C;
-    t.filter(|t| !(lo..=hi).contains(t)).map(|t| {
-        format!("winding_temperature {t} is outside {lo}…{hi} °C (the key is in °C, not K)")
-    })
-}
-
 impl ImStandardTests {
     /// Add one reading to its test's list.
     pub fn push(&mut self, reading: StandardTestReading) {
@@ -121,5 +122,23 @@ impl ImStandardTests {
     /// Whether the record holds none of these tests.
     pub fn is_empty(&self) -> bool {
         self.dc_resistance.is_empty() && self.no_load.is_empty() && self.locked_rotor.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_temperature_in_kelvin_or_not_a_number_is_implausible_and_the_reason_names_the_range() {
+        let (lo, hi) = TEMPERATURE_RANGE_C;
+        for t in [lo, 20.0, hi] {
+            assert_eq!(implausible_temperature(t), None, "{t}");
+        }
+        for t in [293.15, lo - 0.1, hi + 0.1, f64::NAN] {
+            let why = implausible_temperature(t).expect("implausible");
+            assert!(why.contains(&format!("{lo}…{hi} °C")), "{why}");
+            assert!(why.contains("not K"), "{why}");
+        }
     }
 }

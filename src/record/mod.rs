@@ -42,7 +42,7 @@ pub use csv::read_dc_csv;
 pub use csv_im::{read_im_csv, ImCsvSegment};
 pub use csv_im_tests::{
     im_file_kind, read_dc_resistance_csv, read_supply_test_csv, ImTestCsvSegment, COL_DC_CURRENT,
-    COL_DC_VOLTAGE, COL_WINDING_TEMPERATURE, TEMPERATURE_RANGE_C,
+    COL_DC_VOLTAGE, COL_WINDING_TEMPERATURE,
 };
 pub use error::{LoadError, RecordError};
 pub use files::load_record_files;

@@ -498,8 +498,10 @@ impl<'p, 's> Reading<'p, 's> {
                     Route::OperatingPoint => {
                         let point: OperatingPoint =
                             decode(&data).map_err(|e| bad(e.to_string()))?;
-                        if let Some(why) = implausible_temperature(point.winding_temperature) {
-                            return Err(bad(why));
+                        if let Some(t) = point.winding_temperature {
+                            if let Some(why) = implausible_temperature(t) {
+                                return Err(bad(format!("winding_temperature {t} {why}")));
+                            }
                         }
                         Some(Entry::OperatingPoint { t_ns, point })
                     }
@@ -510,8 +512,10 @@ impl<'p, 's> Reading<'p, 's> {
                     Route::StandardTest => {
                         let reading: StandardTestReading =
                             decode(&data).map_err(|e| bad(e.to_string()))?;
-                        if let Some(why) = implausible_temperature(reading.winding_temperature()) {
-                            return Err(bad(why));
+                        if let Some(t) = reading.winding_temperature() {
+                            if let Some(why) = implausible_temperature(t) {
+                                return Err(bad(format!("winding_temperature {t} {why}")));
+                            }
                         }
                         Some(Entry::StandardTest { t_ns, reading })
                     }

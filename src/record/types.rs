@@ -4,7 +4,8 @@
 use serde::{Deserialize, Serialize};
 
 pub use super::im_tests::{
-    DcResistanceReading, ImStandardTests, StandardTestReading, SupplyReading,
+    implausible_temperature, DcResistanceReading, ImStandardTests, StandardTestReading,
+    SupplyReading, TEMPERATURE_RANGE_C,
 };
 
 /// Contract version written to every record and report.

@@ -218,13 +218,10 @@ impl SlipSweep {
             }
             // A temperature scales Rs per point: one in kelvin (or not a
             // number) would scale it wrongly, not merely add noise.
-            let (lo, hi) = crate::record::TEMPERATURE_RANGE_C;
-            if let Some(t) = p.winding_temperature.filter(|t| !(lo..=hi).contains(t)) {
-                return bad(
-                    "winding_temperature",
-                    t,
-                    "is outside -60…250 °C (the key is in °C, not K)",
-                );
+            if let Some(t) = p.winding_temperature {
+                if let Some(why) = crate::record::implausible_temperature(t) {
+                    return bad("winding_temperature", t, why);
+                }
             }
         }
         Ok(())
