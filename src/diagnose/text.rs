@@ -3,6 +3,7 @@
 use std::fmt::Write as _;
 
 use super::{Diagnosis, RegionAxis};
+use crate::diagnose::decision::FALSE_ALARM_RATE;
 
 /// Render `d` as a short text report: where the gap lies, the verdict and
 /// how far it shrinks, the candidates, corrected parameters, look-alikes.
@@ -40,9 +41,16 @@ pub fn render_diagnosis_text(d: &Diagnosis) -> String {
     }
     let v = &d.verdict;
     if v.effect == "none" {
+        // `confidence` of `none` is the smallest candidate p-value.
+        let why = if v.confidence < FALSE_ALARM_RATE {
+            "candidates shrink the held-out gap beyond what noise gives, but none explains it \
+             (the warnings say why)"
+        } else {
+            "no candidate shrinks the held-out gap beyond what noise gives"
+        };
         let _ = writeln!(
             s,
-            "  verdict: none — no candidate shrinks the held-out gap beyond what noise gives (confidence {:.3})",
+            "  verdict: none — {why} (confidence {:.3})",
             v.confidence
         );
     } else {
@@ -101,4 +109,45 @@ pub fn render_diagnosis_text(d: &Diagnosis) -> String {
         let _ = writeln!(s, "  warning: {w}");
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn none_with_smallest_p(p: f64) -> Diagnosis {
+        serde_json::from_value(serde_json::json!({
+            "schema_version": "1.0",
+            "kind": "dc_step",
+            "nominal": {"model": "dc_nominal", "params": {}, "fit_nrmse": 0.0126,
+                        "validation_nrmse": 0.013},
+            "gap": {"regions": [], "noise_floor": 0.0092},
+            "candidates": [],
+            "verdict": {"effect": "none", "gap_before": 0.013, "gap_after": 0.013,
+                        "shrink": 0.0, "confidence": p},
+            "validation": "interleaved blocks",
+            "warnings": []
+        }))
+        .expect("a diagnosis")
+    }
+
+    #[test]
+    fn a_none_verdict_says_whether_candidates_were_significant_but_refused() {
+        let refused = render_diagnosis_text(&none_with_smallest_p(7e-4));
+        assert!(
+            refused.contains(
+                "verdict: none — candidates shrink the held-out gap beyond what \
+                              noise gives, but none explains it (the warnings say why)"
+            ),
+            "{refused}"
+        );
+        let noise = render_diagnosis_text(&none_with_smallest_p(0.3));
+        assert!(
+            noise.contains(
+                "verdict: none — no candidate shrinks the held-out gap beyond what \
+                            noise gives (confidence 0.300)"
+            ),
+            "{noise}"
+        );
+    }
 }

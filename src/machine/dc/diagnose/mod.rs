@@ -21,6 +21,7 @@
 //!    best significant, physically signed candidate, else `none`.
 
 mod candidates;
+mod choice;
 mod cv;
 mod fit;
 mod gap;
@@ -35,6 +36,7 @@ use self::candidates::{
     candidates, effect_params, extra_params, physical, separating_plan, undetermined, CandidateDef,
     RecordScales,
 };
+use self::choice::{choose, Ranked, Refusal};
 use self::fit::{
     fit, fit_fold, one_step_refit, refit_spec, runs_residuals, without, FitSpec, Fitted, Transform,
     Weights,
@@ -454,25 +456,32 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
     // a guess.
     let share_of =
         |fam: &FamilyResult| explained_share(nominal.validation, fam.validation, noise_floor);
-    let refusal = |fam: &FamilyResult| -> Option<String> {
+    let refusal = |fam: &FamilyResult| -> Option<Refusal> {
+        let other = |why: String| {
+            Some(Refusal {
+                why,
+                partial: false,
+            })
+        };
+        let partial = |why: String| Some(Refusal { why, partial: true });
         if nominal.validation <= noise_floor {
-            return Some(format!(
+            return other(format!(
                 "but the nominal model's held-out NRMSE {:.4} is already within the noise \
                  floor {:.4}: there is no gap for an effect to explain",
                 nominal.validation, noise_floor
             ));
         }
         if !physical(&fam.all.model) {
-            return Some("only with an unphysical sign of its parameter".into());
+            return other("only with an unphysical sign of its parameter".into());
         }
         if let Some(why) = undetermined(&fam.all.model, &scales) {
-            return Some(format!(
+            return other(format!(
                 "with a parameter the record does not determine: {why}"
             ));
         }
         let explained = share_of(fam);
         if explained < EXPLAINED_SHARE {
-            return Some(format!(
+            return partial(format!(
                 "by {:.0} % only of its excess over the noise floor (held-out NRMSE {:.4} \
                  against {:.4}, floor {:.4}): an effect that causes the gap removes most \
                  of it",
@@ -482,31 +491,28 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
                 noise_floor
             ));
         }
-        (fam.validation > EXPLAINED * noise_floor && explained < DOMINANT_SHARE).then(|| {
-            format!(
+        if fam.validation > EXPLAINED * noise_floor && explained < DOMINANT_SHARE {
+            return partial(format!(
                 "but leaves a held-out NRMSE of {:.4}, {:.1} times the noise floor {:.4}: \
                  the gap is not this effect alone (another effect, or a nominal fit that \
                  missed its optimum)",
                 fam.validation,
                 fam.validation / noise_floor,
                 noise_floor
-            )
-        })
+            ));
+        }
+        None
     };
-    let mut winner = None;
-    for (n, (e, fam, test, score)) in scored.iter().enumerate() {
-        if !(test.significant() && *score > 0.0) {
-            continue;
-        }
-        match refusal(fam) {
-            None if winner.is_none() => winner = Some(n),
-            None => {}
-            Some(why) => warnings.push(format!(
-                "{}: shrinks the held-out gap {why}; not taken as the verdict",
-                effect_name(*e)
-            )),
-        }
-    }
+    let ranked: Vec<Ranked> = scored
+        .iter()
+        .map(|(e, fam, test, score)| Ranked {
+            effect: *e,
+            blocks: &fam.blocks,
+            passes: test.significant() && *score > 0.0,
+            refusal: refusal(fam),
+        })
+        .collect();
+    let winner = choose(&ranked, &mut warnings);
 
     if let Some(wi) = winner {
         let (e, fam, _, _) = &scored[wi];
@@ -544,11 +550,10 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
             let look_alikes = scored
                 .iter()
                 .enumerate()
-                .filter(|(n, (_, other, t, s))| {
+                .filter(|(n, (_, other, _, _))| {
                     *n != wi
-                        && t.significant()
-                        && *s > 0.0
-                        && refusal(other).is_none()
+                        && ranked[*n].passes
+                        && ranked[*n].refusal.is_none()
                         && !held_out_test(&other.blocks, &fam.blocks, 1).significant()
                 })
                 .map(|(_, (oe, other, _, _))| LookAlike {
@@ -638,7 +643,7 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
     Ok(DiagnosisRun { report, plot })
 }
 
-fn effect_name(e: Effect) -> String {
+pub(super) fn effect_name(e: Effect) -> String {
     serde_json::to_value(e)
         .ok()
         .and_then(|v| v.as_str().map(str::to_string))
