@@ -329,6 +329,10 @@ pub fn noise_sigma(y: &[f64]) -> f64 {
     median(&mut d).map_or(0.0, |m| m / (std::f64::consts::SQRT_2 * 0.674_489_75))
 }
 
+/// Differences of a residual beyond this many times its rms are a
+/// misfit's jumps, not noise ([`residual_noise_sigma`]).
+const CLIP_SIGMAS: f64 = 4.0;
+
 /// Standard deviation of the measurement noise in residuals (measured
 /// minus simulated), pooled over `residuals` (one slice per segment), from
 /// the first differences `Δr`, which the misfit's slow part does not
@@ -346,26 +350,53 @@ pub fn noise_sigma(y: &[f64]) -> f64 {
 ///
 /// Differencing the residual rather than the reading removes what the
 /// model follows, so the estimate holds on ramps, PRBS and closed loops,
-/// where the reading itself never settles.
+/// where the reading itself never settles. What differencing does not
+/// remove is a misfit that jumps: a sensor delay or a fast current the
+/// model lags leaves one large difference at every step of the voltage.
+/// Differences beyond [`CLIP_SIGMAS`] times the estimate are left out
+/// (sigma clipping, repeated until the estimate holds still): on a
+/// blind record of a PRBS through a 0.5 ms delay (one sample) with an
+/// armature time constant of a sample, the floor came out 6.4 times the
+/// true one without it and the delay's verdict was refused as "within
+/// the noise floor"; over the four blind seeds' 160 DC records the median
+/// estimate moved from 1.05 to 1.02 times the truth, and no other verdict
+/// changed (docs/diagnosis-dc.md).
 pub fn residual_noise_sigma(residuals: &[&[f64]], readings: &[&[f64]]) -> f64 {
-    // Over every segment: V0 = mean(Δr²), V1 = mean(Δr_k·Δr_(k−1)).
-    let (mut v0, mut v1, mut n0, mut n1) = (0.0, 0.0, 0usize, 0usize);
-    for r in residuals {
-        let d: Vec<f64> = r.windows(2).map(|w| w[1] - w[0]).collect();
-        for (k, x) in d.iter().enumerate() {
-            if !x.is_finite() {
-                continue;
-            }
-            v0 += x * x;
-            n0 += 1;
-            if let Some(p) = k.checked_sub(1).map(|p| d[p]).filter(|p| p.is_finite()) {
-                v1 += x * p;
-                n1 += 1;
+    let diffs: Vec<Vec<f64>> = residuals
+        .iter()
+        .map(|r| r.windows(2).map(|w| w[1] - w[0]).collect())
+        .collect();
+    // Over every segment: V0 = mean(Δr²), V1 = mean(Δr_k·Δr_(k−1)), of
+    // the differences within `clip` (both of a pair for V1).
+    let moments = |clip: f64| {
+        let kept = |x: f64| x.is_finite() && x.abs() <= clip;
+        let (mut v0, mut v1, mut n0, mut n1) = (0.0, 0.0, 0usize, 0usize);
+        for d in &diffs {
+            for (k, &x) in d.iter().enumerate().filter(|(_, x)| kept(**x)) {
+                v0 += x * x;
+                n0 += 1;
+                if let Some(&p) = k.checked_sub(1).map(|p| &d[p]).filter(|p| kept(**p)) {
+                    v1 += x * p;
+                    n1 += 1;
+                }
             }
         }
+        let v0 = v0 / n0.max(1) as f64;
+        (v0, if n1 > 0 { v1 / n1 as f64 } else { -0.5 * v0 })
+    };
+    // A misfit that jumps (a delay across a step, a spike the model
+    // misses) leaves a few large differences the noise does not: they are
+    // clipped at CLIP_SIGMAS times the estimate, repeated until it holds
+    // still (Gaussian noise loses 6e-5 of its samples at 4 σ).
+    let (mut v0, mut v1) = moments(f64::INFINITY);
+    for _ in 0..8 {
+        let (c0, c1) = moments(CLIP_SIGMAS * v0.sqrt());
+        let settled = c0 >= 0.999 * v0;
+        (v0, v1) = (c0, c1);
+        if settled {
+            break;
+        }
     }
-    let v0 = v0 / n0.max(1) as f64;
-    let v1 = if n1 > 0 { v1 / n1 as f64 } else { -0.5 * v0 };
     // Noise correlated over one sample at most (white, or an encoder's
     // differenced quantisation, or a filter of about a sample):
     // γ0 = V0 + V1; a one-lag correlation cannot make it less than V0/3
@@ -584,6 +615,22 @@ pub(crate) mod tests {
         let flat = vec![0.0; 100];
         let q = residual_noise_sigma(&[&flat], &[&coarse]);
         assert!((q - 0.5 / 12f64.sqrt()).abs() < 1e-12, "{q}");
+    }
+
+    #[test]
+    fn residual_noise_leaves_out_a_misfit_that_jumps() {
+        // White noise of 0.05 and, every 100 samples, a jump of 2 the
+        // model misses for one sample (a delay across a voltage step).
+        let white = noise(23, 4000);
+        let residual: Vec<f64> = white
+            .iter()
+            .enumerate()
+            .map(|(k, v)| 0.05 * v + if k % 100 == 50 { 2.0 } else { 0.0 })
+            .collect();
+        let s = residual_noise_sigma(&[&residual], &[&white]);
+        // Unclipped, the jumps' 80 differences of ±2 alone would give
+        // √(80·4/3999/2) ≈ 0.2: four times the noise.
+        assert!((s - 0.05).abs() < 0.003, "sigma {s}");
     }
 
     #[test]
