@@ -89,6 +89,11 @@ const BREAKAWAY_SPEEDS: [f64; 2] = [0.05, 0.25];
 /// (read as no effect; a blind case, seed 2024 case 39).
 const BREAKAWAY_TORQUE: f64 = 1.0;
 
+/// The floor of a saturating inductance a knee fit starts from, as a share
+/// of La: an iron core's incremental inductance falls to what its leakage
+/// and air gap keep, commonly a third to a half of it.
+const KNEE_FLOOR: f64 = 0.4;
+
 /// Every candidate (sensor lag twice, on the current and on the speed; the
 /// brush drop from two knees; shaft compliance from each resonance start):
 /// the best on the fitting data stands for its effect.
@@ -128,6 +133,15 @@ pub fn candidates(nominal: &AugModel, s: &RecordScales) -> Vec<CandidateDef> {
                 Augment::InductanceSaturation,
                 [0.0; 3],
                 vec![lin(0.2 / i2)],
+            ),
+            // The knee's second start: La falling to a floor it keeps (a
+            // core saturated, its leakage and air gap left), with the knee
+            // at a third of the peak current.
+            def(
+                Effect::InductanceSaturation,
+                Augment::InductanceSaturation,
+                [9.0 / i2, KNEE_FLOOR, 0.0],
+                vec![Transform::Log, Transform::Logit],
             ),
             def(
                 Effect::ThermalDrift,
@@ -200,9 +214,10 @@ fn shaft_starts(s: &RecordScales) -> Vec<f64> {
 const SHAFT_BELOW_PEAK: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
 /// Extra parameters of a candidate (the sensor-lag channel counts as one).
-pub fn extra_params(aug: Augment) -> usize {
-    match aug {
+pub fn extra_params(m: &AugModel) -> usize {
+    match m.aug {
         Augment::Nominal => 0,
+        Augment::InductanceSaturation if m.e[1] > 0.0 => 2,
         Augment::CoulombFriction | Augment::BrushDrop => 2,
         Augment::SensorLag(_) => 2,
         Augment::ShaftCompliance => 3,
@@ -246,6 +261,22 @@ pub fn undetermined(m: &AugModel, s: &RecordScales) -> Option<String> {
              a drop proportional to the current there, the same as a change of Ra",
             e[1], s.i_max
         )),
+        Augment::InductanceSaturation
+            if e[1] > 0.0 && !(SHARE_BOUNDS.0..=SHARE_BOUNDS.1).contains(&e[1]) =>
+        {
+            Some(format!(
+                "its floor La_floor = {:.4} of La sits at the bound of its range",
+                e[1]
+            ))
+        }
+        Augment::InductanceSaturation if e[1] > 0.0 && e[0] * s.i_max * s.i_max < 0.1 => {
+            Some(format!(
+                "its knee Isat = {:.3} A lies far above every current of the record ({:.3} A): \
+                 the floor is never reached, and its share of La is not pinned down",
+                e[0].max(1e-300).powf(-0.5),
+                s.i_max
+            ))
+        }
         Augment::ArmatureReaction if e[0] * s.i_max * s.i_max >= 1.0 => {
             Some("K would vanish at the record's peak current".into())
         }
@@ -373,6 +404,9 @@ pub fn effect_params(
                     .map(|c| [isat(c[1]), isat(c[0])]),
                 "A",
             );
+            if m.e[1] > 0.0 {
+                put("La_floor", m.e[1], ci(1), "1");
+            }
         }
         Augment::ThermalDrift => {
             put("beta", m.e[0], ci(0), "1/(A^2*s)");
@@ -475,6 +509,10 @@ mod tests {
             // A breakaway decaying slower than any speed reached: Tst.
             with(Augment::CoulombFriction, [0.01, 400.0, 0.0]),
             with(Augment::ArmatureReaction, [0.02, 0.0, 0.0]),
+            // A saturation floor at the bound of its logit, and a knee at
+            // 50 A against a peak of 10 A (the floor never reached).
+            with(Augment::InductanceSaturation, [0.01, 0.995, 0.0]),
+            with(Augment::InductanceSaturation, [4e-4, 0.4, 0.0]),
             with(Augment::ThermalDrift, [0.05, 0.0, 0.0]),
             // A breakaway decaying within the speed reading's noise: it
             // only moves the instant the rotor starts.
@@ -490,6 +528,10 @@ mod tests {
             with(Augment::BrushDrop, [2.0, 0.5, 0.0]),
             with(Augment::CoulombFriction, [0.01, 5.0, 0.0]),
             with(Augment::ArmatureReaction, [0.002, 0.0, 0.0]),
+            // A knee at 3.3 A falling to 40 % of La; the form without a
+            // floor at any knee.
+            with(Augment::InductanceSaturation, [0.09, 0.4, 0.0]),
+            with(Augment::InductanceSaturation, [4e-4, 0.0, 0.0]),
             with(Augment::ThermalDrift, [0.002, 0.0, 0.0]),
             with(Augment::SensorLag(LagChannel::Speed), [1e-3, 0.0, 0.0]),
         ];

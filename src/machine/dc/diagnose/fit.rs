@@ -1008,7 +1008,7 @@ mod tests {
         /// uses: the effect's parameters within 2 %, K and Ra within 0.5 %.
         #[test]
         fn an_augmented_fit_recovers_the_effect_it_was_simulated_with(
-            which in 0usize..5,
+            which in 0usize..6,
             a in 0.0f64..1.0,
             b in 0.0f64..1.0,
         ) {
@@ -1019,6 +1019,12 @@ mod tests {
                 1 => (Augment::ArmatureReaction, [(0.03 + 0.07 * a) / 42.0, 0.0, 0.0], 1),
                 // La halved at 2.5–8 A.
                 2 => (Augment::InductanceSaturation, [1.0 / (2.5 + 5.5 * a).powi(2), 0.0, 0.0], 1),
+                // La falling to a floor of 30–50 % past a knee at 1.5–4 A.
+                5 => (
+                    Augment::InductanceSaturation,
+                    [1.0 / (1.5 + 2.5 * a).powi(2), 0.3 + 0.2 * b, 0.0],
+                    2,
+                ),
                 // Ra up 0.5–2 % per A²·s.
                 3 => (Augment::ThermalDrift, [0.005 + 0.015 * a, 0.0, 0.0], 1),
                 // A 1–4 sample lag on the current reading.

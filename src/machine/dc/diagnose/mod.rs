@@ -433,7 +433,7 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
             // at once; an effect that is really there also lowers the
             // all-segment residual beyond what its parameters fit of the
             // noise. Both must hold; the larger p-value is reported.
-            let k = extra_params(fam.all.model.aug);
+            let k = extra_params(&fam.all.model);
             let lr = (nominal_all.sse - fam.all.sse) / (fam.all.s2 * fam.all.colour);
             let p_in = if lr > 0.0 {
                 ChiSquared::new(k as f64).map_or(1.0, |d| 1.0 - d.cdf(lr))
@@ -441,8 +441,7 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
                 1.0
             };
             test.p_value = test.p_value.max((p_in * tried as f64).min(1.0));
-            let score =
-                penalised_score(nominal.sse, fam.sse, n_eff, extra_params(fam.all.model.aug));
+            let score = penalised_score(nominal.sse, fam.sse, n_eff, extra_params(&fam.all.model));
             (e, fam, test, score)
         })
         .collect();

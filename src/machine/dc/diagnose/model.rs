@@ -255,6 +255,13 @@ impl AugModel {
                 let d = self.e[0] * i * i;
                 (-p.k * d * w, p.k * d * i)
             }
+            // La·(ℓ + (1 − ℓ)/(1 + s·i²)), ℓ = e[1] the floor it falls
+            // to (0: La/(1 + s·i²), the form without one).
+            Augment::InductanceSaturation if self.e[1] > 0.0 => {
+                let l = self.e[1];
+                let g = l + (1.0 - l) / (1.0 + self.e[0] * i * i);
+                ((u - p.ra * i - p.k * w) * (1.0 - 1.0 / g), 0.0)
+            }
             Augment::InductanceSaturation => (-(u - p.ra * i - p.k * w) * self.e[0] * i * i, 0.0),
             Augment::ThermalDrift => (p.ra * self.e[0] * heat * i, 0.0),
             _ => (0.0, 0.0),
