@@ -133,18 +133,25 @@ mod tests {
         assert!(warnings[0].starts_with("thermal_drift: shrinks the held-out gap only with"));
     }
 
-    #[test]
-    fn a_verdict_no_better_than_a_higher_ranked_partial_candidate_is_none_naming_both() {
-        // The Coulomb candidate outscores the sensor lag and explains
-        // 49 % of the gap; the lag explains a little more, no better
-        // block by block.
-        let (coulomb, lag) = (blocks(1.0, 0.0), blocks(0.99, 0.05));
+    /// The verdict and warnings of a Coulomb candidate refused as
+    /// partial, ranked above a sensor lag that explains the gap with
+    /// held-out blocks at `lag_level` (the Coulomb's at 1).
+    fn coulomb_above_a_lag(lag_level: f64) -> (Option<usize>, Vec<String>) {
+        let (coulomb, lag) = (blocks(1.0, 0.0), blocks(lag_level, 0.05));
         let list = [
             ranked(Effect::CoulombFriction, &coulomb, partial()),
             ranked(Effect::SensorLag, &lag, None),
         ];
         let mut warnings = Vec::new();
-        assert_eq!(choose(&list, &mut warnings), None);
+        (choose(&list, &mut warnings), warnings)
+    }
+
+    #[test]
+    fn a_verdict_no_better_than_a_higher_ranked_partial_candidate_is_none_naming_both() {
+        // The lag explains a little more of the gap than the Coulomb
+        // candidate, no better block by block.
+        let (verdict, warnings) = coulomb_above_a_lag(0.99);
+        assert_eq!(verdict, None);
         let w = warnings.last().expect("a warning");
         assert!(
             w.starts_with("sensor_lag: explains the gap, but no better")
@@ -155,12 +162,7 @@ mod tests {
 
     #[test]
     fn a_verdict_that_beats_the_partial_candidate_on_the_blocks_stands() {
-        let (coulomb, lag) = (blocks(1.0, 0.0), blocks(0.9, 0.05));
-        let list = [
-            ranked(Effect::CoulombFriction, &coulomb, partial()),
-            ranked(Effect::SensorLag, &lag, None),
-        ];
-        assert_eq!(choose(&list, &mut Vec::new()), Some(1));
+        assert_eq!(coulomb_above_a_lag(0.9).0, Some(1));
     }
 
     #[test]
