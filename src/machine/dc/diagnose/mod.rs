@@ -18,7 +18,9 @@
 //!    run on every core (`std::thread::scope`).
 //! 4. Candidates are ranked by the held-out penalised score and tested
 //!    with the paired held-out block test of `decision`; the verdict is the
-//!    best significant, physically signed candidate, else `none`.
+//!    best significant, physically signed candidate that explains the gap,
+//!    unless a higher-ranked one that explains part of it is as good on
+//!    the held-out blocks (`choice.rs`); else `none`.
 
 mod candidates;
 mod choice;
