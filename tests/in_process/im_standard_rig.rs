@@ -97,14 +97,7 @@ async fn a_winding_temperature_in_kelvin_is_refused_on_reading() {
         winding_temperature: Some(294.65),
     };
     let path = dir.path().join("kelvin.mcap");
-    let rec = Recorder::start(&path, &meta(), &[], 8).unwrap();
-    rec.send(Entry::StandardTest {
-        t_ns: 1,
-        reading: StandardTestReading::ImNoLoad(kelvin),
-    })
-    .await
-    .unwrap();
-    rec.finish().await.unwrap();
+    record_one_no_load_reading(&path, kelvin).await;
     let e = read_mcap(&path).unwrap_err().to_string();
     assert!(
         e.contains("/bench/standard_test")
@@ -114,19 +107,24 @@ async fn a_winding_temperature_in_kelvin_is_refused_on_reading() {
     );
     // The same reading in °C reads.
     let path = dir.path().join("celsius.mcap");
-    let rec = Recorder::start(&path, &meta(), &[], 8).unwrap();
     let celsius = SupplyReading {
         winding_temperature: Some(21.5),
         ..kelvin
     };
+    record_one_no_load_reading(&path, celsius).await;
+    assert_eq!(read_mcap(&path).unwrap().standard_tests.no_load, [celsius]);
+}
+
+/// A record at `path` holding one no-load reading.
+async fn record_one_no_load_reading(path: &std::path::Path, reading: SupplyReading) {
+    let rec = Recorder::start(path, &meta(), &[], 8).unwrap();
     rec.send(Entry::StandardTest {
         t_ns: 1,
-        reading: StandardTestReading::ImNoLoad(celsius),
+        reading: StandardTestReading::ImNoLoad(reading),
     })
     .await
     .unwrap();
     rec.finish().await.unwrap();
-    assert_eq!(read_mcap(&path).unwrap().standard_tests.no_load, [celsius]);
 }
 
 /// Raises the operator's stop when segment `at` begins.
