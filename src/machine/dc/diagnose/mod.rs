@@ -35,8 +35,8 @@ use std::collections::BTreeMap;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
 
 use self::candidates::{
-    candidates, effect_params, extra_params, physical, separating_plan, undetermined, CandidateDef,
-    RecordScales,
+    candidates, effect_params, extra_params, immaterial, physical, separating_plan, undetermined,
+    CandidateDef, RecordScales,
 };
 use self::choice::{choose, Ranked, Refusal};
 use self::fit::{
@@ -479,6 +479,9 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
             return other(format!(
                 "with a parameter the record does not determine: {why}"
             ));
+        }
+        if let Some(why) = immaterial(&fam.all.model) {
+            return other(format!("but {why}"));
         }
         let explained = share_of(fam);
         if explained < EXPLAINED_SHARE {
