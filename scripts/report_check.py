@@ -11,6 +11,8 @@ each report for:
 - a parameter outside its physical range, judged by its unit: resistances,
   inductances, reactances, inertias and the torque constant > 0; friction
   and torque >= 0 (identified values, and a verdict's corrected values);
+  a share of a whole (the DC saturation's `La_floor`, the shaft's
+  `r_motor`) within [0, 1];
 - an NRMSE above 1 reported as a result (a method's fit or held-out
   score, the nominal model's, the verdict's gap before or after; a
   candidate's is a comparison and may exceed 1): a model worse than the
@@ -35,6 +37,7 @@ import time
 POSITIVE = {"ohm", "H", "kg*m^2", "V*s/rad", "N*m/A"}
 NON_NEGATIVE = {"N*m", "N*m*s/rad", "N*m*s^2/rad^2", "W"}
 NRMSE_KEYS = {"fit_nrmse", "validation_nrmse", "gap_before", "gap_after"}
+SHARES = {"La_floor", "r_motor"}
 OPTIONAL = {"ci95", "reason", "best", "validation_nrmse", "params", "region", "verdict"}
 
 
@@ -58,6 +61,8 @@ def findings(report, where):
                     found.append(f"{where}: {path}.{key} = {v} {unit} (must be > 0)")
                 if unit in NON_NEGATIVE and not v >= 0:
                     found.append(f"{where}: {path}.{key} = {v} {unit} (must be >= 0)")
+                if path.rsplit(".", 1)[-1] in SHARES and not 0 <= v <= 1:
+                    found.append(f"{where}: {path}.{key} = {v} (a share: must lie in [0, 1])")
             for k, v in x.items():
                 # A candidate's held-out NRMSE compares it with the nominal
                 # model (a candidate worse than the mean is just a bad one);
