@@ -315,33 +315,23 @@ pub fn undetermined(m: &AugModel, s: &RecordScales) -> Option<String> {
 /// gap's cause, if it is: a sensor lag within what any sensor's
 /// bandwidth gives.
 pub fn immaterial(m: &AugModel) -> Option<String> {
-    let e = m.e;
-    match m.aug {
-        Augment::SensorLag(ch) if e[0].abs() + e[1].abs() < MIN_LAG_SHARE * lagged_tau(m, ch) => {
-            Some(format!(
-                "its lag ({:.2e} s with its dead time) is under {:.0} % of the time constant of \
-                 the {} it delays ({:.2e} s): a sensor's own bandwidth, which moves a step's \
-                 transient by that share at most, not a gap between the motor and its model",
-                e[0].abs() + e[1].abs(),
-                100.0 * MIN_LAG_SHARE,
-                match ch {
-                    LagChannel::Current => "current",
-                    LagChannel::Speed => "speed",
-                },
-                lagged_tau(m, ch)
-            ))
-        }
-        _ => None,
-    }
-}
-
-/// The time constant of the channel a sensor lag delays: τe for the
-/// current, τm for the speed.
-fn lagged_tau(m: &AugModel, ch: LagChannel) -> f64 {
-    match ch {
-        LagChannel::Current => m.p.tau_e(),
-        LagChannel::Speed => m.p.tau_m(),
-    }
+    let Augment::SensorLag(ch) = m.aug else {
+        return None;
+    };
+    // The channel's own time constant: τe for the current, τm for the speed.
+    let (channel, tau) = match ch {
+        LagChannel::Current => ("current", m.p.tau_e()),
+        LagChannel::Speed => ("speed", m.p.tau_m()),
+    };
+    let lag = m.e[0].abs() + m.e[1].abs();
+    (lag < MIN_LAG_SHARE * tau).then(|| {
+        format!(
+            "its lag ({lag:.2e} s with its dead time) is under {:.0} % of the time constant of \
+             the {channel} it delays ({tau:.2e} s): a sensor's own bandwidth, which moves a \
+             step's transient by that share at most, not a gap between the motor and its model",
+            100.0 * MIN_LAG_SHARE
+        )
+    })
 }
 
 /// Shortest sensor lag (with its dead time), as a share of the time
