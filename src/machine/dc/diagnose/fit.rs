@@ -131,24 +131,44 @@ fn runs_residuals_lanes(
     w: &Weights,
     cols: &mut [&mut [f64]],
 ) -> Vec<bool> {
-    let mut counts = vec![vec![0usize; runs.len()]; models.len()];
-    let mut at = vec![0usize; models.len()];
-    let ok = lanes::simulate_runs(models, live, runs, |l, n, i, s| {
+    // Where each run's rows begin, the same in every lane; a lane's
+    // readings of run `n` at `counts[l * runs.len() + n]`.
+    let starts: Vec<usize> = runs
+        .iter()
+        .scan(0, |at, run| {
+            let start = *at;
+            *at += segment_rows(run);
+            Some(start)
+        })
+        .collect();
+    let mut counts = vec![0usize; models.len() * runs.len()];
+    let ok = lanes::simulate_runs(models, live, runs, |l, n, readings| {
         let run = &runs[n];
-        let k = counts[l][n];
-        if k < run.len() {
-            let (col, at) = (&mut cols[l], &mut at[l]);
-            if !run.coast {
-                col[*at] = (i - run.seg.current[k]) * w.current;
-                *at += 1;
+        counts[l * runs.len() + n] += readings.len();
+        let readings = &readings[..readings.len().min(run.len())];
+        let (current, speed) = (
+            &run.seg.current[..readings.len()],
+            &run.seg.speed[..readings.len()],
+        );
+        let rows = &mut cols[l][starts[n]..starts[n] + segment_rows(run)];
+        if run.coast {
+            for ((row, (_, s)), m) in rows.iter_mut().zip(readings).zip(speed) {
+                *row = (s - m) * w.speed;
             }
-            col[*at] = (s - run.seg.speed[k]) * w.speed;
-            *at += 1;
+        } else {
+            for (((row, (i, s)), mi), ms) in rows
+                .chunks_exact_mut(2)
+                .zip(readings)
+                .zip(current)
+                .zip(speed)
+            {
+                row[0] = (i - mi) * w.current;
+                row[1] = (s - ms) * w.speed;
+            }
         }
-        counts[l][n] += 1;
     });
     ok.iter()
-        .zip(&counts)
+        .zip(counts.chunks(runs.len().max(1)))
         .map(|(ok, counts)| *ok && counts.iter().zip(runs).all(|(k, r)| *k == r.len()))
         .collect()
 }
@@ -208,7 +228,9 @@ impl FitProblem<'_> {
                         }
                     }
                 }
-                ok && col.iter().all(|v| v.is_finite())
+                // A fold, not `all`: without the early exit the check
+                // vectorises (a pass over tens of thousands of rows).
+                ok && col.iter().fold(true, |all, v| all & v.is_finite())
             })
             .collect()
     }
@@ -220,9 +242,19 @@ impl FitProblem<'_> {
             }
         }
         // The previous linearisation goes before the next is built: two
-        // tall Jacobians at once would double the fit's peak memory.
-        self.last.borrow_mut().take();
+        // tall Jacobians at once would double the fit's peak memory. Its
+        // buffers are reused as they are: every row of every column is
+        // written below (a lane whose simulation fails is stepped
+        // backward or zeroed), and a fresh tall matrix would cost a zeroing
+        // pass and the page faults of megabytes per evaluation.
         let np = x.len();
+        let (mut r, mut jac) = match self.last.borrow_mut().take() {
+            Some(l) if l.r.len() == self.rows && l.jac.shape() == (self.rows, np) => (l.r, l.jac),
+            _ => (
+                DVector::<f64>::zeros(self.rows),
+                DMatrix::<f64>::zeros(self.rows, np),
+            ),
+        };
         // The residuals at `x` and at a forward step in every parameter,
         // all in one lockstep simulation; a column whose step the model
         // refuses steps backward alone, and stays zero where it refuses
@@ -234,8 +266,6 @@ impl FitProblem<'_> {
                 xp
             }))
             .collect();
-        let mut r = DVector::<f64>::zeros(self.rows);
-        let mut jac = DMatrix::<f64>::zeros(self.rows, np);
         let ok = {
             let mut cols: Vec<&mut [f64]> = std::iter::once(r.as_mut_slice())
                 .chain(jac.as_mut_slice().chunks_mut(self.rows.max(1)))
