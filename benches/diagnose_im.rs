@@ -11,7 +11,7 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use motorbench::diagnose::blind::simulate_im_case;
 use motorbench::diagnose::{diagnose_im, DiagnoseOptions};
 use motorbench::model::{Connection, Effect};
-use motorbench::record::{load_record_files, SegmentKind};
+use motorbench::record::{load_record_files, ColumnMap, SegmentKind};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::hint::black_box;
@@ -32,7 +32,14 @@ fn bench(c: &mut Criterion) {
         .iter()
         .map(|f| dir.join(f))
         .collect();
-    let lab = load_record_files(SegmentKind::ImSlipSweep, &files, None, None).expect("lab record");
+    let lab = load_record_files(
+        SegmentKind::ImSlipSweep,
+        &files,
+        None,
+        None,
+        &ColumnMap::default(),
+    )
+    .expect("lab record");
     let star = DiagnoseOptions {
         connection: Some(Connection::Star),
         ..Default::default()

@@ -29,7 +29,7 @@ use crate::config::TestConfig;
 use crate::contract::{unphysical_param, IdentificationReport};
 use crate::machine::{analyse, AnalyseOptions};
 use crate::model::ImModel;
-use crate::record::{load_record_files, read_mcap, Record, SegmentKind};
+use crate::record::{load_record_files, read_mcap, ColumnMap, Record, SegmentKind};
 
 /// A fuzz target: arbitrary bytes in, a panic only for a broken promise.
 pub type Target = fn(&[u8]);
@@ -60,7 +60,13 @@ pub fn csv_segment(data: &[u8]) {
         SegmentKind::ImDcResistance,
     ] {
         check_record(
-            load_record_files(kind, std::slice::from_ref(&file.path), None, Some(50.0)),
+            load_record_files(
+                kind,
+                std::slice::from_ref(&file.path),
+                None,
+                Some(50.0),
+                &ColumnMap::default(),
+            ),
             &file.path,
         );
     }
@@ -74,9 +80,13 @@ pub fn csv_segment(data: &[u8]) {
 pub fn identify_segment(data: &[u8]) {
     let file = Scratch::write("segment.csv", data);
     for kind in [SegmentKind::DcStep, SegmentKind::ImSlipSweep] {
-        let Ok(record) =
-            load_record_files(kind, std::slice::from_ref(&file.path), None, Some(50.0))
-        else {
+        let Ok(record) = load_record_files(
+            kind,
+            std::slice::from_ref(&file.path),
+            None,
+            Some(50.0),
+            &ColumnMap::default(),
+        ) else {
             continue;
         };
         let samples: usize = record.segments.iter().map(|s| s.time.len()).sum::<usize>()
@@ -132,6 +142,7 @@ pub fn nameplate(data: &[u8]) {
             std::slice::from_ref(&csv.path),
             Some(&plate.path),
             None,
+            &ColumnMap::default(),
         ),
         &plate.path,
     );

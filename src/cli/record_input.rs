@@ -11,7 +11,7 @@ use super::output::warn_if_damaged;
 use super::Failure;
 use crate::machine::{check_record, ready_record};
 use crate::model::Connection;
-use crate::record::{load_record_files, Record, SegmentKind};
+use crate::record::{load_record_files, ColumnMap, ColumnMapError, Record, SegmentKind};
 
 /// The data a command reads: `--kind`, the files, `--nameplate`, and the
 /// induction machine's `--connection` and `--frequency`.
@@ -39,6 +39,18 @@ pub struct RecordInput {
     /// instant that motorbench's models take.
     #[arg(long)]
     pub voltage_as_issued: bool,
+    /// CSV: read the header cell HEADER as the contract's column NAME,
+    /// e.g. --column time_s="Time [s]" --column speed_rpm="n [rpm]"
+    /// (repeat for each column the files name otherwise).
+    #[arg(long = "column", value_name = "NAME=HEADER", value_parser = parse_column)]
+    columns: Vec<(String, String)>,
+}
+
+/// One `--column` argument, checked as the map will take it.
+fn parse_column(arg: &str) -> Result<(String, String), ColumnMapError> {
+    ColumnMap::parse(&[arg])?;
+    let (name, header) = arg.split_once('=').unwrap_or_default();
+    Ok((name.trim().to_string(), header.trim().to_string()))
 }
 
 impl RecordInput {
@@ -60,11 +72,23 @@ impl RecordInput {
     /// code 2).
     pub fn load(&self) -> Result<Record, Failure> {
         let kind = self.kind();
-        let record =
-            load_record_files(kind, &self.files, self.nameplate.as_deref(), self.frequency)
-                .map_err(Failure::bad_input)?;
+        let columns = self
+            .columns
+            .iter()
+            .try_fold(ColumnMap::default(), |map, (name, header)| {
+                map.with(name, header)
+            })
+            .map_err(Failure::bad_input)?;
+        let record = load_record_files(
+            kind,
+            &self.files,
+            self.nameplate.as_deref(),
+            self.frequency,
+            &columns,
+        )
+        .map_err(Failure::bad_input)?;
         warn_if_damaged(&self.files[0], &record);
-        check_record(&record, kind, &self.files).map_err(Failure::bad_input)?;
+        check_record(&record, kind, &self.files, &columns).map_err(Failure::bad_input)?;
         Ok(ready_record(record, kind, self.voltage_as_issued))
     }
 }

@@ -16,7 +16,7 @@ use crate::identify::{
     check_input_power, check_plausible_files, ImplausibleFile, ImplausiblePower,
 };
 use crate::model::{Connection, ImModel, Machine};
-use crate::record::{Record, SegmentKind};
+use crate::record::{ColumnMap, Record, SegmentKind};
 
 /// What the analysis of a record takes beside it.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -50,14 +50,16 @@ pub enum ImplausibleRecord {
 /// Check a record of `kind` loaded from `files` for values its machine
 /// cannot give (a DC record's voltage, current or speed beyond any rig's,
 /// an induction machine's power factor above 1 or far below any
-/// machine's), naming the file.
+/// machine's), naming the file (`columns`: the CSV columns' map the
+/// record was loaded with).
 pub fn check_record(
     record: &Record,
     kind: SegmentKind,
     files: &[PathBuf],
+    columns: &ColumnMap,
 ) -> Result<(), ImplausibleRecord> {
     match kind.machine() {
-        Machine::Dc => Ok(check_plausible_files(record, kind, files)?),
+        Machine::Dc => Ok(check_plausible_files(record, kind, files, columns)?),
         Machine::Induction => check_input_power(record).map_err(|power| ImplausibleRecord::Im {
             file: only(files).map(Path::to_path_buf),
             power,

@@ -24,6 +24,7 @@
 
 use std::path::Path;
 
+use super::columns::ColumnMap;
 use super::error::{DeclarationError, RecordError, TimeError};
 use super::types::{DcSegment, SegmentKind};
 use crate::bounds::{MAX_CSV_STEP_S, MAX_CSV_TIME_S, MIN_CSV_STEP_S};
@@ -66,6 +67,7 @@ pub fn read_dc_csv(
     path: &Path,
     default_kind: SegmentKind,
     default_index: u32,
+    columns: &ColumnMap,
 ) -> Result<DcSegment, RecordError> {
     let text = read_text(path)?;
     let csv = CsvLines::split(path, &text)?;
@@ -81,20 +83,12 @@ pub fn read_dc_csv(
         });
     }
 
-    let (header, lines) = csv.header(path)?;
+    let (header, lines) = csv.header(path, columns)?;
     let find = |name: &str| header.find(path, name);
     let header_no = header.no;
     let header = &header.names;
-    let missing = |name: &str, extra: &str| {
-        err(
-            header_no,
-            Some(name),
-            format!(
-                "missing column{extra} (the header names: {})",
-                cut(&header.join(", "))
-            ),
-        )
-    };
+    let missing =
+        |name: &str, extra: &str| err(header_no, Some(name), missing_column(extra, header));
     // Each quantity from its SI column, else from the first of its other
     // units the file has: (column, factor to SI, name).
     let column =
@@ -142,6 +136,16 @@ pub fn read_dc_csv(
         return Err(err(header_no, None, "no data rows after the header".into()));
     }
     Ok(seg)
+}
+
+/// Why a header lacks a column: what it names instead, and how to map a
+/// column of another name (`extra`: the other units' names, if any).
+pub(super) fn missing_column(extra: &str, header: &[&str]) -> String {
+    format!(
+        "missing column{extra} (the header names: {}; read a column of another name as this \
+         one with --column NAME=HEADER)",
+        cut(&header.join(", "))
+    )
 }
 
 /// Time `t` of a row, after `previous` (the previous row's time and line):
@@ -232,10 +236,12 @@ impl<'a> CsvLines<'a> {
         })
     }
 
-    /// The header row and the data lines after it.
+    /// The header row (its cells renamed by `columns`) and the data lines
+    /// after it.
     pub(super) fn header(
         &self,
         path: &Path,
+        columns: &ColumnMap,
     ) -> Result<(CsvHeader<'a>, &[NumberedLine<'a>]), RecordError> {
         let Some((&(no, line), rows)) = self.lines.split_first() else {
             let reason = "no header row (the file is empty)";
@@ -254,7 +260,7 @@ impl<'a> CsvLines<'a> {
                 return Err(RecordError::csv(path, no, None, reason));
             }
         }
-        let names: Vec<&str> = line.split(',').map(unquote).collect();
+        let mut names: Vec<&str> = line.split(',').map(unquote).collect();
         if names.iter().all(|n| n.trim().parse::<f64>().is_ok()) {
             let reason = format!(
                 "no header row: the first line that is not a '#' comment holds numbers ({}); \
@@ -265,6 +271,7 @@ impl<'a> CsvLines<'a> {
             );
             return Err(RecordError::csv(path, no, None, reason));
         }
+        columns.rename(&mut names);
         Ok((CsvHeader { no, names }, rows))
     }
 
@@ -440,7 +447,7 @@ mod tests {
     fn read(text: &str) -> Result<DcSegment, RecordError> {
         let dir = tempfile::tempdir().unwrap();
         let p = write(&dir, "data.csv", text);
-        read_dc_csv(&p, SegmentKind::DcStep, 3)
+        read_dc_csv(&p, SegmentKind::DcStep, 3, &ColumnMap::default())
     }
 
     /// The error text, checked to name the file, the line and the column.
@@ -605,7 +612,7 @@ mod tests {
         assert!(e.to_string().contains("an im_no_load file"), "{e}");
         let dir = tempfile::tempdir().unwrap();
         let p = write(&dir, "s.csv", "slip\n0.1\n");
-        let e = read_dc_csv(&p, SegmentKind::ImSlipSweep, 0).unwrap_err();
+        let e = read_dc_csv(&p, SegmentKind::ImSlipSweep, 0, &ColumnMap::default()).unwrap_err();
         assert!(e.to_string().contains("s.csv"), "{e}");
     }
 
@@ -705,7 +712,13 @@ mod tests {
     #[test]
     fn missing_file() {
         let dir = tempfile::tempdir().unwrap();
-        let e = read_dc_csv(&dir.path().join("nope.csv"), SegmentKind::DcStep, 0).unwrap_err();
+        let e = read_dc_csv(
+            &dir.path().join("nope.csv"),
+            SegmentKind::DcStep,
+            0,
+            &ColumnMap::default(),
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("nope.csv"), "{e}");
     }
 }

@@ -19,7 +19,8 @@
 
 use std::path::Path;
 
-use super::csv::{read_text, CsvLines, CsvRow};
+use super::columns::ColumnMap;
+use super::csv::{missing_column, read_text, CsvLines, CsvRow};
 use super::csv_im_tests::{temperature, COL_WINDING_TEMPERATURE};
 use super::error::RecordError;
 use super::types::{OperatingPoint, SegmentKind};
@@ -69,6 +70,7 @@ pub fn read_im_csv(
     default_index: u32,
     frequency: Option<f64>,
     pole_pairs: Option<u32>,
+    columns: &ColumnMap,
 ) -> Result<ImCsvSegment, RecordError> {
     let text = read_text(path)?;
     let csv = CsvLines::split(path, &text)?;
@@ -84,21 +86,12 @@ pub fn read_im_csv(
             ));
         }
     }
-    let (header, lines) = csv.header(path)?;
+    let (header, lines) = csv.header(path, columns)?;
     let find = |name: &str| header.find(path, name);
     let header_no = header.no;
     let header = &header.names;
     let required = |name: &str| -> Result<usize, RecordError> {
-        find(name)?.ok_or_else(|| {
-            err(
-                header_no,
-                Some(name),
-                format!(
-                    "missing column (the header names: {})",
-                    cut(&header.join(", "))
-                ),
-            )
-        })
+        find(name)?.ok_or_else(|| err(header_no, Some(name), missing_column("", header)))
     };
     // The slip, or the shaft speed it is computed from (a lab measures
     // speed): s = 1 − ω·p/(2π·f).
@@ -116,7 +109,8 @@ pub fn read_im_csv(
                 Some(COL_SLIP),
                 format!(
                     "missing column (or {COL_SPEED_RPM} or {COL_SPEED_RAD_S}, with the nameplate's \
-                     poles; the header names: {})",
+                     poles; the header names: {}; read a column of another name as one of these \
+                     with --column NAME=HEADER)",
                     cut(&header.join(", "))
                 ),
             ))
@@ -227,7 +221,29 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join("sweep.csv");
         std::fs::write(&p, text).unwrap();
-        read_im_csv(&p, 3, Some(50.0), pole_pairs)
+        read_im_csv(&p, 3, Some(50.0), pole_pairs, &ColumnMap::default())
+    }
+
+    /// A lab's own names, mapped: the same points as under the contract's.
+    #[test]
+    fn a_mapped_header_reads_as_the_contracts() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("sweep.csv");
+        std::fs::write(&p, "n [rpm],U [V],I [A],P1 [W]\n1470,400,3.1,310.5\n").unwrap();
+        let map = ColumnMap::parse(&[
+            "speed_rpm=n [rpm]",
+            "line_voltage_V=U [V]",
+            "line_current_A=I [A]",
+            "input_power_W=P1 [W]",
+        ])
+        .unwrap();
+        let mapped = read_im_csv(&p, 3, Some(50.0), Some(2), &map).unwrap();
+        let contract =
+            read("speed_rpm,line_voltage_V,line_current_A,input_power_W\n1470,400,3.1,310.5\n")
+                .unwrap();
+        assert_eq!(mapped.points, contract.points);
+        let e = read_im_csv(&p, 0, Some(50.0), Some(2), &ColumnMap::default()).unwrap_err();
+        assert!(e.to_string().contains("--column NAME=HEADER"), "{e}");
     }
 
     #[test]
@@ -337,7 +353,7 @@ mod tests {
             "slip,line_voltage_V,line_current_A,input_power_W\n0.5,400,10,2000\n",
         )
         .unwrap();
-        let seg = read_im_csv(&p, 0, None, Some(2)).unwrap();
+        let seg = read_im_csv(&p, 0, None, Some(2), &ColumnMap::default()).unwrap();
         assert!(seg.points[0].frequency.is_nan() && seg.points[0].speed.is_nan());
         assert_eq!(seg.points[0].non_finite_field().map(|f| f.0), Some("speed"));
         assert_eq!(seg.label, "s.csv");

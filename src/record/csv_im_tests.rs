@@ -16,6 +16,7 @@
 
 use std::path::Path;
 
+use super::columns::ColumnMap;
 use super::csv::{read_text, CsvLines, CsvRow};
 use super::csv_im::{COL_FREQUENCY, COL_INPUT_POWER, COL_LINE_CURRENT, COL_LINE_VOLTAGE};
 use super::error::RecordError;
@@ -61,6 +62,7 @@ fn read_table(
     default_index: u32,
     required: &[&str],
     optional: &[&str],
+    columns: &ColumnMap,
 ) -> Result<Table, RecordError> {
     let text = read_text(path)?;
     let csv = CsvLines::split(path, &text)?;
@@ -74,7 +76,7 @@ fn read_table(
             ));
         }
     }
-    let (header, lines) = csv.header(path)?;
+    let (header, lines) = csv.header(path, columns)?;
     let mut req = Vec::new();
     for name in required {
         let col = header.find(path, name)?.ok_or_else(|| {
@@ -83,7 +85,8 @@ fn read_table(
                 header.no,
                 Some(name),
                 format!(
-                    "missing column (a {kind} file needs {}; the header names: {})",
+                    "missing column (a {kind} file needs {}; the header names: {}; read a column \
+                     of another name as one of these with --column NAME=HEADER)",
                     required.join(", "),
                     cut(&header.names.join(", "))
                 ),
@@ -162,6 +165,7 @@ pub(super) fn temperature(
 pub fn read_dc_resistance_csv(
     path: &Path,
     default_index: u32,
+    columns: &ColumnMap,
 ) -> Result<ImTestCsvSegment<DcResistanceReading>, RecordError> {
     let t = read_table(
         path,
@@ -169,6 +173,7 @@ pub fn read_dc_resistance_csv(
         default_index,
         &[COL_DC_VOLTAGE, COL_DC_CURRENT],
         &[COL_WINDING_TEMPERATURE],
+        columns,
     )?;
     let mut readings = Vec::new();
     for (no, v, extra) in &t.rows {
@@ -193,6 +198,7 @@ pub fn read_supply_test_csv(
     kind: SegmentKind,
     default_index: u32,
     frequency: Option<f64>,
+    columns: &ColumnMap,
 ) -> Result<ImTestCsvSegment<SupplyReading>, RecordError> {
     let t = read_table(
         path,
@@ -200,6 +206,7 @@ pub fn read_supply_test_csv(
         default_index,
         &[COL_LINE_VOLTAGE, COL_LINE_CURRENT, COL_INPUT_POWER],
         &[COL_FREQUENCY, COL_WINDING_TEMPERATURE],
+        columns,
     )?;
     let mut readings = Vec::new();
     for (no, v, extra) in &t.rows {
@@ -245,7 +252,7 @@ mod tests {
             im_file_kind(&p, SegmentKind::ImSlipSweep).unwrap(),
             SegmentKind::ImDcResistance
         );
-        let seg = read_dc_resistance_csv(&p, 0).unwrap();
+        let seg = read_dc_resistance_csv(&p, 0, &ColumnMap::default()).unwrap();
         assert_eq!((seg.index, seg.label.as_str()), (4, "cold"));
         assert_eq!(seg.readings[1].dc_voltage, 6.2);
         assert_eq!(seg.readings[0].winding_temperature, Some(21.5));
@@ -254,7 +261,14 @@ mod tests {
             "nl.csv",
             "line_voltage_V,line_current_A,input_power_W\n400,3.5,250\n",
         );
-        let seg = read_supply_test_csv(&p, SegmentKind::ImNoLoad, 2, Some(50.0)).unwrap();
+        let seg = read_supply_test_csv(
+            &p,
+            SegmentKind::ImNoLoad,
+            2,
+            Some(50.0),
+            &ColumnMap::default(),
+        )
+        .unwrap();
         assert_eq!(seg.index, 2);
         assert_eq!(seg.readings[0].frequency, 50.0);
         assert_eq!(seg.readings[0].winding_temperature, None);
@@ -309,8 +323,10 @@ mod tests {
         for (text, kind, line, column, why) in cases {
             let (_d, p) = write("test.csv", text);
             let e = match kind {
-                SegmentKind::ImDcResistance => read_dc_resistance_csv(&p, 0).map(|_| ()),
-                k => read_supply_test_csv(&p, k, 0, None).map(|_| ()),
+                SegmentKind::ImDcResistance => {
+                    read_dc_resistance_csv(&p, 0, &ColumnMap::default()).map(|_| ())
+                }
+                k => read_supply_test_csv(&p, k, 0, None, &ColumnMap::default()).map(|_| ()),
             }
             .unwrap_err()
             .to_string();

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use super::{
     im_file_kind, read_dc_csv, read_dc_resistance_csv, read_im_csv, read_mcap,
-    read_supply_test_csv, LoadError, Record, SegmentKind, TestMeta, SCHEMA_VERSION,
+    read_supply_test_csv, ColumnMap, LoadError, Record, SegmentKind, TestMeta, SCHEMA_VERSION,
 };
 
 /// Read `files` as a record of `kind`. An IM record (any IM kind) reads
@@ -15,12 +15,14 @@ use super::{
 /// standard tests (DC resistance, no load, locked rotor) may be mixed. It
 /// takes its supply frequency from `frequency`, else the nameplate's
 /// `frequency_Hz`, and its pole pairs from the nameplate's `poles`. Errors name the file (and
-/// line and field where there is one).
+/// line and field where there is one). `columns` reads CSV header cells of
+/// other names as the contract's columns.
 pub fn load_record_files(
     kind: SegmentKind,
     files: &[PathBuf],
     nameplate: Option<&Path>,
     frequency: Option<f64>,
+    columns: &ColumnMap,
 ) -> Result<Record, LoadError> {
     let plate = nameplate.map(read_nameplate).transpose()?;
     let is_mcap = |p: &PathBuf| {
@@ -58,12 +60,12 @@ pub fn load_record_files(
             let tests = &mut record.standard_tests;
             match im_file_kind(path, kind)? {
                 SegmentKind::ImDcResistance => {
-                    let seg = read_dc_resistance_csv(path, n as u32)?;
+                    let seg = read_dc_resistance_csv(path, n as u32, columns)?;
                     claim(seg.index, n)?;
                     tests.dc_resistance.extend(seg.readings);
                 }
                 k @ (SegmentKind::ImNoLoad | SegmentKind::ImLockedRotor) => {
-                    let seg = read_supply_test_csv(path, k, n as u32, frequency)?;
+                    let seg = read_supply_test_csv(path, k, n as u32, frequency, columns)?;
                     claim(seg.index, n)?;
                     if k == SegmentKind::ImNoLoad {
                         tests.no_load.extend(seg.readings);
@@ -72,7 +74,7 @@ pub fn load_record_files(
                     }
                 }
                 _ => {
-                    let seg = read_im_csv(path, n as u32, frequency, pole_pairs)?;
+                    let seg = read_im_csv(path, n as u32, frequency, pole_pairs, columns)?;
                     claim(seg.index, n)?;
                     record.operating_points.extend(seg.points);
                 }
@@ -80,7 +82,7 @@ pub fn load_record_files(
         }
     } else {
         for (n, path) in files.iter().enumerate() {
-            let seg = read_dc_csv(path, kind, n as u32)?;
+            let seg = read_dc_csv(path, kind, n as u32, columns)?;
             claim(seg.index, n)?;
             record.segments.push(seg);
         }
@@ -129,15 +131,27 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let mcap = dir.path().join("a.mcap");
         let csv = dir.path().join("b.csv");
-        let e =
-            load_record_files(SegmentKind::DcStep, &[mcap, csv.clone()], None, None).unwrap_err();
+        let e = load_record_files(
+            SegmentKind::DcStep,
+            &[mcap, csv.clone()],
+            None,
+            None,
+            &ColumnMap::default(),
+        )
+        .unwrap_err();
         assert!(matches!(e, LoadError::MixedFiles), "{e:?}");
         assert_eq!(
             e.to_string(),
             "give either one MCAP file or any number of CSV files"
         );
-        let e = load_record_files(SegmentKind::DcStep, std::slice::from_ref(&csv), None, None)
-            .unwrap_err();
+        let e = load_record_files(
+            SegmentKind::DcStep,
+            std::slice::from_ref(&csv),
+            None,
+            None,
+            &ColumnMap::default(),
+        )
+        .unwrap_err();
         assert!(
             matches!(&e, LoadError::Record(RecordError::Io { .. })),
             "{e:?}"
@@ -145,7 +159,14 @@ mod tests {
         assert!(e.to_string().starts_with(&format!("{}: ", csv.display())));
         let plate = dir.path().join("plate.json");
         std::fs::write(&plate, "[1]").unwrap();
-        let e = load_record_files(SegmentKind::DcStep, &[csv], Some(&plate), None).unwrap_err();
+        let e = load_record_files(
+            SegmentKind::DcStep,
+            &[csv],
+            Some(&plate),
+            None,
+            &ColumnMap::default(),
+        )
+        .unwrap_err();
         assert!(matches!(e, LoadError::NameplateNotObject { .. }), "{e:?}");
     }
 }

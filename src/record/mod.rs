@@ -12,7 +12,8 @@
 //! - [`read_dc_csv`] imports one DC segment from CSV, [`read_im_csv`] one
 //!   induction-machine slip sweep, [`read_dc_resistance_csv`] and
 //!   [`read_supply_test_csv`] its standard tests (DC resistance, no load,
-//!   locked rotor).
+//!   locked rotor); a [`ColumnMap`] reads the user's own column names as
+//!   the contract's.
 //! - [`export`] writes a record as contract CSV (one file per segment)
 //!   and as one Parquet file (`motorbench export`).
 //! - [`schema`] holds the topic and schema names and the JSON Schemas.
@@ -20,6 +21,7 @@
 //!   record's `log_time`; [`log_event`] the events' `foxglove.Log` shape.
 
 mod builder;
+mod columns;
 mod csv;
 mod csv_im;
 mod csv_im_tests;
@@ -38,6 +40,7 @@ mod types;
 mod writer;
 
 pub use builder::{RecordBuilder, INCOMPLETE_SUFFIX};
+pub use columns::{ColumnMap, ColumnMapError, CONTRACT_COLUMNS};
 pub use csv::read_dc_csv;
 pub use csv_im::{read_im_csv, ImCsvSegment};
 pub use csv_im_tests::{

@@ -43,6 +43,19 @@ fn write_segments(
     record: &motorbench::record::Record,
     speed_scale: f64,
 ) -> Vec<String> {
+    write_segments_headed(dir, record, speed_scale, CONTRACT_HEADER)
+}
+
+/// The data contract's DC columns.
+const CONTRACT_HEADER: &str = "time_s,armature_voltage_V,armature_current_A,speed_rad_s";
+
+/// [`write_segments`] under the column names of `header`.
+fn write_segments_headed(
+    dir: &std::path::Path,
+    record: &motorbench::record::Record,
+    speed_scale: f64,
+    header: &str,
+) -> Vec<String> {
     let mut files = Vec::new();
     for seg in &record.segments {
         let mut text = format!(
@@ -51,7 +64,8 @@ fn write_segments(
             seg.kind.unwrap().as_str(),
             seg.label
         );
-        text.push_str("time_s,armature_voltage_V,armature_current_A,speed_rad_s\n");
+        text.push_str(header);
+        text.push('\n');
         for k in 0..seg.time.len() {
             writeln!(
                 text,
@@ -68,6 +82,94 @@ fn write_segments(
         files.push(path.to_str().unwrap().to_string());
     }
     files
+}
+
+/// A logger's own column names (quoted, with units in brackets, the
+/// speed in r/min) are refused naming the way to map them, and read
+/// through `--column` give the MCAP's report to the last digit.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_loggers_column_names_are_mapped_to_the_contracts() {
+    let (dir, done) = common::dry_run::commission(&Config::embedded_default()).await;
+    assert_eq!(done.outcome, Outcome::Completed);
+    let header = "\"Time [s]\",U_A [V],I_A [A],n [rpm]";
+    let files = write_segments_headed(
+        dir.path(),
+        &done.record,
+        30.0 / std::f64::consts::PI,
+        header,
+    );
+    let mcap = done.mcap_path.to_str().unwrap();
+    let from_mcap = common::motorbench(&["identify", "--kind", "dc_step", "--json", mcap]);
+    let (mcap_json, stderr) = common::text(&from_mcap);
+    assert!(from_mcap.status.success(), "{stderr}");
+
+    let mut unmapped = vec!["identify", "--kind", "dc_step", "--json"];
+    unmapped.extend(files.iter().map(String::as_str));
+    let refused = common::motorbench(&unmapped);
+    let (_, stderr) = common::text(&refused);
+    assert_eq!(refused.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("segment-0.csv:2: column time_s: missing column")
+            && stderr.contains("Time [s], U_A [V]")
+            && stderr.contains("--column NAME=HEADER"),
+        "{stderr}"
+    );
+
+    let mut mapped = vec![
+        "identify",
+        "--kind",
+        "dc_step",
+        "--json",
+        "--column",
+        "time_s=Time [s]",
+        "--column",
+        "armature_voltage_V=U_A [V]",
+        "--column",
+        "armature_current_A=I_A [A]",
+        "--column",
+        "speed_rpm=n [rpm]",
+    ];
+    mapped.extend(files.iter().map(String::as_str));
+    let from_csv = common::motorbench(&mapped);
+    let (csv_json, stderr) = common::text(&from_csv);
+    assert!(from_csv.status.success(), "{stderr}");
+    // The speed went through r/min and back: the same report to rounding.
+    let (a, b): (serde_json::Value, serde_json::Value) = (
+        serde_json::from_str(&csv_json).unwrap(),
+        serde_json::from_str(&mcap_json).unwrap(),
+    );
+    for (method, param) in [
+        ("steady_state", "K"),
+        ("steady_state", "Ra"),
+        ("moments", "J"),
+    ] {
+        let value = |v: &serde_json::Value| {
+            v["methods"][method]["params"][param]["value"]
+                .as_f64()
+                .unwrap()
+        };
+        let (x, y) = (value(&a), value(&b));
+        assert!(
+            (x - y).abs() <= 1e-9 * y.abs(),
+            "{method} {param}: {x} against {y}"
+        );
+    }
+
+    // A name the contract does not have is a usage error naming the names.
+    let typo = common::motorbench(&[
+        "identify",
+        "--kind",
+        "dc_step",
+        "--column",
+        "speed=n [rpm]",
+        &files[0],
+    ]);
+    let (_, stderr) = common::text(&typo);
+    assert_eq!(typo.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("\"speed\" is not a column") && stderr.contains("speed_rpm"),
+        "{stderr}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

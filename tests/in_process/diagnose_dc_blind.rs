@@ -122,13 +122,20 @@ fn wide_plans_two_cases_per_effect_and_four_nones() {
 #[test]
 fn a_dominant_effect_that_leaves_more_than_twice_the_floor_is_named_with_a_warning() {
     use motorbench::diagnose::blind::{generate_suite, SuitePlans};
-    use motorbench::record::{load_record_files, SegmentKind};
+    use motorbench::record::{load_record_files, ColumnMap, SegmentKind};
     let dir = tempfile::tempdir().unwrap();
     let suite = dir.path().join("suite");
     let manifest = generate_suite(&suite, 7, SuitePlans::Wide, &|_, _| {}).unwrap();
     let case = manifest.cases.iter().find(|c| c.id == "case-34").unwrap();
     let files: Vec<_> = case.files.iter().map(|f| suite.join(f)).collect();
-    let record = load_record_files(SegmentKind::DcStep, &files, None, None).unwrap();
+    let record = load_record_files(
+        SegmentKind::DcStep,
+        &files,
+        None,
+        None,
+        &ColumnMap::default(),
+    )
+    .unwrap();
     // Held out by interleaved blocks (the default) the lag is fitted on
     // every segment's range and removes the gap to the floor.
     let run = diagnose_dc(&record, &DiagnoseOptions::default()).unwrap();

@@ -14,7 +14,7 @@ use std::path::PathBuf;
 use motorbench::diagnose::{diagnose_im, DiagnoseOptions};
 use motorbench::identify::{identify_im, ImIdentification};
 use motorbench::model::{Connection, ImModel, LabMachine, LabMeters};
-use motorbench::record::{load_record_files, Record, SegmentKind};
+use motorbench::record::{load_record_files, ColumnMap, Record, SegmentKind};
 use motorbench::report::render_im_text;
 
 /// Meter-noise seed of the stored set.
@@ -41,7 +41,14 @@ fn generated() -> Vec<(String, String)> {
 }
 
 fn lab_record() -> Record {
-    load_record_files(SegmentKind::ImSlipSweep, &files(), None, None).expect("the CSV set loads")
+    load_record_files(
+        SegmentKind::ImSlipSweep,
+        &files(),
+        None,
+        None,
+        &ColumnMap::default(),
+    )
+    .expect("the CSV set loads")
 }
 
 fn identify(model: ImModel) -> ImIdentification {
@@ -154,8 +161,14 @@ fn a_misfitting_circuit_is_named_as_such() {
 /// The diagnosis of the lab record's `files` (star, as the nameplate's
 /// motor).
 fn diagnosed_files(files: &[PathBuf]) -> motorbench::diagnose::DiagnosisRun {
-    let record =
-        load_record_files(SegmentKind::ImSlipSweep, files, None, None).expect("the CSV set loads");
+    let record = load_record_files(
+        SegmentKind::ImSlipSweep,
+        files,
+        None,
+        None,
+        &ColumnMap::default(),
+    )
+    .expect("the CSV set loads");
     diagnose_im(
         &record,
         &DiagnoseOptions {

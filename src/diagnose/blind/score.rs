@@ -15,7 +15,7 @@ use super::SuiteError;
 use crate::contract::Diagnosis;
 use crate::diagnose::{diagnose, DiagnoseOptions};
 use crate::machine::ready_record;
-use crate::record::{load_record_files, SegmentKind};
+use crate::record::{load_record_files, ColumnMap, SegmentKind};
 
 /// The comparison of one case.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -332,7 +332,13 @@ pub fn score_suite(dir: &Path, progress: &dyn Fn(usize, usize)) -> Result<SuiteS
         let files: Vec<_> = case.files.iter().map(|p| dir.join(p)).collect();
         let nameplate = case.nameplate.as_ref().map(|p| dir.join(p));
         let started = Instant::now();
-        let record = load_record_files(kind, &files, nameplate.as_deref(), None)?;
+        let record = load_record_files(
+            kind,
+            &files,
+            nameplate.as_deref(),
+            None,
+            &ColumnMap::default(),
+        )?;
         // Made ready as `motorbench diagnose` makes it.
         let record = ready_record(record, kind, false);
         let report = diagnose(&record, kind, &DiagnoseOptions::default()).map(|run| run.report);

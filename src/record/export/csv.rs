@@ -302,7 +302,7 @@ fn im_text(index: u32, label: &str, points: &[&OperatingPoint], source: &str) ->
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::record::{read_dc_csv, read_im_csv};
+    use crate::record::{read_dc_csv, read_im_csv, ColumnMap};
 
     #[test]
     fn a_dc_segment_reads_back_bit_for_bit() {
@@ -324,7 +324,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("s.csv");
         std::fs::write(&path, &files[0].text).unwrap();
-        let back = read_dc_csv(&path, SegmentKind::DcStep, 0).unwrap();
+        let back = read_dc_csv(&path, SegmentKind::DcStep, 0, &ColumnMap::default()).unwrap();
         assert_eq!(back.index, 3);
         assert_eq!(back.kind, Some(SegmentKind::DcCoastdown));
         assert_eq!(back.label, seg.label);
@@ -362,7 +362,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("s.csv");
         std::fs::write(&path, &files[0].text).unwrap();
-        let back = read_im_csv(&path, 0, None, Some(2)).unwrap();
+        let back = read_im_csv(&path, 0, None, Some(2), &ColumnMap::default()).unwrap();
         assert_eq!(back.index, 1);
         assert_eq!(back.label, "sweep 1");
         assert_eq!(back.points.len(), 2);
@@ -399,7 +399,7 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("s.csv");
         std::fs::write(&path, text).unwrap();
-        let back = read_im_csv(&path, 0, Some(60.0), None).unwrap();
+        let back = read_im_csv(&path, 0, Some(60.0), None, &ColumnMap::default()).unwrap();
         let torques: Vec<Option<f64>> = back.points.iter().map(|p| p.torque).collect();
         assert_eq!(torques, [Some(0.6), None, Some(20.0)], "{text}");
         let temperatures: Vec<Option<f64>> =
@@ -450,10 +450,16 @@ mod tests {
             std::fs::write(&p, &files[k].text).unwrap();
             p
         };
-        let dc = crate::record::read_dc_resistance_csv(&path(0), 9).unwrap();
+        let dc = crate::record::read_dc_resistance_csv(&path(0), 9, &ColumnMap::default()).unwrap();
         assert_eq!(dc.readings, record.standard_tests.dc_resistance);
-        let nl =
-            crate::record::read_supply_test_csv(&path(1), SegmentKind::ImNoLoad, 9, None).unwrap();
+        let nl = crate::record::read_supply_test_csv(
+            &path(1),
+            SegmentKind::ImNoLoad,
+            9,
+            None,
+            &ColumnMap::default(),
+        )
+        .unwrap();
         assert_eq!(nl.readings, record.standard_tests.no_load);
         assert!(!files[2].text.contains("frequency_Hz"), "{}", files[2].text);
         let lr = crate::record::read_supply_test_csv(
@@ -461,6 +467,7 @@ mod tests {
             SegmentKind::ImLockedRotor,
             9,
             Some(12.5),
+            &ColumnMap::default(),
         )
         .unwrap();
         assert_eq!(lr.index, 2);

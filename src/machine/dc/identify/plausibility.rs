@@ -11,7 +11,7 @@
 
 use std::path::PathBuf;
 
-use crate::record::{load_record_files, DcSegment, Record, SegmentKind};
+use crate::record::{load_record_files, ColumnMap, DcSegment, Record, SegmentKind};
 
 /// Largest armature voltage magnitude accepted, V.
 pub const MAX_VOLTAGE: f64 = 2e4;
@@ -79,13 +79,14 @@ pub fn check_plausible_files(
     record: &Record,
     kind: SegmentKind,
     files: &[PathBuf],
+    columns: &ColumnMap,
 ) -> Result<(), ImplausibleFile> {
     let Err(e) = check_plausible(record) else {
         return Ok(());
     };
     let holder = files.iter().find(|f| {
         files.len() == 1
-            || load_record_files(kind, std::slice::from_ref(*f), None, None)
+            || load_record_files(kind, std::slice::from_ref(*f), None, None, columns)
                 .is_ok_and(|r| r.segments.iter().any(|s| s.index == e.segment))
     });
     Err(ImplausibleFile {
