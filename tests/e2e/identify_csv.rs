@@ -15,15 +15,8 @@ async fn csv_files_identify_like_the_mcap_they_came_from() {
     assert_eq!(done.outcome, Outcome::Completed);
 
     let files = write_segments(dir.path(), &done.record, 1.0);
-    let mcap = done.mcap_path.to_str().unwrap();
-    let from_mcap = common::motorbench(&["identify", "--kind", "dc_step", "--json", mcap]);
-    let (mcap_json, stderr) = common::text(&from_mcap);
-    assert!(from_mcap.status.success(), "{stderr}");
-    let mut args = vec!["identify", "--kind", "dc_step", "--json"];
-    args.extend(files.iter().map(String::as_str));
-    let from_csv = common::motorbench(&args);
-    let (csv_json, stderr) = common::text(&from_csv);
-    assert!(from_csv.status.success(), "{stderr}");
+    let mcap_json = identify_json(&[done.mcap_path.to_str().unwrap()]);
+    let csv_json = identify_json(&files.iter().map(String::as_str).collect::<Vec<_>>());
 
     // The same report to the last digit, with every method in it.
     assert_eq!(csv_json, mcap_json);
@@ -32,6 +25,17 @@ async fn csv_files_identify_like_the_mcap_they_came_from() {
         assert!(v["methods"].get(method).is_some(), "{method} missing");
     }
     assert_eq!(v["methods"]["moments"]["applies"], true);
+}
+
+/// `motorbench identify --kind dc_step --json` with `args`, which must
+/// succeed: its stdout.
+fn identify_json(args: &[&str]) -> String {
+    let mut all = vec!["identify", "--kind", "dc_step", "--json"];
+    all.extend(args);
+    let out = common::motorbench(&all);
+    let (stdout, stderr) = common::text(&out);
+    assert!(out.status.success(), "{stderr}");
+    stdout
 }
 
 /// One CSV per segment of `record` in `dir`, floats written in full
@@ -98,10 +102,7 @@ async fn a_loggers_column_names_are_mapped_to_the_contracts() {
         30.0 / std::f64::consts::PI,
         header,
     );
-    let mcap = done.mcap_path.to_str().unwrap();
-    let from_mcap = common::motorbench(&["identify", "--kind", "dc_step", "--json", mcap]);
-    let (mcap_json, stderr) = common::text(&from_mcap);
-    assert!(from_mcap.status.success(), "{stderr}");
+    let mcap_json = identify_json(&[done.mcap_path.to_str().unwrap()]);
 
     let mut unmapped = vec!["identify", "--kind", "dc_step", "--json"];
     unmapped.extend(files.iter().map(String::as_str));
@@ -116,10 +117,6 @@ async fn a_loggers_column_names_are_mapped_to_the_contracts() {
     );
 
     let mut mapped = vec![
-        "identify",
-        "--kind",
-        "dc_step",
-        "--json",
         "--column",
         "time_s=Time [s]",
         "--column",
@@ -130,9 +127,7 @@ async fn a_loggers_column_names_are_mapped_to_the_contracts() {
         "speed_rpm=n [rpm]",
     ];
     mapped.extend(files.iter().map(String::as_str));
-    let from_csv = common::motorbench(&mapped);
-    let (csv_json, stderr) = common::text(&from_csv);
-    assert!(from_csv.status.success(), "{stderr}");
+    let csv_json = identify_json(&mapped);
     // The speed went through r/min and back: the same report to rounding.
     let (a, b): (serde_json::Value, serde_json::Value) = (
         serde_json::from_str(&csv_json).unwrap(),

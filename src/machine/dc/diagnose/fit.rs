@@ -23,7 +23,7 @@
 //! parameters (17 MB for a minute at 2 kHz with a three-parameter effect),
 //! and every candidate's fit lives until the verdict.
 
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 use std::sync::Arc;
 
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
@@ -205,6 +205,13 @@ struct FitProblem<'a> {
     rows: usize,
     x: DVector<f64>,
     last: RefCell<Option<Linearisation>>,
+    /// The squared norm of the reduced residuals at the solver's current
+    /// point (where it last took the Jacobian): a trial point whose sum
+    /// of squares is not below it is rejected whatever its Jacobian.
+    reference: Cell<f64>,
+    /// A trial point's residuals simulated alone, for the linearisation
+    /// there to reuse.
+    trial: RefCell<Option<(DVector<f64>, DVector<f64>)>>,
 }
 
 impl FitProblem<'_> {
@@ -235,12 +242,54 @@ impl FitProblem<'_> {
             .collect()
     }
 
+    /// The reduced residuals the solver rejects the trial point `x` by,
+    /// if it must reject it; `None` where it may accept it (then the
+    /// point's residuals, simulated here, wait in [`Self::trial`] for its
+    /// linearisation) or where this does not apply.
+    ///
+    /// The solver (MINPACK's `lmder`) accepts a trial only if it lowers
+    /// the sum of squares, and on a rejection it reads nothing of the
+    /// trial but the residuals' norm. So a trial whose sum of squares is
+    /// not below the current point's needs no Jacobian: its residuals
+    /// alone, as `[0, …, 0, ‖r‖]` (their norm: the reduced form's, up to
+    /// rounding). Only where the lanes go one after another (a sensor lag,
+    /// shaft compliance: [`lanes::simulate_runs`]); in lockstep, the point
+    /// alone and then its steps would cost more than all together.
+    fn rejected_trial(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
+        let reference = self.reference.get();
+        if self.spec.start.is_rigid()
+            || !reference.is_finite()
+            || self.last.borrow().as_ref().is_some_and(|l| l.x == *x)
+        {
+            return None;
+        }
+        let mut r = DVector::<f64>::zeros(self.rows);
+        if !self.residuals_lanes(std::slice::from_ref(x), &mut [r.as_mut_slice()])[0] {
+            return None;
+        }
+        let sse = r.norm_squared();
+        if sse < reference {
+            *self.trial.borrow_mut() = Some((x.clone(), r));
+            return None;
+        }
+        let mut reduced = DVector::zeros(x.len() + 1);
+        reduced[x.len()] = sse.sqrt();
+        Some(reduced)
+    }
+
     fn linearise(&self, x: &DVector<f64>) {
         if let Some(l) = self.last.borrow().as_ref() {
             if l.x == *x {
                 return;
             }
         }
+        // The residuals at `x` where a trial has simulated them already.
+        let known = self
+            .trial
+            .borrow_mut()
+            .take()
+            .filter(|(at, _)| at == x)
+            .map(|(_, r)| r);
         // The previous linearisation goes before the next is built: two
         // tall Jacobians at once would double the fit's peak memory. Its
         // buffers are reused as they are: every row of every column is
@@ -255,18 +304,25 @@ impl FitProblem<'_> {
                 DMatrix::<f64>::zeros(self.rows, np),
             ),
         };
-        // The residuals at `x` and at a forward step in every parameter,
-        // all in one lockstep simulation; a column whose step the model
-        // refuses steps backward alone, and stays zero where it refuses
-        // both.
-        let lanes: Vec<DVector<f64>> = std::iter::once(x.clone())
-            .chain((0..np).map(|n| {
-                let mut xp = x.clone();
-                xp[n] += FD_STEP;
-                xp
-            }))
-            .collect();
-        let ok = {
+        // The residuals at `x` (unless known) and at a forward step in
+        // every parameter, all in one lockstep simulation; a column whose
+        // step the model refuses steps backward alone, and stays zero
+        // where it refuses both.
+        let steps = (0..np).map(|n| {
+            let mut xp = x.clone();
+            xp[n] += FD_STEP;
+            xp
+        });
+        let ok = if let Some(known) = known {
+            r = known;
+            let lanes: Vec<DVector<f64>> = steps.collect();
+            let mut cols: Vec<&mut [f64]> =
+                jac.as_mut_slice().chunks_mut(self.rows.max(1)).collect();
+            let mut ok = vec![true];
+            ok.extend(self.residuals_lanes(&lanes, &mut cols));
+            ok
+        } else {
+            let lanes: Vec<DVector<f64>> = std::iter::once(x.clone()).chain(steps).collect();
             let mut cols: Vec<&mut [f64]> = std::iter::once(r.as_mut_slice())
                 .chain(jac.as_mut_slice().chunks_mut(self.rows.max(1)))
                 .collect();
@@ -363,13 +419,23 @@ impl LeastSquaresProblem<f64, Dyn, Dyn> for FitProblem<'_> {
     }
 
     fn residuals(&self) -> Option<DVector<f64>> {
+        if let Some(rejected) = self.rejected_trial(&self.x) {
+            return Some(rejected);
+        }
         self.linearise(&self.x);
         self.last.borrow().as_ref().map(|l| l.reduced_r.clone())
     }
 
+    /// Also marks `x` as the solver's current point (it takes the
+    /// Jacobian nowhere else).
     fn jacobian(&self) -> Option<DMatrix<f64>> {
         self.linearise(&self.x);
-        self.last.borrow().as_ref().map(|l| l.reduced_j.clone())
+        let last = self.last.borrow();
+        self.reference.set(
+            last.as_ref()
+                .map_or(f64::NAN, |l| l.reduced_r.norm_squared()),
+        );
+        last.as_ref().map(|l| l.reduced_j.clone())
     }
 }
 
@@ -538,6 +604,8 @@ fn fit_masked(
         rows,
         x: DVector::zeros(np),
         last: RefCell::new(None),
+        reference: Cell::new(f64::NAN),
+        trial: RefCell::new(None),
     };
     let lm = LevenbergMarquardt::new()
         .with_ftol(negligible_ftol(rows))
@@ -640,6 +708,8 @@ pub fn one_step_refit(
             rows,
             x: DVector::zeros(np),
             last: RefCell::new(None),
+            reference: Cell::new(f64::NAN),
+            trial: RefCell::new(None),
         };
         alone.linearise(&alone.x);
         let l = alone.last.into_inner()?;
@@ -808,11 +878,11 @@ mod tests {
         }
     }
 
-    /// Fit `aug` to `segs` from the nominal parameters and the candidate's
-    /// own start values; the fitted model.
-    fn refit(aug: Augment, segs: &[DcSegment]) -> AugModel {
+    /// `segs` as the runs a fit takes, each from its own start; the heat
+    /// of them all.
+    fn runs_of(segs: &[DcSegment]) -> (Vec<SegmentRun<'_>>, f64) {
         let mut heat = 0.0;
-        let runs: Vec<SegmentRun> = segs
+        let runs = segs
             .iter()
             .enumerate()
             .map(|(k, seg)| {
@@ -828,6 +898,94 @@ mod tests {
                 r
             })
             .collect();
+        (runs, heat)
+    }
+
+    /// Noise weights of the noise-free test records: 10 mA, 0.1 rad/s.
+    const WEIGHTS: Weights = Weights {
+        current: 1.0 / 0.01,
+        speed: 1.0 / 0.1,
+    };
+
+    /// A trial the solver must reject (its sum of squares above the
+    /// current point's) gets its residuals' norm alone, and the
+    /// linearisation stays at the current point; a trial it may accept is
+    /// linearised, the same to the bit as from scratch. Only where lanes
+    /// go one after another (a sensor lag), not in lockstep.
+    #[test]
+    fn a_trial_that_cannot_be_accepted_is_not_linearised() {
+        let segs = record(
+            Augment::SensorLag(LagChannel::Current),
+            [2.0 * DT, 0.0, 0.0],
+        );
+        let (runs, _) = runs_of(&segs);
+        let nominal = AugModel::nominal(DcParams::SEED_TABLE4_MOMENTS);
+        let spec = |aug, effect| FitSpec {
+            start: AugModel {
+                aug,
+                e: [DT, 0.0, 0.0],
+                ..nominal
+            },
+            effect,
+        };
+        let (lag_spec, thermal_spec) = (
+            spec(
+                Augment::SensorLag(LagChannel::Current),
+                vec![Transform::Linear(DT)],
+            ),
+            spec(Augment::ThermalDrift, vec![Transform::Linear(1.0)]),
+        );
+        let problem_of = |spec| FitProblem {
+            spec,
+            runs: &runs,
+            w: WEIGHTS,
+            mask: None,
+            rows: runs.iter().map(segment_rows).sum(),
+            x: DVector::zeros(7),
+            last: RefCell::new(None),
+            reference: Cell::new(f64::NAN),
+            trial: RefCell::new(None),
+        };
+        let at = |x6: f64| DVector::from_fn(7, |k, _| if k == 6 { x6 } else { 0.0 });
+        let sse = |p: &FitProblem, x: &DVector<f64>| {
+            let mut r = Vec::new();
+            assert!(runs_residuals(&p.spec.model_at(x), &runs, &WEIGHTS, &mut r));
+            r.iter().map(|v| v * v).sum::<f64>()
+        };
+
+        let mut lag = problem_of(&lag_spec);
+        lag.jacobian().unwrap();
+        // Twenty samples of lag against the record's two: far worse.
+        let far = at(19.0);
+        assert!(sse(&lag, &far) > sse(&lag, &at(0.0)));
+        lag.set_params(&far);
+        let rejected = lag.residuals().unwrap();
+        assert!(rejected.rows(0, 7).iter().all(|v| *v == 0.0));
+        assert!((rejected[7] - sse(&lag, &far).sqrt()).abs() <= 1e-12 * rejected[7]);
+        assert_eq!(lag.last.borrow().as_ref().unwrap().x, at(0.0));
+        // The record's own lag: better, linearised there.
+        let near = at(1.0);
+        lag.set_params(&near);
+        let reduced = lag.residuals().unwrap();
+        assert_eq!(lag.last.borrow().as_ref().unwrap().x, near);
+        let fresh = problem_of(&lag_spec);
+        fresh.linearise(&near);
+        let fresh = fresh.last.into_inner().unwrap();
+        assert_eq!(reduced, fresh.reduced_r);
+        assert_eq!(lag.jacobian().unwrap(), fresh.reduced_j);
+
+        // A rigid model's trial is linearised whatever its sum of squares.
+        let mut thermal = problem_of(&thermal_spec);
+        thermal.jacobian().unwrap();
+        thermal.set_params(&far);
+        thermal.residuals().unwrap();
+        assert_eq!(thermal.last.borrow().as_ref().unwrap().x, far);
+    }
+
+    /// Fit `aug` to `segs` from the nominal parameters and the candidate's
+    /// own start values; the fitted model.
+    fn refit(aug: Augment, segs: &[DcSegment]) -> AugModel {
+        let (runs, heat) = runs_of(segs);
         let all = |f: fn(&DcSegment) -> &Vec<f64>| {
             segs.iter().flat_map(f).fold(0.0f64, |m, v| m.max(v.abs()))
         };
@@ -846,10 +1004,7 @@ mod tests {
             w_noise: 0.0,
         };
         let nominal = AugModel::nominal(DcParams::SEED_TABLE4_MOMENTS);
-        let w = Weights {
-            current: 1.0 / 0.01,
-            speed: 1.0 / 0.1,
-        };
+        let w = WEIGHTS;
         // Every start of that augmentation; the best fit stands, as in the
         // diagnosis.
         candidates(&nominal, &scales)
