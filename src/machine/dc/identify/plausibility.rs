@@ -11,7 +11,7 @@
 
 use std::path::PathBuf;
 
-use crate::record::{load_record_files, ColumnMap, DcSegment, Record, SegmentKind};
+use crate::record::{read_dc_csv, ColumnMap, DcSegment, Record, SegmentKind};
 
 /// Largest armature voltage magnitude accepted, V.
 pub const MAX_VOLTAGE: f64 = 2e4;
@@ -84,13 +84,14 @@ pub fn check_plausible_files(
     let Err(e) = check_plausible(record) else {
         return Ok(());
     };
-    let holder = files.iter().find(|f| {
+    // Each file read with the index the whole record gave it (its
+    // position, unless it declares one).
+    let holder = files.iter().enumerate().find(|(n, f)| {
         files.len() == 1
-            || load_record_files(kind, std::slice::from_ref(*f), None, None, columns)
-                .is_ok_and(|r| r.segments.iter().any(|s| s.index == e.segment))
+            || read_dc_csv(f, kind, *n as u32, columns).is_ok_and(|s| s.index == e.segment)
     });
     Err(ImplausibleFile {
-        file: holder.cloned(),
+        file: holder.map(|(_, f)| f.clone()),
         input: e,
     })
 }
