@@ -138,6 +138,15 @@ pub fn read_dc_csv(
     Ok(seg)
 }
 
+/// The line (from 1) of each data row of the CSV file at `path`, in
+/// order: where an error found in a segment's samples stands in the file.
+pub fn data_lines(path: &Path) -> Result<Vec<usize>, RecordError> {
+    let text = read_text(path)?;
+    let csv = CsvLines::split(path, &text)?;
+    let (_, rows) = csv.header(path, &ColumnMap::default())?;
+    Ok(rows.iter().map(|(no, _)| *no).collect())
+}
+
 /// Why a header lacks a column: what it names instead, and how to map a
 /// column of another name (`extra`: the other units' names, if any).
 pub(super) fn missing_column(extra: &str, header: &[&str]) -> String {

@@ -41,7 +41,7 @@ mod writer;
 
 pub use builder::{RecordBuilder, INCOMPLETE_SUFFIX};
 pub use columns::{ColumnMap, ColumnMapError, CONTRACT_COLUMNS};
-pub use csv::read_dc_csv;
+pub use csv::{data_lines, read_dc_csv};
 pub use csv_im::{read_im_csv, ImCsvSegment};
 pub use csv_im_tests::{
     im_file_kind, read_dc_resistance_csv, read_supply_test_csv, ImTestCsvSegment, COL_DC_CURRENT,

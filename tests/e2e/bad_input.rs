@@ -276,15 +276,20 @@ fn csv_times_that_break_the_numerics_are_refused_at_import() {
 }
 
 /// An implausible reading in the third of four files without a
-/// declaration is reported with that file's path.
+/// declaration is reported with that file's path and the reading's line
+/// (a comment line before it counted).
 #[test]
-fn an_implausible_reading_names_the_file_that_holds_it() {
+fn an_implausible_reading_names_the_file_and_line_that_hold_it() {
     let dir = tempfile::tempdir().unwrap();
     let files: Vec<String> = (0..4)
         .map(|n| {
             let mut text = dc_csv(400, |k| format!("{}", k as f64 * 1e-3));
             if n == 2 {
-                text = text.replacen(",60,1.93771,", ",60,5e6,", 1);
+                text = text.replacen(",60,1.93771,", ",60,5e6,", 1).replacen(
+                    "speed_rad_s\n",
+                    "speed_rad_s\n# logger restarted\n",
+                    1,
+                );
             }
             write(dir.path(), &format!("part-{n}.csv"), &text)
         })
@@ -293,7 +298,7 @@ fn an_implausible_reading_names_the_file_that_holds_it() {
     args.extend(files.iter().map(String::as_str));
     let err = run_bad(&args);
     assert!(
-        err.starts_with(&format!("motorbench: {}: segment 2", files[2]))
+        err.starts_with(&format!("motorbench: {}:4: segment 2", files[2]))
             && err.contains("column armature_current_A: sample 1 reads 5e6 A"),
         "{err}"
     );

@@ -11,7 +11,7 @@
 
 use std::path::PathBuf;
 
-use crate::record::{read_dc_csv, ColumnMap, DcSegment, Record, SegmentKind};
+use crate::record::{data_lines, read_dc_csv, ColumnMap, DcSegment, Record, SegmentKind};
 
 /// Largest armature voltage magnitude accepted, V.
 pub const MAX_VOLTAGE: f64 = 2e4;
@@ -41,25 +41,34 @@ pub struct ImplausibleInput {
     pub column: &'static str,
     /// What is wrong, with the value.
     pub reason: String,
+    /// The sample (from 0, within the segment) that shows it, where one
+    /// does.
+    pub sample: Option<u32>,
 }
 
 /// An [`ImplausibleInput`] in a record loaded from files, with the file
-/// that holds the segment when one does.
+/// that holds the segment when one does, and the line of the sample in a
+/// CSV file.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{}{input}", file_prefix(.file.as_deref()))]
+#[error("{}{input}", file_prefix(.file.as_deref(), *.line))]
 pub struct ImplausibleFile {
     /// The file that holds the segment; `None` for a record-wide finding
     /// in several files.
     pub file: Option<PathBuf>,
+    /// The line (from 1) of the sample that shows it, in a CSV file.
+    pub line: Option<u32>,
     /// What is implausible.
     #[source]
     pub input: ImplausibleInput,
 }
 
-/// `<file>: `, or nothing without a file.
-fn file_prefix(file: Option<&std::path::Path>) -> String {
-    file.map(|f| format!("{}: ", f.display()))
-        .unwrap_or_default()
+/// `<file>:<line>: `, `<file>: `, or nothing without a file.
+fn file_prefix(file: Option<&std::path::Path>, line: Option<u32>) -> String {
+    match (file, line) {
+        (Some(f), Some(line)) => format!("{}:{line}: ", f.display()),
+        (Some(f), None) => format!("{}: ", f.display()),
+        (None, _) => String::new(),
+    }
 }
 
 /// Check every segment's channels, then the record as a whole.
@@ -90,8 +99,18 @@ pub fn check_plausible_files(
         files.len() == 1
             || read_dc_csv(f, kind, *n as u32, columns).is_ok_and(|s| s.index == e.segment)
     });
+    // The sample's line, in a CSV file (an MCAP record has none).
+    let line = holder
+        .filter(|(_, f)| {
+            !f.extension()
+                .is_some_and(|x| x.eq_ignore_ascii_case("mcap"))
+        })
+        .zip(e.sample)
+        .and_then(|((_, f), k)| data_lines(f).ok()?.get(k as usize).copied())
+        .and_then(|line| u32::try_from(line).ok());
     Err(ImplausibleFile {
         file: holder.map(|(_, f)| f.clone()),
+        line,
         input: e,
     })
 }
@@ -120,6 +139,7 @@ fn check_segment(seg: &DcSegment) -> Result<(), ImplausibleInput> {
                 label: seg.label.clone(),
                 column,
                 reason,
+                sample: u32::try_from(k).ok(),
             });
         }
     }
@@ -199,6 +219,7 @@ fn check_current_reverses(record: &Record) -> Result<(), ImplausibleInput> {
             100.0 * neg,
             REVERSAL * u_peak
         ),
+        sample: None,
     })
 }
 
@@ -273,6 +294,7 @@ fn check_speed_glitches(record: &Record) -> Result<(), ImplausibleInput> {
                          that row",
                         k + 1
                     ),
+                    sample: u32::try_from(k + 1).ok(),
                 });
             }
         }
@@ -346,6 +368,7 @@ fn check_power_flows_in(record: &Record) -> Result<(), ImplausibleInput> {
                     "{why} (Σ U·{symbol} is {:.0} % of Σ |U·{symbol}| over the driven segments)",
                     100.0 * net / gross,
                 ),
+                sample: None,
             });
         }
     }
