@@ -239,7 +239,6 @@ pub fn held_out_either_sign_flip_test(
 /// The sign-flip test of `tested` (one value per block), reporting the
 /// mean of `gains` (the absolute gain per block).
 fn sign_flip(gains: &[f64], tested: &[f64], candidates_tried: usize) -> HeldOutTest {
-    use rand::{rngs::StdRng, Rng, SeedableRng};
     let n = tested.len();
     let sum: f64 = tested.iter().sum();
     let mut test = HeldOutTest {
@@ -254,23 +253,10 @@ fn sign_flip(gains: &[f64], tested: &[f64], candidates_tried: usize) -> HeldOutT
     if n < 3 || !sum.is_finite() || sum <= 0.0 {
         return test;
     }
-    let mut rng = StdRng::seed_from_u64(0x5eed);
-    let mut exceed = 0usize;
-    for _ in 0..SIGN_FLIPS {
-        // `rng.random::<bool>()` is a word's top bit: kept where it is
-        // set, negated where it is clear, the negation done on the sign
-        // bit (no branch on a coin toss to mispredict).
-        let flipped: f64 = tested
-            .iter()
-            .map(|g| {
-                let clear = u64::from(!rng.next_u32() >> 31);
-                f64::from_bits(g.to_bits() ^ (clear << 63))
-            })
-            .sum();
-        if flipped >= sum {
-            exceed += 1;
-        }
-    }
+    // Each pattern's sign flips are done on the sign bit (no branch on a
+    // coin toss to mispredict); the patterns are drawn once per block
+    // count (`sign_patterns`).
+    let exceed = super::sign_patterns::count_at_or_above(tested, sum, SIGN_FLIPS);
     let p = (1 + exceed) as f64 / (1 + SIGN_FLIPS) as f64;
     test.p_value = (p * candidates_tried.max(1) as f64).min(1.0);
     test

@@ -16,6 +16,7 @@ pub mod blind;
 pub mod cli;
 pub mod decision;
 mod plot;
+mod sign_patterns;
 mod text;
 mod threads;
 

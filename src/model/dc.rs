@@ -161,6 +161,28 @@ pub struct DcMotor {
 impl DcMotor {
     /// Prepare the motor for steps of `dt` seconds.
     pub fn new(params: DcParams, dt: f64) -> Result<DcMotor, ParamError> {
+        let driven = DcMotor::driven_zoh_of(&params, dt)?;
+        let p = &params;
+        let a_open = SMatrix::<f64, 2, 2>::new(-p.f / p.j, 0.0, 1.0, 0.0);
+        let b_open = SMatrix::<f64, 2, 1>::new(-1.0 / p.j, 0.0);
+        // RK4 sub-steps: at least 40 per fastest time constant.
+        let fastest = p.tau_e().min(p.tau_m());
+        let substeps = ((dt * 40.0 / fastest).ceil() as usize).clamp(1, 10_000);
+        Ok(DcMotor {
+            params,
+            dt,
+            driven,
+            open: Zoh::new(&a_open, &b_open, dt),
+            effects: Vec::new(),
+            substeps,
+        })
+    }
+
+    /// The exact step of the driven motor (state `[i, ω, θ]`, inputs
+    /// `[U, T_load]`) over `dt` seconds, alone: what
+    /// [`DcMotor::driven_zoh`] gives without the rest of a motor (a
+    /// simulation that steps many parameter sets needs only this).
+    pub fn driven_zoh_of(params: &DcParams, dt: f64) -> Result<Zoh<3, 2>, ParamError> {
         params.validate()?;
         if !(dt.is_finite() && dt > 0.0) {
             return Err(ParamError {
@@ -169,7 +191,7 @@ impl DcMotor {
                 reason: "must be a finite number > 0",
             });
         }
-        let p = &params;
+        let p = params;
         let a = SMatrix::<f64, 3, 3>::new(
             -p.ra / p.la,
             -p.k / p.la,
@@ -182,19 +204,7 @@ impl DcMotor {
             0.0,
         );
         let b = SMatrix::<f64, 3, 2>::new(1.0 / p.la, 0.0, 0.0, -1.0 / p.j, 0.0, 0.0);
-        let a_open = SMatrix::<f64, 2, 2>::new(-p.f / p.j, 0.0, 1.0, 0.0);
-        let b_open = SMatrix::<f64, 2, 1>::new(-1.0 / p.j, 0.0);
-        // RK4 sub-steps: at least 40 per fastest time constant.
-        let fastest = p.tau_e().min(p.tau_m());
-        let substeps = ((dt * 40.0 / fastest).ceil() as usize).clamp(1, 10_000);
-        Ok(DcMotor {
-            params,
-            dt,
-            driven: Zoh::new(&a, &b, dt),
-            open: Zoh::new(&a_open, &b_open, dt),
-            effects: Vec::new(),
-            substeps,
-        })
+        Ok(Zoh::new(&a, &b, dt))
     }
 
     /// Attach an unmodelled effect; the motor then integrates with RK4.

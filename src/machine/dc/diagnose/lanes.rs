@@ -1,6 +1,7 @@
 //! The rigid DC models (nominal, or with an effect that enters as `ΔV`,
-//! `ΔT`) simulated in lockstep: several parameter sets of one model form
-//! on the same segment, sample by sample, each "lane" with its own state.
+//! `ΔT`, or read through a sensor's lag) simulated in lockstep: several
+//! parameter sets of one model form on the same segment, sample by
+//! sample, each "lane" with its own state.
 //!
 //! Why: one simulation is a serial recursion (the state at `k + 1` needs
 //! the state at `k`, through an `exp` or a `tanh` for some effects), so a
@@ -12,15 +13,18 @@
 //! readings are the lone simulation's to the last bit (a test holds it).
 //! [`AugModel::simulate_runs`] is the one-lane case of the same code.
 
-use super::model::{AugModel, CoastStep, Continuation, EndState, Rigid, SegmentRun, Start};
+use super::model::{
+    AugModel, CoastStep, Continuation, EndState, LagFilter, Rigid, SegmentRun, Start,
+};
 
 /// Simulate the models of `models` whose `live` is set on `runs` in order,
 /// each run that continues the one before it from the lane's state at that
 /// run's end, as [`AugModel::simulate_runs`] does for one model;
 /// `out(l, n, readings)` with the `(current, speed reading)` of every
 /// sample of run `n` in lane `l`, once per run and lane that emitted any.
-/// Rigid models go in lockstep, the others one after another. Whether
-/// each lane's simulation went through.
+/// Rigid models and sensor lags (a rigid motor read through a lag) go in
+/// lockstep, shaft compliance one lane after another. Whether each lane's
+/// simulation went through.
 ///
 /// The readings are handed over a run at a time, not a sample at a time:
 /// the caller's loop over them is then a tight one, where a call per
@@ -32,7 +36,7 @@ pub(super) fn simulate_runs(
     mut out: impl FnMut(usize, usize, &[(f64, f64)]),
 ) -> Vec<bool> {
     let most = runs.iter().map(SegmentRun::len).max().unwrap_or(0) + 1;
-    if !models.iter().all(AugModel::is_rigid) {
+    if !models.iter().all(AugModel::in_lockstep) {
         let mut readings = Vec::with_capacity(most);
         return models
             .iter()
@@ -61,16 +65,39 @@ pub(super) fn simulate_runs(
             })
             .collect();
     }
+    // The motors stepped in lockstep: a sensor lag's is the nominal one,
+    // its readings passed through the lag (`LagFilter`) as they come.
+    let motors: Vec<AugModel> = models.iter().map(AugModel::motor).collect();
     let mut readings: Vec<Vec<(f64, f64)>> = vec![Vec::with_capacity(most); models.len()];
-    let mut alive = live.to_vec();
+    let mut alive: Vec<bool> = live
+        .iter()
+        .zip(models)
+        .map(|(&l, m)| l && m.valid())
+        .collect();
     let mut ends: Vec<Option<EndState>> = vec![None; models.len()];
     let mut prev_index: Option<u32> = None;
     for (n, run) in runs.iter().enumerate() {
         let continues =
             run.continues.is_some() && prev_index.is_some_and(|i| i + 1 == run.seg.index);
         let from: Vec<Option<EndState>> = ends.iter().map(|e| e.filter(|_| continues)).collect();
-        ends = simulate_rigid(models, &alive, run, &from, |l, i, w| {
-            readings[l].push((i, w))
+        let mut filters: Vec<Option<LagFilter>> = models
+            .iter()
+            .zip(&from)
+            .map(|(m, from)| m.lag_filter(run, from.as_ref()))
+            .collect();
+        let motor_from: Vec<Option<EndState>> = from
+            .iter()
+            .zip(&filters)
+            .map(|(from, lag)| match lag {
+                Some(_) => LagFilter::motor_from(from.as_ref()),
+                None => *from,
+            })
+            .collect();
+        ends = simulate_rigid(&motors, &alive, run, &motor_from, |l, i, w| {
+            readings[l].push(match &mut filters[l] {
+                Some(lag) => lag.reading(i, w),
+                None => (i, w),
+            })
         });
         for (l, lane) in readings.iter_mut().enumerate() {
             if !lane.is_empty() {
@@ -78,7 +105,10 @@ pub(super) fn simulate_runs(
                 lane.clear();
             }
         }
-        for (a, e) in alive.iter_mut().zip(&ends) {
+        for ((a, e), lag) in alive.iter_mut().zip(ends.iter_mut()).zip(filters) {
+            if let (Some(end), Some(lag)) = (e.as_mut(), lag) {
+                *end = lag.end(*end);
+            }
             *a = e.is_some();
         }
         prev_index = Some(run.seg.index);
@@ -315,7 +345,7 @@ pub(super) fn simulate_rigid(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::machine::dc::diagnose::model::Augment;
+    use crate::machine::dc::diagnose::model::{Augment, LagChannel};
     use crate::model::DcParams;
     use crate::record::DcSegment;
 
@@ -334,8 +364,9 @@ mod tests {
 
     /// Each lane of a lockstep simulation emits what its model alone
     /// emits, bit for bit, over a start from rest, a continued segment, a
-    /// coast-down and a segment after a gap; a refused model's lane
-    /// emits nothing and fails without disturbing the others.
+    /// coast-down and a segment after a gap, sensor lags among them; a
+    /// refused model's lane emits nothing and fails without disturbing the
+    /// others.
     #[test]
     fn every_lane_is_its_model_alone() {
         let p = DcParams::SEED_TABLE4_MOMENTS;
@@ -361,7 +392,13 @@ mod tests {
                 start,
                 coast: n == 2,
                 heat_before: 10.0 * n as f64,
-                continues: (n > 0).then_some(Continuation::Next),
+                // The second run shares its first sample with the first's
+                // last (a boundary sample both segments hold).
+                continues: match n {
+                    0 => None,
+                    1 => Some(Continuation::Shared),
+                    _ => Some(Continuation::Next),
+                },
             })
             .collect();
         let with = |aug, e: [f64; 3]| AugModel { p, aug, e };
@@ -374,9 +411,16 @@ mod tests {
             with(Augment::CoulombFriction, [0.05, -1.0, 0.0]),
             with(Augment::InductanceSaturation, [5e-3, 0.0, 0.0]),
             with(Augment::ThermalDrift, [1e-3, 0.0, 0.0]),
+            // A rigid motor read through a lag, with and without a dead
+            // time, on either channel.
+            with(Augment::SensorLag(LagChannel::Current), [2e-3, 0.0, 0.0]),
+            with(Augment::SensorLag(LagChannel::Speed), [5e-3, 2e-3, 0.0]),
+            with(Augment::SensorLag(LagChannel::Current), [0.0, 1e-3, 0.0]),
+            // Refused: a lag that is not a number.
+            with(Augment::SensorLag(LagChannel::Speed), [f64::NAN, 0.0, 0.0]),
         ];
         let mut lanes: Vec<Vec<(usize, u64, u64)>> = vec![Vec::new(); models.len()];
-        let ok = simulate_runs(&models, &[true; 7], &runs, |l, n, readings| {
+        let ok = simulate_runs(&models, &[true; 11], &runs, |l, n, readings| {
             lanes[l].extend(readings.iter().map(|(i, w)| (n, i.to_bits(), w.to_bits())))
         });
         for (l, m) in models.iter().enumerate() {
@@ -387,8 +431,14 @@ mod tests {
             assert_eq!(ok[l], alone_ok, "lane {l}");
             assert_eq!(lanes[l], alone, "lane {l}");
         }
-        assert_eq!(ok, [true, true, true, true, false, true, true]);
-        assert!(lanes[4].is_empty());
+        assert_eq!(
+            ok,
+            [true, true, true, true, false, true, true, true, true, true, false]
+        );
+        assert!(lanes[4].is_empty() && lanes[10].is_empty());
+        // The lags lag: their readings are not the nominal motor's.
+        assert_ne!(lanes[7], lanes[0]);
+        assert_ne!(lanes[8], lanes[0]);
         assert_eq!(lanes[0].len(), 300 + 200 + 400 + 150);
     }
 }

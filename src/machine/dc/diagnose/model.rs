@@ -131,6 +131,101 @@ pub struct AugModel {
     pub e: [f64; 3],
 }
 
+/// The reading path of a sensor-lag model on one run: the motor's own
+/// readings delayed by whole samples, then one channel through a
+/// first-order lag. The motor under it is the nominal one, so a lone
+/// simulation and a lockstep one ([`super::lanes`]) both run the nominal
+/// model and pass its readings through this, one sample at a time.
+pub(super) struct LagFilter {
+    ch: LagChannel,
+    /// `e^(−dt/τ)`, 0 without a lag.
+    a: f64,
+    /// The dead time in samples (at most [`MAX_DELAY`]).
+    delay: usize,
+    /// A shared boundary sample is the previous segment's last reading,
+    /// lagged already: the first reading is that one.
+    skip: bool,
+    /// The last lagged readings.
+    y: Option<(f64, f64)>,
+    /// The readings before the dead time, the latest first; before the
+    /// record's first sample, that sample.
+    raw: Option<[(f64, f64); MAX_DELAY]>,
+}
+
+impl LagFilter {
+    /// The filter of the lag `e` (`[τ, dead time]`, s) on `ch` for `run`,
+    /// continuing from the end of the previous run when `from` is given.
+    pub(super) fn new(
+        ch: LagChannel,
+        e: &[f64; 3],
+        run: &SegmentRun,
+        from: Option<&EndState>,
+    ) -> LagFilter {
+        let tau = e[0].abs();
+        let from = from.filter(|_| run.continues.is_some());
+        LagFilter {
+            ch,
+            a: if tau > 0.0 {
+                (-run.dt / tau).exp()
+            } else {
+                0.0
+            },
+            delay: ((e[1].abs() / run.dt).round() as usize).min(MAX_DELAY),
+            skip: from.is_some() && run.continues == Some(Continuation::Shared),
+            y: from.and_then(|e| e.lag),
+            raw: from.filter(|e| e.lag.is_some()).map(|e| e.raw),
+        }
+    }
+
+    /// Where the motor under the lag starts: the lagged model's end state
+    /// without its lag.
+    pub(super) fn motor_from(from: Option<&EndState>) -> Option<EndState> {
+        from.map(|e| EndState { lag: None, ..*e })
+    }
+
+    /// The reading of the motor's readings `(i, w)`.
+    #[inline(always)]
+    pub(super) fn reading(&mut self, i: f64, w: f64) -> (f64, f64) {
+        if self.skip {
+            self.skip = false;
+            if let Some(prev) = self.y {
+                return prev;
+            }
+        }
+        let past = self.raw.get_or_insert([(i, w); MAX_DELAY]);
+        let (di, dw) = if self.delay == 0 {
+            (i, w)
+        } else {
+            past[self.delay - 1]
+        };
+        past.rotate_right(1);
+        past[0] = (i, w);
+        let a = self.a;
+        let (fi, fw) = match self.y {
+            None => match self.ch {
+                LagChannel::Current => (di, w),
+                LagChannel::Speed => (i, dw),
+            },
+            Some((pi, pw)) => match self.ch {
+                LagChannel::Current => (a * pi + (1.0 - a) * di, w),
+                LagChannel::Speed => (i, a * pw + (1.0 - a) * dw),
+            },
+        };
+        self.y = Some((fi, fw));
+        (fi, fw)
+    }
+
+    /// The lagged model's end state, the motor's being `end`.
+    pub(super) fn end(self, end: EndState) -> EndState {
+        EndState {
+            lag: self.y,
+            raw: self.raw.unwrap_or_default(),
+            reading: self.y.unwrap_or(end.reading),
+            ..end
+        }
+    }
+}
+
 /// Exact one-sample step of the rigid driven motor, in scalars.
 pub(super) struct Rigid {
     a: [[f64; 2]; 3],
@@ -141,8 +236,7 @@ pub(super) struct Rigid {
 
 impl Rigid {
     pub(super) fn new(p: &DcParams, dt: f64) -> Option<Rigid> {
-        let motor = DcMotor::new(*p, dt).ok()?;
-        let z = motor.driven_zoh();
+        let z = DcMotor::driven_zoh_of(p, dt).ok()?;
         Some(Rigid {
             a: std::array::from_fn(|r| [z.ad[(r, 0)], z.ad[(r, 1)]]),
             b: std::array::from_fn(|r| [z.bd[(r, 0)], z.bd[(r, 1)]]),
@@ -324,10 +418,38 @@ impl AugModel {
         (i, w)
     }
 
-    /// Whether the motor is one rigid mass read without lag: the models
-    /// [`super::lanes`] steps in lockstep.
+    /// Whether the motor is one rigid mass read without lag.
     pub(super) fn is_rigid(&self) -> bool {
         !matches!(self.aug, Augment::SensorLag(_) | Augment::ShaftCompliance)
+    }
+
+    /// Whether [`super::lanes`] steps the model in lockstep: a rigid
+    /// motor, read with or without a lag (shaft compliance goes alone).
+    pub(super) fn in_lockstep(&self) -> bool {
+        self.aug != Augment::ShaftCompliance
+    }
+
+    /// The motor the lockstep simulation ([`super::lanes`]) steps for
+    /// this model: the nominal one under a sensor lag (its readings then
+    /// go through [`Self::lag_filter`]), the model itself otherwise.
+    pub(super) fn motor(&self) -> AugModel {
+        match self.aug {
+            Augment::SensorLag(_) => AugModel::nominal(self.p),
+            _ => *self,
+        }
+    }
+
+    /// A sensor-lag model's reading path on `run` (continuing from `from`
+    /// where given); `None` for the other models.
+    pub(super) fn lag_filter(
+        &self,
+        run: &SegmentRun,
+        from: Option<&EndState>,
+    ) -> Option<LagFilter> {
+        match self.aug {
+            Augment::SensorLag(ch) => Some(LagFilter::new(ch, &self.e, run, from)),
+            _ => None,
+        }
     }
 
     /// Whether the model is the paper's alone (no effect to evaluate).
@@ -408,56 +530,16 @@ impl AugModel {
         let from = from.filter(|_| run.continues.is_some());
         match self.aug {
             Augment::SensorLag(ch) => {
-                let tau = self.e[0].abs();
-                let a = if tau > 0.0 {
-                    (-run.dt / tau).exp()
-                } else {
-                    0.0
-                };
-                // A dead time of whole samples before the lag (`e[1]`, s):
-                // a reading taken, converted or sent a sample late.
-                let delay = ((self.e[1].abs() / run.dt).round() as usize).min(MAX_DELAY);
-                let nominal = AugModel::nominal(self.p);
-                let inner = from.map(|e| EndState { lag: None, ..*e });
-                // A shared boundary sample is the previous segment's last
-                // reading, lagged already.
-                let mut skip = from.is_some() && run.continues == Some(Continuation::Shared);
-                let mut y: Option<(f64, f64)> = from.and_then(|e| e.lag);
-                // The readings before the dead time, the latest first;
-                // before the record's first sample, that sample.
-                let mut raw: Option<[(f64, f64); MAX_DELAY]> =
-                    from.filter(|e| e.lag.is_some()).map(|e| e.raw);
-                let end = nominal.simulate_from(run, inner.as_ref(), &mut |i, w| {
-                    if skip {
-                        skip = false;
-                        if let Some(prev) = y {
-                            out(prev.0, prev.1);
-                            return;
-                        }
-                    }
-                    let past = raw.get_or_insert([(i, w); MAX_DELAY]);
-                    let (di, dw) = if delay == 0 { (i, w) } else { past[delay - 1] };
-                    past.rotate_right(1);
-                    past[0] = (i, w);
-                    let (fi, fw) = match y {
-                        None => match ch {
-                            LagChannel::Current => (di, w),
-                            LagChannel::Speed => (i, dw),
-                        },
-                        Some((pi, pw)) => match ch {
-                            LagChannel::Current => (a * pi + (1.0 - a) * di, w),
-                            LagChannel::Speed => (i, a * pw + (1.0 - a) * dw),
-                        },
-                    };
-                    y = Some((fi, fw));
-                    out(fi, fw);
-                })?;
-                Some(EndState {
-                    lag: y,
-                    raw: raw.unwrap_or_default(),
-                    reading: y.unwrap_or(end.reading),
-                    ..end
-                })
+                let mut filter = LagFilter::new(ch, &self.e, run, from);
+                let end = AugModel::nominal(self.p).simulate_from(
+                    run,
+                    LagFilter::motor_from(from).as_ref(),
+                    &mut |i, w| {
+                        let (fi, fw) = filter.reading(i, w);
+                        out(fi, fw)
+                    },
+                )?;
+                Some(filter.end(end))
             }
             Augment::ShaftCompliance => self.simulate_shaft(run, from, out),
             _ => super::lanes::simulate_rigid(
