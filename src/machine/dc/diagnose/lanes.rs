@@ -116,6 +116,24 @@ pub(super) fn simulate_runs(
     alive
 }
 
+/// A lane's sample after [`Lane::predict`].
+#[derive(Clone, Copy)]
+enum Half {
+    /// The step is done: `(i, ω, Δθ)` and the friction's direction.
+    Done((f64, f64, f64), Option<f64>),
+    /// The effect is to be evaluated again at the predicted state.
+    Predicted {
+        /// The friction's direction.
+        d: f64,
+        /// The static torque, signed.
+        t: f64,
+        /// `(ΔV, ΔT)` at the sample's start.
+        first: (f64, f64),
+        /// The predicted `(i, ω)` and the heat there.
+        at: (f64, f64, f64),
+    },
+}
+
 /// One parameter set's state in a lockstep simulation of one segment.
 struct Lane<'m> {
     model: &'m AugModel,
@@ -203,10 +221,12 @@ impl Lane<'_> {
         (0.0, dth * inv_dt)
     }
 
-    /// One sample of the driven motor under the voltage `uk`: the
-    /// readings, or `None` when the state is no longer finite.
+    /// The first half of one sample of the driven motor under the
+    /// voltage `uk`: the direction of the friction and, for a model with
+    /// an effect, the effect at the sample's start and the state it
+    /// predicts; a step without an effect to evaluate again is done here.
     #[inline(always)]
-    fn drive(&mut self, step: &Rigid, uk: f64, dt: f64, inv_dt: f64) -> Option<(f64, f64)> {
+    fn predict(&self, step: &Rigid, uk: f64, dt: f64) -> Half {
         let m = self.model;
         let p = &m.p;
         let (i, w, heat) = (self.i, self.w, self.heat);
@@ -220,23 +240,54 @@ impl Lane<'_> {
         } else {
             None
         };
-        let (ni, nw, dth) = match dir {
+        match dir {
             None => {
                 let (dv, _) = m.perturb(i, 0.0, uk, heat, 1.0);
                 let i_ss = (uk - dv) / p.ra;
-                (i_ss + (i - i_ss) * step.decay, 0.0, 0.0)
+                Half::Done((i_ss + (i - i_ss) * step.decay, 0.0, 0.0), None)
             }
             Some(d) => {
                 let t = p.tst * d;
                 if m.is_nominal() {
-                    step.step(i, w, uk, t)
+                    Half::Done(step.step(i, w, uk, t), dir)
                 } else {
                     let (dv0, dt0) = m.perturb(i, w, uk, heat, d);
                     let (pi, pw, _) = step.step(i, w, uk - dv0, t + dt0);
-                    let ph = heat + dt * i * i;
-                    let (dv1, dt1) = m.perturb(pi, pw, uk, ph, d);
-                    step.step(i, w, uk - 0.5 * (dv0 + dv1), t + 0.5 * (dt0 + dt1))
+                    Half::Predicted {
+                        d,
+                        t,
+                        first: (dv0, dt0),
+                        at: (pi, pw, heat + dt * i * i),
+                    }
                 }
+            }
+        }
+    }
+
+    /// The second half: the effect at the predicted state, the step with
+    /// the mean of the two, and the new state; the readings, or `None`
+    /// when the state is no longer finite.
+    #[inline(always)]
+    fn finish(
+        &mut self,
+        half: Half,
+        step: &Rigid,
+        uk: f64,
+        dt: f64,
+        inv_dt: f64,
+    ) -> Option<(f64, f64)> {
+        let (i, w, heat) = (self.i, self.w, self.heat);
+        let ((ni, nw, dth), dir) = match half {
+            Half::Done(next, dir) => (next, dir),
+            Half::Predicted {
+                d,
+                t,
+                first: (dv0, dt0),
+                at: (pi, pw, ph),
+            } => {
+                let (dv1, dt1) = self.model.perturb(pi, pw, uk, ph, d);
+                let next = step.step(i, w, uk - 0.5 * (dv0 + dv1), t + 0.5 * (dt0 + dt1));
+                (next, Some(d))
             }
         };
         self.heat = heat + 0.5 * dt * (i * i + ni * ni);
@@ -325,12 +376,24 @@ pub(super) fn simulate_rigid(
             step
         })
         .collect();
+    // Each sample in two passes over the lanes: the effect at every
+    // lane's state, then at every lane's predicted state. Within a lane
+    // the two depend on each other (through an `exp` or a `tanh` for
+    // some effects), across lanes they do not: a pass lets the core
+    // overlap the lanes' evaluations, where one lane's whole sample
+    // after another's waited for each in turn.
+    let mut halves = vec![Half::Done((0.0, 0.0, 0.0), None); lanes.len()];
     for &uk in &u[first..] {
-        for (l, (lane, step)) in lanes.iter_mut().zip(&steps).enumerate() {
+        for ((lane, step), half) in lanes.iter().zip(&steps).zip(halves.iter_mut()) {
+            if let Some(step) = step.as_ref().filter(|_| lane.alive) {
+                *half = lane.predict(step, uk, dt);
+            }
+        }
+        for (l, ((lane, step), half)) in lanes.iter_mut().zip(&steps).zip(&halves).enumerate() {
             let Some(step) = step.as_ref().filter(|_| lane.alive) else {
                 continue;
             };
-            match lane.drive(step, uk, dt, inv_dt) {
+            match lane.finish(*half, step, uk, dt, inv_dt) {
                 Some((i, w)) => lane.emit(l, i, w, &mut out),
                 None => lane.alive = false,
             }
