@@ -21,9 +21,11 @@
 //! below what a record resolves from its own sampling
 //! (`candidates::MIN_LAG_SAMPLES`).
 
+use nalgebra::{DMatrix, DVector};
+
 use super::fit::{
-    fit_fold, gauss_newton_step, refit_spec, runs_residuals, segment_rows, step_landed, FitSpec,
-    Fitted, Weights,
+    fit_fold, gauss_newton_step, refit_spec, runs_residuals_lanes, segment_rows, step_landed,
+    FitSpec, Fitted, Weights,
 };
 use super::gap::HeldOutSeries;
 use super::model::{AugModel, SegmentRun};
@@ -81,50 +83,45 @@ pub(super) fn row_folds(runs: &[SegmentRun]) -> Vec<usize> {
     out
 }
 
-/// The model refit without fold `f`'s rows: one Gauss–Newton step from
-/// `all`'s optimum when it is short and the linearisation predicts its
-/// decrease (the tests of the leave-one-segment-out refit,
-/// [`super::fit::one_step_refit`]), else an iterated fit from `all` with
-/// those rows masked.
-fn refit_fold(
-    spec: &FitSpec,
-    all: &Fitted,
-    runs: &[SegmentRun],
-    rows: &[usize],
-    f: usize,
-    w: &Weights,
-    patience: usize,
-) -> Option<AugModel> {
-    let refit = refit_spec(spec, all);
+/// Fold `f`'s one Gauss–Newton step from `all`'s optimum (the
+/// leave-one-segment-out refit's, [`super::fit::one_step_refit`]), on the
+/// normal equations of the rows it keeps: the stepped model and what
+/// [`step_landed`] judges it by. `None` where the optimum's sums do not
+/// fit `refit` and `rows` or the step is undetermined.
+struct OneStep {
+    model: AugModel,
+    step: DVector<f64>,
+    normal: DMatrix<f64>,
+    gradient: DVector<f64>,
+    sse0: f64,
+}
+
+fn one_step(refit: &FitSpec, all: &Fitted, rows: usize, f: usize) -> Option<OneStep> {
     let at = &all.at;
-    let np = refit.len();
-    if at.np == np && at.rows == rows.len() && f < at.by_fold.len() {
-        let held = &at.by_fold[f];
-        let normal = &at.whole.normal - &held.normal;
-        let gradient = &at.whole.gradient - &held.gradient;
-        let sse0 = at.whole.sse - held.sse;
-        if let Some(step) = gauss_newton_step(&normal, &gradient) {
-            let model = refit.model_at(&step);
-            let mut r = Vec::new();
-            if runs_residuals(&model, runs, w, &mut r) && r.len() == rows.len() {
-                let sse1: f64 = r
-                    .iter()
-                    .zip(rows)
-                    .filter(|(_, k)| **k != f)
-                    .map(|(v, _)| v * v)
-                    .sum();
-                if step_landed(&normal, &gradient, &step, sse0, sse1) {
-                    return Some(model);
-                }
-            }
-        }
+    if !(at.np == refit.len() && at.rows == rows && f < at.by_fold.len()) {
+        return None;
     }
-    let mask: Vec<bool> = rows.iter().map(|k| *k == f).collect();
-    fit_fold(&refit, runs, w, patience, Some(&mask)).map(|m| m.model)
+    let held = &at.by_fold[f];
+    let normal = &at.whole.normal - &held.normal;
+    let gradient = &at.whole.gradient - &held.gradient;
+    let step = gauss_newton_step(&normal, &gradient)?;
+    Some(OneStep {
+        model: refit.model_at(&step),
+        step,
+        normal,
+        gradient,
+        sse0: at.whole.sse - held.sse,
+    })
 }
 
 /// The cross-validated residual series of every run: each sample
-/// predicted by the fold that left it out. `None` when a fold's refit or
+/// predicted by the fold that left it out, refit without the fold's rows.
+/// The refit is one Gauss–Newton step from `all`'s optimum where the step
+/// is short and the linearisation predicts its decrease (the tests of
+/// [`super::fit::one_step_refit`]), else an iterated fit from `all` with
+/// those rows masked. The folds' stepped models are simulated together,
+/// in lockstep, once: the same simulation gives the rows that judge a
+/// step and the readings the fold predicts. `None` when a fold's refit or
 /// simulation fails.
 pub fn cross_validated(
     spec: &FitSpec,
@@ -134,21 +131,62 @@ pub fn cross_validated(
     patience: usize,
 ) -> Option<Vec<HeldOutSeries>> {
     let rows = row_folds(runs);
+    let refit = refit_spec(spec, all);
     let mut sims: Vec<(Vec<f64>, Vec<f64>)> = runs
         .iter()
         .map(|r| (vec![0.0; r.len()], vec![0.0; r.len()]))
         .collect();
-    for f in 0..CV_FOLDS {
-        let model = refit_fold(spec, all, runs, &rows, f, w, patience)?;
-        let mut counts = vec![0usize; runs.len()];
-        let ok = model.simulate_runs(runs, &mut |n, i, s| {
-            let k = counts[n];
-            if k < runs[n].len() && fold_of(n, k) == f {
-                sims[n].0[k] = i;
-                sims[n].1[k] = s;
+    // Fold `f`'s readings of run `n` at the samples it holds out.
+    let mut keep = |f: usize, n: usize, readings: &[(f64, f64)]| {
+        let (si, sw) = &mut sims[n];
+        for (k, (i, s)) in readings.iter().enumerate().take(runs[n].len()) {
+            if fold_of(n, k) == f {
+                si[k] = *i;
+                sw[k] = *s;
             }
-            counts[n] += 1;
+        }
+    };
+    let steps: Vec<Option<OneStep>> = (0..CV_FOLDS)
+        .map(|f| one_step(&refit, all, rows.len(), f))
+        .collect();
+    let models: Vec<AugModel> = steps
+        .iter()
+        .map(|s| s.as_ref().map_or(all.model, |s| s.model))
+        .collect();
+    let live: Vec<bool> = steps.iter().map(Option::is_some).collect();
+    let mut r = vec![0.0; CV_FOLDS * rows.len()];
+    let mut cols: Vec<&mut [f64]> = r.chunks_mut(rows.len().max(1)).collect();
+    let simulated = runs_residuals_lanes(&models, &live, runs, w, &mut cols, &mut keep);
+    for (f, (step, simulated)) in steps.iter().zip(simulated).enumerate() {
+        let landed = step.as_ref().is_some_and(|s| {
+            let sse1: f64 = cols[f]
+                .iter()
+                .zip(&rows)
+                .filter(|(_, k)| **k != f)
+                .map(|(v, _)| v * v)
+                .sum();
+            simulated && step_landed(&s.normal, &s.gradient, &s.step, s.sse0, sse1)
         });
+        if landed {
+            continue;
+        }
+        let mask: Vec<bool> = rows.iter().map(|k| *k == f).collect();
+        let model = fit_fold(&refit, runs, w, patience, Some(&mask))?.model;
+        let mut run = None;
+        let mut readings = Vec::new();
+        let ok = model.simulate_runs(runs, &mut |n, i, s| {
+            if run != Some(n) {
+                if let Some(done) = run {
+                    keep(f, done, &readings);
+                }
+                readings.clear();
+                run = Some(n);
+            }
+            readings.push((i, s));
+        });
+        if let Some(done) = run {
+            keep(f, done, &readings);
+        }
         if !ok {
             return None;
         }
@@ -162,6 +200,154 @@ pub fn cross_validated(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::machine::dc::diagnose::fit::tests::{noisy_steps, DT};
+    use crate::machine::dc::diagnose::fit::{fit, runs_residuals, AtOptimum, Transform};
+    use crate::machine::dc::diagnose::model::{Augment, Continuation, Start};
+    use crate::model::DcParams;
+
+    /// What a fit's sums let the folds do.
+    #[derive(Clone, Copy)]
+    enum Sums {
+        AsFitted,
+        Missing,
+        Misleading,
+    }
+
+    /// Every held-out sample is the reading of the fold that left it out,
+    /// simulated alone: the lockstep simulation of the stepped folds is
+    /// each fold's own, to the bit, and a fold whose step did not land is
+    /// refit and simulated as before. Over a nominal fit, a Coulomb
+    /// friction fit (in lockstep) and a shaft-compliance fit (one lane
+    /// after another), each also without the sums a fold steps from and
+    /// with sums whose steps do not land, each fold's model found as the
+    /// refit did fold by fold.
+    #[test]
+    fn each_held_out_sample_is_its_folds_lone_simulation() {
+        let levels = [60.0, 120.0, 200.0, 90.0];
+        let segs = noisy_steps(&levels);
+        let runs: Vec<SegmentRun> = segs
+            .iter()
+            .enumerate()
+            .map(|(k, seg)| SegmentRun {
+                seg,
+                dt: DT,
+                start: if k == 0 {
+                    Start::Settled(levels[0])
+                } else {
+                    Start::Rest
+                },
+                coast: false,
+                heat_before: 0.0,
+                continues: (k > 0).then_some(Continuation::Next),
+            })
+            .collect();
+        let w = Weights {
+            current: 1.0 / 0.01,
+            speed: 1.0 / 0.1,
+        };
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let nominal = AugModel::nominal(DcParams {
+            ra: p.ra * 1.1,
+            k: p.k * 0.97,
+            ..p
+        });
+        let coulomb = FitSpec {
+            start: AugModel {
+                aug: Augment::CoulombFriction,
+                e: [0.01, 20.0, 0.0],
+                ..nominal
+            },
+            effect: vec![Transform::Log; 2],
+        };
+        let shaft = FitSpec {
+            start: AugModel {
+                aug: Augment::ShaftCompliance,
+                e: [40.0, 0.5, 0.1],
+                ..nominal
+            },
+            effect: vec![Transform::Log, Transform::Logit, Transform::Log],
+        };
+        let specs = [
+            FitSpec {
+                start: nominal,
+                effect: Vec::new(),
+            },
+            coulomb,
+            shaft,
+        ];
+        let (mut stepped, mut refused) = (0, 0);
+        let variants = [Sums::AsFitted, Sums::Missing, Sums::Misleading];
+        for (spec, sums) in specs.iter().flat_map(|s| variants.map(|v| (s, v))) {
+            let mut all = fit(spec, &runs, &w, 40).expect("the all-record fit");
+            let mut whole = all.at.whole.clone();
+            let by_fold = match sums {
+                Sums::AsFitted => all.at.by_fold.clone(),
+                // Without the folds' sums no fold can step: each is refit.
+                Sums::Missing => Vec::new(),
+                // A gradient far off the residuals': every step is
+                // simulated in lockstep, and none lands.
+                Sums::Misleading => {
+                    whole.gradient *= 1e3;
+                    all.at.by_fold.clone()
+                }
+            };
+            all.at = std::sync::Arc::new(AtOptimum {
+                whole,
+                by_fold,
+                by_run: Vec::new(),
+                ..*all.at
+            });
+            let series = cross_validated(spec, &all, &runs, &w, 6).expect("the folds");
+            let rows = row_folds(&runs);
+            let refit = refit_spec(spec, &all);
+            for f in 0..CV_FOLDS {
+                // The fold's model as the refit found it fold by fold.
+                let step = one_step(&refit, &all, rows.len(), f);
+                let had_step = step.is_some();
+                let landed = step.filter(|s| {
+                    let mut r = Vec::new();
+                    runs_residuals(&s.model, &runs, &w, &mut r) && {
+                        let sse1: f64 = r
+                            .iter()
+                            .zip(&rows)
+                            .filter(|(_, k)| **k != f)
+                            .map(|(v, _)| v * v)
+                            .sum();
+                        step_landed(&s.normal, &s.gradient, &s.step, s.sse0, sse1)
+                    }
+                });
+                stepped += usize::from(landed.is_some());
+                refused += usize::from(had_step && landed.is_none());
+                let model = landed.map(|s| s.model).unwrap_or_else(|| {
+                    let mask: Vec<bool> = rows.iter().map(|k| *k == f).collect();
+                    fit_fold(&refit, &runs, &w, 6, Some(&mask)).unwrap().model
+                });
+                let mut alone: Vec<Vec<(f64, f64)>> = vec![Vec::new(); runs.len()];
+                assert!(model.simulate_runs(&runs, &mut |n, i, s| alone[n].push((i, s))));
+                for (n, s) in series.iter().enumerate() {
+                    let seg = runs[n].seg;
+                    for k in (0..runs[n].len()).filter(|&k| fold_of(n, k) == f) {
+                        // The series holds `measured − simulated`.
+                        let (i, sp) = alone[n][k];
+                        assert_eq!(
+                            (s.current[k].to_bits(), s.speed[k].to_bits()),
+                            (
+                                (seg.current[k] - i).to_bits(),
+                                (seg.speed[k] - sp).to_bits()
+                            ),
+                            "fold {f}, run {n}, sample {k}"
+                        );
+                    }
+                }
+            }
+        }
+        // Every path was taken: folds that stepped, folds whose step was
+        // simulated and refused, folds without a step (`Sums::Missing`).
+        assert!(
+            stepped > 0 && refused > 0,
+            "{stepped} stepped, {refused} refused"
+        );
+    }
 
     #[test]
     fn every_fold_holds_out_a_fifth_of_the_blocks_in_turn() {

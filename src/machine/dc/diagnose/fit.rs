@@ -117,19 +117,28 @@ pub fn runs_residuals(
     let from = out.len();
     out.resize(from + rows, 0.0);
     let col = &mut out[from..];
-    runs_residuals_lanes(std::slice::from_ref(model), &[true], runs, w, &mut [col])[0]
+    runs_residuals_lanes(
+        std::slice::from_ref(model),
+        &[true],
+        runs,
+        w,
+        &mut [col],
+        |_, _, _| {},
+    )[0]
 }
 
 /// [`runs_residuals`] of each model of `models` whose `live` is set, the
 /// models simulated in lockstep ([`lanes::simulate_runs`]), lane `l`'s
-/// rows into `cols[l]` (as many as the runs have); whether each lane's
-/// rows are all there.
-fn runs_residuals_lanes(
+/// rows into `cols[l]` (as many as the runs have); `seen(l, n, readings)`
+/// with the simulated readings of run `n` in lane `l` where a caller
+/// needs them too. Whether each lane's rows are all there.
+pub(super) fn runs_residuals_lanes(
     models: &[AugModel],
     live: &[bool],
     runs: &[SegmentRun],
     w: &Weights,
     cols: &mut [&mut [f64]],
+    mut seen: impl FnMut(usize, usize, &[(f64, f64)]),
 ) -> Vec<bool> {
     // Where each run's rows begin, the same in every lane; a lane's
     // readings of run `n` at `counts[l * runs.len() + n]`.
@@ -143,6 +152,7 @@ fn runs_residuals_lanes(
         .collect();
     let mut counts = vec![0usize; models.len() * runs.len()];
     let ok = lanes::simulate_runs(models, live, runs, |l, n, readings| {
+        seen(l, n, readings);
         let run = &runs[n];
         counts[l * runs.len() + n] += readings.len();
         let readings = &readings[..readings.len().min(run.len())];
@@ -224,7 +234,7 @@ impl FitProblem<'_> {
             .map(|x| x.iter().all(|v| v.is_finite() && v.abs() < 30.0))
             .collect();
         let models: Vec<AugModel> = xs.iter().map(|x| self.spec.model_at(x)).collect();
-        let ok = runs_residuals_lanes(&models, &live, self.runs, &self.w, cols);
+        let ok = runs_residuals_lanes(&models, &live, self.runs, &self.w, cols, |_, _, _| {});
         ok.into_iter()
             .zip(cols.iter_mut())
             .map(|(ok, col)| {
@@ -822,7 +832,7 @@ pub fn refit_spec(spec: &FitSpec, fitted: &Fitted) -> FitSpec {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use proptest::prelude::*;
 
     use super::super::candidates::{candidates, RecordScales};
@@ -830,7 +840,7 @@ mod tests {
     use super::*;
     use crate::record::DcSegment;
 
-    const DT: f64 = 5e-4;
+    pub(in crate::machine::dc::diagnose) const DT: f64 = 5e-4;
     const LEVELS: [f64; 2] = [120.0, 200.0];
 
     /// Two noise-free segments of the seed motor with augmentation `aug`
@@ -1032,7 +1042,7 @@ mod tests {
 
     /// Three noisy steps of the seed motor, each from the level before it
     /// (settled), as runs.
-    fn noisy_steps(levels: &[f64]) -> Vec<DcSegment> {
+    pub(in crate::machine::dc::diagnose) fn noisy_steps(levels: &[f64]) -> Vec<DcSegment> {
         let m = AugModel::nominal(DcParams::SEED_TABLE4_MOMENTS);
         let mut x = 0.412_345_678f64;
         let mut noise = move || {

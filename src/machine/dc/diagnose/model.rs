@@ -140,7 +140,8 @@ pub(super) struct LagFilter {
     ch: LagChannel,
     /// `e^(−dt/τ)`, 0 without a lag.
     a: f64,
-    /// The dead time in samples (at most [`MAX_DELAY`]).
+    /// The dead time in whole samples (at most [`MAX_DELAY`]): a reading
+    /// taken, converted or sent a sample late.
     delay: usize,
     /// A shared boundary sample is the previous segment's last reading,
     /// lagged already: the first reading is that one.
