@@ -28,6 +28,7 @@ use super::fit::{
     FitSpec, Fitted, Weights,
 };
 use super::gap::HeldOutSeries;
+use super::lanes::simulate_runs;
 use super::model::{AugModel, SegmentRun};
 
 /// Folds of the interleaved cross-validation.
@@ -172,22 +173,13 @@ pub fn cross_validated(
         }
         let mask: Vec<bool> = rows.iter().map(|k| *k == f).collect();
         let model = fit_fold(&refit, runs, w, patience, Some(&mask))?.model;
-        let mut run = None;
-        let mut readings = Vec::new();
-        let ok = model.simulate_runs(runs, &mut |n, i, s| {
-            if run != Some(n) {
-                if let Some(done) = run {
-                    keep(f, done, &readings);
-                }
-                readings.clear();
-                run = Some(n);
-            }
-            readings.push((i, s));
-        });
-        if let Some(done) = run {
-            keep(f, done, &readings);
-        }
-        if !ok {
+        let ok = simulate_runs(
+            std::slice::from_ref(&model),
+            &[true],
+            runs,
+            |_, n, readings| keep(f, n, readings),
+        );
+        if !ok[0] {
             return None;
         }
     }
