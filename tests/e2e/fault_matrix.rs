@@ -173,6 +173,12 @@ impl Ran {
     /// Completed (exit code 0) with a warning containing `warning`.
     fn assert_degraded(&self, warning: &str) {
         assert_eq!(self.code, Some(0), "{}", self.stderr);
+        self.assert_warned(warning);
+    }
+
+    /// Ran to its end without an abort, a warning containing `warning` in
+    /// its events and its report.
+    fn assert_warned(&self, warning: &str) {
         let warnings = self.events(EventLevel::Warn);
         assert!(
             warnings.iter().any(|w| w.contains(warning)),
@@ -744,7 +750,26 @@ fn im_sim_run_encoder_losing_half_its_counts_warns_against_the_dynamometer() {
         IM,
         "[[fault]]\nkind = \"encoder_loses_counts\"\nat_s = 0\nvalue = 0.5\n",
     );
-    r.assert_degraded("where the dynamometer holds");
+    r.assert_warned("where the dynamometer holds");
+    // No circuit follows slips of past one half: the fit collapses, and
+    // the run says so (exit 4, nothing identified) rather than report a
+    // circuit that misses the readings several times over.
+    assert_eq!(r.code, Some(4), "{}", r.stderr);
+    assert!(
+        r.stderr
+            .contains("no identification method applies to this data"),
+        "{}",
+        r.stderr
+    );
+    let result = r.record.recorded_result.as_ref().unwrap();
+    let lm = &result["methods"]["lm"];
+    assert_eq!(lm["applies"], false, "{lm}");
+    assert!(
+        lm["reason"]
+            .as_str()
+            .is_some_and(|t| t.contains("collapsed") && t.contains("Check that the columns")),
+        "{lm}"
+    );
     let warned: Vec<&str> = r
         .events(EventLevel::Warn)
         .into_iter()

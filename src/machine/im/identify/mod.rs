@@ -278,8 +278,9 @@ pub const CHECK_THE_COLUMNS: &str = "Check that the columns belong together: the
      scaled sensor reads a multiple); readings that jump from point to point do not follow slip \
      as a machine's do";
 
-/// Whether the circuit `c` predicts almost none of the measured current
-/// or power (an rms relative residual of 90 % or more): relative residuals
+/// Whether the circuit `c` predicts almost nothing of the measured
+/// current or power (an rms relative residual of 90 % or more, below or
+/// above the readings): relative residuals
 /// give every prediction of zero a cost of one per point, so a fit to
 /// readings that no circuit of its kind follows (an input power of half
 /// the machine's, current and power that jump from point to point) can
@@ -476,15 +477,17 @@ fn lm_method(
     }
     warnings.extend(fit.warnings.iter().map(|w| format!("lm: {w}")));
     warnings.extend(misfit_warning(&fit.circuit, sweep, model));
-    if values.is_empty() {
-        // Every element left out: no circuit to report, to validate or
-        // to diagnose against (the warnings above say why).
+    // A collapsed fit is no circuit to report even where an element looks
+    // determined; nor is one with every element left out (the warnings
+    // above say why). Neither is validated or diagnosed against.
+    let collapse = collapsed(&fit.circuit, sweep);
+    if collapse || values.is_empty() {
         return (
-            MethodReport::not_applicable(if collapsed(&fit.circuit, sweep) {
+            MethodReport::not_applicable(if collapse {
                 format!(
-                    "the fit of the {model} circuit collapsed to elements of zero, predicting \
-                     almost none of the measured current and power: no {model} circuit follows \
-                     these readings. {CHECK_THE_COLUMNS}"
+                    "the fit of the {model} circuit collapsed to elements of zero or without \
+                     bound, predicting almost nothing of the measured current and power: no \
+                     {model} circuit follows these readings. {CHECK_THE_COLUMNS}"
                 )
             } else {
                 format!(
@@ -896,7 +899,7 @@ mod tests {
             lm.reason
                 .as_deref()
                 .unwrap()
-                .contains("collapsed to elements of zero"),
+                .contains("collapsed to elements of zero or without bound"),
             "{lm:?}"
         );
         assert!(id.lm.is_none());
@@ -924,7 +927,7 @@ mod tests {
         assert!(!lm.applies, "{lm:?}");
         let reason = lm.reason.as_deref().unwrap();
         assert!(
-            reason.contains("collapsed to elements of zero")
+            reason.contains("collapsed to elements of zero or without bound")
                 && reason.contains("three-phase total input power in W"),
             "{reason}"
         );
