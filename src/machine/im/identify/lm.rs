@@ -578,6 +578,50 @@ pub fn evaluation_bound(points: usize, q: usize) -> usize {
     (SOLVE_POINT_EVALUATIONS / points.max(1)).clamp(20 * (q + 1), 200 * (q + 1))
 }
 
+/// Points per fitted element (plus one) a screening run fits at the
+/// most, where there are more: enough to rank the starts as every point
+/// would, at a fraction of the cost.
+const SCREEN_POINTS_PER_ELEMENT: usize = 4;
+
+/// Relative difference of two runs' costs under which they found the
+/// same fit.
+const SAME_FIT: f64 = 1e-6;
+
+/// The smallest stride through `points` that leaves a screening run at
+/// most [`SCREEN_POINTS_PER_ELEMENT`]`·(q + 1)` of them (1: all).
+fn screening_stride(points: usize, q: usize) -> usize {
+    points.div_ceil(SCREEN_POINTS_PER_ELEMENT * (q + 1)).max(1)
+}
+
+/// The circuit of the screening runs' `(cost, converged, circuit)` that
+/// the fit goes on from: of the runs that reach the lowest cost to
+/// [`SAME_FIT`] (the same fit; in the double cage, members of its family
+/// of equivalent circuits), the one whose `free` elements lie farthest
+/// inside the fitted range (an element at the range's edge has a
+/// vanishing column, which a refit cannot move).
+fn best_screened(results: &[(f64, bool, ImCircuit)], free: &[ImParam]) -> Option<ImCircuit> {
+    let best_cost = results.iter().map(|r| r.0).fold(f64::INFINITY, f64::min);
+    results
+        .iter()
+        .filter(|r| r.0 <= best_cost * (1.0 + SAME_FIT))
+        .max_by(|a, b| inner_margin(&a.2, free).total_cmp(&inner_margin(&b.2, free)))
+        .map(|r| r.2)
+}
+
+/// How far inside the fitted range (in logarithms; [`VANISHING`] of
+/// `|Z(s = 1)|` and its inverse) the nearest of `c`'s `free` elements is
+/// (−∞ for a missing or non-finite one).
+fn inner_margin(c: &ImCircuit, free: &[ImParam]) -> f64 {
+    let z = c.impedance(1.0).norm().ln();
+    let edge = -VANISHING.ln();
+    free.iter()
+        .map(|&p| {
+            let v = c.get(p).map_or(f64::NAN, f64::ln) - z;
+            (edge - v.abs()).max(f64::NEG_INFINITY)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// How one Levenberg–Marquardt run ended.
 struct Solved<'a> {
     problem: AtParams<SweepProblem<'a>>,
@@ -587,14 +631,38 @@ struct Solved<'a> {
     at_bound: bool,
 }
 
-fn solve(mut problem: AtParams<SweepProblem<'_>>, tol: f64, max_evaluations: usize) -> Solved<'_> {
+/// What a run starts from, which sets its first trust region.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Origin {
+    /// A start of the screening: the solver's usual first radius
+    /// (MINPACK's `factor` 100).
+    Start,
+    /// A converged fit, refitted on more points, whitened or re-split:
+    /// its Gauss–Newton step runs along the flat directions (the double
+    /// cage's family) far beyond where the linearisation holds, and from
+    /// the usual radius the run rejected three or four trials before its
+    /// region shrank to the step it takes ([`REFIT_STEP_BOUND`]).
+    Fit,
+}
+
+/// MINPACK's `factor` (the first trust region's radius over `‖D·x‖`,
+/// 0.1 to 100 by its guide) for a run from a converged fit.
+const REFIT_STEP_BOUND: f64 = 0.1;
+
+fn solve(
+    mut problem: AtParams<SweepProblem<'_>>,
+    tol: f64,
+    max_evaluations: usize,
+    origin: Origin,
+) -> Solved<'_> {
     let q = problem.param.free.len();
     let patience = (max_evaluations / (q + 1)).max(1);
-    let outcome = lm_solver::minimize(
-        &problem.problem,
-        problem.x.as_slice(),
-        &lm_solver::Settings::new(tol, patience),
-    );
+    let settings = lm_solver::Settings::new(tol, patience);
+    let settings = match origin {
+        Origin::Start => settings,
+        Origin::Fit => settings.with_step_bound(REFIT_STEP_BOUND),
+    };
+    let outcome = lm_solver::minimize(&problem.problem, problem.x.as_slice(), &settings);
     problem.x = DVector::from_vec(outcome.x);
     // The cost at the solver's last point: from its residuals where it
     // has them (it does unless it stopped right after a rejected step).
@@ -668,6 +736,12 @@ fn whitening(pairs: &[(f64, f64)], dof: usize, uses_power: bool) -> [[f64; 2]; 2
 
 /// Fit the equivalent circuit to `data` by Levenberg–Marquardt.
 pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, ImFitError> {
+    fit_screened(data, opts, true)
+}
+
+/// [`fit_lm`], its screening runs on thinned points where there are many
+/// (`thin`) or on every point.
+fn fit_screened(data: &PhaseData, opts: &LmOptions, thin: bool) -> Result<LmFit, ImFitError> {
     let model = opts.model;
     let model_params = model.params();
     for (p, v) in &opts.fixed {
@@ -720,12 +794,19 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, ImFitError> {
     }
     let weights = Weighting::new(data, opts.residual_scale);
     let mut evaluations = 0;
-    let make = |param: Parametrisation, weights: Weighting, start: &ImCircuit| {
+    fn make_on<'a>(
+        data: &'a PhaseData,
+        channels: Channels,
+        model_params: &'static [ImParam],
+        param: Parametrisation,
+        weights: Weighting,
+        start: &ImCircuit,
+    ) -> AtParams<SweepProblem<'a>> {
         let x = param.x_of(start);
         AtParams {
             problem: SweepProblem {
                 data,
-                channels: opts.channels,
+                channels,
                 param,
                 weights,
                 model_params,
@@ -734,24 +815,43 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, ImFitError> {
             },
             x,
         }
+    }
+    let make = |param: Parametrisation, weights: Weighting, start: &ImCircuit| {
+        make_on(data, opts.channels, model_params, param, weights, start)
     };
 
-    // Stage A: every start, channels scaled but not yet whitened.
+    // Stage A: every start, channels scaled but not yet whitened, on a
+    // thinned set of the points where there are many (the screening only
+    // ranks the starts).
     let open = |base: ImCircuit| Parametrisation::new(base, free.clone(), None);
+    let stride = screening_stride(data.len(), free.len());
+    let thinned = (thin && stride > 1).then(|| data.every(stride));
+    let screen_data = thinned.as_ref().unwrap_or(data);
+    let screen_weights = Weighting::new(screen_data, opts.residual_scale);
     // The starts share one run's bound (each at least 5·(q + 1)
     // evaluations): more starts, shorter screening runs.
     let bound = evaluation_bound(data.len(), free.len());
-    let screen_bound = (bound / starts.len().max(1)).max(5 * (free.len() + 1));
-    // The screening runs are independent: on every core the analysis may
-    // use, results in the starts' order (so the best, and every tie, are
-    // those of the runs one after the other).
-    let screened = crate::diagnose::par_map(&starts, |s| {
+    let share = |points: usize| {
+        (evaluation_bound(points, free.len()) / starts.len().max(1)).max(5 * (free.len() + 1))
+    };
+    // The screening runs one after the other: at most 4·(q + 1) points
+    // each (thinned, or as few in all), they cost less than waking a
+    // second core for them.
+    let screened = starts.iter().map(|s| {
+        let start = make_on(
+            screen_data,
+            opts.channels,
+            model_params,
+            open(*s),
+            screen_weights.clone(),
+            s,
+        );
         let Solved {
             problem: p,
             cost,
             converged: ok,
             ..
-        } = solve(make(open(*s), weights.clone(), s), SCREEN_TOL, screen_bound);
+        } = solve(start, SCREEN_TOL, share(screen_data.len()), Origin::Start);
         (
             p.evaluations.get(),
             p.param.circuit(p.x.as_slice()).map(|c| (cost, ok, c)),
@@ -772,11 +872,23 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, ImFitError> {
         .iter()
         .filter(|r| r.1 && r.0 <= best_cost * 1.01 + 1e-300)
         .count();
-    let best = results
-        .iter()
-        .find(|r| r.0 == best_cost)
-        .map(|r| r.2)
-        .expect("best exists");
+    let best = best_screened(&results, &free).expect("best exists");
+    // A start screened on thinned points is refitted on all of them, so
+    // that stage B's scales and whitening are those of the whole data's
+    // fit.
+    let best = if thinned.is_some() {
+        let solved = solve(
+            make(open(best), weights.clone(), &best),
+            SCREEN_TOL,
+            share(data.len()),
+            Origin::Fit,
+        );
+        evaluations += solved.problem.evaluations.get();
+        let refitted = solved.problem.param.circuit(solved.problem.x.as_slice());
+        refitted.filter(|_| solved.cost.is_finite()).unwrap_or(best)
+    } else {
+        best
+    };
 
     // Stage B: whiten with the residual covariance of the best fit, refit.
     // Relative residuals are then scaled by the first fit's prediction
@@ -799,7 +911,12 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, ImFitError> {
     }
     let probe = make(open(best), weights.clone(), &best);
     weights.l_inv = whitening(&probe.raw_residuals(&best), dof, opts.channels.uses_power());
-    let solved = solve(make(open(best), weights.clone(), &best), FINAL_TOL, bound);
+    let solved = solve(
+        make(open(best), weights.clone(), &best),
+        FINAL_TOL,
+        bound,
+        Origin::Fit,
+    );
     evaluations += solved.problem.evaluations.get();
     let mut at_bound = solved.at_bound;
     let mut problem = solved.problem;
@@ -844,7 +961,12 @@ pub fn fit_lm(data: &PhaseData, opts: &LmOptions) -> Result<LmFit, ImFitError> {
             cost,
             at_bound: p_at_bound,
             ..
-        } = solve(make(param, weights.clone(), &start), FINAL_TOL, bound);
+        } = solve(
+            make(param, weights.clone(), &start),
+            FINAL_TOL,
+            bound,
+            Origin::Fit,
+        );
         evaluations += p.evaluations.get();
         // Keep the convention only where the data do not contradict it: a
         // likelihood-ratio test on one degree of freedom (whitened
@@ -1395,6 +1517,103 @@ mod tests {
     }
 
     #[test]
+    fn a_thinned_screening_predicts_as_one_on_every_point() {
+        // 150 points, seven elements: the screening runs fit every fifth.
+        let d = double_cage_data();
+        assert_eq!(screening_stride(d.len(), 7), 5);
+        let opts = LmOptions {
+            split_policy: SplitPolicy::Never,
+            ..LmOptions::new(ImModel::Double)
+        };
+        let thinned = fit_screened(&d, &opts, true).unwrap();
+        let every = fit_screened(&d, &opts, false).unwrap();
+        for k in 0..d.len() {
+            let (a, b) = (d.predict(&thinned.circuit, k), d.predict(&every.circuit, k));
+            assert!(
+                (a.0 - b.0).abs() <= 1e-7 * b.0.abs(),
+                "current at {k}: {a:?} {b:?}"
+            );
+            assert!(
+                (a.1 - b.1).abs() <= 1e-7 * b.1.abs(),
+                "power at {k}: {a:?} {b:?}"
+            );
+        }
+        // Few points are screened whole.
+        assert_eq!(screening_stride(63, 7), 2);
+        assert_eq!(screening_stride(32, 7), 1);
+    }
+
+    #[test]
+    fn of_equal_screening_fits_the_one_inside_the_range_goes_on() {
+        let d = double_cage_data();
+        let free = ImModel::Double.params();
+        let inside =
+            classical_starts(&d, ImModel::Double, LeakageSplit::default(), None).unwrap()[0];
+        let mut edge = inside;
+        let z = inside.impedance(1.0).norm();
+        edge.set(ImParam::Xr1, 2e-9 * z).unwrap();
+        assert!(inner_margin(&edge, free) < 1.0 && inner_margin(&inside, free) > 5.0);
+        // The same cost to 1e-6: the inner one, in either order.
+        let tied = [(1.0, true, edge), (1.0 + 1e-7, true, inside)];
+        assert_eq!(best_screened(&tied, free), Some(inside));
+        let tied = [(1.0 + 1e-7, true, inside), (1.0, true, edge)];
+        assert_eq!(best_screened(&tied, free), Some(inside));
+        // A lower cost wins wherever its elements are.
+        let apart = [(1.0, true, edge), (1.001, true, inside)];
+        assert_eq!(best_screened(&apart, free), Some(edge));
+        assert_eq!(best_screened(&[], free), None);
+    }
+
+    #[test]
+    fn a_refit_from_a_converged_fit_starts_from_a_small_region() {
+        // From the usual first radius the refit's Gauss–Newton step runs
+        // along the double cage's family and is refused until the region
+        // shrinks; from the small one it reaches the same cost sooner.
+        let d = double_cage_data();
+        let model = ImModel::Double;
+        let start = classical_starts(&d, model, LeakageSplit::default(), None).unwrap()[0];
+        let problem = |c: &ImCircuit| {
+            let param = Parametrisation::new(*c, model.params().to_vec(), None);
+            let x = param.x_of(c);
+            AtParams {
+                problem: SweepProblem {
+                    data: &d,
+                    channels: Channels::CurrentAndPower,
+                    param,
+                    weights: Weighting::new(&d, ResidualScale::Relative),
+                    model_params: model.params(),
+                    evaluations: std::cell::Cell::new(0),
+                    buffers: Default::default(),
+                },
+                x,
+            }
+        };
+        let first = solve(problem(&start), SCREEN_TOL, 1000, Origin::Start);
+        let fitted = first
+            .problem
+            .param
+            .circuit(first.problem.x.as_slice())
+            .unwrap();
+        let usual = solve(problem(&fitted), FINAL_TOL, 1000, Origin::Start);
+        let small = solve(problem(&fitted), FINAL_TOL, 1000, Origin::Fit);
+        assert!(usual.converged && small.converged);
+        assert!(
+            (usual.cost - small.cost).abs() <= 1e-9 * usual.cost,
+            "{} {}",
+            usual.cost,
+            small.cost
+        );
+        let (u, s) = (
+            usual.problem.evaluations.get(),
+            small.problem.evaluations.get(),
+        );
+        assert!(
+            s < u,
+            "{s} evaluations from the small region, {u} from the usual"
+        );
+    }
+
+    #[test]
     fn a_base_without_a_finite_impedance_bounds_nothing() {
         // `f64::clamp` panics on a NaN bound; such a base has none.
         let mut c = single(1.0, 2.0, 60.0, 1.2, 3.0);
@@ -1432,7 +1651,7 @@ mod tests {
             x,
         };
         let before = problem.residuals().unwrap().norm_squared();
-        let solved = solve(problem, FINAL_TOL, 1000);
+        let solved = solve(problem, FINAL_TOL, 1000, Origin::Start);
         assert!(solved.cost < 0.1 * before, "{} from {before}", solved.cost);
         let c = solved
             .problem

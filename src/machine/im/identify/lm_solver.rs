@@ -88,6 +88,16 @@ impl Settings {
             patience,
         }
     }
+
+    /// The same with MINPACK's `factor`, the first trust region's radius
+    /// over `‖D·x‖`, at `factor` instead of 100.
+    pub(super) fn with_step_bound(self, factor: f64) -> Settings {
+        assert!(factor > 0.0, "the step bound must be > 0");
+        Settings {
+            stepbound: factor,
+            ..self
+        }
+    }
 }
 
 /// How a run ended.

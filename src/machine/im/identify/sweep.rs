@@ -333,6 +333,19 @@ impl PhaseData {
         }
     }
 
+    /// Every `stride`-th point, from the first.
+    pub fn every(&self, stride: usize) -> PhaseData {
+        let stride = stride.max(1);
+        let pick = |v: &[f64]| v.iter().step_by(stride).copied().collect::<Vec<f64>>();
+        PhaseData {
+            slip: pick(&self.slip),
+            voltage: pick(&self.voltage),
+            current: pick(&self.current),
+            power: pick(&self.power),
+            rs_scale: pick(&self.rs_scale),
+        }
+    }
+
     /// The circuit as point `k` sees it: `Rs` scaled to the point's
     /// winding temperature where the data carry one.
     fn circuit_at(&self, c: &ImCircuit, k: usize) -> ImCircuit {
