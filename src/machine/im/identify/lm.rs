@@ -1516,6 +1516,29 @@ mod tests {
         d
     }
 
+    /// The fit's problem on `d` at `c`, every element of `model` free,
+    /// relative residuals not yet whitened (a screening run's).
+    fn unwhitened<'a>(
+        d: &'a PhaseData,
+        model: ImModel,
+        c: &ImCircuit,
+    ) -> AtParams<SweepProblem<'a>> {
+        let param = Parametrisation::new(*c, model.params().to_vec(), None);
+        let x = param.x_of(c);
+        AtParams {
+            problem: SweepProblem {
+                data: d,
+                channels: Channels::CurrentAndPower,
+                param,
+                weights: Weighting::new(d, ResidualScale::Relative),
+                model_params: model.params(),
+                evaluations: std::cell::Cell::new(0),
+                buffers: Default::default(),
+            },
+            x,
+        }
+    }
+
     #[test]
     fn a_thinned_screening_predicts_as_one_on_every_point() {
         // 150 points, seven elements: the screening runs fit every fifth.
@@ -1572,22 +1595,7 @@ mod tests {
         let d = double_cage_data();
         let model = ImModel::Double;
         let start = classical_starts(&d, model, LeakageSplit::default(), None).unwrap()[0];
-        let problem = |c: &ImCircuit| {
-            let param = Parametrisation::new(*c, model.params().to_vec(), None);
-            let x = param.x_of(c);
-            AtParams {
-                problem: SweepProblem {
-                    data: &d,
-                    channels: Channels::CurrentAndPower,
-                    param,
-                    weights: Weighting::new(&d, ResidualScale::Relative),
-                    model_params: model.params(),
-                    evaluations: std::cell::Cell::new(0),
-                    buffers: Default::default(),
-                },
-                x,
-            }
-        };
+        let problem = |c: &ImCircuit| unwhitened(&d, model, c);
         let first = solve(problem(&start), SCREEN_TOL, 1000, Origin::Start);
         let fitted = first
             .problem
@@ -1635,21 +1643,11 @@ mod tests {
         let model = ImModel::Double;
         let mut start = classical_starts(&d, model, LeakageSplit::default(), None).unwrap()[0];
         start.set(ImParam::Xr1, 1.3e-104).unwrap();
-        let param = Parametrisation::new(start, model.params().to_vec(), None);
-        let x = param.x_of(&start);
-        assert_eq!(x[5], param.bounds.0, "the start is lifted to the bound");
-        let problem = AtParams {
-            problem: SweepProblem {
-                data: &d,
-                channels: Channels::CurrentAndPower,
-                param,
-                weights: Weighting::new(&d, ResidualScale::Relative),
-                model_params: model.params(),
-                evaluations: std::cell::Cell::new(0),
-                buffers: Default::default(),
-            },
-            x,
-        };
+        let problem = unwhitened(&d, model, &start);
+        assert_eq!(
+            problem.x[5], problem.param.bounds.0,
+            "the start is lifted to the bound"
+        );
         let before = problem.residuals().unwrap().norm_squared();
         let solved = solve(problem, FINAL_TOL, 1000, Origin::Start);
         assert!(solved.cost < 0.1 * before, "{} from {before}", solved.cost);
