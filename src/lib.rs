@@ -13,7 +13,9 @@
 //!   sizes an allocation, a loop or a wait.
 //! - [`excerpt`]: user input quoted in error messages, long values cut.
 //! - [`model`]: DC machine equations, effects, exact simulation; the
-//!   induction machine's steady-state equivalent circuits.
+//!   induction machine's steady-state equivalent circuits, and its
+//!   augmentations (`model::im_effects`: saturation, core loss, deep bar,
+//!   …) that the diagnosis and the standard tests' joint fit share.
 //! - [`bench`]: machine-agnostic: settle detection, limits and safe state.
 //!   Every test reads through one sequencer core (`bench/sequencer.rs`:
 //!   select on the stop, stale-data timeout, recording, the

@@ -14,6 +14,7 @@ pub use zoh::Zoh;
 
 mod im;
 mod im_closed_form;
+pub(crate) mod im_effects;
 mod im_equivalent;
 #[cfg(test)]
 pub(crate) mod im_fixtures;

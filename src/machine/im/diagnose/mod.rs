@@ -20,7 +20,7 @@
 //! The method is written up in `docs/diagnosis-im.md`.
 
 mod data;
-pub(crate) mod effects;
+pub(crate) use crate::model::im_effects as effects;
 mod fit;
 mod gap;
 mod second_effect;

@@ -1,6 +1,8 @@
 //! The induction machine's nominal model and its six augmentations, as
 //! the diagnosis fits them: one parameter vector, one prediction of phase
-//! current and three-phase input power per operating point.
+//! current and three-phase input power per operating point. A model, not
+//! a diagnosis step: the diagnosis fits it, and the standard tests' joint
+//! fit takes its main-flux saturation from it.
 //!
 //! The nominal model is the seed paper's single cage **without** iron
 //! loss (`Rs`, `Xs`, `Xm`, `Rr`, `Xr`), with the leakage split fixed by
@@ -499,6 +501,13 @@ impl ImAugmentation {
         let rr = x[2].exp();
         match self.effect {
             Some(Effect::ThermalDrift) => rr * (1.0 + x[5].exp() * p.heat),
+            // The Γ circuit's rotor, behind the stator flux: referred by
+            // γ = (Xs + Xm)/Xm ([`gamma_circuit`]).
+            Some(Effect::MainFluxSaturation) if self.flux == SaturatingFlux::Stator => {
+                let (xm, xs) = (x[1].exp(), self.split_ratio * x[3].exp());
+                let g = (xs + xm) / xm;
+                g * g * rr
+            }
             _ => rr,
         }
     }
@@ -802,6 +811,36 @@ mod tests {
             "{model:?} {free:?}"
         );
         assert!(rel(bare.power, free.power) > 0.3, "{bare:?} {free:?}");
+    }
+
+    /// The same on the stator-flux form of main-flux saturation, whose
+    /// rotor is the Γ circuit's (`γ²·Rr` behind the stator flux): the
+    /// free-running point's air-gap power is the friction and the rotor's
+    /// copper loss, `Pfw/(1 − s)` (the slip below 0.5 %; with the T circuit's
+    /// `Rr` it was `γ²` times too much, 7 % here).
+    #[test]
+    fn a_free_running_point_on_the_stator_flux_delivers_its_friction() {
+        let model = ImAugmentation {
+            friction: true,
+            flux: SaturatingFlux::Stator,
+            ..ImAugmentation::with(Effect::MainFluxSaturation, 1.0)
+        };
+        let friction: f64 = 150.0;
+        for es in [150.0f64, 1e6] {
+            let mut x = x0();
+            x.extend([es.ln(), friction.ln()]);
+            let t = model
+                .terminal(
+                    &x,
+                    &PointInput {
+                        free_running: true,
+                        ..PointInput::at(0.3, 230.0)
+                    },
+                )
+                .unwrap();
+            let gap = t.rotor_power / friction - 1.0;
+            assert!(gap > 0.0 && gap < 5e-3, "Es {es}: {gap}");
+        }
     }
 
     /// At a quarter of the frequency the nominal model is the circuit with
