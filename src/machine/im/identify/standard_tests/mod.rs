@@ -77,6 +77,13 @@ pub struct StandardTestsReduction {
     /// where the DC reading and that test give one, the DC reading's
     /// where only it does; `None` when the DC reading gives none.
     pub rs_temperature: Option<f64>,
+    /// The rated line voltage the reduction took, V (the nameplate's, else
+    /// the highest no-load voltage).
+    pub rated_voltage: f64,
+    /// The no-load test's air-gap voltage per phase at rated voltage, V
+    /// at rated frequency (the table's `E` interpolated to the rated line
+    /// voltage, held at its ends): where `Xm` is reported.
+    pub rated_air_gap_voltage: Option<f64>,
     /// What a user should know (conventions, corrections, assumptions).
     pub warnings: Vec<String>,
 }
@@ -308,8 +315,12 @@ pub fn reduce_standard_tests(
             xr: k_f * s.xr,
         },
     };
+    let rated_air_gap_voltage =
+        no_load::interpolate(&s.rows, rated_voltage, |r| Some(r.air_gap_voltage)).map(|e| k_f * e);
     Ok(StandardTestsReduction {
         circuit,
+        rated_voltage,
+        rated_air_gap_voltage,
         params,
         tables: StandardTestTables {
             no_load: s.rows,
