@@ -13,6 +13,13 @@ use crate::record::{DcResistanceReading, SupplyReading};
 
 const PFW: f64 = 45.0;
 
+/// Each `(name, got, truth)` within 10⁻⁴ of its truth.
+fn assert_near(elements: &[(&str, f64, f64)]) {
+    for &(name, got, truth) in elements {
+        assert!((got / truth - 1.0).abs() < 1e-4, "{name}: {got} vs {truth}");
+    }
+}
+
 /// Star, 400 V, 50 Hz, Xs = Xr.
 fn machine() -> ImCircuit {
     single_cage(0.9, 1.8, 60.0, Some(900.0), 1.1, 1.8)
@@ -156,15 +163,13 @@ fn readings_at_their_winding_temperatures_fit_with_rs_scaled_to_each() {
         unreachable!()
     };
     // Rs at the locked-rotor test's 40 °C.
-    for (name, got, truth) in [
+    assert_near(&[
         ("Rs", f.circuit.rs, at(40.0).rs),
         ("Xm", f.circuit.xm, c.xm),
         ("Rfe", f.circuit.rfe.unwrap(), 900.0),
         ("Rr", rr, 1.1),
         ("Pfw", f.friction_windage, PFW),
-    ] {
-        assert!((got / truth - 1.0).abs() < 1e-4, "{name}: {got} vs {truth}");
-    }
+    ]);
     assert!(f.rms_relative < 1e-6, "{}", f.rms_relative);
     assert_warned(&f.warnings, "scaled to its own temperature");
     // Without the no-load readings' temperatures they are fitted at
@@ -211,14 +216,12 @@ fn load_points_at_their_winding_temperature_see_rs_scaled_to_it() {
     let RotorCage::Single { rr, .. } = f.circuit.rotor else {
         unreachable!()
     };
-    for (name, got, truth) in [
+    assert_near(&[
         ("Rs", f.circuit.rs, at(40.0).rs),
         ("Xm", f.circuit.xm, c.xm),
         ("Rr", rr, 1.1),
         ("Pfw", f.friction_windage, PFW),
-    ] {
-        assert!((got / truth - 1.0).abs() < 1e-4, "{name}: {got} vs {truth}");
-    }
+    ]);
     assert!(f.rms_relative < 1e-6, "{}", f.rms_relative);
     assert_warned(&f.warnings, "so does each load point");
     // The same points without their temperature: fitted at 40 °C,
@@ -317,7 +320,7 @@ fn a_no_load_test_that_saturates_is_fitted_with_the_saturation_curve() {
     let RotorCage::Single { rr, xr } = f.circuit.rotor else {
         unreachable!()
     };
-    for (name, got, truth) in [
+    assert_near(&[
         ("Rs", f.circuit.rs, 0.9),
         ("Xr", xr, 1.8),
         ("Rr", rr, 1.1),
@@ -325,9 +328,7 @@ fn a_no_load_test_that_saturates_is_fitted_with_the_saturation_curve() {
         ("Pfw", f.friction_windage, PFW),
         ("Xm_unsaturated", f.params["Xm_unsaturated"].value, 60.0),
         ("Es", f.params["Es"].value, 205.0),
-    ] {
-        assert!((got / truth - 1.0).abs() < 1e-4, "{name}: {got} vs {truth}");
-    }
+    ]);
     assert!(f.rms_relative < 1e-6, "{}", f.rms_relative);
     // Xm is the one the no-load test shows at rated voltage: below the
     // unsaturated one, and what the classical reduction reads there.
