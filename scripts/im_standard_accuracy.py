@@ -23,7 +23,8 @@ The plant's truth in the contract's T circuit (Xs = Xr) is the one of
 `scripts/blind_motulator.py`'s docstring. With saturation, `Xm` is what
 the noise-free no-load reading at rated voltage shows by the classical
 formula `E²/(Q − I²·Xs)` (what both methods report), and
-`Xm_unsaturated` the T circuit's unsaturated `Xm`. motulator's core loss
+`Xm_unsaturated` the T circuit's unsaturated `Xm`, `saturation_exponent`
+motulator's exponent `S` (the same curve's, on the stator flux). motulator's core loss
 sits across the stator flux (the Γ circuit's node); its truth here is the
 T circuit's `Rfe` across `E` that draws the same loss at no load.
 
@@ -35,6 +36,7 @@ import argparse
 import json
 import math
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -47,7 +49,7 @@ import blind_motulator as bm  # noqa: E402  (the plant, its machines and meters)
 from motulator.drive.model import InductionMachinePars  # noqa: E402
 
 EFFECTS = ["none", "iron_loss", "main_flux_saturation", "saturation_and_iron_loss"]
-KEYS = ["Rs", "Xs", "Xr", "Rr", "Xm", "Xm_unsaturated", "Rfe", "Pfw"]
+KEYS = ["Rs", "Xs", "Xr", "Rr", "Xm", "Xm_unsaturated", "saturation_exponent", "Rfe", "Pfw"]
 
 
 def slip_for_torque(par, w, u, torque):
@@ -135,6 +137,8 @@ def make(seed, effect, out):
     rs, xs = k * mc["R_s"], k * w * leak
     truth = {"Rs": rs, "Xs": xs, "Xr": xs, "Rr": k * mc["R_r"] * L_su / (L_su + L_ell),
              "Xm_unsaturated": k * w * L_m, "Pfw": pfw}
+    if callable(par.L_s):
+        truth["saturation_exponent"] = S
     if par.G_c:
         truth["Rfe"] = k / par.G_c * L_su / (L_su + L_ell)
     # Xm as the noise-free no-load reading at rated voltage shows it.
@@ -173,6 +177,7 @@ def main():
                 d, truth = make(seed, effect, out)
             except RuntimeError as e:  # the plant, not motorbench
                 print(f"{effect:26s} seed {seed}: skipped, motulator: {e}", file=sys.stderr)
+                shutil.rmtree(os.path.join(out, f"{effect}-{seed}"), ignore_errors=True)
                 continue
             report = run(args.bin, d)
             warnings = report.get("warnings", [])

@@ -165,6 +165,11 @@ pub struct ImAugmentation {
     /// core loss beside the effect (a second effect; never with
     /// [`Effect::IronLoss`], which is the core loss).
     pub iron: bool,
+    /// The saturation curve's exponent (read only for
+    /// [`Effect::MainFluxSaturation`]): [`MAIN_FLUX_EXPONENT`] for the
+    /// diagnosis; the standard tests' joint fit may fit it, the no-load
+    /// test's span of voltages fixing the curve's shape.
+    pub exponent: f64,
 }
 
 /// The two usual forms of main-flux saturation. They are the same
@@ -328,6 +333,7 @@ impl ImAugmentation {
             friction: false,
             torque: false,
             iron: false,
+            exponent: MAIN_FLUX_EXPONENT as f64,
         }
     }
 
@@ -340,6 +346,7 @@ impl ImAugmentation {
             friction: false,
             torque: false,
             iron: false,
+            exponent: MAIN_FLUX_EXPONENT as f64,
         }
     }
 
@@ -559,7 +566,7 @@ impl ImAugmentation {
                     return None;
                 }
                 // The flux is the voltage over the frequency.
-                let d = |e: f64| 1.0 + (e / (r * es)).powi(MAIN_FLUX_EXPONENT);
+                let d = |e: f64| 1.0 + saturation(e / (r * es), self.exponent);
                 match self.flux {
                     SaturatingFlux::AirGap => main_flux_terminal(&cage, s, v, d)?,
                     SaturatingFlux::Stator => main_flux_terminal(&gamma_circuit(&cage), s, v, d)?,
@@ -630,6 +637,16 @@ pub fn gamma_circuit(c: &Cage) -> Cage {
         rr: g * g * c.rr,
         xr: g * c.xs + g * g * c.xr,
         gfe: c.gfe,
+    }
+}
+
+/// `u^n`, the saturation curve's term: by multiplication at the
+/// diagnosis' exponent, [`MAIN_FLUX_EXPONENT`].
+pub fn saturation(u: f64, n: f64) -> f64 {
+    if n == MAIN_FLUX_EXPONENT as f64 {
+        u.powi(MAIN_FLUX_EXPONENT)
+    } else {
+        u.powf(n)
     }
 }
 

@@ -6,18 +6,18 @@ use levenberg_marquardt::{LevenbergMarquardt, MinimizationReport};
 use nalgebra::DVector;
 use statrs::distribution::{ContinuousCDF, FisherSnedecor};
 
-use super::problem::{Branch, JointProblem, Test, Q};
+use super::problem::{Branch, CurveFit, JointProblem, Test, Q};
 use super::MAX_EVALUATIONS;
 use crate::identify::least_squares::{AtParams, Residuals};
 use crate::machine::im::identify::standard_tests::StandardTestsReduction;
-use crate::model::im_effects::{SaturatingFlux, MAIN_FLUX_EXPONENT};
+use crate::model::im_effects::{saturation, SaturatingFlux, MAIN_FLUX_EXPONENT};
 
 /// The significance at which the saturation curve enters the fit
 /// (extra-sum-of-squares F test for its one parameter).
 pub(super) const SATURATION_P: f64 = 1e-3;
 
 /// The least fall of `Xm` at the no-load test's highest air-gap voltage,
-/// `(E/Es)^7`, for saturation to count: a better fit with less is the
+/// `(E/Es)^n`, for saturation to count: a better fit with less is the
 /// other form's placement of the core loss (across the stator flux), not
 /// saturation, and the linear fit stays.
 pub(super) const MIN_SATURATION: f64 = 0.01;
@@ -29,6 +29,11 @@ const PLACEMENT_GAIN: f64 = 0.01;
 /// The fewest no-load readings the saturating fit needs: with `Pfw` and
 /// `Rfe` the no-load test fixes three quantities of its own.
 const SATURATION_MIN_NO_LOAD: usize = 3;
+
+/// The fewest no-load readings the fit of the curve's exponent needs
+/// (with fewer it is [`MAIN_FLUX_EXPONENT`]): the no-load test then fixes
+/// `Xm`, `Es`, the exponent, `Rfe` and `Pfw` with a spare reading.
+const EXPONENT_MIN_NO_LOAD: usize = 6;
 
 /// The saturating fit's starts of `Es`, times the largest air-gap voltage
 /// of the no-load test (the diagnosis' starts).
@@ -82,13 +87,9 @@ pub(super) fn choose_branch<'a>(
     let Some(e_ref) = e_ref else {
         return (linear, Vec::new());
     };
-    let curve = |flux, fitted| Branch::Curve {
-        e_ref,
-        flux,
-        fitted,
-    };
+    let curve = |flux, fit| Branch::Curve { e_ref, flux, fit };
     let mut notes = Vec::new();
-    let stator = linear.0.with(curve(SaturatingFlux::Stator, false));
+    let stator = linear.0.with(curve(SaturatingFlux::Stator, CurveFit::Held));
     let base = match fitted(stator, x0.clone()) {
         Some(g) if g.2 < (1.0 - PLACEMENT_GAIN) * linear.2 => {
             notes.push(format!(
@@ -109,7 +110,13 @@ pub(super) fn choose_branch<'a>(
         .iter()
         .filter(|r| r.test == Test::NoLoad)
         .count();
-    if no_load < SATURATION_MIN_NO_LOAD || m <= Q + 1 {
+    let shape = if no_load >= EXPONENT_MIN_NO_LOAD {
+        CurveFit::KneeAndExponent
+    } else {
+        CurveFit::Knee
+    };
+    let q = base.0.with(curve(SaturatingFlux::AirGap, shape)).q();
+    if no_load < SATURATION_MIN_NO_LOAD || m <= q {
         return (base, notes);
     }
     let e_max = reduction
@@ -122,17 +129,28 @@ pub(super) fn choose_branch<'a>(
         .into_iter()
         .flat_map(|flux| ES_STARTS.map(|k| (flux, k)))
         .filter_map(|(flux, k)| {
-            let x0 = x0.clone().insert_row(Q, (k * e_max).ln());
-            fitted(base.0.with(curve(flux, true)), x0)
+            let start = x0.clone().insert_row(Q, (k * e_max).ln());
+            let knee = fitted(base.0.with(curve(flux, CurveFit::Knee)), start)?;
+            if shape == CurveFit::Knee {
+                return Some(knee);
+            }
+            // The exponent from the fit at the diagnosis' exponent, `Rs`
+            // back at the DC reading (a plant of another exponent may
+            // have pushed it to a bound, where its map is flat).
+            let mut start = knee.0.x.clone();
+            start[0] = x0[0];
+            let n = f64::from(MAIN_FLUX_EXPONENT);
+            let start = start.insert_row(Q + 1, JointProblem::exponent_entry(n));
+            fitted(base.0.with(curve(flux, shape)), start)
         })
         .min_by(|a, b| a.2.total_cmp(&b.2));
     let Some(sat) = best else {
         return (base, notes);
     };
     let (rss0, rss1) = (base.2, sat.2);
-    let dof = (m - Q - 1) as f64;
-    let f = (rss0 - rss1) / (rss1 / dof);
-    let p = match FisherSnedecor::new(1.0, dof) {
+    let (df1, df2) = ((q - Q) as f64, (m - q) as f64);
+    let f = (rss0 - rss1) / df1 / (rss1 / df2);
+    let p = match FisherSnedecor::new(df1, df2) {
         Ok(d) if f.is_finite() => d.sf(f.max(0.0)),
         _ if rss1 < rss0 => 0.0,
         _ => 1.0,
@@ -141,10 +159,16 @@ pub(super) fn choose_branch<'a>(
     let (Some(es), Some((circuit, _))) = (fit.fitted_knee(&fit.x), fit.unpack(&fit.x)) else {
         return (base, notes);
     };
-    if p >= SATURATION_P || (e_max / es).powi(MAIN_FLUX_EXPONENT) < MIN_SATURATION {
+    let n = fit.exponent(&fit.x);
+    if p >= SATURATION_P || saturation(e_max / es, n) < MIN_SATURATION {
         return (base, notes);
     }
-    let xm_u = fit.unsaturated_xm(&circuit, es).unwrap_or(f64::NAN);
+    let xm_u = fit.unsaturated_xm(&circuit, (es, n)).unwrap_or(f64::NAN);
+    let exponent = if shape == CurveFit::KneeAndExponent {
+        format!("{n:.3} (saturation_exponent)")
+    } else {
+        format!("{n} (fixed: fewer than {EXPONENT_MIN_NO_LOAD} no-load readings)")
+    };
     let form = match fit.branch {
         Branch::Curve {
             flux: SaturatingFlux::Stator,
@@ -155,9 +179,9 @@ pub(super) fn choose_branch<'a>(
     let note = format!(
         "joint: Xm falls with the voltage (main-flux saturation, from the {no_load} no-load \
          readings: the rms relative residual {:.3} % with one Xm, {:.3} % with the curve, F test \
-         p = {p:.1e}): Xm(E) = Xm_u/(1 + (E/Es)^{MAIN_FLUX_EXPONENT}) on {form}, Xm_u = \
-         {xm_u:.5} ohm (Xm_unsaturated), Es = {es:.5} V per phase at rated frequency; Xm is the \
-         one the no-load test shows at rated voltage, as the classical reduction takes it",
+         p = {p:.1e}): Xm(E) = Xm_u/(1 + (E/Es)^n) on {form}, Xm_u = {xm_u:.5} ohm \
+         (Xm_unsaturated), Es = {es:.5} V per phase at rated frequency, n = {exponent}; Xm is \
+         the one the no-load test shows at rated voltage, as the classical reduction takes it",
         rms(rss0),
         rms(rss1)
     );

@@ -36,7 +36,9 @@
 //!   it fall by a third or more; one constant `Xm` then misfits that test
 //!   by several per cent and pushes `Rs` to a bound. With three no-load
 //!   readings or more the fit is also run with the diagnosis' saturation
-//!   curve, `Xm(E) = Xm_u/(1 + (E/Es)^7)`, one parameter `ln Es` more,
+//!   curve, `Xm(E) = Xm_u/(1 + (E/Es)^n)`, `ln Es` one parameter more
+//!   and the exponent `n` another where six no-load readings or more
+//!   fix the curve's shape (else `n` = 7, the diagnosis' exponent),
 //!   in both of its forms ([`crate::model::im_effects`]: the T circuit's
 //!   `Xm` on the air-gap voltage, or the Γ circuit's stator inductance on
 //!   the stator flux), the better fit kept. `Xm` is then reported as the
@@ -69,7 +71,7 @@ mod tests;
 
 use branch::{choose_branch, fitted};
 use covariance::Covariance;
-use problem::{Branch, JointProblem, Reading, Test, Q};
+use problem::{Branch, CurveFit, JointProblem, Reading, Test, Q};
 
 /// The method's key in the report.
 pub const JOINT: &str = "joint";
@@ -342,13 +344,34 @@ pub fn fit_joint(
             let rated = |x: &DVector<f64>| problem.rated_xm(x, reduction.rated_voltage);
             let unsaturated = |x: &DVector<f64>| {
                 let (c, _) = problem.unpack(x)?;
-                problem.unsaturated_xm(&c, problem.knee(x)?)
+                problem.unsaturated_xm(&c, problem.curve(x)?)
             };
             let xm = derived(&rated).ok_or(JointFitError::Invalid)?;
             circuit.xm = xm.value;
             params.insert("Xm".into(), xm);
             params.extend(derived(&unsaturated).map(|p| ("Xm_unsaturated".to_string(), p)));
             params.insert("Es".into(), log_estimate(es, Q, "V"));
+            if let Branch::Curve {
+                fit: CurveFit::KneeAndExponent,
+                ..
+            } = problem.branch
+            {
+                // The exponent's interval through its logistic map.
+                let n = |z: f64| {
+                    let mut at = x.clone();
+                    at[Q + 1] = z;
+                    problem.exponent(&at)
+                };
+                let z = x[Q + 1];
+                params.insert(
+                    "saturation_exponent".into(),
+                    ParamEstimate {
+                        value: problem.exponent(&x),
+                        ci95: se(Q + 1).map(|s| [n(z - t * s), n(z + t * s)]),
+                        unit: "1".into(),
+                    },
+                );
+            }
         }
         None => {
             params.insert("Xm".into(), log_estimate(circuit.xm, 2, "ohm"));

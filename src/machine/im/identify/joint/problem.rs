@@ -7,7 +7,9 @@ use std::cell::Cell;
 use nalgebra::{DMatrix, DVector};
 
 use crate::identify::least_squares::Residuals;
-use crate::model::im_effects::{ImAugmentation, PointInput, SaturatingFlux, MAIN_FLUX_EXPONENT};
+use crate::model::im_effects::{
+    logistic, saturation, ImAugmentation, PointInput, SaturatingFlux, MAIN_FLUX_EXPONENT,
+};
 use crate::model::{
     at_frequency, no_load_reading, Connection, Effect, ImCircuit, ImSupply, RotorCage, C64,
 };
@@ -65,16 +67,33 @@ pub(super) enum Branch {
     Linear,
     /// The diagnosis' model ([`crate::model::im_effects`]): `Xm` on the
     /// saturation curve of `flux`, the core loss across the same node;
-    /// the vector's `Xm` holds at the air-gap voltage `e_ref`. The knee
-    /// `Es` is the vector's last entry where `fitted`, else held
-    /// [`HELD_KNEE`] times `e_ref` (nothing saturates: on the stator flux,
-    /// the Γ circuit's placement of the core loss, behind `Rs` alone).
+    /// the vector's `Xm` holds at the air-gap voltage `e_ref`; `fit` says
+    /// which of the curve's parameters the vector holds.
     Curve {
         e_ref: f64,
         flux: SaturatingFlux,
-        fitted: bool,
+        fit: CurveFit,
     },
 }
+
+/// Which of the saturation curve's parameters the vector holds after its
+/// first [`Q`] entries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum CurveFit {
+    /// None: the knee held [`HELD_KNEE`] times `e_ref`, so that nothing
+    /// saturates (on the stator flux: the Γ circuit's placement of the
+    /// core loss, behind `Rs` alone).
+    Held,
+    /// `ln Es`; the exponent [`MAIN_FLUX_EXPONENT`].
+    Knee,
+    /// `ln Es`, then the exponent within [`EXPONENT_RANGE`] through a
+    /// logistic map.
+    KneeAndExponent,
+}
+
+/// The exponents the curve may take where the fit holds one: the
+/// no-load test's span of voltages fixes the curve's shape.
+pub(super) const EXPONENT_RANGE: (f64, f64) = (3.0, 15.0);
 
 /// A held knee, times the reference air-gap voltage: `(E/Es)^7` below
 /// 10⁻⁴⁰ at every reading.
@@ -83,7 +102,21 @@ const HELD_KNEE: f64 = 1e6;
 impl JointProblem<'_> {
     /// How many parameters the fit has.
     pub(super) fn q(&self) -> usize {
-        Q + usize::from(matches!(self.branch, Branch::Curve { fitted: true, .. }))
+        Q + match self.branch {
+            Branch::Linear
+            | Branch::Curve {
+                fit: CurveFit::Held,
+                ..
+            } => 0,
+            Branch::Curve {
+                fit: CurveFit::Knee,
+                ..
+            } => 1,
+            Branch::Curve {
+                fit: CurveFit::KneeAndExponent,
+                ..
+            } => 2,
+        }
     }
 
     /// This fit with the magnetising branch modelled as `branch`.
@@ -100,27 +133,62 @@ impl JointProblem<'_> {
     pub(super) fn knee(&self, x: &DVector<f64>) -> Option<f64> {
         match self.branch {
             Branch::Linear => None,
-            Branch::Curve { fitted: true, .. } => {
-                Some(x[Q].exp()).filter(|v| v.is_finite() && *v > 0.0)
-            }
-            Branch::Curve { e_ref, .. } => Some(HELD_KNEE * e_ref),
+            Branch::Curve {
+                e_ref,
+                fit: CurveFit::Held,
+                ..
+            } => Some(HELD_KNEE * e_ref),
+            Branch::Curve { .. } => Some(x[Q].exp()).filter(|v| v.is_finite() && *v > 0.0),
         }
+    }
+
+    /// The saturation curve's exponent in `x`.
+    pub(super) fn exponent(&self, x: &DVector<f64>) -> f64 {
+        match self.branch {
+            Branch::Curve {
+                fit: CurveFit::KneeAndExponent,
+                ..
+            } => {
+                let (lo, hi) = EXPONENT_RANGE;
+                lo + (hi - lo) * logistic(x[Q + 1])
+            }
+            _ => f64::from(MAIN_FLUX_EXPONENT),
+        }
+    }
+
+    /// The vector entry that holds `exponent` (the inverse of
+    /// [`JointProblem::exponent`]'s map).
+    pub(super) fn exponent_entry(exponent: f64) -> f64 {
+        let (lo, hi) = EXPONENT_RANGE;
+        let share = (exponent - lo) / (hi - lo);
+        (share / (1.0 - share)).ln()
+    }
+
+    /// The knee and the exponent in `x`; `None` for the linear branch.
+    pub(super) fn curve(&self, x: &DVector<f64>) -> Option<(f64, f64)> {
+        Some((self.knee(x)?, self.exponent(x)))
     }
 
     /// The fitted knee `Es` in `x`: `None` where the fit holds it.
     pub(super) fn fitted_knee(&self, x: &DVector<f64>) -> Option<f64> {
-        matches!(self.branch, Branch::Curve { fitted: true, .. })
-            .then(|| self.knee(x))
-            .flatten()
+        let held = matches!(
+            self.branch,
+            Branch::Linear
+                | Branch::Curve {
+                    fit: CurveFit::Held,
+                    ..
+                }
+        );
+        (!held).then(|| self.knee(x)).flatten()
     }
 
     /// The unsaturated `Xm_u` of circuit `c` (whose `Xm` holds at the
-    /// reference air-gap voltage) with knee `es`.
-    pub(super) fn unsaturated_xm(&self, c: &ImCircuit, es: f64) -> Option<f64> {
+    /// reference air-gap voltage) on the curve `(es, n)`.
+    pub(super) fn unsaturated_xm(&self, c: &ImCircuit, (es, n): (f64, f64)) -> Option<f64> {
         let Branch::Curve { e_ref, .. } = self.branch else {
             return Some(c.xm);
         };
-        Some(c.xm * (1.0 + (e_ref / es).powi(MAIN_FLUX_EXPONENT)))
+        Some(c.xm * (1.0 + saturation(e_ref / es, n)))
     }
 
     /// Whether the core loss sits across the stator flux (behind `Rs`
@@ -160,16 +228,16 @@ impl JointProblem<'_> {
     }
 
     /// Line current and input power of `r` on circuit `c` with friction
-    /// `pfw`, its `Xm` saturating with knee `es` where given.
+    /// `pfw`, its `Xm` on the saturation curve `(Es, n)` where given.
     pub(super) fn model(
         &self,
         c: &ImCircuit,
         pfw: f64,
-        es: Option<f64>,
+        curve: Option<(f64, f64)>,
         r: &Reading,
     ) -> Option<(f64, f64)> {
-        if let Some(es) = es {
-            return self.saturating(c, pfw, es, r);
+        if let Some(curve) = curve {
+            return self.saturating(c, pfw, curve, r);
         }
         let mut at = at_frequency(c, r.frequency / self.rated_frequency);
         at.rs *= r.rs_scale;
@@ -232,7 +300,7 @@ impl JointProblem<'_> {
             frequency: self.rated_frequency,
             rs_scale: 1.0,
         };
-        let (i_line, p) = self.model(&c, pfw, self.knee(x), &reading)?;
+        let (i_line, p) = self.model(&c, pfw, self.curve(x), &reading)?;
         let v = self.connection.phase_voltage(line_voltage);
         let i = self.connection.phase_current(i_line);
         let (p, s) = (p / 3.0, v * i);
@@ -240,15 +308,15 @@ impl JointProblem<'_> {
         Some((c, v, C64::new(p / v, -q / v)))
     }
 
-    /// [`JointProblem::model`] with `Xm` on the saturation curve of knee
-    /// `es`: the diagnosis' model of main-flux saturation with a core loss
+    /// [`JointProblem::model`] with `Xm` on the saturation curve
+    /// `(Es, n)`: the diagnosis' model of main-flux saturation with a core loss
     /// and friction beside it, whose free-running points are the no-load
     /// readings.
     pub(super) fn saturating(
         &self,
         c: &ImCircuit,
         pfw: f64,
-        es: f64,
+        (es, n): (f64, f64),
         r: &Reading,
     ) -> Option<(f64, f64)> {
         let RotorCage::Single { rr, xr } = c.rotor else {
@@ -261,9 +329,10 @@ impl JointProblem<'_> {
                 Branch::Curve { flux, .. } => flux,
                 Branch::Linear => return None,
             },
+            exponent: n,
             ..ImAugmentation::with(Effect::MainFluxSaturation, self.ratio)
         };
-        let xm_u = self.unsaturated_xm(c, es)?;
+        let xm_u = self.unsaturated_xm(c, (es, n))?;
         let x = [c.rs, xm_u, rr, xr, es, c.rfe?, pfw].map(f64::ln);
         let p = PointInput {
             slip: match r.test {
@@ -290,13 +359,13 @@ impl Residuals for JointProblem<'_> {
     fn residuals_at(&self, x: &DVector<f64>) -> Option<DVector<f64>> {
         self.evaluations.set(self.evaluations.get() + 1);
         let (c, pfw) = self.unpack(x)?;
-        let es = match self.branch {
+        let curve = match self.branch {
             Branch::Linear => None,
-            Branch::Curve { .. } => Some(self.knee(x)?),
+            Branch::Curve { .. } => Some(self.curve(x)?),
         };
         let mut out = DVector::zeros(2 * self.readings.len());
         for (k, r) in self.readings.iter().enumerate() {
-            let (i, p) = self.model(&c, pfw, es, r)?;
+            let (i, p) = self.model(&c, pfw, curve, r)?;
             out[2 * k] = i / r.line_current - 1.0;
             out[2 * k + 1] = p / r.input_power - 1.0;
         }
