@@ -13,7 +13,7 @@ use crate::machine::im::identify::standard_tests::StandardTestsReduction;
 use crate::model::im_effects::{saturation, SaturatingFlux, MAIN_FLUX_EXPONENT};
 
 /// The significance at which the saturation curve enters the fit
-/// (extra-sum-of-squares F test for its one parameter).
+/// (extra-sum-of-squares F test for its one or two parameters).
 pub(super) const SATURATION_P: f64 = 1e-3;
 
 /// The least fall of `Xm` at the no-load test's highest air-gap voltage,
