@@ -341,12 +341,7 @@ impl ImAugmentation {
     pub fn with(effect: Effect, split_ratio: f64) -> ImAugmentation {
         ImAugmentation {
             effect: Some(effect),
-            split_ratio,
-            flux: SaturatingFlux::AirGap,
-            friction: false,
-            torque: false,
-            iron: false,
-            exponent: MAIN_FLUX_EXPONENT as f64,
+            ..ImAugmentation::nominal(split_ratio)
         }
     }
 
