@@ -170,11 +170,11 @@ pub(super) fn choose_branch<'a>(
         format!("{n} (fixed: fewer than {EXPONENT_MIN_NO_LOAD} no-load readings)")
     };
     let form = match fit.branch {
-        Branch::Curve {
-            flux: SaturatingFlux::Stator,
-            ..
-        } => "the stator flux (Γ circuit's stator inductance; the core loss across it too)",
-        _ => "the air-gap flux (T circuit's Xm)",
+        Branch::Curve { flux, .. } if fit.core_loss_on_stator_flux() => {
+            format!("{}, the core loss across it too", flux.name())
+        }
+        Branch::Curve { flux, .. } => flux.name().to_string(),
+        Branch::Linear => String::new(),
     };
     let note = format!(
         "joint: Xm falls with the voltage (main-flux saturation, from the {no_load} no-load \
