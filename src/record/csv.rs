@@ -7,8 +7,13 @@
 //! `time_ms` (×10⁻³), `armature_current_mA` (×10⁻³), `speed_rpm` (×2π/60).
 //! Where both are present the SI column is used. The header row names the columns, in any order, optionally in
 //! quotes; unknown columns are ignored (and not parsed). Fields are plain
-//! comma-separated numbers with optional surrounding whitespace (and
-//! optional quotes). Blank lines and lines starting with `#` are skipped.
+//! numbers with optional surrounding whitespace (and optional quotes),
+//! separated by commas — or, as a spreadsheet in a decimal-comma locale or
+//! a logger exports them, by semicolons or tabs (motorbench's addition to
+//! the contract): the header row's most frequent of the three is the
+//! file's delimiter, and where it is not the comma a field's comma is its
+//! decimal point (`0,25` is 0.25). Blank lines and lines starting with `#`
+//! are skipped.
 //!
 //! The file may open with a declaration comment,
 //! `# motorbench segment <index> kind=<kind> label=<free text>`
@@ -83,10 +88,10 @@ pub fn read_dc_csv(
         });
     }
 
-    let (header, lines) = csv.header(path, columns)?;
-    let find = |name: &str| header.find(path, name);
-    let header_no = header.no;
-    let header = &header.names;
+    let (header_row, lines) = csv.header(path, columns)?;
+    let find = |name: &str| header_row.find(path, name);
+    let header_no = header_row.no;
+    let header = &header_row.names;
     let missing =
         |name: &str, extra: &str| err(header_no, Some(name), missing_column(extra, header));
     // Each quantity from its SI column, else from the first of its other
@@ -119,7 +124,7 @@ pub fn read_dc_csv(
     };
     let mut previous_time: Option<(f64, usize)> = None;
     for &(no, line) in lines {
-        let row = CsvRow::split(path, header, no, line)?;
+        let row = CsvRow::split(path, &header_row, no, line)?;
         // In SI: times the unit's factor (1 for an SI column).
         let si = |(col, scale, _): (usize, f64, &str)| -> Result<f64, RecordError> {
             Ok(row.number(col)? * scale)
@@ -208,12 +213,61 @@ pub(super) struct CsvLines<'a> {
 /// A 1-based line number and the line's text.
 pub(super) type NumberedLine<'a> = (usize, &'a str);
 
-/// The header row: its line number and column names.
+/// The header row: its line number, column names and delimiter.
 pub(super) struct CsvHeader<'a> {
     /// 1-based line number.
     pub no: usize,
     /// Column names, quotes removed.
     pub names: Vec<&'a str>,
+    /// What separates the fields, in this row and every data row.
+    pub delimiter: Delimiter,
+}
+
+/// A CSV file's field separator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Delimiter {
+    /// `,` (the contract's), with a decimal point.
+    Comma,
+    /// `;`, a decimal-comma locale's spreadsheet export: a field's comma
+    /// is its decimal point.
+    Semicolon,
+    /// A tab, as loggers write: a field's comma is its decimal point.
+    Tab,
+}
+
+impl Delimiter {
+    /// The most frequent separator of the header `line` (the comma where
+    /// none is more frequent).
+    fn of_header(line: &str) -> Delimiter {
+        let count = |c: char| line.matches(c).count();
+        let (commas, semicolons, tabs) = (count(','), count(';'), count('\t'));
+        if semicolons > commas && semicolons >= tabs {
+            Delimiter::Semicolon
+        } else if tabs > commas && tabs > semicolons {
+            Delimiter::Tab
+        } else {
+            Delimiter::Comma
+        }
+    }
+
+    /// The separator itself.
+    fn char(self) -> char {
+        match self {
+            Delimiter::Comma => ',',
+            Delimiter::Semicolon => ';',
+            Delimiter::Tab => '\t',
+        }
+    }
+
+    /// `field` as a number: with a decimal comma where the delimiter is
+    /// not the comma (`"0,25"` is 0.25; `"1,000.5"`, a thousands
+    /// separator, is not a number).
+    fn parse(self, field: &str) -> Option<f64> {
+        if self == Delimiter::Comma || !field.contains(',') {
+            return field.parse().ok();
+        }
+        field.replacen(',', ".", 1).parse().ok()
+    }
 }
 
 impl<'a> CsvLines<'a> {
@@ -256,21 +310,9 @@ impl<'a> CsvLines<'a> {
             let reason = "no header row (the file is empty)";
             return Err(RecordError::csv(path, self.last_line, None, reason));
         };
-        if !line.contains(',') {
-            if let Some((sep, name)) = [(';', "semicolon"), ('\t', "tab")]
-                .into_iter()
-                .find(|(c, _)| line.contains(*c))
-            {
-                let reason = format!(
-                    "the header is {name}-separated ({sep:?}); motorbench reads comma-separated \
-                     CSV with a decimal point: export with ',' as the delimiter (a spreadsheet's \
-                     \"CSV (comma delimited)\"), or convert the file"
-                );
-                return Err(RecordError::csv(path, no, None, reason));
-            }
-        }
-        let mut names: Vec<&str> = line.split(',').map(unquote).collect();
-        if names.iter().all(|n| n.trim().parse::<f64>().is_ok()) {
+        let delimiter = Delimiter::of_header(line);
+        let mut names: Vec<&str> = line.split(delimiter.char()).map(unquote).collect();
+        if names.iter().all(|n| delimiter.parse(n.trim()).is_some()) {
             let reason = format!(
                 "no header row: the first line that is not a '#' comment holds numbers ({}); \
                  the file's first row must name its columns (the data contract's names: \
@@ -281,7 +323,14 @@ impl<'a> CsvLines<'a> {
             return Err(RecordError::csv(path, no, None, reason));
         }
         columns.rename(&mut names);
-        Ok((CsvHeader { no, names }, rows))
+        Ok((
+            CsvHeader {
+                no,
+                names,
+                delimiter,
+            },
+            rows,
+        ))
     }
 
     /// The declared label, or the file name.
@@ -366,6 +415,7 @@ fn split_word(s: &str) -> (&str, &str) {
 pub(super) struct CsvRow<'a> {
     path: &'a Path,
     header: &'a [&'a str],
+    delimiter: Delimiter,
     no: usize,
     fields: Vec<&'a str>,
 }
@@ -375,11 +425,12 @@ impl<'a> CsvRow<'a> {
     /// header's (naming the first missing column, if any).
     pub(super) fn split(
         path: &'a Path,
-        header: &'a [&'a str],
+        header: &'a CsvHeader<'a>,
         no: usize,
         line: &'a str,
     ) -> Result<CsvRow<'a>, RecordError> {
-        let fields: Vec<&str> = line.split(',').collect();
+        let (delimiter, header) = (header.delimiter, &header.names[..]);
+        let fields: Vec<&str> = line.split(delimiter.char()).collect();
         if fields.len() != header.len() {
             let column = header.get(fields.len()).copied();
             let reason = format!(
@@ -392,6 +443,7 @@ impl<'a> CsvRow<'a> {
         Ok(CsvRow {
             path,
             header,
+            delimiter,
             no,
             fields,
         })
@@ -409,7 +461,7 @@ impl<'a> CsvRow<'a> {
                 format!("{} is not {what}", quoted(raw)),
             )
         };
-        let v: f64 = raw.parse().map_err(|_| bad("a number"))?;
+        let v = self.delimiter.parse(raw).ok_or_else(|| bad("a number"))?;
         if v.is_finite() {
             Ok(v)
         } else {
@@ -527,22 +579,45 @@ mod tests {
     }
 
     #[test]
-    fn a_semicolon_or_tab_separated_file_is_named_as_such() {
+    fn semicolon_and_tab_separated_files_read_a_decimal_comma() {
+        let comma = read(
+            "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,60,0.25,40\n0.5,60,1.5,41\n",
+        )
+        .unwrap();
+        for text in [
+            "time_s;armature_voltage_V;armature_current_A;speed_rad_s\n0;60;0,25;40\n0,5;60;1,5;41\n",
+            "\"time_s\";\"armature_voltage_V\";\"armature_current_A\";\"speed_rad_s\"\n0;60;\"0,25\";40\n0,5;60;1.5;41\n",
+            "time_s\tarmature_voltage_V\tarmature_current_A\tspeed_rad_s\n0\t60\t0,25\t40\n0.5\t60\t1,5\t41\n",
+        ] {
+            let seg = read(text).unwrap();
+            assert_eq!(
+                (&seg.time, &seg.voltage, &seg.current, &seg.speed),
+                (&comma.time, &comma.voltage, &comma.current, &comma.speed),
+                "{text}"
+            );
+        }
+        // A thousands separator is not a decimal comma.
         let e = error(
-            "time_s;armature_voltage_V;armature_current_A;speed_rad_s\n0;60;0,1;40\n",
-            1,
+            "time_s;armature_voltage_V;armature_current_A;speed_rad_s\n0;1,000.5;0,25;40\n",
+            2,
+            Some("armature_voltage_V"),
+        );
+        assert!(e.contains("\"1,000.5\" is not a number"), "{e}");
+        // A comma-separated row under a semicolon header is one field.
+        let e = error(
+            "time_s;armature_voltage_V;armature_current_A;speed_rad_s\n0,60,0.25,40\n",
+            2,
+            Some("armature_voltage_V"),
+        );
+        assert!(e.contains("the row has 1 fields, the header has 4"), "{e}");
+        // A comma-separated file keeps its decimal point: a decimal
+        // comma there is a field more.
+        let e = error(
+            "time_s,armature_voltage_V,armature_current_A,speed_rad_s\n0,60,0,25,40\n",
+            2,
             None,
         );
-        assert!(
-            e.contains("semicolon-separated") && e.contains("','"),
-            "{e}"
-        );
-        let e = error(
-            "time_s\tarmature_voltage_V\tarmature_current_A\tspeed_rad_s\n0\t60\t0.1\t40\n",
-            1,
-            None,
-        );
-        assert!(e.contains("tab-separated"), "{e}");
+        assert!(e.contains("the row has 5 fields, the header has 4"), "{e}");
     }
 
     #[test]

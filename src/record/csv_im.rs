@@ -86,10 +86,10 @@ pub fn read_im_csv(
             ));
         }
     }
-    let (header, lines) = csv.header(path, columns)?;
-    let find = |name: &str| header.find(path, name);
-    let header_no = header.no;
-    let header = &header.names;
+    let (header_row, lines) = csv.header(path, columns)?;
+    let find = |name: &str| header_row.find(path, name);
+    let header_no = header_row.no;
+    let header = &header_row.names;
     let required = |name: &str| -> Result<usize, RecordError> {
         find(name)?.ok_or_else(|| err(header_no, Some(name), missing_column("", header)))
     };
@@ -125,7 +125,7 @@ pub fn read_im_csv(
     let index = csv.decl.index.unwrap_or(default_index);
     let mut points = Vec::new();
     for &(no, line) in lines {
-        let row = CsvRow::split(path, header, no, line)?;
+        let row = CsvRow::split(path, &header_row, no, line)?;
         let number = |col: usize| row.number(col);
         let positive = |col: usize| -> Result<f64, RecordError> {
             let v = number(col)?;

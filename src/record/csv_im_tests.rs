@@ -100,7 +100,7 @@ fn read_table(
         .collect::<Result<Vec<_>, _>>()?;
     let mut rows = Vec::new();
     for &(no, line) in lines {
-        let row = CsvRow::split(path, &header.names, no, line)?;
+        let row = CsvRow::split(path, &header, no, line)?;
         let values = req
             .iter()
             .map(|&c| row.number(c))
