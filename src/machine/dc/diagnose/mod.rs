@@ -764,7 +764,9 @@ fn series_of(run: &SegmentRun, si: &[f64], sw: &[f64]) -> Option<HeldOutSeries> 
 const CHECK_THE_COLUMNS: &str = "Check that the columns belong together: the armature voltage \
      in V, the armature current in A and the speed in rad/s at the same instants (a voltage \
      column that is a set point, or held while the motor moves; a current or speed in other \
-     units, scaled, or of another channel)";
+     units, scaled, or of another channel), and that the motor's field is constant: the models \
+     are a permanent-magnet or separately excited motor's, and a series or shunt winding's \
+     field follows the armature current or voltage";
 
 /// NRMSE of a model on every segment it was fitted to (mean over segments).
 fn fit_nrmse(model: &AugModel, runs: &[SegmentRun]) -> f64 {
