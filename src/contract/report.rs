@@ -275,8 +275,10 @@ impl IdentificationReport {
     /// mean scores 1): a method whose model, fitted without the held-out
     /// data, predicts them worse than their mean gets no
     /// `validation_nrmse`, and a warning gives the number and what it
-    /// means. Its parameters stay, as what the fitting data give.
-    pub fn unscore_failed_predictions(&mut self) {
+    /// means. Its parameters stay, as what the fitting data give. Returns
+    /// the methods it unscored, for [`IdentificationReport::warn_if_best_failed`].
+    pub fn unscore_failed_predictions(&mut self) -> Vec<String> {
+        let mut failed = Vec::new();
         for (name, method) in &mut self.methods {
             let Some(v) = method
                 .validation_nrmse
@@ -290,7 +292,29 @@ impl IdentificationReport {
                  that misfits this record, or held-out data unlike the rest)"
             ));
             method.validation_nrmse = None;
+            failed.push(name.clone());
         }
+        failed
+    }
+
+    /// Where the best method is one of `failed` (its model predicted the
+    /// held-out data worse than their mean), a warning says so beside the
+    /// best: its values fit the record, but the record does not validate
+    /// them.
+    pub fn warn_if_best_failed(&mut self, failed: &[String]) {
+        let Some(best) = self
+            .best
+            .as_deref()
+            .filter(|b| failed.iter().any(|f| f == b))
+        else {
+            return;
+        };
+        self.warnings.push(format!(
+            "best: {best}, though its model, fitted without the held-out data, predicts them \
+             worse than their mean: its values fit this record, which does not validate them \
+             (an effect the model lacks, which `motorbench diagnose` names where one of \
+             its candidates explains the gap, or a machine the model does not describe)"
+        ));
     }
 
     /// The report as JSON text (pretty, stable key order).
@@ -312,7 +336,8 @@ mod tests {
         let fitted = |v: f64| MethodReport::fitted(BTreeMap::new(), Some(v));
         report.methods.insert("equation_error".into(), fitted(8.37));
         report.methods.insert("moments".into(), fitted(f64::NAN));
-        report.unscore_failed_predictions();
+        let failed = report.unscore_failed_predictions();
+        assert_eq!(failed, ["equation_error", "moments"]);
         assert_eq!(report.methods["output_error"].validation_nrmse, Some(0.01));
         for name in ["equation_error", "moments"] {
             assert_eq!(report.methods[name].validation_nrmse, None, "{name}");
@@ -326,6 +351,23 @@ mod tests {
             );
         }
         assert!(report.warnings.iter().any(|w| w.contains("8.370e0")));
+    }
+
+    /// A best method whose held-out prediction failed gets a warning
+    /// beside the best; a best that was not unscored gets none.
+    #[test]
+    fn a_best_whose_prediction_failed_is_said_to_be_unvalidated() {
+        let mut report = IdentificationReport::with_best_params(&[("K", 0.05, "V*s/rad")]);
+        let said = |r: &IdentificationReport| {
+            r.warnings
+                .iter()
+                .filter(|w| w.starts_with("best: output_error, though its model"))
+                .count()
+        };
+        report.warn_if_best_failed(&["equation_error".into()]);
+        assert_eq!(said(&report), 0, "{:?}", report.warnings);
+        report.warn_if_best_failed(&["equation_error".into(), "output_error".into()]);
+        assert_eq!(said(&report), 1, "{:?}", report.warnings);
     }
 
     #[test]

@@ -448,7 +448,7 @@ pub fn identify_dc(record: &Record) -> Identification {
 
     friction_bound::refuse_friction_beyond_torque(record, &mut report);
     report.refuse_unphysical();
-    report.unscore_failed_predictions();
+    let failed = report.unscore_failed_predictions();
     report.best = best_method(&report);
     let equation_error_applies = report
         .methods
@@ -463,6 +463,7 @@ pub fn identify_dc(record: &Record) -> Identification {
             report.best = Some("equation_error".into());
         }
     }
+    report.warn_if_best_failed(&failed);
     if let Some(meta) = &record.meta {
         report
             .warnings

@@ -662,7 +662,8 @@ pub fn identify_im(
             .find(|m| report.methods.get(*m).is_some_and(|r| r.applies))
             .map(String::from);
         report.warnings = warnings;
-        report.unscore_failed_predictions();
+        let failed = report.unscore_failed_predictions();
+        report.warn_if_best_failed(&failed);
         return ImIdentification {
             report,
             sweep,
@@ -702,7 +703,8 @@ pub fn identify_im(
         .find(|m| report.methods.get(*m).is_some_and(|r| r.applies))
         .map(String::from);
     report.warnings = warnings;
-    report.unscore_failed_predictions();
+    let failed = report.unscore_failed_predictions();
+    report.warn_if_best_failed(&failed);
     ImIdentification {
         report,
         sweep,
