@@ -55,6 +55,23 @@ pub fn partial_verdict_warning(
     })
 }
 
+/// The warning for a `none` verdict on a gap of more than [`EXPLAINED`]
+/// noise floors: no candidate explains it, so the record holds something
+/// the model and every candidate lack — an effect outside the list, or a
+/// reading at fault (`faults`: the machine's usual suspects). `None` when
+/// the gap is within that.
+pub fn unexplained_gap_warning(gap_before: f64, noise_floor: f64, faults: &str) -> Option<String> {
+    (gap_before > EXPLAINED * noise_floor).then(|| {
+        format!(
+            "no candidate explains the gap: the nominal model's held-out NRMSE {gap_before:.4} \
+             is {:.1} times the noise floor {noise_floor:.4}, so the record holds something \
+             the model and its candidates lack: an effect outside the list, or a reading at \
+             fault ({faults})",
+            gap_before / noise_floor
+        )
+    })
+}
+
 /// Why a nominal model is no baseline to judge effects against, if it is
 /// not: it predicts the readings worse than their own mean (a fit NRMSE
 /// above 1, which the mean scores), or, fitted without them, the held-out
@@ -405,6 +422,16 @@ pub fn residual_noise_sigma(residuals: &[&[f64]], readings: &[&[f64]]) -> f64 {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+
+    /// The unexplained gap's warning: above twice the floor, with the
+    /// ratio and the faults named; none within it.
+    #[test]
+    fn a_gap_beyond_twice_the_floor_is_unexplained() {
+        assert_eq!(unexplained_gap_warning(0.02, 0.01, "x"), None);
+        let w = unexplained_gap_warning(0.05, 0.01, "a meter's offset").unwrap();
+        assert!(w.contains("5.0 times the noise floor 0.0100"), "{w}");
+        assert!(w.ends_with("(a meter's offset)"), "{w}");
+    }
     use rand::{rngs::StdRng, SeedableRng};
     use rand_distr::{Distribution, Normal};
 

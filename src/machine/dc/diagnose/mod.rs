@@ -51,7 +51,7 @@ use crate::contract::{
 use crate::diagnose::decision::{
     block_sums, effective_samples, explained_share, held_out_either_sign_flip_test, held_out_test,
     median, no_baseline, partial_verdict_warning, penalised_score, residual_noise_sigma,
-    HeldOutTest, EXPLAINED,
+    unexplained_gap_warning, HeldOutTest, EXPLAINED,
 };
 use crate::diagnose::par_map;
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
@@ -526,6 +526,12 @@ fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<Diagnosis
             fam.validation,
             noise_floor,
         ));
+    } else {
+        warnings.extend(unexplained_gap_warning(
+            nominal.validation,
+            noise_floor,
+            DC_READING_FAULTS,
+        ));
     }
 
     let gap_before = nominal.validation;
@@ -759,6 +765,11 @@ fn series_of(run: &SegmentRun, si: &[f64], sw: &[f64]) -> Option<HeldOutSeries> 
         nrmse: nrmse_v,
     })
 }
+
+/// The readings' faults that leave a DC record's gap unexplained.
+const DC_READING_FAULTS: &str = "an offset or a scale error of the voltage, current or speed \
+     reading, a voltage read elsewhere than at the armature, a current or speed of another \
+     channel";
 
 /// What to check when no DC motor model follows a record's readings.
 const CHECK_THE_COLUMNS: &str = "Check that the columns belong together: the armature voltage \
@@ -1714,6 +1725,45 @@ mod tests {
                     && m.contains("the armature voltage in V")),
             "{e}"
         );
+    }
+
+    /// A voltage reading with an offset of a third of its largest value
+    /// (no candidate's effect) leaves a gap of many noise floors that no
+    /// candidate closes: the `none` verdict says so; the same record
+    /// without the offset gets no such warning.
+    #[test]
+    fn a_gap_no_candidate_explains_is_said_to_be_unexplained() {
+        let mut rng = StdRng::seed_from_u64(5);
+        let case = simulate_dc_case(None, &mut rng);
+        let said = |d: &crate::contract::Diagnosis| {
+            d.warnings
+                .iter()
+                .any(|w| w.starts_with("no candidate explains the gap"))
+        };
+        let clean = diagnose_dc(&case.record, &DiagnoseOptions::default())
+            .unwrap()
+            .report;
+        assert_eq!(clean.verdict.effect, "none", "{:?}", clean.candidates);
+        assert!(!said(&clean), "{:?}", clean.warnings);
+        let mut record = case.record.clone();
+        let top = record
+            .segments
+            .iter()
+            .flat_map(|s| s.voltage.iter())
+            .fold(0.0f64, |m, v| m.max(v.abs()));
+        for seg in &mut record.segments {
+            seg.voltage.iter_mut().for_each(|v| *v += top / 3.0);
+        }
+        let d = diagnose_dc(&record, &DiagnoseOptions::default())
+            .unwrap()
+            .report;
+        assert_eq!(d.verdict.effect, "none", "{:?}", d.candidates);
+        assert!(
+            d.gap.noise_floor * EXPLAINED < d.verdict.gap_before,
+            "{:?}",
+            d.verdict
+        );
+        assert!(said(&d), "{:?}", d.warnings);
     }
 
     /// Interleaved blocks held out: a withheld armature reaction is named

@@ -41,7 +41,7 @@ use crate::contract::{
 };
 use crate::diagnose::decision::{
     explained_share, held_out_sign_flip_test, median, no_baseline, noise_sigma,
-    partial_verdict_warning, penalised_score, HeldOutTest,
+    partial_verdict_warning, penalised_score, unexplained_gap_warning, HeldOutTest,
 };
 use crate::diagnose::{DiagnoseError, DiagnoseOptions, DiagnosisRun, ResidualPanel, ResidualPlot};
 use crate::identify::{fit_lm, no_load_friction, LmOptions, PhaseData, SplitPolicy};
@@ -300,6 +300,13 @@ pub fn diagnose_im(
         split.ratio(),
     );
     let floor = noise_floor(&data);
+    if winner.is_none() {
+        warnings.extend(unexplained_gap_warning(
+            gap_before,
+            floor,
+            IM_READING_FAULTS,
+        ));
+    }
     if let Some(w) = winner {
         let others: Vec<&Evaluated> = evaluated.iter().filter(|e| physical(e)).collect();
         warnings.extend(gap_left_warnings(w, &others, gap_before, floor));
@@ -426,6 +433,11 @@ fn torque_note(data: &SweepSet) -> String {
             .unwrap_or(f64::NAN)
     )
 }
+
+/// The readings' faults that leave an induction machine's gap unexplained.
+const IM_READING_FAULTS: &str = "a slip read from a speed of another scale, one phase's power \
+     or one of two wattmeters instead of the total, a phase voltage or current where the \
+     line's belongs, a meter's offset";
 
 /// A verdict `w` that leaves more than twice the noise floor says so (as
 /// on DC records), and names the candidate of `others` that alone took the
@@ -954,6 +966,36 @@ mod tests {
         let shares: f64 = d.gap.regions.iter().map(|r| r.share).sum();
         assert!((shares - 1.0).abs() < 1e-9, "region shares sum to {shares}");
         assert!(d.validation.starts_with("interleaved"));
+    }
+
+    /// A line-current meter reading 6 % of the largest current high
+    /// (no candidate's effect): the `none` verdict says that no candidate
+    /// explains the gap; the same sweep without the offset does not.
+    #[test]
+    fn a_gap_no_candidate_explains_is_said_to_be_unexplained() {
+        let r = record(
+            ImAugmentation::nominal(1.0),
+            &nominal_x(),
+            &[400.0, 300.0],
+            3,
+        );
+        let said = |r: &Record| {
+            let d = diagnose_im(r, &star()).unwrap().report;
+            assert_eq!(d.verdict.effect, "none", "{:?}", d.candidates);
+            d.warnings
+                .iter()
+                .any(|w| w.starts_with("no candidate explains the gap"))
+        };
+        assert!(!said(&r));
+        let top = r
+            .operating_points
+            .iter()
+            .fold(0.0f64, |m, p| m.max(p.line_current));
+        let mut offset = r.clone();
+        for p in &mut offset.operating_points {
+            p.line_current += 0.06 * top;
+        }
+        assert!(said(&offset));
     }
 
     #[test]
