@@ -39,14 +39,6 @@ impl Failure {
         }
     }
 
-    /// No identification method applied: exit code 4.
-    pub fn not_identified() -> Failure {
-        Failure {
-            code: 4,
-            message: "no identification method applies to this data (see the warnings)".into(),
-        }
-    }
-
     /// The exit code of `result`, saying the failure on stderr.
     pub fn exit(result: Result<(), Failure>) -> ExitCode {
         match result {

@@ -59,7 +59,7 @@ use super::{
 };
 use crate::bench::{BenchError, Outcome, Progress, RecordSink, SafetyRules, StopPath};
 use crate::config::{recorded_im_model, CommonConfig};
-use crate::identify::{identify_im, ImIdentification};
+use crate::identify::{identify_im, ImIdentification, JOINT, STANDARD_TESTS};
 use crate::model::{Connection, ImModel};
 use crate::record::{ChannelSpec, Record, SegmentKind};
 use crate::report::IdentificationReport;
@@ -85,12 +85,34 @@ impl Analysis for ImAnalysis {
     }
 
     fn refusal(&self) -> Option<String> {
-        self.0
-            .report
-            .best
-            .is_none()
-            .then(|| "no identification method applies to this data (see the warnings)".into())
+        refusal(&self.0.report)
     }
+}
+
+/// Why nothing was identified, `None` where a method was: the first
+/// reason of the joint fit, the circuit fit, the classical reduction and
+/// the paper's estimator, in that order (the first says most of what the
+/// record lacks, the estimator's least).
+fn refusal(report: &IdentificationReport) -> Option<String> {
+    if report.best.is_some() {
+        return None;
+    }
+    let why = [JOINT, "lm", STANDARD_TESTS, "recursive"]
+        .into_iter()
+        .find_map(|key| {
+            let reason = report.methods.get(key)?.reason.as_deref()?;
+            Some(format!(
+                "{key}: {}",
+                reason.trim_start_matches("does not apply: ")
+            ))
+        });
+    Some(match why {
+        Some(why) => format!(
+            "no identification method applies to this data ({why}; the other methods' \
+             reasons are in the report)"
+        ),
+        None => "no identification method applies to this data (see the warnings)".into(),
+    })
 }
 
 /// Identify an induction-machine record with the circuit `model` (the
@@ -275,4 +297,34 @@ impl Machine for ImRunConfig {
 #[track_caller]
 pub(crate) fn assert_warned(warnings: &[String], text: &str) {
     assert!(warnings.iter().any(|w| w.contains(text)), "{:?}", warnings);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::report::MethodReport;
+
+    /// With no best method the refusal gives the first reason of the
+    /// joint fit, the circuit fit, the classical reduction and the
+    /// estimator, in that order; with a best, none.
+    #[test]
+    fn the_refusal_gives_the_reason_that_says_most() {
+        let mut report = IdentificationReport::new("im_slip_sweep");
+        let refused = |why: &str| MethodReport::not_applicable(format!("does not apply: {why}"));
+        report
+            .methods
+            .insert("recursive".into(), refused("Rs went negative"));
+        report
+            .methods
+            .insert("lm".into(), refused("the fit collapsed"));
+        let why = refusal(&report).unwrap();
+        assert!(why.contains("(lm: the fit collapsed;"), "{why}");
+        report
+            .methods
+            .insert(JOINT.into(), refused("no no-load readings"));
+        let why = refusal(&report).unwrap();
+        assert!(why.contains("(joint: no no-load readings;"), "{why}");
+        report.best = Some("lm".into());
+        assert_eq!(refusal(&report), None);
+    }
 }
