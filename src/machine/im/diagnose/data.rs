@@ -265,6 +265,15 @@ impl SweepSet {
         (v, i)
     }
 
+    /// What the record holds of the tests that separate look-alikes.
+    pub fn held_tests(&self) -> super::verdict::HeldTests {
+        super::verdict::HeldTests {
+            several_voltages: self.several_voltages(),
+            no_load: self.free_running.iter().any(|f| *f),
+            torque: self.torque.iter().any(Option::is_some),
+        }
+    }
+
     /// Whether the record holds sweeps at two or more supply voltages, or
     /// a no-load test over a range of voltages.
     pub fn several_voltages(&self) -> bool {

@@ -34,7 +34,7 @@ use self::effects::{effect_name, ImAugmentation, SaturatingFlux, IM_EFFECTS, NOM
 use self::fit::{fit, held_out, intervals, starts_from, torque_misfit, AugmentedFit, HeldOut};
 use self::gap::{evidence, shares, SlipRegions, CHANNELS};
 use self::standard_points::{with_standard_points, StandardPoints};
-use self::verdict::separating_plan;
+use self::verdict::{held_note, separating_plan, separating_plan_for, HeldTests};
 use crate::contract::{
     reportable, Candidate, Diagnosis, Gap, LookAlike, NominalFit, ParamCorrection, RegionAxis,
     Verdict,
@@ -309,7 +309,13 @@ pub fn diagnose_im(
     }
     if let Some(w) = winner {
         let others: Vec<&Evaluated> = evaluated.iter().filter(|e| physical(e)).collect();
-        warnings.extend(gap_left_warnings(w, &others, gap_before, floor));
+        warnings.extend(gap_left_warnings(
+            w,
+            &others,
+            gap_before,
+            floor,
+            data.held_tests(),
+        ));
         // Only where the verdict leaves the gap well above the floor: a
         // refit from the verdict's own optimum gains a little everywhere.
         if w.validation_nrmse > 2.0 * floor {
@@ -441,12 +447,14 @@ const IM_READING_FAULTS: &str = "a slip read from a speed of another scale, one 
 
 /// A verdict `w` that leaves more than twice the noise floor says so (as
 /// on DC records), and names the candidate of `others` that alone took the
-/// gap further, where one did, with the test that separates the two.
+/// gap further, where one did, with the test that separates the two (or,
+/// where the record `held` it, that it does).
 fn gap_left_warnings(
     w: &Evaluated,
     others: &[&Evaluated],
     gap_before: f64,
     floor: f64,
+    held: HeldTests,
 ) -> Vec<String> {
     let name = |e: &Evaluated| effect_name(Some(e.effect));
     let Some(partial) = partial_verdict_warning(&name(w), gap_before, w.validation_nrmse, floor)
@@ -467,12 +475,13 @@ fn gap_left_warnings(
         out.push(format!(
             "{}: alone takes the held-out gap from {gap_before:.4} to {:.4} ({:.0} % of its \
              excess over the floor), more than the verdict, but {why} (p = {:.3}); the record \
-             may hold both: {} separates them",
+             may hold both: {} separates them{}",
             name(other),
             other.validation_nrmse,
             100.0 * explained_share(gap_before, other.validation_nrmse, floor),
             other.test.p_value,
-            separating_plan(w.effect, other.effect)
+            separating_plan(w.effect, other.effect),
+            held_note(w.effect, other.effect, held).map_or(String::new(), |n| format!("; {n}"))
         ));
     }
     out
@@ -678,7 +687,7 @@ fn verdict_of(
             look_alikes.push(LookAlike {
                 effect: effect_name(Some(other.effect)),
                 validation_nrmse: other.validation_nrmse,
-                plan: separating_plan(w.effect, other.effect),
+                plan: separating_plan_for(w.effect, other.effect, data.held_tests()),
             });
         }
     }
@@ -910,7 +919,7 @@ mod tests {
         let further = evaluated(Effect::MainFluxSaturation, 0.02, 0.04);
         let worse = evaluated(Effect::DeepBar, 0.035, 0.5);
         let others = [&verdict, &further, &worse];
-        let w = gap_left_warnings(&verdict, &others, 0.05, 0.01);
+        let w = gap_left_warnings(&verdict, &others, 0.05, 0.01, HeldTests::default());
         assert_eq!(w.len(), 2, "{w:?}");
         assert!(w[0].starts_with("iron_loss: named as the verdict, though it leaves"));
         assert!(
@@ -922,7 +931,7 @@ mod tests {
             w[1]
         );
         let within = evaluated(Effect::IronLoss, 0.015, 0.001);
-        assert!(gap_left_warnings(&within, &others, 0.05, 0.01).is_empty());
+        assert!(gap_left_warnings(&within, &others, 0.05, 0.01, HeldTests::default()).is_empty());
     }
 
     /// An input power of half what the machine took (one wattmeter of
