@@ -143,7 +143,7 @@ mod tests {
             "{plan}"
         );
         // An iron loss against stray load loss needs the no-load test.
-        let (stray,) = (Effect::StrayLoadLoss,);
+        let stray = Effect::StrayLoadLoss;
         assert_eq!(
             separating_plan_for(iron, stray, voltages),
             separating_plan(iron, stray)
