@@ -26,6 +26,7 @@ pub use im::{
     PerUnitBase, RotorCage, C64, SEED_DOUBLE_CAGE_PU,
 };
 pub use im_closed_form::{DoubleCageForms, PaperTerms, SingleCageForms};
+pub use im_effects::IM_EFFECTS;
 pub use im_equivalent::{
     impedance_mismatch, standstill_rotor_leakage, stator_leakage_range, with_leakage_split,
     with_stator_leakage, EquivalentError, LeakageSplit,

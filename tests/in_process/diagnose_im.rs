@@ -9,18 +9,9 @@ use std::collections::BTreeMap;
 
 use motorbench::diagnose::blind::simulate_im_case;
 use motorbench::diagnose::{diagnose_im, DiagnoseOptions};
-use motorbench::model::Effect;
+use motorbench::model::{Effect, IM_EFFECTS};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-
-const EFFECTS: [Effect; 6] = [
-    Effect::IronLoss,
-    Effect::DeepBar,
-    Effect::MainFluxSaturation,
-    Effect::LeakageSaturation,
-    Effect::StrayLoadLoss,
-    Effect::ThermalDrift,
-];
 
 struct Outcome {
     cases: usize,
@@ -38,7 +29,7 @@ fn run(seed: u64, per_effect: usize, nones: usize) -> Outcome {
             plan.push(None);
         }
         if k < per_effect {
-            plan.extend(EFFECTS.iter().map(|e| Some(*e)));
+            plan.extend(IM_EFFECTS.iter().map(|e| Some(*e)));
         }
     }
     let mut out = Outcome {

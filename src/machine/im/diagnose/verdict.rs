@@ -21,6 +21,7 @@ enum Separator {
     LockedRotorVoltageAndFrequency,
     ReducedVoltage,
     TimeOrder,
+    NoLoadAgainstStrayLoss,
     NoLoadVoltages,
     TorqueOrLockedRotorFrequency,
     VoltageAndLockedRotorFrequency,
@@ -36,7 +37,9 @@ fn separator(a: Effect, b: Effect) -> Separator {
         Separator::ReducedVoltage
     } else if either(ThermalDrift) {
         Separator::TimeOrder
-    } else if pair(IronLoss, StrayLoadLoss) || either(IronLoss) {
+    } else if pair(IronLoss, StrayLoadLoss) {
+        Separator::NoLoadAgainstStrayLoss
+    } else if either(IronLoss) {
         Separator::NoLoadVoltages
     } else if either(StrayLoadLoss) {
         Separator::TorqueOrLockedRotorFrequency
@@ -47,7 +50,6 @@ fn separator(a: Effect, b: Effect) -> Separator {
 
 /// The test plan that separates effect `a` from effect `b`.
 pub fn separating_plan(a: Effect, b: Effect) -> String {
-    let pair = |x: Effect, y: Effect| (a == x && b == y) || (a == y && b == x);
     match separator(a, b) {
         Separator::LockedRotorVoltageAndFrequency => {
             "a locked-rotor test at reduced voltage (leakage saturation depends on the current, deep bar does not) \
@@ -61,7 +63,7 @@ pub fn separating_plan(a: Effect, b: Effect) -> String {
             "the sweep repeated in reverse order (locked rotor first), or its first points repeated at the end: \
              thermal drift follows the time order, not the slip"
         }
-        Separator::NoLoadVoltages if pair(Effect::IronLoss, Effect::StrayLoadLoss) => {
+        Separator::NoLoadAgainstStrayLoss => {
             "a no-load test at several voltages: iron loss grows with the air-gap voltage squared, \
              stray load loss with the load current squared"
         }
@@ -85,7 +87,7 @@ pub fn held_note(a: Effect, b: Effect, held: HeldTests) -> Option<String> {
         Separator::ReducedVoltage => held
             .several_voltages
             .then_some("readings at several voltages"),
-        Separator::NoLoadVoltages => {
+        Separator::NoLoadAgainstStrayLoss | Separator::NoLoadVoltages => {
             (held.no_load && held.several_voltages).then_some("a no-load test at several voltages")
         }
         Separator::TorqueOrLockedRotorFrequency => held.torque.then_some("a torque reading"),
