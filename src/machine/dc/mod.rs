@@ -31,7 +31,7 @@ mod supply_limits;
 mod text;
 mod timing;
 
-pub use gaps::cut_at_time_gaps;
+pub use gaps::{cut_at_time_gaps, fill_missing_samples};
 pub use overlay::segment_plots;
 pub use plan::{plan_steps, PlanStep};
 pub use rig::{build_rig, Rig, SERVED_PLANT_RATE_HZ};

@@ -27,6 +27,7 @@ mod choice;
 mod cv;
 mod fit;
 mod gap;
+mod join;
 mod lanes;
 mod model;
 
@@ -136,8 +137,11 @@ pub fn diagnose_dc(
     record: &Record,
     options: &DiagnoseOptions,
 ) -> Result<DiagnosisRun, DiagnoseError> {
-    let mut trimmed: Option<Record> = None;
     let mut left_out = Vec::new();
+    // The join's note is the record's, which the report lists.
+    let joined = join::join_short_continuations(record);
+    let record = joined.as_ref().unwrap_or(record);
+    let mut trimmed: Option<Record> = None;
     let mut options = *options;
     loop {
         let current = trimmed.as_ref().unwrap_or(record);
