@@ -3,7 +3,8 @@
 //! A friction coefficient `f` or static torque `Tst` is positive and
 //! finite in every method, yet a fit that a record barely excites can
 //! carry it off to values no motor has (a closed-loop record read by a
-//! coarse encoder gave `f = 1.6·10²⁷ N·m·s/rad`): the model then holds the
+//! coarse encoder gave `f = 1.6·10²⁷ N·m·s/rad`, through a voltage-noise
+//! bias correction since bounded): the model then holds the
 //! rotor still and the fit lets the speed residual carry the rest. The
 //! record itself bounds friction. At its top speed the rotor turned, so
 //! the friction there, `Tst + f·ω_max`, was overcome by the motor's

@@ -72,6 +72,9 @@ pub struct Uncertainty {
     /// Per parameter: undetermined, poorly determined or hard to separate
     /// from another one.
     pub flagged: [bool; NP],
+    /// Per parameter: undetermined, or its 95 % interval wider than
+    /// ±50 % (the record hardly determines it).
+    pub poorly_determined: [bool; NP],
     /// Parameters the data do not determine, and why.
     pub warnings: Vec<String>,
 }
@@ -183,6 +186,7 @@ pub fn uncertainty(
 
     let mut warnings = Vec::new();
     let mut flagged = undetermined;
+    let mut poorly_determined = undetermined;
     for involved in &null_directions {
         let names: Vec<&str> = involved.iter().map(|&p| PARAM_KEYS[p]).collect();
         warnings.push(format!(
@@ -196,6 +200,7 @@ pub fn uncertainty(
             let half = (hi - lo) / 2.0 / values[n];
             if half > POOR_HALF_WIDTH {
                 flagged[n] = true;
+                poorly_determined[n] = true;
                 warnings.push(format!(
                     "{} is poorly determined by this record: 95 % interval [{lo:.4e}, {hi:.4e}] \
                      (±{:.0} % of the estimate)",
@@ -226,6 +231,7 @@ pub fn uncertainty(
         residual_variance: s2,
         dof,
         flagged,
+        poorly_determined,
         std_ln_classic,
         jtj_inverse: mark(h_inv),
         warnings,
