@@ -392,3 +392,80 @@ fn voltage_one_sample_early(csv: &str) -> String {
     }
     out.join("\n") + "\n"
 }
+
+/// A current reading offset by 3 % of its largest value (a Hall sensor's
+/// zero) on the seed paper's Table 2 test: `identify` and `diagnose` say
+/// so, with its size and the K it leaves; without the offset neither says
+/// anything of the kind.
+#[test]
+fn a_current_reading_offset_is_named_by_identify_and_diagnose() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, truth, drive) = dc_shapes::shapes().swap_remove(0);
+    let record = dc_shapes::record(&truth, &drive, 1);
+    let clean = dc_shapes::write_csvs(&record, dir.path());
+    let peak = record
+        .segments
+        .iter()
+        .flat_map(|s| &s.current)
+        .fold(0.0f64, |m, v| m.max(v.abs()));
+    let offset = 0.03 * peak;
+    let shifted: Vec<String> = clean
+        .iter()
+        .map(|f| {
+            let text = std::fs::read_to_string(f).unwrap();
+            let path = f.with_extension("offset.csv");
+            std::fs::write(&path, current_plus(&text, offset)).unwrap();
+            path.display().to_string()
+        })
+        .collect();
+    let clean: Vec<String> = clean.iter().map(|f| f.display().to_string()).collect();
+    let said = "current reading offset by about";
+    assert!(!identify_warnings(&[], &clean).contains(said));
+    let noted = identify_warnings(&[], &shifted);
+    let warning = noted
+        .split("\",\"")
+        .find(|w| w.contains(said))
+        .unwrap_or_else(|| panic!("{noted}"));
+    // The offset and K as the warning gives them.
+    let number_after = |key: &str| -> f64 {
+        let rest = &warning[warning.find(key).unwrap() + key.len()..];
+        rest.split_whitespace().next().unwrap().parse().unwrap()
+    };
+    let b = number_after(said);
+    assert!(
+        (b - offset).abs() < 0.25 * offset,
+        "{b} vs {offset}: {warning}"
+    );
+    let k = number_after("K = ");
+    assert!(((k - truth.k) / truth.k).abs() < 0.01, "{k}: {warning}");
+    for (files, named) in [(&shifted, true), (&clean, false)] {
+        let mut args = vec!["diagnose", "--kind", "dc_step", "--json"];
+        args.extend(files.iter().map(String::as_str));
+        let out = common::motorbench(&args);
+        let (stdout, stderr) = common::text(&out);
+        assert!(out.status.success(), "{stderr}");
+        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        assert_eq!(v["warnings"].to_string().contains(said), named, "{v}");
+    }
+}
+
+/// A segment CSV with `offset` added to its current column.
+fn current_plus(csv: &str, offset: f64) -> String {
+    let mut column: Option<usize> = None;
+    let mut out = String::new();
+    for line in csv.lines() {
+        if line.starts_with('#') {
+            out += line;
+        } else if let Some(c) = column {
+            let mut cells: Vec<String> = line.split(',').map(str::to_string).collect();
+            let i: f64 = cells[c].parse().unwrap();
+            cells[c] = (i + offset).to_string();
+            out += &cells.join(",");
+        } else {
+            column = line.split(',').position(|c| c == "armature_current_A");
+            out += line;
+        }
+        out.push('\n');
+    }
+    out
+}

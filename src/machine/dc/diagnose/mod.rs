@@ -191,6 +191,7 @@ pub fn diagnose_dc(
 fn diagnose_once(record: &Record, options: &DiagnoseOptions) -> Result<DiagnosisRun, Attempt> {
     let mut warnings = record.notes.clone();
     warnings.extend(crate::identify::clipped_channels(record));
+    warnings.extend(crate::identify::reading_offset_warning(record));
     // Nominal: start from the identification's output-error fit, whose
     // parameters also say where a record's first segment starts when it
     // is not plainly at rest (fitted only once a segment needs it, so

@@ -42,7 +42,7 @@ pub use abacus::{
     invert_delta, paper_delta, paper_t1_over_tau_e, real_pole_threshold, AbacusError, CurrentStep,
 };
 pub use coastdown::{fit_decay, DecayFit};
-pub use equation_error::{equation_error, EquationErrorFit};
+pub use equation_error::{equation_error, reading_offset_warning, EquationErrorFit};
 pub use error::NotApplicable;
 pub use level_error::LevelError;
 pub(crate) use levels::white_noise;

@@ -31,9 +31,11 @@
 //!   and simulated on it.
 
 mod feedback;
+mod offset;
 mod rows;
 
 pub use feedback::Feedback;
+pub use offset::{reading_offset_warning, ElectricalConstant};
 
 use nalgebra::{SMatrix, SVector};
 
@@ -86,6 +88,9 @@ pub struct EquationErrorFit {
     pub closed_loop: Option<Feedback>,
     /// The estimate simulated on every fitted segment, for plots.
     pub simulated: Vec<SimulatedSegment>,
+    /// The electrical equation refitted with a constant: a check for an
+    /// offset of the current or voltage reading (see [`offset`]).
+    pub electrical_constant: Option<ElectricalConstant>,
 }
 
 /// One segment prepared for the fit.
@@ -169,6 +174,10 @@ pub fn equation_error(
         )));
     };
     let filter = LowPass::new(corner, dt);
+    let electrical_constant = electrical_constant_of(&sol.params, &prepared, reading, &filter);
+    if let Some(w) = electrical_constant.and_then(|c| c.warning(&sol.params)) {
+        warnings.push(format!("equation_error: {w}"));
+    }
     let validation = if prepared.len() >= 2 {
         let scores: Vec<f64> = (0..prepared.len())
             .filter_map(|n| {
@@ -244,6 +253,7 @@ pub fn equation_error(
         warnings,
         closed_loop,
         simulated,
+        electrical_constant,
     })
 }
 
@@ -812,6 +822,34 @@ fn simulate_from_first(
     (i.iter().chain(&w).all(|v| v.is_finite())).then_some((i, w))
 }
 
+/// The electrical equation refitted with a constant at `filter`, with the
+/// instruments of `params` (see [`offset`]).
+fn electrical_constant_of(
+    params: &DcParams,
+    prepared: &[Prepared],
+    reading: SpeedReading,
+    filter: &LowPass,
+) -> Option<ElectricalConstant> {
+    let mut measured = Vec::new();
+    let mut instruments = Vec::new();
+    let mut dts = Vec::new();
+    for p in prepared {
+        let (i, w) = simulate_from_first(params, p, reading)?;
+        let seg = p.seg;
+        measured.push(rows::rows(
+            seg,
+            &seg.current,
+            &seg.speed,
+            &p.moving,
+            reading,
+            filter,
+        ));
+        instruments.push(rows::rows(seg, &i, &w, &p.moving, reading, filter));
+        dts.push(p.dt);
+    }
+    offset::electrical_constant(&measured, &instruments, &dts, filter)
+}
+
 /// Mean NRMSE of current and speed of `params` simulated on `p`.
 fn segment_nrmse(params: &DcParams, p: &Prepared, reading: SpeedReading) -> Option<f64> {
     let (i, w) = simulate_from_first(params, p, reading)?;
@@ -1219,6 +1257,38 @@ mod tests {
             proptest::prop_assert!(rel(fit.params.k, p.k) < 0.01, "K {} vs {}", fit.params.k, p.k);
             proptest::prop_assert!(rel(fit.params.ra, p.ra) < 0.03, "Ra {} vs {}", fit.params.ra, p.ra);
             proptest::prop_assert!(rel(fit.params.la, p.la) < 0.2, "La {} vs {}", fit.params.la, p.la);
+            proptest::prop_assert!(
+                !fit.warnings.iter().any(|w| w.contains("leaves a constant")),
+                "{:?}",
+                fit.warnings
+            );
+        }
+
+        /// A current reading offset by 3 % of its largest value (a Hall
+        /// sensor's zero) moves K; the electrical constant names it, its
+        /// size, and K and Ra with it taken up.
+        #[test]
+        fn a_current_reading_offset_is_named_and_taken_up(
+            plan in any_plan(),
+            sign in proptest::bool::ANY,
+            seed in 0u64..1000,
+        ) {
+            let p = DcParams::SEED_TABLE4_MOMENTS;
+            let mut r = plan_record(&p, &plan, 1.0, seed);
+            let peak = r.segments.iter().flat_map(|s| &s.current).fold(0.0f64, |m, v| m.max(v.abs()));
+            let b = if sign { 0.03 } else { -0.03 } * peak;
+            for s in &mut r.segments {
+                s.current.iter_mut().for_each(|i| *i += b);
+            }
+            let fit = equation_error(&r, SpeedReading::IntervalMean).unwrap();
+            let c = fit.electrical_constant.expect("a constant");
+            proptest::prop_assert!(rel(c.k, p.k) < 0.01, "K {} vs {}", c.k, p.k);
+            proptest::prop_assert!(rel(c.ra, p.ra) < 0.03, "Ra {} vs {}", c.ra, p.ra);
+            proptest::prop_assert!(rel(-c.volts / c.ra, b) < 0.25, "offset {} vs {b}", -c.volts / c.ra);
+            let said = fit.warnings.iter().find(|w| w.contains("current reading offset by about"));
+            // Said wherever it moves K or Ra by half a percent.
+            let moved = rel(c.k, fit.params.k) >= 0.005 || rel(c.ra, fit.params.ra) >= 0.005;
+            proptest::prop_assert_eq!(said.is_some(), moved, "{:?}", fit.warnings);
         }
     }
 }

@@ -76,7 +76,7 @@ impl LowPass {
 
     /// Filter every column of `rows` in place (two passes of one section,
     /// from a zero state).
-    fn apply<const N: usize>(&self, rows: &mut [[f64; N]]) {
+    pub fn apply<const N: usize>(&self, rows: &mut [[f64; N]]) {
         for _ in 0..2 {
             let mut s = [0.0; N];
             for r in rows.iter_mut() {
