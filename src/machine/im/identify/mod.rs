@@ -599,6 +599,21 @@ fn warming_note(sweep: &SlipSweep) -> Option<String> {
     })
 }
 
+/// Close `report`: refuse unphysical values, the first method of
+/// `preference` that applies as the best, `warnings`, and the methods
+/// whose predictions failed unscored (with a warning where the best is
+/// one of them).
+fn conclude(report: &mut IdentificationReport, preference: &[&str], warnings: Vec<String>) {
+    report.refuse_unphysical();
+    report.best = preference
+        .iter()
+        .find(|m| report.methods.get(**m).is_some_and(|r| r.applies))
+        .map(|m| m.to_string());
+    report.warnings = warnings;
+    let failed = report.unscore_failed_predictions();
+    report.warn_if_best_failed(&failed);
+}
+
 /// Identify an induction machine from `record`'s operating points.
 /// `connection` overrides the nameplate's.
 pub fn identify_im(
@@ -656,14 +671,7 @@ pub fn identify_im(
                 .methods
                 .insert(key.into(), MethodReport::not_applicable(reason.to_string()));
         }
-        report.refuse_unphysical();
-        report.best = [JOINT, STANDARD_TESTS]
-            .into_iter()
-            .find(|m| report.methods.get(*m).is_some_and(|r| r.applies))
-            .map(String::from);
-        report.warnings = warnings;
-        let failed = report.unscore_failed_predictions();
-        report.warn_if_best_failed(&failed);
+        conclude(&mut report, &[JOINT, STANDARD_TESTS], warnings);
         return ImIdentification {
             report,
             sweep,
@@ -697,14 +705,11 @@ pub fn identify_im(
     let (rec_report, recursive) = recursive_method(&sweep, model, &base, &mut warnings);
     report.methods.insert("lm".into(), lm_report);
     report.methods.insert("recursive".into(), rec_report);
-    report.refuse_unphysical();
-    report.best = [JOINT, "lm", "recursive", STANDARD_TESTS]
-        .into_iter()
-        .find(|m| report.methods.get(*m).is_some_and(|r| r.applies))
-        .map(String::from);
-    report.warnings = warnings;
-    let failed = report.unscore_failed_predictions();
-    report.warn_if_best_failed(&failed);
+    conclude(
+        &mut report,
+        &[JOINT, "lm", "recursive", STANDARD_TESTS],
+        warnings,
+    );
     ImIdentification {
         report,
         sweep,
