@@ -192,10 +192,9 @@ pub fn cross_validated(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::machine::dc::diagnose::fit::tests::{noisy_steps, DT};
+    use crate::machine::dc::diagnose::fit::tests::{noisy_steps, off_seed, unheated_runs, WEIGHTS};
     use crate::machine::dc::diagnose::fit::{fit, runs_residuals, AtOptimum, Transform};
     use crate::machine::dc::diagnose::model::{Augment, Continuation, Start};
-    use crate::model::DcParams;
 
     /// What a fit's sums let the folds do.
     #[derive(Clone, Copy)]
@@ -217,32 +216,14 @@ mod tests {
     fn each_held_out_sample_is_its_folds_lone_simulation() {
         let levels = [60.0, 120.0, 200.0, 90.0];
         let segs = noisy_steps(&levels);
-        let runs: Vec<SegmentRun> = segs
-            .iter()
-            .enumerate()
-            .map(|(k, seg)| SegmentRun {
-                seg,
-                dt: DT,
-                start: if k == 0 {
-                    Start::Settled(levels[0])
-                } else {
-                    Start::Rest
-                },
-                coast: false,
-                heat_before: 0.0,
-                continues: (k > 0).then_some(Continuation::Next),
-            })
-            .collect();
-        let w = Weights {
-            current: 1.0 / 0.01,
-            speed: 1.0 / 0.1,
-        };
-        let p = DcParams::SEED_TABLE4_MOMENTS;
-        let nominal = AugModel::nominal(DcParams {
-            ra: p.ra * 1.1,
-            k: p.k * 0.97,
-            ..p
+        // One chain: the first from its level settled, each next one
+        // continuing it.
+        let runs = unheated_runs(&segs, |k| match k {
+            0 => (Start::Settled(levels[0]), None),
+            _ => (Start::Rest, Some(Continuation::Next)),
         });
+        let w = WEIGHTS;
+        let nominal = off_seed();
         let coulomb = FitSpec {
             start: AugModel {
                 aug: Augment::CoulombFriction,

@@ -836,7 +836,7 @@ pub(super) mod tests {
     use proptest::prelude::*;
 
     use super::super::candidates::{candidates, RecordScales};
-    use super::super::model::{Augment, LagChannel, Start};
+    use super::super::model::{Augment, Continuation, LagChannel, Start};
     use super::*;
     use crate::record::DcSegment;
 
@@ -915,8 +915,9 @@ pub(super) mod tests {
         (runs, heat)
     }
 
-    /// Noise weights of the noise-free test records: 10 mA, 0.1 rad/s.
-    const WEIGHTS: Weights = Weights {
+    /// Noise weights of the noise-free test records, and the noise of
+    /// [`noisy_steps`]: 10 mA, 0.1 rad/s.
+    pub(in crate::machine::dc::diagnose) const WEIGHTS: Weights = Weights {
         current: 1.0 / 0.01,
         speed: 1.0 / 0.1,
     };
@@ -1082,6 +1083,40 @@ pub(super) mod tests {
             .collect()
     }
 
+    /// `segs` as runs [`DT`] apart, none coasting or heated before, each
+    /// starting and continuing the one before as `start` says of its
+    /// index.
+    pub(in crate::machine::dc::diagnose) fn unheated_runs(
+        segs: &[DcSegment],
+        start: impl Fn(usize) -> (Start, Option<Continuation>),
+    ) -> Vec<SegmentRun<'_>> {
+        segs.iter()
+            .enumerate()
+            .map(|(k, seg)| {
+                let (start, continues) = start(k);
+                SegmentRun {
+                    seg,
+                    dt: DT,
+                    start,
+                    coast: false,
+                    heat_before: 0.0,
+                    continues,
+                }
+            })
+            .collect()
+    }
+
+    /// The seed motor with its resistance 10 % high and its constant 3 %
+    /// low: a fit's start off the truth of [`noisy_steps`].
+    pub(in crate::machine::dc::diagnose) fn off_seed() -> AugModel {
+        let p = DcParams::SEED_TABLE4_MOMENTS;
+        AugModel::nominal(DcParams {
+            ra: p.ra * 1.1,
+            k: p.k * 0.97,
+            ..p
+        })
+    }
+
     /// A held-out refit in one step predicts the held-out segment as the
     /// refit iterated to convergence does: the same held-out sum of
     /// squares to 1e-4, for every fold.
@@ -1089,29 +1124,10 @@ pub(super) mod tests {
     fn one_step_refit_predicts_as_the_converged_refit() {
         let levels = [60.0, 120.0, 200.0, 90.0];
         let segs = noisy_steps(&levels);
-        let runs: Vec<SegmentRun> = segs
-            .iter()
-            .enumerate()
-            .map(|(k, seg)| SegmentRun {
-                seg,
-                dt: DT,
-                start: Start::Settled(levels[k]),
-                coast: false,
-                heat_before: 0.0,
-                continues: None,
-            })
-            .collect();
-        let w = Weights {
-            current: 1.0 / 0.01,
-            speed: 1.0 / 0.1,
-        };
-        let p = DcParams::SEED_TABLE4_MOMENTS;
+        let runs = unheated_runs(&segs, |k| (Start::Settled(levels[k]), None));
+        let w = WEIGHTS;
         let spec = FitSpec {
-            start: AugModel::nominal(DcParams {
-                ra: p.ra * 1.1,
-                k: p.k * 0.97,
-                ..p
-            }),
+            start: off_seed(),
             effect: Vec::new(),
         };
         let all = fit(&spec, &runs, &w, 40).expect("the all-segment fit");
