@@ -849,6 +849,12 @@ mod tests {
         }
     }
 
+    /// The nominal machine (its parameters [`nominal_x`]) swept at
+    /// `voltages`, as [`record`] simulates it.
+    fn nominal_record(voltages: &[f64], seed: u64) -> Record {
+        record(ImAugmentation::nominal(1.0), &nominal_x(), voltages, seed)
+    }
+
     fn nominal_x() -> Vec<f64> {
         [0.8f64, 110.0, 0.9, 3.0].iter().map(|v| v.ln()).collect()
     }
@@ -857,6 +863,20 @@ mod tests {
     fn assert_holds(p: &ParamEstimate, truth: f64) {
         let [lo, hi] = p.ci95.expect("an interval");
         assert!(lo <= truth && truth <= hi, "{truth} outside {p:?}");
+    }
+
+    /// The candidate of `effect` in `d`.
+    fn candidate<'a>(d: &'a Diagnosis, effect: &str) -> &'a Candidate {
+        d.candidates.iter().find(|c| c.effect == effect).unwrap()
+    }
+
+    /// `d` finds no effect, warns `warning` and validates as `validation`
+    /// says.
+    #[track_caller]
+    fn assert_no_effect(d: &Diagnosis, warning: &str, validation: &str) {
+        assert_eq!(d.verdict.effect, "none", "{:?}", d.candidates);
+        assert_warned(&d.warnings, warning);
+        assert!(d.validation.contains(validation), "{}", d.validation);
     }
 
     fn star() -> DiagnoseOptions {
@@ -868,11 +888,11 @@ mod tests {
 
     #[test]
     fn too_few_points_are_refused_with_the_count() {
-        let mut r = record(ImAugmentation::nominal(1.0), &nominal_x(), &[400.0], 1);
+        let mut r = nominal_record(&[400.0], 1);
         r.operating_points.truncate(8);
         let e = diagnose_im(&r, &star()).unwrap_err();
         assert!(matches!(&e, DiagnoseError::NotEnoughData(m) if m.contains("8 operating points")));
-        let mut bad = record(ImAugmentation::nominal(1.0), &nominal_x(), &[400.0], 1);
+        let mut bad = nominal_record(&[400.0], 1);
         bad.operating_points[4].line_current = f64::NAN;
         let e = diagnose_im(&bad, &star()).unwrap_err().to_string();
         assert!(
@@ -939,7 +959,7 @@ mod tests {
     /// the refusal says which columns to check.
     #[test]
     fn a_record_no_circuit_follows_is_refused_with_the_columns_to_check() {
-        let mut r = record(ImAugmentation::nominal(1.0), &nominal_x(), &[400.0], 1);
+        let mut r = nominal_record(&[400.0], 1);
         for p in &mut r.operating_points {
             p.input_power *= 0.5;
         }
@@ -954,7 +974,7 @@ mod tests {
 
     #[test]
     fn the_nominal_machine_gives_none_and_a_star_warning_without_nameplate() {
-        let r = record(ImAugmentation::nominal(1.0), &nominal_x(), &[400.0], 2);
+        let r = nominal_record(&[400.0], 2);
         let run = diagnose_im(&r, &DiagnoseOptions::default()).unwrap();
         let d = &run.report;
         assert_eq!(d.verdict.effect, "none");
@@ -982,12 +1002,7 @@ mod tests {
     /// explains the gap; the same sweep without the offset does not.
     #[test]
     fn a_gap_no_candidate_explains_is_said_to_be_unexplained() {
-        let r = record(
-            ImAugmentation::nominal(1.0),
-            &nominal_x(),
-            &[400.0, 300.0],
-            3,
-        );
+        let r = nominal_record(&[400.0, 300.0], 3);
         let said = |r: &Record| {
             let d = diagnose_im(r, &star()).unwrap().report;
             assert_eq!(d.verdict.effect, "none", "{:?}", d.candidates);
@@ -1016,11 +1031,7 @@ mod tests {
         let d = &run.report;
         assert_eq!(d.verdict.effect, "iron_loss", "{:?}", d.candidates);
         assert!(d.verdict.gap_after < d.verdict.gap_before);
-        let winner = d
-            .candidates
-            .iter()
-            .find(|c| c.effect == "iron_loss")
-            .unwrap();
+        let winner = candidate(d, "iron_loss");
         assert_holds(&winner.params["Rfe"], 1200.0);
         // Corrected Rs is back near the truth; the nominal fit was biased.
         let rs = &d.verdict.corrected_params["Rs"];
@@ -1101,16 +1112,11 @@ mod tests {
         r.standard_tests.locked_rotor = vec![lr(60.0), lr(80.0), lr(100.0)];
         let points = r.operating_points.len();
         let d = diagnose_im(&r, &star()).unwrap().report;
-        assert_eq!(d.verdict.effect, "none", "{:?}", d.candidates);
-        assert_warned(
-            &d.warnings,
-            "3 locked-rotor reading(s) are diagnosed with the load test",
-        );
         // The locked-rotor points are a voltage group of their own.
-        assert!(
-            d.validation.contains("2 supply voltages"),
-            "{}",
-            d.validation
+        assert_no_effect(
+            &d,
+            "3 locked-rotor reading(s) are diagnosed with the load test",
+            "2 supply voltages",
         );
         assert!(points == 30, "{points}");
     }
@@ -1165,12 +1171,7 @@ mod tests {
     /// itself (a twentieth of one row's mean square).
     #[test]
     fn a_candidate_the_record_does_not_show_stops_where_it_crawls() {
-        let r = record(
-            ImAugmentation::nominal(1.0),
-            &nominal_x(),
-            &[400.0, 300.0],
-            2,
-        );
+        let r = nominal_record(&[400.0, 300.0], 2);
         let data = SweepSet::from_record(&r, &[], &star()).unwrap();
         let all: Vec<usize> = (0..data.len()).collect();
         let nominal = fit(ImAugmentation::nominal(1.0), &data, &all, &[nominal_x()]).unwrap();
@@ -1205,11 +1206,7 @@ mod tests {
             d.candidates
         );
         assert_warned(&d.warnings, "fitted as saturation of the stator flux");
-        let fitted = d
-            .candidates
-            .iter()
-            .find(|c| c.effect == "main_flux_saturation")
-            .unwrap();
+        let fitted = candidate(d, "main_flux_saturation");
         assert_holds(&fitted.params["Es"], 260.0);
     }
 
@@ -1289,15 +1286,10 @@ mod tests {
         let d = diagnose_im(&with_no_load(nominal, &nominal_x(), 8), &star())
             .unwrap()
             .report;
-        assert_eq!(d.verdict.effect, "none", "{:?}", d.candidates);
-        assert_warned(
-            &d.warnings,
+        assert_no_effect(
+            &d,
             "10 no-load reading(s) are diagnosed as free-running",
-        );
-        assert!(
-            d.validation.contains("1 supply voltage and a no-load test"),
-            "{}",
-            d.validation
+            "1 supply voltage and a no-load test",
         );
         let region = d.gap.regions.iter().find(|r| r.label == "no_load").unwrap();
         assert_eq!(region.axis, RegionAxis::Voltage);
