@@ -276,6 +276,34 @@ pub(crate) struct FaultRig<'a> {
     pub current_limit: bool,
 }
 
+/// Why a fault of `kind` may not be written with its `field` `given` or
+/// not, where the kind `(takes, needs)` one: missing where it needs one,
+/// given where it takes none.
+fn presence_error(
+    kind: FaultKind,
+    field: &str,
+    given: bool,
+    (takes, needs): (bool, bool),
+) -> Option<String> {
+    match (given, takes, needs) {
+        (false, _, true) => Some(format!("missing: a {} fault needs one", kind.name())),
+        (true, false, _) => Some(format!("a {} fault takes no {field}", kind.name())),
+        _ => None,
+    }
+}
+
+/// Why the target `t` is none of `names` (the `what`s the rig `offers`,
+/// e.g. "has"), the rig's names listed.
+fn unknown_target(t: &str, names: &[&str], what: &str, offers: &str) -> Option<String> {
+    (!names.contains(&t)).then(|| {
+        format!(
+            "no {what} {} (this rig {offers}: {})",
+            quoted(t),
+            names.join(", ")
+        )
+    })
+}
+
 /// Validate `raw` (from `source`) for a rig offering `rig`.
 pub(crate) fn validate_faults(
     source: &str,
@@ -323,41 +351,19 @@ pub(crate) fn validate_faults(
                 ));
             }
         }
-        match (&r.target, kind.takes_target(), kind.needs_target()) {
-            (None, _, true) => {
-                return Err(bad(
-                    "target",
-                    format!("missing: a {} fault needs one", kind.name()),
-                ))
-            }
-            (Some(_), false, _) => {
-                return Err(bad(
-                    "target",
-                    format!("a {} fault takes no target", kind.name()),
-                ))
-            }
-            (Some(t), ..) if t.trim().is_empty() => {
-                return Err(bad("target", "must not be empty".into()))
-            }
-            _ => {}
+        let target = (kind.takes_target(), kind.needs_target());
+        if let Some(why) = presence_error(kind, "target", r.target.is_some(), target) {
+            return Err(bad("target", why));
         }
-        match (r.value, kind.takes_value(), kind.needs_value()) {
-            (None, _, true) => {
-                return Err(bad(
-                    "value",
-                    format!("missing: a {} fault needs one", kind.name()),
-                ))
-            }
-            (Some(_), false, _) => {
-                return Err(bad(
-                    "value",
-                    format!("a {} fault takes no value", kind.name()),
-                ))
-            }
-            (Some(v), ..) if !v.is_finite() => {
-                return Err(bad("value", format!("{v} must be finite")))
-            }
-            _ => {}
+        if r.target.as_ref().is_some_and(|t| t.trim().is_empty()) {
+            return Err(bad("target", "must not be empty".into()));
+        }
+        let value = (kind.takes_value(), kind.needs_value());
+        if let Some(why) = presence_error(kind, "value", r.value.is_some(), value) {
+            return Err(bad("value", why));
+        }
+        if let Some(v) = r.value.filter(|v| !v.is_finite()) {
+            return Err(bad("value", format!("{v} must be finite")));
         }
         let value_check = match (kind, r.value) {
             (FaultKind::CurrentLimit, Some(v)) if v <= 0.0 => Some(format!("{v} A must be > 0")),
@@ -396,15 +402,8 @@ pub(crate) fn validate_faults(
                     ),
                 ));
             }
-            if !rig.served.contains(&t) {
-                return Err(bad(
-                    "target",
-                    format!(
-                        "no served device {} (this rig serves: {})",
-                        quoted(t),
-                        rig.served.join(", ")
-                    ),
-                ));
+            if let Some(why) = unknown_target(t, rig.served, "served device", "serves") {
+                return Err(bad("target", why));
             }
             if kind == FaultKind::CrcError && rig.can.contains(&t) {
                 return Err(bad(
@@ -434,15 +433,8 @@ pub(crate) fn validate_faults(
         }
         if kind.on_stage() {
             if let Some(t) = r.target.as_deref() {
-                if !rig.stages.contains(&t) {
-                    return Err(bad(
-                        "target",
-                        format!(
-                            "no stage {} (this rig has: {})",
-                            quoted(t),
-                            rig.stages.join(", ")
-                        ),
-                    ));
+                if let Some(why) = unknown_target(t, rig.stages, "stage", "has") {
+                    return Err(bad("target", why));
                 }
             }
         }
