@@ -116,33 +116,69 @@ fn opt_f(v: &Value, digits: usize, unit: &str) -> String {
         .map_or_else(|| "—".to_string(), |x| format!("{x:.digits$} {unit}"))
 }
 
+/// Get the list at `path` and print it: as JSON with `--json`, else one
+/// line (`line`) for each element of its array `key`.
+async fn print_list(
+    client: &Client,
+    path: &str,
+    key: &str,
+    json: bool,
+    line: fn(&Value) -> String,
+) -> Result<(), CtlFailure> {
+    let v = get_ok(client, path).await?;
+    if json {
+        print_json(&v);
+        return Ok(());
+    }
+    for r in v[key].as_array().into_iter().flatten() {
+        println!("{}", line(r));
+    }
+    Ok(())
+}
+
+/// One rig of `/v1/rigs`, for a person.
+fn rig_line(r: &Value) -> String {
+    let mut line = format!(
+        "{:<16} {:<8} motor {}  winding ≈ {}",
+        r["name"].as_str().unwrap_or("?"),
+        r["state"].as_str().unwrap_or("?"),
+        r["motor_id"].as_str().unwrap_or("?"),
+        opt_f(&r["winding_c"], 1, "°C"),
+    );
+    if let Some(t) = r["running_test"].as_str() {
+        line += &format!("  running {t}");
+    }
+    if let Some(m) = r["trip"]["message"].as_str() {
+        line += &format!("  TRIPPED: {m}");
+    }
+    line
+}
+
+/// One record of `/v1/records`, for a person: its key results last.
+fn record_line(r: &Value) -> String {
+    let results = r["key_results"]["params"]
+        .as_object()
+        .map(|p| {
+            p.iter()
+                .map(|(k, v)| format!("{k}={:.4}", v.as_f64().unwrap_or(f64::NAN)))
+                .collect::<Vec<_>>()
+                .join(" ")
+        })
+        .unwrap_or_default();
+    format!(
+        "{:<40} {:<11} {:<20} {}  {}",
+        r["name"].as_str().unwrap_or("?"),
+        r["outcome"].as_str().unwrap_or("?"),
+        r["started_at"].as_str().unwrap_or("?"),
+        r["plan"].as_str().unwrap_or(""),
+        results
+    )
+}
+
 /// Run one `ctl` command.
 pub async fn run(client: &Client, command: CtlCommand, json: bool) -> Result<(), CtlFailure> {
     match command {
-        CtlCommand::Status => {
-            let v = get_ok(client, "/v1/rigs").await?;
-            if json {
-                print_json(&v);
-                return Ok(());
-            }
-            for r in v["rigs"].as_array().into_iter().flatten() {
-                let mut line = format!(
-                    "{:<16} {:<8} motor {}  winding ≈ {}",
-                    r["name"].as_str().unwrap_or("?"),
-                    r["state"].as_str().unwrap_or("?"),
-                    r["motor_id"].as_str().unwrap_or("?"),
-                    opt_f(&r["winding_c"], 1, "°C"),
-                );
-                if let Some(t) = r["running_test"].as_str() {
-                    line += &format!("  running {t}");
-                }
-                if let Some(m) = r["trip"]["message"].as_str() {
-                    line += &format!("  TRIPPED: {m}");
-                }
-                println!("{line}");
-            }
-            Ok(())
-        }
+        CtlCommand::Status => print_list(client, "/v1/rigs", "rigs", json, rig_line).await,
         CtlCommand::Start {
             rig,
             test_json,
@@ -228,31 +264,7 @@ pub async fn run(client: &Client, command: CtlCommand, json: bool) -> Result<(),
             .await
         }
         CtlCommand::Records => {
-            let v = get_ok(client, "/v1/records").await?;
-            if json {
-                print_json(&v);
-                return Ok(());
-            }
-            for r in v["records"].as_array().into_iter().flatten() {
-                let results = r["key_results"]["params"]
-                    .as_object()
-                    .map(|p| {
-                        p.iter()
-                            .map(|(k, v)| format!("{k}={:.4}", v.as_f64().unwrap_or(f64::NAN)))
-                            .collect::<Vec<_>>()
-                            .join(" ")
-                    })
-                    .unwrap_or_default();
-                println!(
-                    "{:<40} {:<11} {:<20} {}  {}",
-                    r["name"].as_str().unwrap_or("?"),
-                    r["outcome"].as_str().unwrap_or("?"),
-                    r["started_at"].as_str().unwrap_or("?"),
-                    r["plan"].as_str().unwrap_or(""),
-                    results
-                );
-            }
-            Ok(())
+            print_list(client, "/v1/records", "records", json, record_line).await
         }
         CtlCommand::Fetch { name, out } => {
             std::fs::create_dir_all(&out)
