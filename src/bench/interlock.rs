@@ -36,7 +36,7 @@ use motorbench_drivers::{
     ChannelInfo, ChannelStats, DriverError, PowerStage, SampleBatch, SensorStream,
     StageCapabilities,
 };
-use tokio::sync::{mpsc, oneshot, watch, Mutex, Notify};
+use tokio::sync::{mpsc, oneshot, watch, Mutex, MutexGuard, Notify};
 use tokio::time::Instant;
 
 use super::escalation::escalate;
@@ -229,6 +229,20 @@ impl InterlockedStage {
             reason: format!("{what} refused after the stop: {why}"),
         }
     }
+
+    /// The stage, locked, to command `what`: refused once the test is
+    /// stopped. Checked under the lock: a stop takes the lock before
+    /// commanding the safe state, so nothing gets past it.
+    async fn unless_stopped(
+        &self,
+        what: &str,
+    ) -> Result<MutexGuard<'_, Box<dyn PowerStage>>, DriverError> {
+        let stage = self.stage.lock().await;
+        if self.shared.stopped.load(Ordering::SeqCst) {
+            return Err(self.refuse(what));
+        }
+        Ok(stage)
+    }
 }
 
 #[async_trait]
@@ -251,13 +265,10 @@ impl PowerStage for InterlockedStage {
                 ),
             });
         }
-        let mut stage = self.stage.lock().await;
-        // Checked under the lock: a stop takes the lock before commanding
-        // the safe state, so nothing gets past it.
-        if self.shared.stopped.load(Ordering::SeqCst) {
-            return Err(self.refuse("set point"));
-        }
-        stage.set_setpoint(value).await
+        self.unless_stopped("set point")
+            .await?
+            .set_setpoint(value)
+            .await
     }
 
     async fn set_output_enabled(&mut self, enabled: bool) -> Result<(), DriverError> {
@@ -277,19 +288,17 @@ impl PowerStage for InterlockedStage {
     }
 
     async fn set_current_limit(&mut self, amperes: f64) -> Result<(), DriverError> {
-        let mut stage = self.stage.lock().await;
-        if self.shared.stopped.load(Ordering::SeqCst) {
-            return Err(self.refuse("current limit"));
-        }
-        stage.set_current_limit(amperes).await
+        self.unless_stopped("current limit")
+            .await?
+            .set_current_limit(amperes)
+            .await
     }
 
     async fn set_frequency(&mut self, hz: f64) -> Result<(), DriverError> {
-        let mut stage = self.stage.lock().await;
-        if self.shared.stopped.load(Ordering::SeqCst) {
-            return Err(self.refuse("frequency"));
-        }
-        stage.set_frequency(hz).await
+        self.unless_stopped("frequency")
+            .await?
+            .set_frequency(hz)
+            .await
     }
 }
 
