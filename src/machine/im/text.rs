@@ -8,6 +8,16 @@ use std::fmt::Write;
 use crate::contract::StandardTestTables;
 use crate::identify::{ImIdentification, ParamSource};
 
+/// The head of the columns both tables open with: the supply's line
+/// voltage, line current and input power ([`supply_cells`]).
+const SUPPLY_HEADER: &str = "   V line    I line     P in W";
+
+/// A reading's line voltage, line current and input power, under
+/// [`SUPPLY_HEADER`].
+fn supply_cells(line_voltage: f64, line_current: f64, input_power: f64) -> String {
+    format!("{line_voltage:>9.2} {line_current:>9.4} {input_power:>10.2}")
+}
+
 /// The standard tests' tables, for a person.
 fn render_tables(out: &mut String, t: &StandardTestTables) {
     let opt = |v: Option<f64>, w: usize, p: usize| {
@@ -24,16 +34,14 @@ fn render_tables(out: &mut String, t: &StandardTestTables) {
     );
     let _ = writeln!(
         out,
-        "  {:>9} {:>9} {:>10} {:>11} {:>10} {:>9} {:>10} {:>11}",
-        "V line", "I line", "P in W", "P-Pcu W", "Pfe W", "E V", "Xm ohm", "Rfe ohm"
+        "  {SUPPLY_HEADER} {:>11} {:>10} {:>9} {:>10} {:>11}",
+        "P-Pcu W", "Pfe W", "E V", "Xm ohm", "Rfe ohm"
     );
     for r in &t.no_load {
         let _ = writeln!(
             out,
-            "  {:>9.2} {:>9.4} {:>10.2} {:>11.2} {} {:>9.2} {} {}{}",
-            r.line_voltage,
-            r.line_current,
-            r.input_power,
+            "  {} {:>11.2} {} {:>9.2} {} {}{}",
+            supply_cells(r.line_voltage, r.line_current, r.input_power),
             r.constant_losses,
             opt(r.core_loss, 10, 2),
             r.air_gap_voltage,
@@ -65,16 +73,14 @@ fn render_tables(out: &mut String, t: &StandardTestTables) {
     let _ = writeln!(out, "\nlocked rotor (per phase)");
     let _ = writeln!(
         out,
-        "  {:>9} {:>9} {:>10} {:>8} {:>10} {:>10} {:>10}",
-        "V line", "I line", "P in W", "f Hz", "Zlr ohm", "Rlr ohm", "Xlr ohm"
+        "  {SUPPLY_HEADER} {:>8} {:>10} {:>10} {:>10}",
+        "f Hz", "Zlr ohm", "Rlr ohm", "Xlr ohm"
     );
     for r in &t.locked_rotor {
         let _ = writeln!(
             out,
-            "  {:>9.2} {:>9.4} {:>10.2} {} {:>10.4} {:>10.4} {:>10.4}",
-            r.line_voltage,
-            r.line_current,
-            r.input_power,
+            "  {} {} {:>10.4} {:>10.4} {:>10.4}",
+            supply_cells(r.line_voltage, r.line_current, r.input_power),
             opt(r.frequency, 8, 2),
             r.zlr,
             r.rlr,
@@ -183,4 +189,23 @@ pub fn render_im_text(id: &ImIdentification) -> String {
     }
     crate::contract::render_warnings(&mut out, &id.report);
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The supply's columns stand under their heads, as wide as them.
+    #[test]
+    fn supply_cells_stand_under_their_heads() {
+        assert_eq!(
+            SUPPLY_HEADER,
+            format!("{:>9} {:>9} {:>10}", "V line", "I line", "P in W")
+        );
+        assert_eq!(
+            supply_cells(400.0, 12.3456, 1234.5),
+            "   400.00   12.3456    1234.50"
+        );
+        assert_eq!(supply_cells(400.0, 1.0, 1.0).len(), SUPPLY_HEADER.len());
+    }
 }
