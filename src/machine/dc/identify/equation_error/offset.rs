@@ -6,8 +6,9 @@
 //! `U = Ra·(i_m − b) + La·di/dt + K·ω`: a constant `−Ra·b` the model has
 //! no term for, which least squares shares out over Ra and K (a 3 % offset
 //! moved K by 1 to 6 % on the blind suites' `none` records, with nothing
-//! else to show for it). A voltage reading offset by `c` adds `−c` the
-//! same way, and a brush drop on a current of one sign `+U_b`.
+//! else to show for it). A voltage reading offset by `c` leaves `+c` the
+//! same way, a speed reading offset by `d` leaves `−K·d`, and a brush
+//! drop on a current of one sign `+U_b`.
 //!
 //! The check refits the electrical equation alone with a constant beside
 //! La, Ra and K, with the instruments of the final pass, and gives the
@@ -65,13 +66,15 @@ impl ElectricalConstant {
                 "the voltage equation leaves a constant of {:+.3} V ({:.0} \
                  standard errors), and taking it up moves K by {:+.1} % and Ra by {:+.1} %: the \
                  current reading offset by about {:+.3e} A (read the current with the power stage off \
-                 and subtract it), the voltage reading offset by about {:+.3} V, or a brush drop of a \
-                 current of one sign; with the constant, K = {:.5} V*s/rad and Ra = {:.5} ohm",
+                 and subtract it), the speed reading by about {:+.3e} rad/s, the voltage reading by \
+                 about {:+.3} V, or a brush drop of a current of one sign; with the constant, \
+                 K = {:.5} V*s/rad and Ra = {:.5} ohm",
                 self.volts,
                 self.t().abs(),
                 100.0 * dk,
                 100.0 * dra,
                 -self.volts / self.ra,
+                -self.volts / self.k,
                 self.volts,
                 self.k,
                 self.ra
