@@ -108,6 +108,16 @@ pub fn equation_error(
     record: &Record,
     reading: SpeedReading,
 ) -> Result<EquationErrorFit, NotApplicable> {
+    fit_record(record, reading, true)
+}
+
+/// [`equation_error`], with the held-out validation (a refit per
+/// segment) only where `validate`.
+pub(crate) fn fit_record(
+    record: &Record,
+    reading: SpeedReading,
+    validate: bool,
+) -> Result<EquationErrorFit, NotApplicable> {
     let mut warnings = Vec::new();
     let driven: Vec<&DcSegment> = record
         .segments
@@ -178,7 +188,9 @@ pub fn equation_error(
     if let Some(w) = electrical_constant.and_then(|c| c.warning(&sol.params)) {
         warnings.push(format!("equation_error: {w}"));
     }
-    let validation = if prepared.len() >= 2 {
+    let validation = if !validate {
+        None
+    } else if prepared.len() >= 2 {
         let scores: Vec<f64> = (0..prepared.len())
             .filter_map(|n| {
                 let rest: Vec<Prepared> = prepared

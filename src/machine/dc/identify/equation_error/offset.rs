@@ -154,10 +154,10 @@ pub fn electrical_constant(
 }
 
 /// The warning of [`ElectricalConstant::warning`] for `record`, from its
-/// equation-error fit (for the diagnosis, which fits by output error and
-/// would otherwise not say it); `None` where the fit does not apply or
-/// finds no constant that matters.
+/// equation-error fit without validation (for the diagnosis, which fits
+/// by output error and would otherwise not say it); `None` where the fit
+/// does not apply or finds no constant that matters.
 pub fn reading_offset_warning(record: &Record) -> Option<String> {
-    let fit = super::equation_error(record, SpeedReading::default()).ok()?;
+    let fit = super::fit_record(record, SpeedReading::default(), false).ok()?;
     fit.electrical_constant?.warning(&fit.params)
 }
