@@ -322,3 +322,44 @@ fn an_implausible_current_names_the_file_and_column() {
         "{stderr}"
     );
 }
+
+/// A record longer than the diagnosis reads (a 40 s PRBS at 2 kHz, 80 001
+/// samples in three segments) is diagnosed from windows spread over it,
+/// and the report says how many samples it read and where.
+#[test]
+fn a_long_record_is_diagnosed_from_windows_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let truth = motorbench::model::DcParams::SEED_TABLE4_MOMENTS;
+    // A pseudo-random 80 V / 220 V square wave, clocked every 20 ms.
+    let prbs = |t: f64| {
+        let clock = (t / 0.02) as u64;
+        if (clock.wrapping_mul(2_654_435_761) >> 13) & 1 == 1 {
+            220.0
+        } else {
+            80.0
+        }
+    };
+    let record = dc_shapes::record(&truth, &dc_shapes::Drive::Open(Box::new(prbs), 40.0), 3);
+    let samples: usize = record.segments.iter().map(|s| s.time.len()).sum();
+    assert!(samples > 65_536, "{samples}");
+    let files = dc_shapes::write_csvs(&record, dir.path());
+    let mut args = vec!["diagnose", "--kind", "dc_step", "--json"];
+    args.extend(files.iter().map(|f| f.to_str().unwrap()));
+    let out = motorbench(&args);
+    let (stdout, stderr) = text(&out);
+    assert!(out.status.success(), "{stderr}");
+    let d: Value = serde_json::from_str(&stdout).unwrap();
+    check_contract(&d);
+    let note = d["warnings"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(Value::as_str)
+        .find(|w| w.contains("more than the diagnosis reads"))
+        .unwrap_or_else(|| panic!("{}", d["warnings"]));
+    assert!(
+        note.contains(&format!("the record holds {samples} samples")),
+        "{note}"
+    );
+    assert_eq!(d["verdict"]["effect"], "none", "{}", d["verdict"]);
+}

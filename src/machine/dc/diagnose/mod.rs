@@ -30,6 +30,7 @@ mod gap;
 mod join;
 mod lanes;
 mod model;
+mod windows;
 
 use std::collections::BTreeMap;
 
@@ -141,6 +142,9 @@ pub fn diagnose_dc(
     // The join's note is the record's, which the report lists.
     let joined = join::join_short_continuations(record);
     let record = joined.as_ref().unwrap_or(record);
+    // A long record is read in windows (the note says so).
+    let windowed = windows::windowed(record);
+    let record = windowed.as_ref().unwrap_or(record);
     let mut trimmed: Option<Record> = None;
     let mut options = *options;
     loop {
@@ -856,6 +860,9 @@ fn prepare_runs<'a>(
     let mut heat = 0.0;
     for (pos, seg) in segs.iter().enumerate() {
         let n = seg.time.len();
+        if let Some(prev) = pos.checked_sub(1).map(|p| &segs[p]) {
+            heat += gap_heat(prev, seg);
+        }
         let seg_heat = heat_of(seg);
         if n < MIN_SAMPLES {
             warnings.push(format!(
@@ -1286,6 +1293,29 @@ fn heat_of(seg: &DcSegment) -> f64 {
         .sum()
 }
 
+/// Readings at each side of a gap in time whose `i²` stands for it.
+const GAP_SIDE: usize = 32;
+
+/// `∫i²dt` over a gap in time between `prev` and `seg` (samples a logger
+/// dropped, or what a long record's windows leave out, `windows.rs`): the
+/// gap's length times the mean `i²` of the readings at either side. Zero
+/// where `seg` follows `prev` (on its last sample or one interval later).
+fn gap_heat(prev: &DcSegment, seg: &DcSegment) -> f64 {
+    let n = seg.time.len();
+    let (Some(&end), true) = (prev.time.last(), n >= 2) else {
+        return 0.0;
+    };
+    let dt = (seg.time[n - 1] - seg.time[0]) / (n - 1) as f64;
+    let gap = seg.time[0] - end - dt;
+    if !gap.is_finite() || gap <= 0.5 * dt {
+        return 0.0;
+    }
+    let mean_sq = |y: &[f64]| y.iter().map(|v| v * v).sum::<f64>() / y.len().max(1) as f64;
+    let before = &prev.current[prev.current.len().saturating_sub(GAP_SIDE)..];
+    let after = &seg.current[..GAP_SIDE.min(n)];
+    gap * 0.5 * (mean_sq(before) + mean_sq(after))
+}
+
 /// Noise of current and speed from first differences over the last
 /// quarter of every step segment: `σ² = mean(Δy²)/2`.
 fn channel_weights(runs: &[SegmentRun], warnings: &mut Vec<String>) -> Weights {
@@ -1450,6 +1480,28 @@ mod tests {
     use super::*;
     use crate::diagnose::blind::simulate_dc_case;
     use rand::{rngs::StdRng, SeedableRng};
+
+    /// A gap in time between two segments heats the winding at the `i²`
+    /// of its sides; a segment that follows the one before adds nothing.
+    #[test]
+    fn a_gap_in_time_is_heated_at_its_sides_current() {
+        let seg = |t0: f64, i: f64| DcSegment {
+            index: 0,
+            kind: Some(SegmentKind::DcStep),
+            label: String::new(),
+            time: (0..100).map(|k| t0 + k as f64 * 1e-3).collect(),
+            voltage: vec![10.0; 100],
+            current: vec![i; 100],
+            speed: vec![5.0; 100],
+        };
+        let a = seg(0.0, 2.0);
+        // Ends at 0.099 s; the next starts at 1.1 s: a gap of 1 s beyond
+        // one interval, at i² of 4 and 16 on its sides.
+        let heat = gap_heat(&a, &seg(1.1, 4.0));
+        assert!((heat - 10.0).abs() < 1e-9, "{heat}");
+        assert_eq!(gap_heat(&a, &seg(0.099, 4.0)), 0.0);
+        assert_eq!(gap_heat(&a, &seg(0.1, 4.0)), 0.0);
+    }
 
     /// The nominal parameters a simulated case was made with.
     fn truth_params(case: &crate::diagnose::blind::BlindRecord) -> DcParams {
