@@ -30,7 +30,13 @@ async fn csv_files_identify_like_the_mcap_they_came_from() {
 /// `motorbench identify --kind dc_step --json` with `args`, which must
 /// succeed: its stdout.
 fn identify_json(args: &[&str]) -> String {
-    let mut all = vec!["identify", "--kind", "dc_step", "--json"];
+    dc_json("identify", args)
+}
+
+/// `motorbench COMMAND --kind dc_step --json` with `args`, which must
+/// succeed: its stdout.
+fn dc_json(command: &str, args: &[&str]) -> String {
+    let mut all = vec![command, "--kind", "dc_step", "--json"];
     all.extend(args);
     let out = common::motorbench(&all);
     let (stdout, stderr) = common::text(&out);
@@ -292,12 +298,8 @@ fn a_friction_the_motor_could_not_overcome_is_not_an_answer() {
     let files: Vec<String> = (0..4)
         .map(|n| data.join(format!("segment-{n}.csv")).display().to_string())
         .collect();
-    let mut args = vec!["identify", "--kind", "dc_step", "--json"];
-    args.extend(files.iter().map(String::as_str));
-    let out = common::motorbench(&args);
-    let (stdout, stderr) = common::text(&out);
-    assert!(out.status.success(), "{stderr}");
-    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let files: Vec<&str> = files.iter().map(String::as_str).collect();
+    let v: serde_json::Value = serde_json::from_str(&identify_json(&files)).unwrap();
     let oe = &v["methods"]["output_error"];
     assert_eq!(oe["applies"], true, "{oe}");
     let k = oe["params"]["K"]["value"].as_f64().unwrap();
@@ -307,7 +309,7 @@ fn a_friction_the_motor_could_not_overcome_is_not_an_answer() {
             .unwrap()
             .contains("voltage-noise bias correction was not applied")
     });
-    assert!(warned, "{stdout}");
+    assert!(warned, "{v}");
     // The methods that apply: friction at the top speed (132 rad/s) below
     // ten times K times the largest current (3.43 A).
     let mut applying = 0;
@@ -322,7 +324,7 @@ fn a_friction_the_motor_could_not_overcome_is_not_an_answer() {
             applying += 1;
         }
     }
-    assert!(applying >= 2, "{stdout}");
+    assert!(applying >= 2, "{v}");
     assert_eq!(v["best"], "equation_error");
 }
 
@@ -361,13 +363,9 @@ fn a_voltage_logged_as_issued_is_named_and_moved_on_request() {
 /// `motorbench identify --kind dc_step --json EXTRA… FILES…`: the report's
 /// warnings, as JSON text.
 fn identify_warnings(extra: &[&str], files: &[String]) -> String {
-    let mut args = vec!["identify", "--kind", "dc_step", "--json"];
-    args.extend(extra);
+    let mut args = extra.to_vec();
     args.extend(files.iter().map(String::as_str));
-    let out = common::motorbench(&args);
-    let (stdout, stderr) = common::text(&out);
-    assert!(out.status.success(), "{stderr}");
-    let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&identify_json(&args)).unwrap();
     v["warnings"].to_string()
 }
 
@@ -439,12 +437,8 @@ fn a_current_reading_offset_is_named_by_identify_and_diagnose() {
     let k = number_after("K = ");
     assert!(((k - truth.k) / truth.k).abs() < 0.01, "{k}: {warning}");
     for (files, named) in [(&shifted, true), (&clean, false)] {
-        let mut args = vec!["diagnose", "--kind", "dc_step", "--json"];
-        args.extend(files.iter().map(String::as_str));
-        let out = common::motorbench(&args);
-        let (stdout, stderr) = common::text(&out);
-        assert!(out.status.success(), "{stderr}");
-        let v: serde_json::Value = serde_json::from_str(&stdout).unwrap();
+        let files: Vec<&str> = files.iter().map(String::as_str).collect();
+        let v: serde_json::Value = serde_json::from_str(&dc_json("diagnose", &files)).unwrap();
         assert_eq!(v["warnings"].to_string().contains(said), named, "{v}");
     }
 }
