@@ -89,7 +89,7 @@ pub struct EquationErrorFit {
     /// The estimate simulated on every fitted segment, for plots.
     pub simulated: Vec<SimulatedSegment>,
     /// The electrical equation refitted with a constant: a check for an
-    /// offset of the current or voltage reading (see [`offset`]).
+    /// offset of the current, speed or voltage reading (`offset.rs`).
     pub electrical_constant: Option<ElectricalConstant>,
 }
 
