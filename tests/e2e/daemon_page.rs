@@ -16,6 +16,11 @@
 //! of `config/sim-im.toml`): the page must plot the sweep's operating
 //! points, line current and input power against slip, as they arrive,
 //! the same points the API's status holds.
+//!
+//! A third cuts every event feed in the browser (a dropped connection, a
+//! proxy that closes long answers): the page must still show the test
+//! from its status and, once aborted from the page, how it ended, though
+//! the rig is idle by then.
 
 use crate::common;
 
@@ -152,6 +157,36 @@ async fn the_status_page_shows_the_test_and_aborts_it_in_chromium() {
     ] {
         assert!(shots.join(format!("{shot}.png")).exists(), "{shot}.png");
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_status_page_shows_how_a_test_ended_when_its_event_feed_is_cut() {
+    let dir = tempfile::tempdir().unwrap();
+    let served = start_with_token(dir.path(), &dir.path().join("records"));
+    let c = served.client(Some(WEB_TOKEN));
+    let slow =
+        serde_json::json!({"test": {"settle": {"min_hold_s": 6, "hold_s": 2, "timeout_s": 20}}});
+    let id = start(&c, &slow).await;
+    let seen = page_check(&served, Some("--cut-feed"), &id);
+
+    assert!(seen["feeds_cut"].as_u64().unwrap() >= 1, "{seen}");
+    let running = &seen["running"];
+    assert_eq!(running["badge"], "running", "{running}");
+    assert!(
+        running["segment"].as_str().unwrap().starts_with("segment "),
+        "{running}"
+    );
+    let aborted = &seen["aborted"];
+    assert_eq!(aborted["badge"], "idle", "{aborted}");
+    assert!(
+        aborted["eta"].as_str().unwrap().starts_with("aborted"),
+        "{aborted}"
+    );
+    let s = wait_test(&c, &id, finished).await;
+    assert_eq!(s["outcome"], "aborted");
+    assert_eq!(s["stop"]["kind"], "operator_abort");
+    assert_eq!(seen["console_errors"], Value::Array(vec![]), "{seen}");
+    assert!(shots_dir().join("21-feed-cut.png").exists());
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -15,7 +15,12 @@ Screenshots go to OUT_DIR (01-token.png … 05-latched.png).
 With --sweep, TEST_ID is an induction-machine slip sweep: the card must
 plot its operating points (line current and input power against slip) as
 they arrive, beside the live plot; the page's Abort button then aborts
-it. Screenshots: 11-sweep.png, 12-sweep-aborted.png. Chromium is
+it. Screenshots: 11-sweep.png, 12-sweep-aborted.png.
+
+With --cut-feed, every request for a test's event feed is failed in the
+browser (as a dropped connection or a proxy that closes long answers
+would): the card must still show the test running, from its status, and
+once aborted from the page, how it ended. Screenshot: 21-feed-cut.png. Chromium is
 /usr/bin/chromium unless MOTORBENCH_CHROMIUM names another; without it the
 script fails (exit 2) and says how to install it.
 """
@@ -61,6 +66,7 @@ class Browser:
         self.requests = []
         self.console_errors = []
         self.session = None
+        self.feeds_cut = 0
 
     async def start(self):
         exe = os.environ.get("MOTORBENCH_CHROMIUM", "/usr/bin/chromium")
@@ -107,6 +113,11 @@ class Browser:
             method, params = msg.get("method"), msg.get("params", {})
             if method == "Network.requestWillBeSent":
                 self.requests.append(params["request"]["url"])
+            elif method == "Fetch.requestPaused":
+                # Only the event feeds are paused (see cut_event_feeds).
+                self.feeds_cut += 1
+                asyncio.create_task(self.send("Fetch.failRequest", {
+                    "requestId": params["requestId"], "errorReason": "ConnectionClosed"}))
             elif method == "Runtime.exceptionThrown":
                 self.console_errors.append(params["exceptionDetails"].get("text", "exception"))
             elif method == "Runtime.consoleAPICalled" and params.get("type") == "error":
@@ -124,6 +135,10 @@ class Browser:
         if "error" in reply:
             raise Failure(f"{method}: {reply['error']}")
         return reply.get("result", {})
+
+    async def cut_event_feeds(self):
+        """Fail every request for a test's event feed from now on."""
+        await self.send("Fetch.enable", {"patterns": [{"urlPattern": "*/v1/tests/*/events"}]})
 
     async def js(self, expression):
         r = await self.send("Runtime.evaluate", {
@@ -289,11 +304,32 @@ async def run(url, token, rig, test_id, out_dir):
     return seen
 
 
+async def run_cut_feed(url, token, rig, test_id, out_dir):
+    b = Browser(out_dir)
+    await b.start()
+    seen = {}
+    try:
+        await b.cut_event_feeds()
+        await open_with_token(b, url, token, seen)
+        seen["running"] = await b.wait("the test shown running without its feed", card(
+            rig, f"c.dataset.state === 'running' && c.querySelector('.test').textContent.includes('{test_id}') "
+                 f"&& c.querySelector('.test').textContent.includes('running') && {CARD_TEXT}"))
+        seen["aborted"] = await abort_from_page(b, rig, CARD_TEXT)
+        seen["shots"].append(await b.screenshot("21-feed-cut"))
+        seen["feeds_cut"] = b.feeds_cut
+        seen["requests"] = b.requests
+        seen["console_errors"] = b.console_errors
+    finally:
+        await b.close()
+    return seen
+
+
 def main():
     args = sys.argv[1:]
+    modes = {"--sweep": run_sweep, "--cut-feed": run_cut_feed}
     check = run
-    if args and args[0] == "--sweep":
-        check = run_sweep
+    if args and args[0] in modes:
+        check = modes[args[0]]
         args = args[1:]
     url, token, rig, test_id, out_dir = args[:5]
     os.makedirs(out_dir, exist_ok=True)

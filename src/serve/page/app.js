@@ -167,7 +167,10 @@ function showRig(rig) {
   card.runningId = rig.running_test;
   card.abort.disabled = !rig.running_test;
   card.reset.disabled = rig.state !== "tripped";
-  if (rig.running_test && card.feedId !== rig.running_test) follow(card, rig.running_test);
+  // The running test, or the last one followed until it is seen to end:
+  // after an abort the rig is idle while its test is still identifying.
+  const id = rig.running_test || (card.plotId !== card.endedId ? card.plotId : null);
+  if (id && card.feedId !== id) follow(card, id);
 }
 
 async function act(card, what) {
@@ -330,14 +333,34 @@ async function follow(card, id) {
       showProgress(card, s);
       if (ev.name === "done") {
         done = true;
-        refreshRecords();
         break;
       }
     }
   } catch (e) {
-    if (!(e instanceof Unauthorized)) card.message.textContent = `live feed: ${e.message}`;
+    if (!(e instanceof Unauthorized)) card.message.textContent = `live feed: ${e.message}; the card follows the test's status instead`;
   }
-  // A feed cut before the end is picked up again by the next poll.
+  // A feed cut before its `done` (a dropped connection, a proxy that
+  // closes long answers): the test's status instead, so the card shows
+  // where it is, and how it ended once it has.
+  if (!done) {
+    try {
+      const r = await call("GET", `v1/tests/${encodeURIComponent(id)}`);
+      if (r.status === 404) {
+        done = true; // no longer in the daemon's run: the records have it
+      } else if (r.ok) {
+        const s = await r.json();
+        showProgress(card, s);
+        done = s.state === "finished";
+      }
+    } catch (e) {
+      if (!(e instanceof Unauthorized)) card.message.textContent = `test status: ${e.message}`;
+    }
+  }
+  if (done) {
+    card.endedId = id;
+    refreshRecords();
+  }
+  // A test not seen to end is followed again from the next poll.
   if (!done && card.feedId === id) card.feedId = null;
 }
 
