@@ -444,7 +444,7 @@ impl ServedRig {
                 // The adapter's line through its faults: the encoder's
                 // end on an in-process pipe, relayed to the terminal.
                 let (adapter, line_end) = tokio::io::duplex(4096);
-                tokio::spawn(FaultyLine::new(f.clone()).relay(pty.host, line_end));
+                tokio::spawn(FaultyLine::unasked(f.clone()).relay(pty.host, line_end));
                 Box::new(SlcanStream::open(adapter, name, opts).await.map_err(io)?)
             }
         };
