@@ -20,6 +20,7 @@ pub(crate) mod config;
 pub mod diagnose;
 mod gaps;
 pub mod identify;
+mod join;
 mod overlay;
 mod plan;
 mod rig;

@@ -27,7 +27,6 @@ mod choice;
 mod cv;
 mod fit;
 mod gap;
-mod join;
 mod lanes;
 mod model;
 mod windows;
@@ -65,7 +64,7 @@ use crate::record::{DcSegment, Record, SegmentKind, SCHEMA_VERSION};
 use crate::report::ParamEstimate;
 
 /// Fewest samples a segment needs to take part.
-const MIN_SAMPLES: usize = 40;
+use crate::machine::dc::join::MIN_SAMPLES;
 
 /// Samples per block of the held-out test: 16 ms at 2 kHz, long against
 /// the encoder noise's one-sample correlation.
@@ -140,7 +139,8 @@ pub fn diagnose_dc(
 ) -> Result<DiagnosisRun, DiagnoseError> {
     let mut left_out = Vec::new();
     // The join's note is the record's, which the report lists.
-    let joined = join::join_short_continuations(record);
+    let joined = crate::machine::dc::join::join_short_continuations(record, "the diagnosis")
+        .map(|j| j.record);
     let record = joined.as_ref().unwrap_or(record);
     // A long record is read in windows (the note says so).
     let windowed = windows::windowed(record);

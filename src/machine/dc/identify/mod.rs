@@ -38,6 +38,7 @@ mod transient;
 use std::collections::BTreeMap;
 
 use crate::identify::nrmse;
+use crate::machine::dc::join::join_short_continuations;
 pub use abacus::{
     invert_delta, paper_delta, paper_t1_over_tau_e, real_pole_threshold, AbacusError, CurrentStep,
 };
@@ -411,15 +412,28 @@ pub fn identify_dc(record: &Record) -> Identification {
         simulated.extend(fit.simulate(record));
     }
 
+    // Equation error and output error take any excitation: short segments
+    // that continue one another (a slow logger's staircase) are one driven
+    // segment to them, their responses drawn on the segments as they are.
+    let joined = join_short_continuations(record, "equation_error and output_error");
+    let driven = joined.as_ref().map_or(record, |j| &j.record);
+    report
+        .warnings
+        .extend(joined.as_ref().and_then(|j| j.record.notes.last().cloned()));
+    let as_recorded = |sims: &[SimulatedSegment]| match &joined {
+        Some(j) => j.split_back(sims.to_vec()),
+        None => sims.to_vec(),
+    };
+
     let equation_error = enter_method(
         &mut report.methods,
         "equation_error",
-        equation_error(record, SpeedReading::default()),
+        equation_error(driven, SpeedReading::default()),
         |f| f.method_report(),
     );
     if let Some(fit) = &equation_error {
         report.warnings.extend(fit.warnings.iter().cloned());
-        simulated.extend(fit.simulated.iter().cloned());
+        simulated.extend(as_recorded(&fit.simulated));
     }
 
     // The full model, fitted to every step at once, started from the
@@ -438,12 +452,12 @@ pub fn identify_dc(record: &Record) -> Identification {
     let output_error = enter_method(
         &mut report.methods,
         "output_error",
-        output_error(record, start, &OutputErrorOptions::default()),
+        output_error(driven, start, &OutputErrorOptions::default()),
         |f| f.method_report(),
     );
     if let Some(fit) = &output_error {
         report.warnings.extend(fit.warnings.iter().cloned());
-        simulated.extend(fit.simulated.iter().cloned());
+        simulated.extend(as_recorded(&fit.simulated));
     }
 
     friction_bound::refuse_friction_beyond_torque(record, &mut report);
@@ -472,6 +486,12 @@ pub fn identify_dc(record: &Record) -> Identification {
     report
         .warnings
         .extend(time_constant::time_constant_implausible(&report));
+    report
+        .warnings
+        .extend(time_constant::time_constant_unresolved(
+            &report,
+            sample_interval(record),
+        ));
     Identification {
         report,
         levels,
@@ -484,6 +504,16 @@ pub fn identify_dc(record: &Record) -> Identification {
         output_error,
         equation_error,
     }
+}
+
+/// The record's sample interval (s): the median step of its longest
+/// segment's time; 0 where it has none.
+fn sample_interval(record: &Record) -> f64 {
+    let Some(seg) = record.segments.iter().max_by_key(|s| s.time.len()) else {
+        return 0.0;
+    };
+    let mut steps: Vec<f64> = seg.time.windows(2).map(|w| w[1] - w[0]).collect();
+    crate::identify::stats::median(&mut steps).unwrap_or(0.0)
 }
 
 /// Enter method `name`'s outcome in `methods`: the fit's report (made by

@@ -11,6 +11,14 @@
 //! is a warning naming the likely cause. There is no lower bound: small
 //! coreless motors reach a few µs, so a time column in a smaller unit
 //! cannot be told from them.
+//!
+//! The other way round, a time constant within [`RESOLVED_INTERVALS`]
+//! sample intervals is one the record barely resolves (a 100 Hz logger on
+//! a motor whose current settles in a millisecond): La then rests on the
+//! one or two readings after each voltage change and on when in its
+//! interval the voltage changed, which no reading says, so its estimate
+//! and interval are not to be trusted however narrow; K, Ra and J rest on
+//! the rest of the record.
 
 use crate::contract::IdentificationReport;
 
@@ -35,6 +43,30 @@ pub fn time_constant_implausible(report: &IdentificationReport) -> Option<String
     ))
 }
 
+/// Sample intervals the armature time constant must span for La to be
+/// read from the record.
+pub const RESOLVED_INTERVALS: f64 = 2.0;
+
+/// A warning when the best method's `La/Ra` is within
+/// [`RESOLVED_INTERVALS`] of the record's sample interval `dt` (s);
+/// `None` beyond it, or where the best method has no `La`.
+pub fn time_constant_unresolved(report: &IdentificationReport, dt: f64) -> Option<String> {
+    let params = report.best_params()?;
+    let (la, ra) = (params.get("La")?.value, params.get("Ra")?.value);
+    let tau = la / ra;
+    if !(dt > 0.0 && tau < RESOLVED_INTERVALS * dt) {
+        return None;
+    }
+    Some(format!(
+        "sampling: the armature's electrical time constant La/Ra = {tau:.3e} s spans {:.1} \
+         sample intervals ({dt:.3e} s): the record barely resolves the current's transient, so \
+         La rests on the readings just after each voltage change and on when in its interval \
+         the voltage changed; take La from a record sampled at least ten times faster (K, Ra \
+         and J rest on the whole record)",
+        tau / dt
+    ))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -53,6 +85,20 @@ mod tests {
         assert!(w.contains("milliseconds"), "{w}");
         // A large machine's 0.2 s is not warned of.
         assert_eq!(time_constant_implausible(&report_with(0.02, 0.1)), None);
+    }
+
+    #[test]
+    fn a_transient_within_two_samples_is_named() {
+        // 26 ms at 2 kHz: resolved.
+        assert_eq!(
+            time_constant_unresolved(&report_with(0.803, 30.9), 5e-4),
+            None
+        );
+        // 1 ms at 100 Hz: not.
+        let w = time_constant_unresolved(&report_with(0.0272, 25.7), 0.01).expect("a warning");
+        assert!(w.contains("spans 0.1 sample intervals"), "{w}");
+        // 26 ms at 50 Hz (20 ms): 1.3 intervals, not resolved either.
+        assert!(time_constant_unresolved(&report_with(0.803, 30.9), 0.02).is_some());
     }
 
     #[test]
