@@ -465,49 +465,69 @@ fn current_plus(csv: &str, offset: f64) -> String {
 }
 
 /// A slow logger's staircase: the seed motor's five levels of three time
-/// constants each, read at 100 Hz, so every step holds fewer than 20
-/// readings. Before, every method refused and `identify` exited 4; the
-/// steps continue one another, so equation error and output error read
-/// them as one driven segment and identify the motor.
+/// constants each, read at 100 Hz (every 20th reading: under 20 a step),
+/// 50 Hz (8 or 9 a step) and 25 Hz (4 or 5). Before, every method refused
+/// and `identify` exited 4 ("fewer than 20 samples"; with the join alone,
+/// at 50 Hz "the current never changes"). The steps continue one another,
+/// so equation error and output error read them as one driven segment and
+/// identify the motor. At 25 Hz the armature's 26 ms is within one
+/// interval: the report says La is not read.
 #[test]
 fn a_slow_loggers_short_steps_are_identified_as_one_driven_segment() {
-    let dir = tempfile::tempdir().unwrap();
-    let (name, truth, drive) = dc_shapes::shapes().swap_remove(1);
-    assert_eq!(name, "staircase_3tau");
-    let mut record = dc_shapes::record(&truth, &drive, 3);
-    // Every 20th reading of the 2 kHz record: 100 Hz.
-    let every = 20;
-    for seg in &mut record.segments {
-        let keep: Vec<usize> = (0..seg.time.len())
-            .filter(|&k| (seg.time[k] / dc_shapes::DT).round() as usize % every == 0)
-            .collect();
-        let pick = |v: &[f64]| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
-        (seg.time, seg.voltage, seg.current, seg.speed) = (
-            pick(&seg.time),
-            pick(&seg.voltage),
-            pick(&seg.current),
-            pick(&seg.speed),
+    for (every, coarse) in [(20, false), (40, false), (80, true)] {
+        let dir = tempfile::tempdir().unwrap();
+        let (name, truth, drive) = dc_shapes::shapes().swap_remove(1);
+        assert_eq!(name, "staircase_3tau");
+        let mut record = dc_shapes::record(&truth, &drive, 3);
+        for seg in &mut record.segments {
+            let keep: Vec<usize> = (0..seg.time.len())
+                .filter(|&k| (seg.time[k] / dc_shapes::DT).round() as usize % every == 0)
+                .collect();
+            let pick = |v: &[f64]| keep.iter().map(|&k| v[k]).collect::<Vec<f64>>();
+            (seg.time, seg.voltage, seg.current, seg.speed) = (
+                pick(&seg.time),
+                pick(&seg.voltage),
+                pick(&seg.current),
+                pick(&seg.speed),
+            );
+            assert!(seg.time.len() < 20, "{} readings", seg.time.len());
+        }
+        let files = dc_shapes::write_csvs(&record, dir.path());
+        let files: Vec<&str> = files.iter().map(|f| f.to_str().unwrap()).collect();
+        let v: serde_json::Value = serde_json::from_str(&dc_json("identify", &files)).unwrap();
+        let warnings = v["warnings"].to_string();
+        assert!(
+            warnings.contains("are joined for equation_error and output_error"),
+            "{warnings}"
         );
-        assert!(seg.time.len() < 20, "{} readings", seg.time.len());
+        assert_eq!(
+            warnings.contains("the record barely resolves the current's transient"),
+            coarse,
+            "every {every}: {warnings}"
+        );
+        let value = |method: &str, key: &str| v["methods"][method]["params"][key]["value"].as_f64();
+        // K within 1 %, 2 % at 25 Hz (four readings a step).
+        let k_within = if coarse { 0.02 } else { 0.01 };
+        for method in ["output_error", "equation_error"] {
+            assert_eq!(v["methods"][method]["applies"], true, "{method}: {v}");
+            let k = value(method, "K").unwrap();
+            assert!(
+                ((k - truth.k) / truth.k).abs() < k_within,
+                "every {every}: {method} K {k}"
+            );
+        }
+        // The best method's Ra as well (equation error's filtered
+        // derivatives at 100 Hz leave its Ra 5 % low; `best` is output
+        // error).
+        let best = v["best"].as_str().unwrap();
+        assert_eq!(best, "output_error", "{v}");
+        let ra = value(best, "Ra").unwrap();
+        // Within 3 %; 12 % at 25 Hz, where each step's transient is in
+        // its first reading (output error's Ra -10 % there).
+        let ra_within = if coarse { 0.12 } else { 0.03 };
+        assert!(
+            ((ra - truth.ra) / truth.ra).abs() < ra_within,
+            "every {every}: {best} Ra {ra}"
+        );
     }
-    let files = dc_shapes::write_csvs(&record, dir.path());
-    let files: Vec<&str> = files.iter().map(|f| f.to_str().unwrap()).collect();
-    let v: serde_json::Value = serde_json::from_str(&dc_json("identify", &files)).unwrap();
-    let warnings = v["warnings"].to_string();
-    assert!(
-        warnings.contains("are joined for equation_error and output_error"),
-        "{warnings}"
-    );
-    let value = |method: &str, key: &str| v["methods"][method]["params"][key]["value"].as_f64();
-    for method in ["output_error", "equation_error"] {
-        assert_eq!(v["methods"][method]["applies"], true, "{method}: {v}");
-        let k = value(method, "K").unwrap();
-        assert!(((k - truth.k) / truth.k).abs() < 0.01, "{method} K {k}");
-    }
-    // The best method's Ra as well (equation error's filtered derivatives
-    // at 100 Hz leave its Ra 5 % low; `best` is output error).
-    let best = v["best"].as_str().unwrap();
-    assert_eq!(best, "output_error", "{v}");
-    let ra = value(best, "Ra").unwrap();
-    assert!(((ra - truth.ra) / truth.ra).abs() < 0.03, "{best} Ra {ra}");
 }

@@ -32,7 +32,7 @@ pub(crate) mod recorded;
 mod simulate;
 pub(crate) mod steady_state;
 mod step;
-mod time_constant;
+pub(crate) mod time_constant;
 mod transient;
 
 use std::collections::BTreeMap;
@@ -490,7 +490,7 @@ pub fn identify_dc(record: &Record) -> Identification {
         .warnings
         .extend(time_constant::time_constant_unresolved(
             &report,
-            sample_interval(record),
+            time_constant::sample_interval(record),
         ));
     Identification {
         report,
@@ -504,16 +504,6 @@ pub fn identify_dc(record: &Record) -> Identification {
         output_error,
         equation_error,
     }
-}
-
-/// The record's sample interval (s): the median step of its longest
-/// segment's time; 0 where it has none.
-fn sample_interval(record: &Record) -> f64 {
-    let Some(seg) = record.segments.iter().max_by_key(|s| s.time.len()) else {
-        return 0.0;
-    };
-    let mut steps: Vec<f64> = seg.time.windows(2).map(|w| w[1] - w[0]).collect();
-    crate::identify::stats::median(&mut steps).unwrap_or(0.0)
 }
 
 /// Enter method `name`'s outcome in `methods`: the fit's report (made by

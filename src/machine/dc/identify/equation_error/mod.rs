@@ -418,6 +418,7 @@ struct Excitation {
 impl Excitation {
     fn of(segments: &[&DcSegment], f: fn(&DcSegment) -> &Vec<f64>) -> Excitation {
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        let (mut y_lo, mut y_hi) = (f64::INFINITY, f64::NEG_INFINITY);
         let mut noise = 0.0f64;
         let mut peak = 0.0f64;
         for seg in segments {
@@ -429,10 +430,21 @@ impl Excitation {
                 lo = lo.min(m);
                 hi = hi.max(m);
             }
+            for &v in y {
+                y_lo = y_lo.min(v);
+                y_hi = y_hi.max(v);
+            }
         }
         let span = hi - lo;
+        // The block means move beyond their noise; or, on a record of a
+        // few blocks (a slow logger's: a current that swings both ways
+        // within each block averages out), the readings themselves span
+        // twelve noise levels, which white noise does not reach in any
+        // record a logger writes (six standard deviations each way).
+        let readings_span = y_hi - y_lo;
         Excitation {
-            changes: span > 0.0 && span > 12.0 * noise / (BLOCK as f64).sqrt(),
+            changes: (span > 0.0 && span > 12.0 * noise / (BLOCK as f64).sqrt())
+                || (noise > 0.0 && readings_span > 12.0 * noise),
             noise,
             peak,
         }
