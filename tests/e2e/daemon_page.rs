@@ -46,6 +46,14 @@ async fn start(c: &Client, body: &Value) -> String {
     r.json()["id"].as_str().unwrap().to_string()
 }
 
+/// Start the full DC staircase, each level held 6 s: long enough to load
+/// the page, watch and abort however slow the browser starts; its id.
+async fn start_slow_staircase(c: &Client) -> String {
+    let slow =
+        serde_json::json!({"test": {"settle": {"min_hold_s": 6, "hold_s": 2, "timeout_s": 20}}});
+    start(c, &slow).await
+}
+
 /// Run `tests/python/page_check.py` (`mode` first when given) against
 /// the daemon's page following test `id` on rig `rig`; what it saw.
 fn page_check(served: &Served, mode: Option<&str>, id: &str) -> Value {
@@ -77,11 +85,7 @@ async fn the_status_page_shows_the_test_and_aborts_it_in_chromium() {
     let dir = tempfile::tempdir().unwrap();
     let served = start_with_token(dir.path(), &dir.path().join("records"));
     let c = served.client(Some(WEB_TOKEN));
-    // The full staircase, each level held 6 s: long enough to load the
-    // page, watch and abort however slow the browser starts.
-    let slow =
-        serde_json::json!({"test": {"settle": {"min_hold_s": 6, "hold_s": 2, "timeout_s": 20}}});
-    let id = start(&c, &slow).await;
+    let id = start_slow_staircase(&c).await;
     let seen = page_check(&served, None, &id);
     let shots = shots_dir();
 
@@ -164,9 +168,7 @@ async fn the_status_page_shows_how_a_test_ended_when_its_event_feed_is_cut() {
     let dir = tempfile::tempdir().unwrap();
     let served = start_with_token(dir.path(), &dir.path().join("records"));
     let c = served.client(Some(WEB_TOKEN));
-    let slow =
-        serde_json::json!({"test": {"settle": {"min_hold_s": 6, "hold_s": 2, "timeout_s": 20}}});
-    let id = start(&c, &slow).await;
+    let id = start_slow_staircase(&c).await;
     let seen = page_check(&served, Some("--cut-feed"), &id);
 
     assert!(seen["feeds_cut"].as_u64().unwrap() >= 1, "{seen}");
