@@ -32,7 +32,7 @@ pub(crate) mod recorded;
 mod simulate;
 pub(crate) mod steady_state;
 mod step;
-pub(crate) mod time_constant;
+mod time_constant;
 mod transient;
 
 use std::collections::BTreeMap;

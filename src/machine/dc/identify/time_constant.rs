@@ -49,8 +49,9 @@ pub fn time_constant_implausible(report: &IdentificationReport) -> Option<String
 /// left at the first reading after a step. The fitted constant is biased
 /// up where the record does not resolve it (a 0.1-interval armature read
 /// at 100 Hz fitted 0.6 intervals), so a stricter bound would not catch
-/// more of those, and would name blind records at 2 kHz whose 0.5 ms
-/// armatures identify K and Ra within 1 %.
+/// more of those; at two it named many of the blind suites' 2 kHz records,
+/// whose armatures of 0.5–1 ms span one to two intervals (7 of 120 named
+/// at one).
 pub const RESOLVED_INTERVALS: f64 = 1.0;
 
 /// The record's sample interval (s): the median step of its longest
@@ -104,7 +105,7 @@ mod tests {
     }
 
     #[test]
-    fn a_transient_within_two_samples_is_named() {
+    fn a_transient_within_one_sample_interval_is_named() {
         // 26 ms at 2 kHz: resolved.
         assert_eq!(
             time_constant_unresolved(&report_with(0.803, 30.9), 5e-4),
