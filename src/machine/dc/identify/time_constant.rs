@@ -49,9 +49,9 @@ pub fn time_constant_implausible(report: &IdentificationReport) -> Option<String
 /// left at the first reading after a step. The fitted constant is biased
 /// up where the record does not resolve it (a 0.1-interval armature read
 /// at 100 Hz fitted 0.6 intervals), so a stricter bound would not catch
-/// more of those; at two it named many of the blind suites' 2 kHz records,
-/// whose armatures of 0.5–1 ms span one to two intervals (7 of 120 named
-/// at one).
+/// more of those, and at two it would name the 37 of the blind suites'
+/// 120 DC records whose armatures' `La/Ra` is under 1 ms, two intervals
+/// at 2 kHz (7 of 120 are named at one).
 pub const RESOLVED_INTERVALS: f64 = 1.0;
 
 /// The record's sample interval (s): the median step of its longest
