@@ -30,11 +30,9 @@ pub struct Joined {
     /// says which were joined, for `reader` (the methods that read it).
     pub record: Record,
     /// Per segment of `record`, its parts: the original segment's index,
-    /// and how many of its first samples were the part before's last (0
-    /// or 1: one instant written in both).
-    parts: Vec<Vec<(u32, usize)>>,
-    /// The original segments' sample counts, by index.
-    lens: Vec<(u32, usize)>,
+    /// how many of its first samples were the part before's last (0 or 1:
+    /// one instant written in both), and its sample count.
+    parts: Vec<Vec<(u32, usize, usize)>>,
 }
 
 impl Joined {
@@ -43,20 +41,13 @@ impl Joined {
     /// (a sample two parts share goes to both). Responses to a segment
     /// that was not joined keep their segment's original index.
     pub fn split_back(&self, joined: Vec<SimulatedSegment>) -> Vec<SimulatedSegment> {
-        let len_of = |index: u32| {
-            self.lens
-                .iter()
-                .find(|(i, _)| *i == index)
-                .map_or(0, |(_, n)| *n)
-        };
         let mut out = Vec::with_capacity(joined.len());
         for sim in joined {
             let Some(parts) = self.parts.get(sim.index as usize) else {
                 continue;
             };
             let mut at = 0usize;
-            for &(index, skip) in parts {
-                let n = len_of(index);
+            for &(index, skip, n) in parts {
                 let from = at.saturating_sub(skip);
                 let to = (from + n).min(sim.current.len());
                 if from < to {
@@ -86,7 +77,7 @@ pub fn join_short_continuations(record: &Record, reader: &str) -> Option<Joined>
     let mut out: Vec<DcSegment> = Vec::with_capacity(segs.len());
     // Per joined segment of `out`, the labels of the segments it holds.
     let mut held: Vec<Vec<String>> = Vec::new();
-    let mut parts: Vec<Vec<(u32, usize)>> = Vec::new();
+    let mut parts: Vec<Vec<(u32, usize, usize)>> = Vec::new();
     for seg in segs {
         let short = |s: &DcSegment| s.time.len() < MIN_SAMPLES;
         match out.last_mut() {
@@ -102,12 +93,12 @@ pub fn join_short_continuations(record: &Record, reader: &str) -> Option<Joined>
                 parts
                     .last_mut()
                     .expect("one per segment")
-                    .push((seg.index, skip));
+                    .push((seg.index, skip, seg.time.len()));
             }
             _ => {
                 out.push(seg.clone());
                 held.push(vec![seg.label.clone()]);
-                parts.push(vec![(seg.index, 0)]);
+                parts.push(vec![(seg.index, 0, seg.time.len())]);
             }
         }
     }
@@ -140,7 +131,6 @@ pub fn join_short_continuations(record: &Record, reader: &str) -> Option<Joined>
     Some(Joined {
         record: joined_record,
         parts,
-        lens: segs.iter().map(|s| (s.index, s.time.len())).collect(),
     })
 }
 
